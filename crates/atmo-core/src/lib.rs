@@ -1,0 +1,30 @@
+//! atmo-core: the physics of ATMO, as pure functions on fixed-size types.
+//!
+//! ATMO is a quadrotor whose two arms (each a wheel with two rotors) tilt
+//! inward together by one angle varphi through a self-locking screw linkage:
+//! varphi = 0 is a quadrotor, pi/2 a car.
+//!
+//! - [`config`]: the robot file, strictly parsed and validated.
+//! - [`linkage`]: screw displacement x, tilt varphi and encoder counts.
+//! - [`model`]: the 7-body dynamics `x_dot = f(x, u, varphi)` (composite rigid
+//!   body at fixed tilt, see the module docs for the equations), analytic
+//!   Jacobians, RK4 with exact sensitivities, hover trim.
+//! - [`limits`]: critical angle `cos varphi_c = m g / T_max`, largest tilt for a
+//!   thrust reserve, the tilt where the hover trim saturates.
+//! - [`control`]: the paper's blending `alpha = f(h) cos varphi`, the tilt
+//!   velocity law and differential-drive kinematics.
+//!
+//! Frames: NED world, FRD body, Euler ZYX; SI units, radians. Nothing here
+//! allocates on the heap or does I/O (except reading a config file).
+
+pub mod config;
+pub mod control;
+pub mod error;
+pub mod limits;
+pub mod linkage;
+pub mod model;
+
+pub use config::RobotConfig;
+pub use error::{CoreError, Result};
+pub use linkage::Linkage;
+pub use model::{Input, Model, NU, NX, State, TiltedBody};

@@ -1,0 +1,509 @@
+//! The 7-body model of ATMO: base, two arms, four rotors.
+//!
+//! The tilt varphi is a parameter, not a state: at a given varphi the seven
+//! bodies form one rigid body, so the projected Newton-Euler equations
+//! `M(q, varphi) nu_dot + b + g = S(varphi)^T u` reduce to the composite body
+//! about the base origin B. With `c = sum m_i r_i` (first moment about B),
+//! `I_B = sum (I_i + m_i [r_i]x^T [r_i]x)`, body-frame acceleration of B
+//! `a = R^T v_dot` and gravity in body axes `g_b = R^T (0, 0, g)`:
+//!
+//! ```text
+//! m a + w_dot x c + w x (w x c)     = A_F u + m g_b
+//! I_B w_dot + c x a + w x (I_B w)   = A_T u + c x g_b
+//! ```
+//!
+//! The left side is the constant (per varphi) symmetric matrix
+//! `M_b = [[m I, -[c]x], [[c]x, I_B]]`, factored once per tilt. `A_F`, `A_T`
+//! (3x4) map normalized rotor commands to body force and torque about B:
+//! rotor i at `r_i` with thrust axis `n_i` contributes `kT n_i` and
+//! `kT (r_i x n_i) - s_i kM kT n_i` (s_i the yaw sign).
+//!
+//! State x (12): p (NED, m), Euler ZYX (yaw, pitch, roll), world velocity of
+//! B, body rates. `x_dot = (v, E(theta)^-1 w, R a, w_dot)`.
+//!
+//! Parity with the authors' model (checked to 1e-9 against their 60 points,
+//! reached to about 1e-14): the listed arm inertia is used as the tensor
+//! about the hinge A, as listed for the left arm and with the xz and yz
+//! products negated for the right arm. Rotor spin (gyroscopic) terms and all
+//! aerodynamics are left out, as in their model; atmo-sim adds them.
+
+use nalgebra::{Cholesky, Matrix3, Matrix3x4, Matrix6, SMatrix, SVector, U6, Vector3, Vector4, Vector6};
+
+use crate::config::RobotConfig;
+
+/// Number of states.
+pub const NX: usize = 12;
+/// Number of inputs (normalized rotor commands).
+pub const NU: usize = 4;
+
+pub type State = SVector<f64, NX>;
+pub type Input = SVector<f64, NU>;
+pub type StateJacobian = SMatrix<f64, NX, NX>;
+pub type InputJacobian = SMatrix<f64, NX, NU>;
+
+/// Index of each state in x.
+pub mod idx {
+    pub const X: usize = 0;
+    pub const Y: usize = 1;
+    pub const Z: usize = 2;
+    pub const YAW: usize = 3;
+    pub const PITCH: usize = 4;
+    pub const ROLL: usize = 5;
+    pub const VX: usize = 6;
+    pub const VY: usize = 7;
+    pub const VZ: usize = 8;
+    pub const WX: usize = 9;
+    pub const WY: usize = 10;
+    pub const WZ: usize = 11;
+}
+
+/// Rotation about the body x axis.
+pub fn rot_x(a: f64) -> Matrix3<f64> {
+    let (s, c) = a.sin_cos();
+    Matrix3::new(1.0, 0.0, 0.0, 0.0, c, -s, 0.0, s, c)
+}
+
+/// Body-to-world rotation for Euler ZYX angles: `R = Rz(yaw) Ry(pitch) Rx(roll)`.
+pub fn rotation(yaw: f64, pitch: f64, roll: f64) -> Matrix3<f64> {
+    let (sy, cy) = yaw.sin_cos();
+    let (sp, cp) = pitch.sin_cos();
+    let (sr, cr) = roll.sin_cos();
+    Matrix3::new(
+        cy * cp,
+        cy * sp * sr - sy * cr,
+        cy * sp * cr + sy * sr,
+        sy * cp,
+        sy * sp * sr + cy * cr,
+        sy * sp * cr - cy * sr,
+        -sp,
+        cp * sr,
+        cp * cr,
+    )
+}
+
+/// Partial derivatives of [`rotation`] with respect to yaw, pitch and roll.
+pub fn rotation_partials(yaw: f64, pitch: f64, roll: f64) -> [Matrix3<f64>; 3] {
+    let (sy, cy) = yaw.sin_cos();
+    let (sp, cp) = pitch.sin_cos();
+    let (sr, cr) = roll.sin_cos();
+    let d_yaw = Matrix3::new(
+        -sy * cp,
+        -sy * sp * sr - cy * cr,
+        -sy * sp * cr + cy * sr,
+        cy * cp,
+        cy * sp * sr - sy * cr,
+        cy * sp * cr + sy * sr,
+        0.0,
+        0.0,
+        0.0,
+    );
+    let d_pitch = Matrix3::new(
+        -cy * sp,
+        cy * cp * sr,
+        cy * cp * cr,
+        -sy * sp,
+        sy * cp * sr,
+        sy * cp * cr,
+        -cp,
+        -sp * sr,
+        -sp * cr,
+    );
+    let d_roll = Matrix3::new(
+        0.0,
+        cy * sp * cr + sy * sr,
+        -cy * sp * sr + sy * cr,
+        0.0,
+        sy * sp * cr - cy * sr,
+        -sy * sp * sr - cy * cr,
+        0.0,
+        cp * cr,
+        -cp * sr,
+    );
+    [d_yaw, d_pitch, d_roll]
+}
+
+fn skew(r: &Vector3<f64>) -> Matrix3<f64> {
+    Matrix3::new(0.0, -r.z, r.y, r.z, 0.0, -r.x, -r.y, r.x, 0.0)
+}
+
+/// `[r]x^T [r]x = |r|^2 I - r r^T`: the parallel-axis tensor of a unit mass at r.
+fn parallel_axis(r: &Vector3<f64>) -> Matrix3<f64> {
+    Matrix3::identity() * r.norm_squared() - r * r.transpose()
+}
+
+/// Robot constants the dynamics need, taken from a [`RobotConfig`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct Model {
+    pub gravity: f64,
+    base_mass: f64,
+    base_inertia: Matrix3<f64>,
+    arm_mass: f64,
+    /// Right and left arm tensors about their centres of mass, arm frames.
+    arm_inertia: [Matrix3<f64>; 2],
+    /// Hinge positions A (right, left), body frame.
+    hinge: [Vector3<f64>; 2],
+    /// Hinge to arm CoM (right, left), arm frames.
+    hinge_to_com: [Vector3<f64>; 2],
+    /// Hinge to rotor i, in the frame of the arm that carries it.
+    hinge_to_rotor: [Vector3<f64>; 4],
+    rotor_mass: f64,
+    rotor_inertia: Matrix3<f64>,
+    pub k_thrust: f64,
+    pub k_moment: f64,
+    yaw_sign: [f64; 4],
+}
+
+/// Which arm carries rotor i (0 = right, 1 = left); PX4 quad-x numbering.
+const ROTOR_ARM: [usize; 4] = [0, 1, 1, 0];
+
+impl Model {
+    pub fn new(config: &RobotConfig) -> Self {
+        let mirror_y = Vector3::new(1.0, -1.0, 1.0);
+        let mirror_x = Vector3::new(-1.0, 1.0, 1.0);
+        let hinge_r = Vector3::from(config.arm.base_to_hinge);
+        let com_r = Vector3::from(config.arm.hinge_to_com);
+        let com_l = com_r.component_mul(&mirror_y);
+        let rotor1 = Vector3::from(config.arm.hinge_to_rotor1);
+        let listed = config.arm.inertia.matrix();
+        let flip_z = Matrix3::from_diagonal(&Vector3::new(1.0, 1.0, -1.0));
+        let m_arm = config.arm.mass;
+        let arm_right = flip_z * listed * flip_z - parallel_axis(&com_r) * m_arm;
+        let arm_left = listed - parallel_axis(&com_l) * m_arm;
+        let [rxx, ryy, rzz] = config.rotor.inertia;
+        Self {
+            gravity: config.environment.gravity,
+            base_mass: config.base.mass,
+            base_inertia: config.base.inertia.matrix(),
+            arm_mass: m_arm,
+            arm_inertia: [arm_right, arm_left],
+            hinge: [hinge_r, hinge_r.component_mul(&mirror_y)],
+            hinge_to_com: [com_r, com_l],
+            hinge_to_rotor: [
+                rotor1,                                              // 1 front-right
+                rotor1.component_mul(&mirror_x).component_mul(&mirror_y), // 2 back-left
+                rotor1.component_mul(&mirror_y),                     // 3 front-left
+                rotor1.component_mul(&mirror_x),                     // 4 back-right
+            ],
+            rotor_mass: config.rotor.mass,
+            rotor_inertia: Matrix3::from_diagonal(&Vector3::new(rxx, ryy, rzz)),
+            k_thrust: config.rotor.k_thrust,
+            k_moment: config.rotor.k_moment,
+            yaw_sign: config.rotor.yaw_sign,
+        }
+    }
+
+    /// Total mass, kg.
+    pub fn mass(&self) -> f64 {
+        self.base_mass + 2.0 * self.arm_mass + 4.0 * self.rotor_mass
+    }
+
+    /// Weight, N.
+    pub fn weight(&self) -> f64 {
+        self.mass() * self.gravity
+    }
+
+    /// Sum of the rotors' full thrust, N.
+    pub fn max_total_thrust(&self) -> f64 {
+        4.0 * self.k_thrust
+    }
+
+    /// The composite rigid body at tilt `varphi` (rad).
+    pub fn at_tilt(&self, varphi: f64) -> TiltedBody {
+        // Right arm rotates by +varphi about body x, the left arm by -varphi.
+        let arm_rot = [rot_x(varphi), rot_x(-varphi)];
+        let mut mass = self.base_mass;
+        let mut first_moment = Vector3::zeros();
+        let mut inertia = self.base_inertia;
+        for arm in 0..2 {
+            let r = self.hinge[arm] + arm_rot[arm] * self.hinge_to_com[arm];
+            mass += self.arm_mass;
+            first_moment += r * self.arm_mass;
+            inertia += arm_rot[arm] * self.arm_inertia[arm] * arm_rot[arm].transpose()
+                + parallel_axis(&r) * self.arm_mass;
+        }
+        let mut thrust_force = Matrix3x4::zeros();
+        let mut thrust_torque = Matrix3x4::zeros();
+        let mut rotor_position = [Vector3::zeros(); 4];
+        let mut rotor_axis = [Vector3::zeros(); 4];
+        for i in 0..4 {
+            let arm = ROTOR_ARM[i];
+            let rot = arm_rot[arm];
+            let r = self.hinge[arm] + rot * self.hinge_to_rotor[i];
+            mass += self.rotor_mass;
+            first_moment += r * self.rotor_mass;
+            inertia += rot * self.rotor_inertia * rot.transpose() + parallel_axis(&r) * self.rotor_mass;
+            // Thrust along the arm's -z (up at varphi = 0).
+            let axis = -rot.column(2).into_owned();
+            thrust_force.set_column(i, &(axis * self.k_thrust));
+            let torque = r.cross(&axis) * self.k_thrust - axis * (self.yaw_sign[i] * self.k_moment * self.k_thrust);
+            thrust_torque.set_column(i, &torque);
+            rotor_position[i] = r;
+            rotor_axis[i] = axis;
+        }
+        let mut mass_matrix = Matrix6::zeros();
+        mass_matrix.fixed_view_mut::<3, 3>(0, 0).fill_diagonal(mass);
+        mass_matrix.fixed_view_mut::<3, 3>(0, 3).copy_from(&(-skew(&first_moment)));
+        mass_matrix.fixed_view_mut::<3, 3>(3, 0).copy_from(&skew(&first_moment));
+        mass_matrix.fixed_view_mut::<3, 3>(3, 3).copy_from(&inertia);
+        let mass_matrix_inv = Cholesky::<f64, U6>::new(mass_matrix)
+            .expect("mass matrix of a validated robot is positive definite")
+            .inverse();
+        TiltedBody {
+            varphi,
+            gravity: self.gravity,
+            mass,
+            first_moment,
+            inertia,
+            mass_matrix,
+            mass_matrix_inv,
+            thrust_force,
+            thrust_torque,
+            rotor_position,
+            rotor_axis,
+        }
+    }
+
+    /// `x_dot = f(x, u, varphi)`.
+    pub fn dynamics(&self, x: &State, u: &Input, varphi: f64) -> State {
+        self.at_tilt(varphi).dynamics(x, u)
+    }
+}
+
+/// ATMO frozen at one tilt: the composite body and its actuation.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TiltedBody {
+    pub varphi: f64,
+    pub gravity: f64,
+    /// kg.
+    pub mass: f64,
+    /// `c = sum m_i r_i` about B, body frame (kg m).
+    pub first_moment: Vector3<f64>,
+    /// `I_B`, about B, body frame.
+    pub inertia: Matrix3<f64>,
+    /// `M_b` in body-frame generalized velocities (a, w_dot).
+    pub mass_matrix: Matrix6<f64>,
+    pub mass_matrix_inv: Matrix6<f64>,
+    /// Body force per unit rotor command (N).
+    pub thrust_force: Matrix3x4<f64>,
+    /// Body torque about B per unit rotor command (N m).
+    pub thrust_torque: Matrix3x4<f64>,
+    /// Rotor hub positions, body frame (m).
+    pub rotor_position: [Vector3<f64>; 4],
+    /// Unit thrust directions, body frame.
+    pub rotor_axis: [Vector3<f64>; 4],
+}
+
+/// `x_dot` with its Jacobians.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Linearization {
+    pub xdot: State,
+    pub dfdx: StateJacobian,
+    pub dfdu: InputJacobian,
+}
+
+/// An RK4 step with its sensitivities.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StepSensitivity {
+    pub next: State,
+    /// dx+/dx.
+    pub a: StateJacobian,
+    /// dx+/du.
+    pub b: InputJacobian,
+}
+
+impl TiltedBody {
+    /// Gravity in body axes, `R^T (0, 0, g)`.
+    fn gravity_body(&self, pitch: f64, roll: f64) -> Vector3<f64> {
+        let (sp, cp) = pitch.sin_cos();
+        let (sr, cr) = roll.sin_cos();
+        Vector3::new(-sp, cp * sr, cp * cr) * self.gravity
+    }
+
+    /// Body-frame generalized accelerations (a, w_dot) for body force and
+    /// torque about B from everything but gravity and the rotors (`extra`).
+    /// atmo-sim passes its aerodynamic and contact wrenches here.
+    pub fn accelerations(&self, x: &State, u: &Input, extra: &Vector6<f64>) -> Vector6<f64> {
+        let w = Vector3::new(x[idx::WX], x[idx::WY], x[idx::WZ]);
+        let g_b = self.gravity_body(x[idx::PITCH], x[idx::ROLL]);
+        let c = &self.first_moment;
+        let force = self.thrust_force * u + g_b * self.mass - w.cross(&w.cross(c));
+        let torque = self.thrust_torque * u + c.cross(&g_b) - w.cross(&(self.inertia * w));
+        let rhs = Vector6::new(force.x, force.y, force.z, torque.x, torque.y, torque.z) + extra;
+        self.mass_matrix_inv * rhs
+    }
+
+    /// `x_dot` given body-frame accelerations (a, w_dot).
+    pub fn state_derivative(x: &State, acc: &Vector6<f64>) -> State {
+        let (yaw, pitch, roll) = (x[idx::YAW], x[idx::PITCH], x[idx::ROLL]);
+        let r = rotation(yaw, pitch, roll);
+        let a = r * Vector3::new(acc[0], acc[1], acc[2]);
+        let (sr, cr) = roll.sin_cos();
+        let (sp, cp) = pitch.sin_cos();
+        let (wx, wy, wz) = (x[idx::WX], x[idx::WY], x[idx::WZ]);
+        let q = sr * wy + cr * wz;
+        let mut xdot = State::zeros();
+        xdot[idx::X] = x[idx::VX];
+        xdot[idx::Y] = x[idx::VY];
+        xdot[idx::Z] = x[idx::VZ];
+        xdot[idx::YAW] = q / cp;
+        xdot[idx::PITCH] = cr * wy - sr * wz;
+        xdot[idx::ROLL] = wx + sp / cp * q;
+        xdot[idx::VX] = a.x;
+        xdot[idx::VY] = a.y;
+        xdot[idx::VZ] = a.z;
+        xdot[idx::WX] = acc[3];
+        xdot[idx::WY] = acc[4];
+        xdot[idx::WZ] = acc[5];
+        xdot
+    }
+
+    /// `x_dot = f(x, u)` at this tilt.
+    pub fn dynamics(&self, x: &State, u: &Input) -> State {
+        Self::state_derivative(x, &self.accelerations(x, u, &Vector6::zeros()))
+    }
+
+    /// `x_dot` and the analytic Jacobians df/dx, df/du.
+    pub fn linearize(&self, x: &State, u: &Input) -> Linearization {
+        let (yaw, pitch, roll) = (x[idx::YAW], x[idx::PITCH], x[idx::ROLL]);
+        let w = Vector3::new(x[idx::WX], x[idx::WY], x[idx::WZ]);
+        let acc = self.accelerations(x, u, &Vector6::zeros());
+        let xdot = Self::state_derivative(x, &acc);
+        let a_body = Vector3::new(acc[0], acc[1], acc[2]);
+        let r = rotation(yaw, pitch, roll);
+        let dr = rotation_partials(yaw, pitch, roll);
+        let minv_top = self.mass_matrix_inv.fixed_rows::<3>(0);
+        let minv_bot = self.mass_matrix_inv.fixed_rows::<3>(3);
+        let c = &self.first_moment;
+
+        let mut dfdx = StateJacobian::zeros();
+        // p_dot = v.
+        dfdx.fixed_view_mut::<3, 3>(idx::X, idx::VX).fill_diagonal(1.0);
+
+        // Euler kinematics.
+        let (sr, cr) = roll.sin_cos();
+        let (sp, cp) = pitch.sin_cos();
+        let (wy, wz) = (w.y, w.z);
+        let q = sr * wy + cr * wz;
+        let dq_droll = cr * wy - sr * wz;
+        let tp = sp / cp;
+        dfdx[(idx::YAW, idx::PITCH)] = q * sp / (cp * cp);
+        dfdx[(idx::YAW, idx::ROLL)] = dq_droll / cp;
+        dfdx[(idx::YAW, idx::WY)] = sr / cp;
+        dfdx[(idx::YAW, idx::WZ)] = cr / cp;
+        dfdx[(idx::PITCH, idx::ROLL)] = -sr * wy - cr * wz;
+        dfdx[(idx::PITCH, idx::WY)] = cr;
+        dfdx[(idx::PITCH, idx::WZ)] = -sr;
+        dfdx[(idx::ROLL, idx::PITCH)] = q / (cp * cp);
+        dfdx[(idx::ROLL, idx::ROLL)] = tp * dq_droll;
+        dfdx[(idx::ROLL, idx::WX)] = 1.0;
+        dfdx[(idx::ROLL, idx::WY)] = tp * sr;
+        dfdx[(idx::ROLL, idx::WZ)] = tp * cr;
+
+        // Gravity in body axes depends on pitch and roll.
+        let g = self.gravity;
+        let dg_dpitch = Vector3::new(-cp, -sp * sr, -sp * cr) * g;
+        let dg_droll = Vector3::new(0.0, cp * cr, -cp * sr) * g;
+        for (col, dg) in [(idx::PITCH, dg_dpitch), (idx::ROLL, dg_droll)] {
+            let drhs = {
+                let f = dg * self.mass;
+                let t = c.cross(&dg);
+                Vector6::new(f.x, f.y, f.z, t.x, t.y, t.z)
+            };
+            let da = minv_top * drhs;
+            let dw = minv_bot * drhs;
+            dfdx.fixed_view_mut::<3, 1>(idx::VX, col).copy_from(&(r * da));
+            dfdx.fixed_view_mut::<3, 1>(idx::WX, col).copy_from(&dw);
+        }
+        // v_dot = R a: the rotation itself depends on all three angles.
+        for (k, col) in [idx::YAW, idx::PITCH, idx::ROLL].into_iter().enumerate() {
+            let extra = dr[k] * a_body;
+            let mut column = dfdx.fixed_view_mut::<3, 1>(idx::VX, col);
+            column += extra;
+        }
+        // Rates: -w x (w x c) and -w x (I w).
+        let d_centripetal = Matrix3::identity() * w.dot(c) + w * c.transpose() - c * w.transpose() * 2.0;
+        let iw = self.inertia * w;
+        let d_gyro = skew(&w) * self.inertia - skew(&iw);
+        let mut drhs_dw = SMatrix::<f64, 6, 3>::zeros();
+        drhs_dw.fixed_view_mut::<3, 3>(0, 0).copy_from(&(-d_centripetal));
+        drhs_dw.fixed_view_mut::<3, 3>(3, 0).copy_from(&(-d_gyro));
+        let dacc_dw = self.mass_matrix_inv * drhs_dw;
+        dfdx.fixed_view_mut::<3, 3>(idx::VX, idx::WX)
+            .copy_from(&(r * dacc_dw.fixed_rows::<3>(0)));
+        dfdx.fixed_view_mut::<3, 3>(idx::WX, idx::WX)
+            .copy_from(&dacc_dw.fixed_rows::<3>(3));
+
+        // Inputs.
+        let mut drhs_du = SMatrix::<f64, 6, 4>::zeros();
+        drhs_du.fixed_view_mut::<3, 4>(0, 0).copy_from(&self.thrust_force);
+        drhs_du.fixed_view_mut::<3, 4>(3, 0).copy_from(&self.thrust_torque);
+        let dacc_du = self.mass_matrix_inv * drhs_du;
+        let mut dfdu = InputJacobian::zeros();
+        dfdu.fixed_view_mut::<3, 4>(idx::VX, 0)
+            .copy_from(&(r * dacc_du.fixed_rows::<3>(0)));
+        dfdu.fixed_view_mut::<3, 4>(idx::WX, 0)
+            .copy_from(&dacc_du.fixed_rows::<3>(3));
+
+        Linearization { xdot, dfdx, dfdu }
+    }
+
+    /// One classical RK4 step of length `dt` with u held constant.
+    pub fn rk4_step(&self, x: &State, u: &Input, dt: f64) -> State {
+        let k1 = self.dynamics(x, u);
+        let k2 = self.dynamics(&(x + k1 * (0.5 * dt)), u);
+        let k3 = self.dynamics(&(x + k2 * (0.5 * dt)), u);
+        let k4 = self.dynamics(&(x + k3 * dt), u);
+        x + (k1 + k2 * 2.0 + k3 * 2.0 + k4) * (dt / 6.0)
+    }
+
+    /// One RK4 step with its exact sensitivities dx+/dx and dx+/du
+    /// (the derivative of the discrete map, not of the continuous flow).
+    pub fn rk4_step_sensitivity(&self, x: &State, u: &Input, dt: f64) -> StepSensitivity {
+        let h = dt;
+        let l1 = self.linearize(x, u);
+        let s1x = l1.dfdx;
+        let s1u = l1.dfdu;
+
+        let x2 = x + l1.xdot * (0.5 * h);
+        let l2 = self.linearize(&x2, u);
+        let s2x = l2.dfdx * (StateJacobian::identity() + s1x * (0.5 * h));
+        let s2u = l2.dfdx * (s1u * (0.5 * h)) + l2.dfdu;
+
+        let x3 = x + l2.xdot * (0.5 * h);
+        let l3 = self.linearize(&x3, u);
+        let s3x = l3.dfdx * (StateJacobian::identity() + s2x * (0.5 * h));
+        let s3u = l3.dfdx * (s2u * (0.5 * h)) + l3.dfdu;
+
+        let x4 = x + l3.xdot * h;
+        let l4 = self.linearize(&x4, u);
+        let s4x = l4.dfdx * (StateJacobian::identity() + s3x * h);
+        let s4u = l4.dfdx * (s3u * h) + l4.dfdu;
+
+        let w = h / 6.0;
+        StepSensitivity {
+            next: x + (l1.xdot + l2.xdot * 2.0 + l3.xdot * 2.0 + l4.xdot) * w,
+            a: StateJacobian::identity() + (s1x + s2x * 2.0 + s3x * 2.0 + s4x) * w,
+            b: (s1u + s2u * 2.0 + s3u * 2.0 + s4u) * w,
+        }
+    }
+
+    /// Level hover trim: the rotor commands that hold zero acceleration at
+    /// zero attitude and rates. May exceed 1 past the critical angle.
+    pub fn hover_trim(&self) -> Input {
+        // Rows F_z, tau_x, tau_y, tau_z; F_x and F_y vanish by symmetry.
+        let mut a = nalgebra::Matrix4::zeros();
+        a.set_row(0, &self.thrust_force.row(2));
+        for k in 0..3 {
+            a.set_row(k + 1, &self.thrust_torque.row(k));
+        }
+        let g_b = Vector3::new(0.0, 0.0, self.gravity);
+        let gravity_torque = self.first_moment.cross(&g_b);
+        let rhs = Vector4::new(
+            -self.mass * self.gravity,
+            -gravity_torque.x,
+            -gravity_torque.y,
+            -gravity_torque.z,
+        );
+        a.lu().solve(&rhs).expect("hover allocation matrix is regular")
+    }
+}
