@@ -69,12 +69,35 @@ pub struct Arm {
     /// kg.
     pub mass: f64,
     pub inertia: Inertia,
+    /// How `inertia` is used; see [`ArmInertiaConvention`].
+    pub inertia_convention: ArmInertiaConvention,
     /// m, base origin B to the right hinge A, body frame.
     pub base_to_hinge: [f64; 3],
     /// m, hinge A to the right arm's centre of mass, arm frame.
     pub hinge_to_com: [f64; 3],
     /// m, hinge A to rotor 1, arm frame.
     pub hinge_to_rotor1: [f64; 3],
+}
+
+/// How the listed arm inertia enters the model.
+///
+/// The listed tensor (Ixx 0.0087, Iyy 0.037, Izz 0.044 kg m^2 for a 1.54 kg
+/// arm whose CoM is 0.17 m from the hinge) can only be a tensor about the
+/// arm's own centre of mass: about the hinge, Ixx would be at least
+/// m |r_AG|^2 = 0.044. The authors' model nevertheless treats it as the tensor
+/// about the hinge (subtracting m [r_AG]x^T [r_AG]x), with the xz and yz
+/// products negated on the right arm. That under-estimates the roll and yaw
+/// inertia by about 0.088 kg m^2 and makes the composite inertia indefinite
+/// above about 86 deg of tilt.
+#[derive(Debug, Clone, Copy, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum ArmInertiaConvention {
+    /// As in the authors' model (reproduces their reference data to 1e-14).
+    /// The controller's model.
+    AuthorsModel,
+    /// Physical: the listed tensor is the right arm's about its CoM in the
+    /// arm frame; the left arm is its mirror image. The plant's truth.
+    AboutCom,
 }
 
 #[derive(Debug, Clone, Deserialize, PartialEq)]
@@ -151,9 +174,9 @@ pub fn parse_toml<T: serde::de::DeserializeOwned>(text: &str, file: &Path) -> Re
     serde_path_to_error::deserialize(deserializer).map_err(|err| {
         let key = err.path().to_string();
         let inner = err.into_inner();
-        let line = inner
-            .span()
-            .map_or(0, |span| text[..span.start.min(text.len())].lines().count().max(1));
+        let line = inner.span().map_or(0, |span| {
+            text[..span.start.min(text.len())].lines().count().max(1)
+        });
         CoreError::ConfigParse {
             file: file.to_path_buf(),
             line,
@@ -181,7 +204,12 @@ impl<'a> Checker<'a> {
         Self { file }
     }
 
-    pub fn fail(&self, key: &str, expected: impl Into<String>, got: impl std::fmt::Display) -> CoreError {
+    pub fn fail(
+        &self,
+        key: &str,
+        expected: impl Into<String>,
+        got: impl std::fmt::Display,
+    ) -> CoreError {
         CoreError::ConfigValue {
             file: self.file.to_path_buf(),
             key: key.to_string(),
@@ -258,8 +286,11 @@ impl RobotConfig {
 
     /// The parameters the ATMO authors flew with (the file shipped in `config/atmo.toml`).
     pub fn atmo() -> Self {
-        Self::from_toml_str(include_str!("../../../config/atmo.toml"), "config/atmo.toml")
-            .expect("the shipped config/atmo.toml is valid (tested)")
+        Self::from_toml_str(
+            include_str!("../../../config/atmo.toml"),
+            "config/atmo.toml",
+        )
+        .expect("the shipped config/atmo.toml is valid (tested)")
     }
 
     /// Checks every value against its physical range.
@@ -271,8 +302,6 @@ impl RobotConfig {
         c.inertia("base.inertia", &self.base.inertia.matrix())?;
 
         c.positive("arm.mass", self.arm.mass)?;
-        // The listed arm tensor is about the hinge in the authors' model; it
-        // must be a physical tensor about that point too.
         c.inertia("arm.inertia", &self.arm.inertia.matrix())?;
         c.finite("arm.base_to_hinge", &self.arm.base_to_hinge)?;
         c.finite("arm.hinge_to_com", &self.arm.hinge_to_com)?;
@@ -280,7 +309,10 @@ impl RobotConfig {
 
         c.positive("rotor.mass", self.rotor.mass)?;
         let [ixx, iyy, izz] = self.rotor.inertia;
-        c.inertia("rotor.inertia", &Matrix3::from_diagonal(&Vector3::new(ixx, iyy, izz)))?;
+        c.inertia(
+            "rotor.inertia",
+            &Matrix3::from_diagonal(&Vector3::new(ixx, iyy, izz)),
+        )?;
         c.positive("rotor.k_thrust", self.rotor.k_thrust)?;
         c.within("rotor.k_moment", self.rotor.k_moment, 0.0, 1.0)?;
         for (i, s) in self.rotor.yaw_sign.iter().enumerate() {
@@ -300,14 +332,26 @@ impl RobotConfig {
         c.finite("linkage.d", &l.d)?;
         c.positive("linkage.thread_pitch", l.thread_pitch)?;
         c.positive("linkage.counts_per_rev", l.counts_per_rev)?;
-        crate::linkage::Linkage::from_config(l, self.limits.tilt_max())
-            .map_err(|e| c.fail("linkage", "a linkage that reaches every tilt in [0, tilt_max_deg]", e))?;
+        crate::linkage::Linkage::from_config(l, self.limits.tilt_max()).map_err(|e| {
+            c.fail(
+                "linkage",
+                "a linkage that reaches every tilt in [0, tilt_max_deg]",
+                e,
+            )
+        })?;
 
         let lim = &self.limits;
         c.positive("limits.tilt_rate_max", lim.tilt_rate_max)?;
         c.within("limits.tilt_max_deg", lim.tilt_max_deg, 1.0, 90.0)?;
-        c.within("limits.tilt_flight_max_deg", lim.tilt_flight_max_deg, 0.0, lim.tilt_max_deg)?;
-        if lim.tilt_transition_max_deg < lim.tilt_flight_max_deg || lim.tilt_transition_max_deg > lim.tilt_max_deg {
+        c.within(
+            "limits.tilt_flight_max_deg",
+            lim.tilt_flight_max_deg,
+            0.0,
+            lim.tilt_max_deg,
+        )?;
+        if lim.tilt_transition_max_deg < lim.tilt_flight_max_deg
+            || lim.tilt_transition_max_deg > lim.tilt_max_deg
+        {
             return Err(c.fail(
                 "limits.tilt_transition_max_deg",
                 format!(
@@ -322,9 +366,40 @@ impl RobotConfig {
         if !(lim.morph_height.is_finite() && lim.morph_height > lim.transition_height) {
             return Err(c.fail(
                 "limits.morph_height",
-                format!("a height above limits.transition_height ({} m)", lim.transition_height),
+                format!(
+                    "a height above limits.transition_height ({} m)",
+                    lim.transition_height
+                ),
                 lim.morph_height,
             ));
+        }
+        // The composite body must have a positive-definite inertia wherever
+        // the controller may fly (the authors' convention fails above ~86 deg).
+        let model = crate::model::Model::new(self);
+        let steps = 200;
+        for i in 0..=steps {
+            let varphi = lim.tilt_transition_max() * f64::from(i) / f64::from(steps);
+            if !model.composite_is_physical(varphi) {
+                return Err(c.fail(
+                    "arm.inertia",
+                    "a composite inertia that is positive definite up to limits.tilt_transition_max_deg",
+                    format!("an indefinite inertia at {:.1} deg", varphi.to_degrees()),
+                ));
+            }
+        }
+        // The composite body must have a positive-definite inertia wherever
+        // the controller may fly (the authors' convention fails above ~86 deg).
+        let model = crate::model::Model::new(self);
+        let steps = 200;
+        for i in 0..=steps {
+            let varphi = lim.tilt_transition_max() * f64::from(i) / f64::from(steps);
+            if !model.composite_is_physical(varphi) {
+                return Err(c.fail(
+                    "arm.inertia",
+                    "a composite inertia that is positive definite up to limits.tilt_transition_max_deg",
+                    format!("an indefinite inertia at {:.1} deg", varphi.to_degrees()),
+                ));
+            }
         }
         Ok(())
     }

@@ -39,7 +39,11 @@ pub fn tilt_velocity_reference(
     v_max: f64,
 ) -> f64 {
     if grounded {
-        if throttle >= TAKEOFF_THROTTLE { -v_max } else { 0.0 }
+        if throttle >= TAKEOFF_THROTTLE {
+            -v_max
+        } else {
+            0.0
+        }
     } else if height < morph_height {
         v_max
     } else {
@@ -78,7 +82,11 @@ impl DiffDrive {
         let left = (v + omega * self.half_track) / self.radius;
         let right = (v - omega * self.half_track) / self.radius;
         let peak = left.abs().max(right.abs());
-        let scale = if peak > self.max_rate { self.max_rate / peak } else { 1.0 };
+        let scale = if peak > self.max_rate {
+            self.max_rate / peak
+        } else {
+            1.0
+        };
         WheelRates {
             left: left * scale,
             right: right * scale,

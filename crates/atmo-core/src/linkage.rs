@@ -149,6 +149,11 @@ fn check(quantity: &'static str, value: f64, min: f64, max: f64) -> Result<()> {
     if value.is_finite() && value >= min - slack && value <= max + slack {
         Ok(())
     } else {
-        Err(CoreError::OutOfRange { quantity, value, min, max })
+        Err(CoreError::OutOfRange {
+            quantity,
+            value,
+            min,
+            max,
+        })
     }
 }

@@ -27,9 +27,11 @@
 //! products negated for the right arm. Rotor spin (gyroscopic) terms and all
 //! aerodynamics are left out, as in their model; atmo-sim adds them.
 
-use nalgebra::{Cholesky, Matrix3, Matrix3x4, Matrix6, SMatrix, SVector, U6, Vector3, Vector4, Vector6};
+use nalgebra::{
+    Cholesky, Matrix3, Matrix3x4, Matrix6, SMatrix, SVector, U6, Vector3, Vector4, Vector6,
+};
 
-use crate::config::RobotConfig;
+use crate::config::{ArmInertiaConvention, RobotConfig};
 
 /// Number of states.
 pub const NX: usize = 12;
@@ -131,6 +133,22 @@ fn parallel_axis(r: &Vector3<f64>) -> Matrix3<f64> {
     Matrix3::identity() * r.norm_squared() - r * r.transpose()
 }
 
+/// Smallest principal moment about the CoM kept by the floor, kg m^2.
+pub const MIN_PRINCIPAL_INERTIA: f64 = 1e-3;
+
+/// Raises the principal moments about the centre of mass to
+/// [`MIN_PRINCIPAL_INERTIA`] and returns the tensor about B again.
+fn floor_inertia_about_com(
+    inertia_b: &Matrix3<f64>,
+    first_moment: &Vector3<f64>,
+    mass: f64,
+) -> Matrix3<f64> {
+    let shift = parallel_axis(first_moment) / mass;
+    let eig = (inertia_b - shift).symmetric_eigen();
+    let floored = eig.eigenvalues.map(|l| l.max(MIN_PRINCIPAL_INERTIA));
+    eig.eigenvectors * Matrix3::from_diagonal(&floored) * eig.eigenvectors.transpose() + shift
+}
+
 /// Robot constants the dynamics need, taken from a [`RobotConfig`].
 #[derive(Debug, Clone, PartialEq)]
 pub struct Model {
@@ -165,10 +183,20 @@ impl Model {
         let com_l = com_r.component_mul(&mirror_y);
         let rotor1 = Vector3::from(config.arm.hinge_to_rotor1);
         let listed = config.arm.inertia.matrix();
-        let flip_z = Matrix3::from_diagonal(&Vector3::new(1.0, 1.0, -1.0));
         let m_arm = config.arm.mass;
-        let arm_right = flip_z * listed * flip_z - parallel_axis(&com_r) * m_arm;
-        let arm_left = listed - parallel_axis(&com_l) * m_arm;
+        let [arm_right, arm_left] = match config.arm.inertia_convention {
+            ArmInertiaConvention::AuthorsModel => {
+                let flip_z = Matrix3::from_diagonal(&Vector3::new(1.0, 1.0, -1.0));
+                [
+                    flip_z * listed * flip_z - parallel_axis(&com_r) * m_arm,
+                    listed - parallel_axis(&com_l) * m_arm,
+                ]
+            }
+            ArmInertiaConvention::AboutCom => {
+                let mirror = Matrix3::from_diagonal(&mirror_y);
+                [listed, mirror * listed * mirror]
+            }
+        };
         let [rxx, ryy, rzz] = config.rotor.inertia;
         Self {
             gravity: config.environment.gravity,
@@ -179,10 +207,10 @@ impl Model {
             hinge: [hinge_r, hinge_r.component_mul(&mirror_y)],
             hinge_to_com: [com_r, com_l],
             hinge_to_rotor: [
-                rotor1,                                              // 1 front-right
+                rotor1,                                                   // 1 front-right
                 rotor1.component_mul(&mirror_x).component_mul(&mirror_y), // 2 back-left
-                rotor1.component_mul(&mirror_y),                     // 3 front-left
-                rotor1.component_mul(&mirror_x),                     // 4 back-right
+                rotor1.component_mul(&mirror_y),                          // 3 front-left
+                rotor1.component_mul(&mirror_x),                          // 4 back-right
             ],
             rotor_mass: config.rotor.mass,
             rotor_inertia: Matrix3::from_diagonal(&Vector3::new(rxx, ryy, rzz)),
@@ -211,16 +239,7 @@ impl Model {
     pub fn at_tilt(&self, varphi: f64) -> TiltedBody {
         // Right arm rotates by +varphi about body x, the left arm by -varphi.
         let arm_rot = [rot_x(varphi), rot_x(-varphi)];
-        let mut mass = self.base_mass;
-        let mut first_moment = Vector3::zeros();
-        let mut inertia = self.base_inertia;
-        for arm in 0..2 {
-            let r = self.hinge[arm] + arm_rot[arm] * self.hinge_to_com[arm];
-            mass += self.arm_mass;
-            first_moment += r * self.arm_mass;
-            inertia += arm_rot[arm] * self.arm_inertia[arm] * arm_rot[arm].transpose()
-                + parallel_axis(&r) * self.arm_mass;
-        }
+        let (first_moment, mut inertia, mass) = self.at_tilt_unfloored(varphi);
         let mut thrust_force = Matrix3x4::zeros();
         let mut thrust_torque = Matrix3x4::zeros();
         let mut rotor_position = [Vector3::zeros(); 4];
@@ -229,25 +248,37 @@ impl Model {
             let arm = ROTOR_ARM[i];
             let rot = arm_rot[arm];
             let r = self.hinge[arm] + rot * self.hinge_to_rotor[i];
-            mass += self.rotor_mass;
-            first_moment += r * self.rotor_mass;
-            inertia += rot * self.rotor_inertia * rot.transpose() + parallel_axis(&r) * self.rotor_mass;
             // Thrust along the arm's -z (up at varphi = 0).
             let axis = -rot.column(2).into_owned();
             thrust_force.set_column(i, &(axis * self.k_thrust));
-            let torque = r.cross(&axis) * self.k_thrust - axis * (self.yaw_sign[i] * self.k_moment * self.k_thrust);
+            let torque = r.cross(&axis) * self.k_thrust
+                - axis * (self.yaw_sign[i] * self.k_moment * self.k_thrust);
             thrust_torque.set_column(i, &torque);
             rotor_position[i] = r;
             rotor_axis[i] = axis;
         }
         let mut mass_matrix = Matrix6::zeros();
         mass_matrix.fixed_view_mut::<3, 3>(0, 0).fill_diagonal(mass);
-        mass_matrix.fixed_view_mut::<3, 3>(0, 3).copy_from(&(-skew(&first_moment)));
-        mass_matrix.fixed_view_mut::<3, 3>(3, 0).copy_from(&skew(&first_moment));
+        mass_matrix
+            .fixed_view_mut::<3, 3>(0, 3)
+            .copy_from(&(-skew(&first_moment)));
+        mass_matrix
+            .fixed_view_mut::<3, 3>(3, 0)
+            .copy_from(&skew(&first_moment));
         mass_matrix.fixed_view_mut::<3, 3>(3, 3).copy_from(&inertia);
-        let mass_matrix_inv = Cholesky::<f64, U6>::new(mass_matrix)
-            .expect("mass matrix of a validated robot is positive definite")
-            .inverse();
+        let mass_matrix_inv = match Cholesky::<f64, U6>::new(mass_matrix) {
+            Some(chol) => chol.inverse(),
+            None => {
+                // Only the authors' inertia convention gets here, above ~86 deg
+                // (validation keeps it out of the flight envelope). Floor the
+                // principal moments about the CoM so that the body stays a body.
+                inertia = floor_inertia_about_com(&inertia, &first_moment, mass);
+                mass_matrix.fixed_view_mut::<3, 3>(3, 3).copy_from(&inertia);
+                Cholesky::<f64, U6>::new(mass_matrix)
+                    .expect("floored composite inertia is positive definite")
+                    .inverse()
+            }
+        };
         TiltedBody {
             varphi,
             gravity: self.gravity,
@@ -261,6 +292,38 @@ impl Model {
             rotor_position,
             rotor_axis,
         }
+    }
+
+    /// Whether the composite body at `varphi` is physical without flooring
+    /// (positive-definite inertia about its centre of mass).
+    pub fn composite_is_physical(&self, varphi: f64) -> bool {
+        let body = self.at_tilt_unfloored(varphi);
+        let about_com = body.1 - parallel_axis(&body.0) / body.2;
+        about_com.symmetric_eigenvalues().min() > 0.0
+    }
+
+    /// First moment, inertia about B and mass, without the floor of `at_tilt`.
+    fn at_tilt_unfloored(&self, varphi: f64) -> (Vector3<f64>, Matrix3<f64>, f64) {
+        let arm_rot = [rot_x(varphi), rot_x(-varphi)];
+        let mut mass = self.base_mass;
+        let mut first_moment = Vector3::zeros();
+        let mut inertia = self.base_inertia;
+        for arm in 0..2 {
+            let r = self.hinge[arm] + arm_rot[arm] * self.hinge_to_com[arm];
+            mass += self.arm_mass;
+            first_moment += r * self.arm_mass;
+            inertia += arm_rot[arm] * self.arm_inertia[arm] * arm_rot[arm].transpose()
+                + parallel_axis(&r) * self.arm_mass;
+        }
+        for i in 0..4 {
+            let rot = arm_rot[ROTOR_ARM[i]];
+            let r = self.hinge[ROTOR_ARM[i]] + rot * self.hinge_to_rotor[i];
+            mass += self.rotor_mass;
+            first_moment += r * self.rotor_mass;
+            inertia +=
+                rot * self.rotor_inertia * rot.transpose() + parallel_axis(&r) * self.rotor_mass;
+        }
+        (first_moment, inertia, mass)
     }
 
     /// `x_dot = f(x, u, varphi)`.
@@ -377,7 +440,8 @@ impl TiltedBody {
 
         let mut dfdx = StateJacobian::zeros();
         // p_dot = v.
-        dfdx.fixed_view_mut::<3, 3>(idx::X, idx::VX).fill_diagonal(1.0);
+        dfdx.fixed_view_mut::<3, 3>(idx::X, idx::VX)
+            .fill_diagonal(1.0);
 
         // Euler kinematics.
         let (sr, cr) = roll.sin_cos();
@@ -411,7 +475,8 @@ impl TiltedBody {
             };
             let da = minv_top * drhs;
             let dw = minv_bot * drhs;
-            dfdx.fixed_view_mut::<3, 1>(idx::VX, col).copy_from(&(r * da));
+            dfdx.fixed_view_mut::<3, 1>(idx::VX, col)
+                .copy_from(&(r * da));
             dfdx.fixed_view_mut::<3, 1>(idx::WX, col).copy_from(&dw);
         }
         // v_dot = R a: the rotation itself depends on all three angles.
@@ -421,11 +486,14 @@ impl TiltedBody {
             column += extra;
         }
         // Rates: -w x (w x c) and -w x (I w).
-        let d_centripetal = Matrix3::identity() * w.dot(c) + w * c.transpose() - c * w.transpose() * 2.0;
+        let d_centripetal =
+            Matrix3::identity() * w.dot(c) + w * c.transpose() - c * w.transpose() * 2.0;
         let iw = self.inertia * w;
         let d_gyro = skew(&w) * self.inertia - skew(&iw);
         let mut drhs_dw = SMatrix::<f64, 6, 3>::zeros();
-        drhs_dw.fixed_view_mut::<3, 3>(0, 0).copy_from(&(-d_centripetal));
+        drhs_dw
+            .fixed_view_mut::<3, 3>(0, 0)
+            .copy_from(&(-d_centripetal));
         drhs_dw.fixed_view_mut::<3, 3>(3, 0).copy_from(&(-d_gyro));
         let dacc_dw = self.mass_matrix_inv * drhs_dw;
         dfdx.fixed_view_mut::<3, 3>(idx::VX, idx::WX)
@@ -435,8 +503,12 @@ impl TiltedBody {
 
         // Inputs.
         let mut drhs_du = SMatrix::<f64, 6, 4>::zeros();
-        drhs_du.fixed_view_mut::<3, 4>(0, 0).copy_from(&self.thrust_force);
-        drhs_du.fixed_view_mut::<3, 4>(3, 0).copy_from(&self.thrust_torque);
+        drhs_du
+            .fixed_view_mut::<3, 4>(0, 0)
+            .copy_from(&self.thrust_force);
+        drhs_du
+            .fixed_view_mut::<3, 4>(3, 0)
+            .copy_from(&self.thrust_torque);
         let dacc_du = self.mass_matrix_inv * drhs_du;
         let mut dfdu = InputJacobian::zeros();
         dfdu.fixed_view_mut::<3, 4>(idx::VX, 0)
@@ -504,6 +576,8 @@ impl TiltedBody {
             -gravity_torque.y,
             -gravity_torque.z,
         );
-        a.lu().solve(&rhs).expect("hover allocation matrix is regular")
+        a.lu()
+            .solve(&rhs)
+            .expect("hover allocation matrix is regular")
     }
 }

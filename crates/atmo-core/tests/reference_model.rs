@@ -2,8 +2,8 @@
 //! to 1e-9 (relative, absolute floor 1e-9), the separate terms of their
 //! equation at 10 points, and the hover trims of the reference README.
 
-use atmo_core::model::{Input, Model, State, rotation};
 use atmo_core::RobotConfig;
+use atmo_core::model::{Input, Model, State, rotation};
 use nalgebra::{Matrix3, Matrix6, SMatrix, Vector3, Vector6};
 
 fn model() -> Model {
@@ -31,7 +31,11 @@ fn reproduces_the_60_reference_points() {
         let xdot = model.dynamics(&x, &u, v[16]);
         for k in 0..12 {
             let want = v[17 + k];
-            assert!(close(xdot[k], want), "row {row} xdot{k}: got {} want {want}", xdot[k]);
+            assert!(
+                close(xdot[k], want),
+                "row {row} xdot{k}: got {} want {want}",
+                xdot[k]
+            );
             worst = worst.max((xdot[k] - want).abs() / want.abs().max(1.0));
         }
         rows += 1;
@@ -48,7 +52,12 @@ fn reproduces_the_terms_of_the_equation_of_motion() {
     assert_eq!(points.len(), 10);
     let model = model();
     for (n, p) in points.iter().enumerate() {
-        let x: Vec<f64> = p["x"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
+        let x: Vec<f64> = p["x"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|v| v.as_f64().unwrap())
+            .collect();
         let varphi = p["varphi"].as_f64().unwrap();
         let body = model.at_tilt(varphi);
         let r = rotation(x[3], x[4], x[5]);
@@ -57,7 +66,8 @@ fn reproduces_the_terms_of_the_equation_of_motion() {
         // T = diag(R, I) maps our body-frame generalized forces to theirs.
         let mut t = Matrix6::zeros();
         t.fixed_view_mut::<3, 3>(0, 0).copy_from(&r);
-        t.fixed_view_mut::<3, 3>(3, 3).copy_from(&Matrix3::identity());
+        t.fixed_view_mut::<3, 3>(3, 3)
+            .copy_from(&Matrix3::identity());
         let m_world = t * body.mass_matrix * t.transpose();
         let c = body.first_moment;
         let b_body = {
@@ -71,22 +81,38 @@ fn reproduces_the_terms_of_the_equation_of_motion() {
             Vector6::new(0.0, 0.0, -body.mass * body.gravity, tq.x, tq.y, tq.z)
         };
         let mut s_body = SMatrix::<f64, 6, 4>::zeros();
-        s_body.fixed_view_mut::<3, 4>(0, 0).copy_from(&body.thrust_force);
-        s_body.fixed_view_mut::<3, 4>(3, 0).copy_from(&body.thrust_torque);
+        s_body
+            .fixed_view_mut::<3, 4>(0, 0)
+            .copy_from(&body.thrust_force);
+        s_body
+            .fixed_view_mut::<3, 4>(3, 0)
+            .copy_from(&body.thrust_torque);
         let s_world_t = t * s_body;
         for i in 0..6 {
             for j in 0..6 {
                 let want = p["M"][i][j].as_f64().unwrap();
-                assert!(close(m_world[(i, j)], want), "point {n} M[{i}][{j}] {} vs {want}", m_world[(i, j)]);
+                assert!(
+                    close(m_world[(i, j)], want),
+                    "point {n} M[{i}][{j}] {} vs {want}",
+                    m_world[(i, j)]
+                );
             }
             let want_b = p["b"][i].as_f64().unwrap();
             let got_b = (t * b_body)[i];
             assert!(close(got_b, want_b), "point {n} b[{i}] {got_b} vs {want_b}");
             let want_g = p["g"][i].as_f64().unwrap();
-            assert!(close(g_world[i], want_g), "point {n} g[{i}] {} vs {want_g}", g_world[i]);
+            assert!(
+                close(g_world[i], want_g),
+                "point {n} g[{i}] {} vs {want_g}",
+                g_world[i]
+            );
             for k in 0..4 {
                 let want = p["S"][k][i].as_f64().unwrap();
-                assert!(close(s_world_t[(i, k)], want), "point {n} S[{k}][{i}] {} vs {want}", s_world_t[(i, k)]);
+                assert!(
+                    close(s_world_t[(i, k)], want),
+                    "point {n} S[{k}][{i}] {} vs {want}",
+                    s_world_t[(i, k)]
+                );
             }
         }
     }
@@ -107,7 +133,13 @@ fn hover_trims_match_the_reference_table() {
         let u = body.hover_trim();
         let want = [front, back, front, back];
         for i in 0..4 {
-            assert!((u[i] - want[i]).abs() < 6e-6, "{deg} deg rotor {}: {} vs {}", i + 1, u[i], want[i]);
+            assert!(
+                (u[i] - want[i]).abs() < 6e-6,
+                "{deg} deg rotor {}: {} vs {}",
+                i + 1,
+                u[i],
+                want[i]
+            );
         }
         // The trim really is an equilibrium.
         let xdot = body.dynamics(&State::zeros(), &u);
