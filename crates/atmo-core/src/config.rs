@@ -175,7 +175,7 @@ pub fn parse_toml<T: serde::de::DeserializeOwned>(text: &str, file: &Path) -> Re
         let key = err.path().to_string();
         let inner = err.into_inner();
         let line = inner.span().map_or(0, |span| {
-            text[..span.start.min(text.len())].lines().count().max(1)
+            text[..span.start.min(text.len())].matches('\n').count() + 1
         });
         CoreError::ConfigParse {
             file: file.to_path_buf(),

@@ -21,6 +21,9 @@
 use crate::config::LinkageConfig;
 use crate::error::{CoreError, Result};
 
+/// Samples of the monotonicity check over the tilt range.
+const MONOTONICITY_SAMPLES: usize = 2000;
+
 /// Linkage geometry with its valid tilt range; all lengths in metres.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Linkage {
@@ -54,11 +57,10 @@ impl Linkage {
         };
         // Monotonicity over the whole range, sampled finely: the closed-form
         // inverse is only valid on a monotone branch.
-        const SAMPLES: usize = 2000;
         let mut previous = link.screw_unchecked(0.0)?;
         link.x_min = previous;
-        for i in 1..=SAMPLES {
-            let varphi = tilt_max * i as f64 / SAMPLES as f64;
+        for i in 1..=MONOTONICITY_SAMPLES {
+            let varphi = tilt_max * i as f64 / MONOTONICITY_SAMPLES as f64;
             let x = link.screw_unchecked(varphi)?;
             if x <= previous {
                 return Err(CoreError::OutOfRange {
@@ -93,7 +95,7 @@ impl Linkage {
         let cos_theta = (self.dx - self.h - self.d2 * varphi.cos()) / self.d1;
         // ATMO's linkage reaches theta = 0 exactly at 90 deg: accept the
         // rounding of that singular end point.
-        if !(cos_theta.abs() <= 1.0 + 1e-12) {
+        if cos_theta.is_nan() || cos_theta.abs() > 1.0 + 1e-12 {
             return Err(CoreError::OutOfRange {
                 quantity: "linkage: cos(theta) at this tilt",
                 value: cos_theta,

@@ -266,18 +266,17 @@ impl Model {
             .fixed_view_mut::<3, 3>(3, 0)
             .copy_from(&skew(&first_moment));
         mass_matrix.fixed_view_mut::<3, 3>(3, 3).copy_from(&inertia);
-        let mass_matrix_inv = match Cholesky::<f64, U6>::new(mass_matrix) {
-            Some(chol) => chol.inverse(),
-            None => {
-                // Only the authors' inertia convention gets here, above ~86 deg
-                // (validation keeps it out of the flight envelope). Floor the
-                // principal moments about the CoM so that the body stays a body.
-                inertia = floor_inertia_about_com(&inertia, &first_moment, mass);
-                mass_matrix.fixed_view_mut::<3, 3>(3, 3).copy_from(&inertia);
-                Cholesky::<f64, U6>::new(mass_matrix)
-                    .expect("floored composite inertia is positive definite")
-                    .inverse()
-            }
+        let mass_matrix_inv = if let Some(chol) = Cholesky::<f64, U6>::new(mass_matrix) {
+            chol.inverse()
+        } else {
+            // Only the authors' inertia convention gets here, above ~86 deg
+            // (validation keeps it out of the flight envelope). Floor the
+            // principal moments about the CoM so that the body stays a body.
+            inertia = floor_inertia_about_com(&inertia, &first_moment, mass);
+            mass_matrix.fixed_view_mut::<3, 3>(3, 3).copy_from(&inertia);
+            Cholesky::<f64, U6>::new(mass_matrix)
+                .expect("floored composite inertia is positive definite")
+                .inverse()
         };
         TiltedBody {
             varphi,

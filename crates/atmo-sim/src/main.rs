@@ -1,0 +1,82 @@
+//! `atmo-sim`: the command-line front of the simulator.
+
+use std::path::PathBuf;
+
+use anyhow::{Context, Result};
+use atmo_core::limits::{
+    critical_angle, max_tilt_for_reserve, thrust_to_weight, trim_saturation_angle,
+};
+use atmo_core::{Linkage, Model, RobotConfig};
+use clap::{Parser, Subcommand};
+
+/// ATMO simulator: the built-in plant, scenarios and analysis tools.
+#[derive(Parser)]
+#[command(version, about, long_about = None)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Print what the physics of a robot file gives: mass, thrust-to-weight,
+    /// critical angle, in-flight tilt limit, hover trims and linkage travel.
+    Physics {
+        /// Robot parameter file (TOML, see config/atmo.toml).
+        #[arg(long, default_value = "config/atmo.toml")]
+        robot: PathBuf,
+    },
+}
+
+fn main() -> Result<()> {
+    match Cli::parse().command {
+        Command::Physics { robot } => physics(&robot),
+    }
+}
+
+fn physics(robot: &PathBuf) -> Result<()> {
+    let cfg = RobotConfig::load(robot).with_context(|| "loading the robot file")?;
+    let model = Model::new(&cfg);
+    let reserve = cfg.limits.thrust_reserve;
+    println!("robot file            {}", robot.display());
+    println!("total mass            {:.3} kg", model.mass());
+    println!("weight                {:.3} N", model.weight());
+    println!(
+        "max total thrust      {:.2} N (4 x kT)",
+        model.max_total_thrust()
+    );
+    println!("thrust-to-weight      {:.3}", thrust_to_weight(&model));
+    println!(
+        "critical angle        {:.2} deg   (cos varphi_c = m g / T_max)",
+        critical_angle(&model)?.to_degrees()
+    );
+    println!(
+        "trim saturates at     {:.2} deg   (first rotor at full command in level hover)",
+        trim_saturation_angle(&model, cfg.limits.tilt_max())?.to_degrees()
+    );
+    println!(
+        "in-flight tilt limit  {:.2} deg   (thrust reserve {reserve}: T_max cos varphi / (m g) = {reserve})",
+        max_tilt_for_reserve(&model, reserve)?.to_degrees()
+    );
+    println!("\nlevel hover trim (rotors 1 FR, 2 BL, 3 FL, 4 BR)");
+    println!("  varphi      u1       u2       u3       u4");
+    for deg in [0.0_f64, 20.0, 40.0, 50.0, 60.0] {
+        let u = model.at_tilt(deg.to_radians()).hover_trim();
+        println!(
+            "  {deg:>4.0} deg  {:.5}  {:.5}  {:.5}  {:.5}",
+            u[0], u[1], u[2], u[3]
+        );
+    }
+    let link = Linkage::from_config(&cfg.linkage, cfg.limits.tilt_max())?;
+    let (x0, x1) = link.screw_range();
+    let (_, counts) = link.counts_range();
+    println!(
+        "\nlinkage               screw x from {:.2} mm to {:.2} mm ({:.1} revolutions, {:.0} encoder counts) over 0..{:.0} deg",
+        x0 * 1e3,
+        x1 * 1e3,
+        (x1 - x0) / cfg.linkage.thread_pitch,
+        counts,
+        cfg.limits.tilt_max_deg
+    );
+    Ok(())
+}
