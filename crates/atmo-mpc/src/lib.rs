@@ -1,6 +1,81 @@
-//! atmo-mpc: the real-time-iteration nonlinear MPC that flies ATMO.
+//! atmo-mpc: the real-time-iteration (RTI) nonlinear MPC that flies ATMO.
 //!
-//! Not built yet (issue 4). It will hold: one Gauss-Newton SQP iteration per
-//! tick, split into a preparation phase (shift, linearize along the previous
-//! plan with atmo-core's RK4 sensitivities, build the QP) and a feedback phase
-//! (insert the estimate, solve with Clarabel updated in place, return u[0]).
+//! # The problem
+//!
+//! With the tilt sequence `varphi_k` (a known parameter: the current angle
+//! plus the commanded tilt velocity times `t_k`, clamped), stage length
+//! `dt = T / N` and `F_k(x, u) = RK4(f(., ., varphi_k), x, u, dt)`:
+//!
+//! ```text
+//! min   sum_{k<N} [ |x_k - r_k|^2_{Q(alpha)} + |u_k - u_ref,k|^2_{R(alpha)} ] + |x_N - r_N|^2_{Q_N}
+//! s.t.  x_0 = x_est,  x_{k+1} = F_k(x_k, u_k),  0 <= u_k <= 1
+//! Q(alpha) = alpha Q1 + (1 - alpha) Q2,  R(alpha) = alpha R1 + (1 - alpha) R2,
+//! Q_N = terminal_scale * Q(alpha),  u_ref,k = clamp(hover_trim(varphi_k), 0, 1)
+//! ```
+//!
+//! The yaw entry of `x - r` is the wrapped difference (in (-pi, pi]), so a
+//! reference at +179 deg and a state at -179 deg are 2 deg apart.
+//!
+//! # One Gauss-Newton step per tick (RTI)
+//!
+//! In deviations from the plan (`xbar`, `ubar`): `dx_k = x_k - xbar_k`,
+//! `du_k = u_k - ubar_k`, with `(A_k, B_k)` the exact sensitivities of the
+//! RK4 step at `(xbar_k, ubar_k)` and `d_k = F_k(xbar_k, ubar_k) - xbar_{k+1}`:
+//!
+//! ```text
+//! min  1/2 sum_k |dx_k + e_k|^2_{Q_k} + 1/2 sum_k |du_k + ubar_k - u_ref,k|^2_R
+//! s.t. dx_0 = x_est - xbar_0,  dx_{k+1} = A_k dx_k + B_k du_k + d_k,  -ubar_k <= du_k <= 1 - ubar_k
+//! ```
+//!
+//! (`e_k = xbar_k - r_k`, yaw wrapped). **Preparation** ([`Mpc::prepare`],
+//! before the estimate arrives): shift the plan by one controller period
+//! (linear interpolation between stages, the last state continued by one RK4
+//! step), compute `A_k, B_k, d_k` along it, build the QP and write it into
+//! Clarabel. **Feedback** ([`Mpc::feedback`]): insert `dx_0`, solve, apply
+//! the step to the plan (`xbar += dx`, `ubar += du`), return `u_0`.
+//!
+//! # Two formulations of the same QP
+//!
+//! - *Sparse* (multiple shooting): variables `(dx_0, du_0, ..., dx_N)`,
+//!   diagonal P, `12 (N + 1)` equality rows and `8N` bound rows; feedback
+//!   changes only the first 12 entries of b.
+//! - *Condensed*: states eliminated with
+//!   `dx_k = Phi_k dx_0 + sum_{j<k} G_{k,j} du_j + w_k`
+//!   (`Phi_{k+1} = A_k Phi_k`, `G_{k+1,k} = B_k`, `G_{k+1,j} = A_k G_{k,j}`,
+//!   `w_{k+1} = A_k w_k + d_k`). With `S_N = Q_N`,
+//!   `S_k = Q_k + A_k' S_{k+1} A_k`, `lambda_k = Q_k c_k + A_k' lambda_{k+1}`,
+//!   `c_k = w_k + e_k`, the QP in the 4N inputs is
+//!   `min 1/2 du' H du + (g0 + M dx_0)' du`, `-ubar <= du <= 1 - ubar`, with
+//!   `H_ij = B_i' S_{i+1} G_{i+1,j} (+ R on the diagonal)`,
+//!   `M_i = B_i' S_{i+1} Phi_{i+1}`, `g0_i = B_i' lambda_{i+1} + R (ubar_i - u_ref,i)`.
+//!   The O(N^2) condensing is in the preparation; feedback only forms
+//!   `g0 + M dx_0` (a 40 x 12 product) and solves. States are recovered by
+//!   the linear recursion.
+//!
+//! Which one is the default is decided by measurement (`benches/rti.rs`,
+//! BENCHMARKS.md); `config/mpc.toml` selects it.
+//!
+//! # Solver
+//!
+//! Clarabel (interior point) is built once in [`Mpc::new`] with a fixed
+//! sparsity pattern (structural zeros kept, presolve off, verbose off); each
+//! tick only `update_P/q/A/b` write values. A solve ends as an [`Outcome`]:
+//! `Solved`, `Degraded` (reduced accuracy, iteration or time limit: the
+//! iterate is still used, inputs clamped to [0, 1]), `Fallback` (no usable
+//! solution, or a non-finite estimate: the shifted previous plan is flown,
+//! up to `failure.grace_ticks` ticks in a row) and then `Failed`.
+//!
+//! Nothing in the tick allocates in this crate (`tests/no_alloc.rs`).
+
+pub mod controller;
+pub mod error;
+pub mod qp;
+pub mod settings;
+
+pub use controller::{
+    AlphaSchedule, DegradedCause, FailureCause, Mpc, Outcome, SqpReport, TickOutput, TickTimings,
+    wrap_angle,
+};
+pub use error::{MpcError, Result};
+pub use qp::{LinearizedHorizon, QpSnapshot, SolveReport};
+pub use settings::{CostPreset, Formulation, MpcFile, MpcSettings, SolverSettings};

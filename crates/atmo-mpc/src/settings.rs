@@ -1,0 +1,289 @@
+//! MPC settings: the `config/mpc.toml` layout, its loading and validation.
+//!
+//! Parsing is strict (unknown or missing keys are errors naming file, line and
+//! key, via atmo-core's `parse_toml`); every value is then range-checked.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+use atmo_core::config::{Checker, parse_toml, read_config_file};
+use atmo_core::model::{Input, NU, NX, State};
+use serde::Deserialize;
+
+use crate::error::{MpcError, Result};
+
+/// The whole `config/mpc.toml` file.
+#[derive(Debug, Clone, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct MpcFile {
+    pub horizon: HorizonSettings,
+    pub cost: CostSettings,
+    /// Named cost presets (`fig5`, `default`).
+    pub presets: BTreeMap<String, CostPreset>,
+    pub solver: SolverSettings,
+    pub failure: FailureSettings,
+}
+
+#[derive(Debug, Clone, Copy, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct HorizonSettings {
+    /// s, prediction horizon T.
+    pub duration: f64,
+    /// Number of shooting intervals N.
+    pub steps: usize,
+    /// s, controller period; the plan is shifted by this much each tick.
+    pub tick_period: f64,
+}
+
+#[derive(Debug, Clone, Copy, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct CostSettings {
+    /// Ticks between two recomputations of alpha by the flight stack.
+    pub alpha_refresh_ticks: u32,
+    /// `Q_N = terminal_scale * Q(alpha)`.
+    pub terminal_scale: f64,
+}
+
+/// One set of diagonal weights: `Q_1, Q_2` (12) and `R_1, R_2` (4).
+#[derive(Debug, Clone, Copy, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct CostPreset {
+    pub q1: [f64; NX],
+    pub q2: [f64; NX],
+    pub r1: [f64; NU],
+    pub r2: [f64; NU],
+}
+
+impl CostPreset {
+    /// Blended diagonal state weight `alpha Q1 + (1 - alpha) Q2`.
+    pub fn state_weight(&self, alpha: f64) -> State {
+        State::from_fn(|i, _| alpha * self.q1[i] + (1.0 - alpha) * self.q2[i])
+    }
+
+    /// Blended diagonal input weight `alpha R1 + (1 - alpha) R2`.
+    pub fn input_weight(&self, alpha: f64) -> Input {
+        Input::from_fn(|i, _| alpha * self.r1[i] + (1.0 - alpha) * self.r2[i])
+    }
+}
+
+/// Which QP the RTI step builds.
+#[derive(Debug, Clone, Copy, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "lowercase")]
+pub enum Formulation {
+    /// States eliminated: 4N inputs, dense Hessian, box constraints only.
+    Condensed,
+    /// Multiple shooting: states and inputs, block-sparse equality constraints.
+    Sparse,
+}
+
+#[derive(Debug, Clone, Copy, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct SolverSettings {
+    pub formulation: Formulation,
+    /// Clarabel interior-point iteration cap.
+    pub max_iter: u32,
+    /// s, Clarabel time limit per solve.
+    pub time_limit: f64,
+    pub tol_gap_abs: f64,
+    pub tol_gap_rel: f64,
+    pub tol_feas: f64,
+    /// Clarabel's Ruiz equilibration (computed once, from the start-up QP).
+    pub equilibrate: bool,
+}
+
+#[derive(Debug, Clone, Copy, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct FailureSettings {
+    /// Ticks flown on the shifted previous plan before reporting Failed.
+    pub grace_ticks: u32,
+}
+
+/// Everything one controller needs: the file with one preset chosen.
+#[derive(Debug, Clone, PartialEq)]
+pub struct MpcSettings {
+    pub horizon: HorizonSettings,
+    pub cost: CostSettings,
+    pub preset_name: String,
+    pub weights: CostPreset,
+    pub solver: SolverSettings,
+    pub failure: FailureSettings,
+}
+
+impl MpcSettings {
+    /// Stage length `T / N`, s.
+    pub fn stage_dt(&self) -> f64 {
+        self.horizon.duration / self.horizon.steps as f64
+    }
+
+    /// The shipped `config/mpc.toml` with the named preset.
+    pub fn atmo(preset: &str) -> Result<Self> {
+        MpcFile::from_toml_str(include_str!("../../../config/mpc.toml"), "config/mpc.toml")?
+            .settings(preset)
+    }
+}
+
+impl MpcFile {
+    /// Loads and validates an MPC settings file.
+    pub fn load(path: impl AsRef<Path>) -> Result<Self> {
+        let path = path.as_ref();
+        Self::from_toml_str(&read_config_file(path)?, path)
+    }
+
+    /// Parses and validates; `file` only names the origin in errors.
+    pub fn from_toml_str(text: &str, file: impl Into<PathBuf>) -> Result<Self> {
+        let file = file.into();
+        let parsed: Self = parse_toml(text, &file)?;
+        parsed.validate(&file)?;
+        Ok(parsed)
+    }
+
+    /// Checks every value against its range.
+    pub fn validate(&self, file: &Path) -> Result<()> {
+        let c = Checker::new(file);
+        let h = &self.horizon;
+        c.within("horizon.duration", h.duration, 0.01, 10.0)?;
+        if !(1..=50).contains(&h.steps) {
+            return Err(c
+                .fail("horizon.steps", "an integer in [1, 50]", h.steps)
+                .into());
+        }
+        let stage_dt = h.duration / h.steps as f64;
+        c.within("horizon.tick_period", h.tick_period, 1e-4, stage_dt)?;
+        if self.cost.alpha_refresh_ticks == 0 {
+            return Err(c
+                .fail("cost.alpha_refresh_ticks", "an integer >= 1", 0)
+                .into());
+        }
+        c.within("cost.terminal_scale", self.cost.terminal_scale, 0.0, 1e6)?;
+        if self.presets.is_empty() {
+            return Err(c.fail("presets", "at least one cost preset", "none").into());
+        }
+        for (name, p) in &self.presets {
+            for (key, values) in [
+                ("q1", &p.q1[..]),
+                ("q2", &p.q2[..]),
+                ("r1", &p.r1[..]),
+                ("r2", &p.r2[..]),
+            ] {
+                if let Some(v) = values.iter().find(|v| !(v.is_finite() && **v >= 0.0)) {
+                    return Err(c
+                        .fail(&format!("presets.{name}.{key}"), "finite weights >= 0", v)
+                        .into());
+                }
+            }
+            // The QP must stay strictly convex in the inputs whatever alpha is.
+            for (key, values) in [("r1", &p.r1), ("r2", &p.r2)] {
+                if let Some(v) = values.iter().find(|v| **v <= 0.0) {
+                    return Err(c
+                        .fail(&format!("presets.{name}.{key}"), "input weights > 0", v)
+                        .into());
+                }
+            }
+        }
+        let s = &self.solver;
+        if !(1..=1000).contains(&s.max_iter) {
+            return Err(c
+                .fail("solver.max_iter", "an integer in [1, 1000]", s.max_iter)
+                .into());
+        }
+        c.within("solver.time_limit", s.time_limit, 1e-5, 10.0)?;
+        c.within("solver.tol_gap_abs", s.tol_gap_abs, 1e-12, 1e-2)?;
+        c.within("solver.tol_gap_rel", s.tol_gap_rel, 1e-12, 1e-2)?;
+        c.within("solver.tol_feas", s.tol_feas, 1e-12, 1e-2)?;
+        if self.failure.grace_ticks > 10_000 {
+            return Err(c
+                .fail(
+                    "failure.grace_ticks",
+                    "an integer in [0, 10000]",
+                    self.failure.grace_ticks,
+                )
+                .into());
+        }
+        Ok(())
+    }
+
+    /// The settings with preset `name` chosen.
+    pub fn settings(&self, name: &str) -> Result<MpcSettings> {
+        let weights = *self
+            .presets
+            .get(name)
+            .ok_or_else(|| MpcError::UnknownPreset {
+                name: name.to_string(),
+                known: self.presets.keys().cloned().collect::<Vec<_>>().join(", "),
+            })?;
+        Ok(MpcSettings {
+            horizon: self.horizon,
+            cost: self.cost,
+            preset_name: name.to_string(),
+            weights,
+            solver: self.solver,
+            failure: self.failure,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const SHIPPED: &str = include_str!("../../../config/mpc.toml");
+
+    #[test]
+    fn shipped_file_has_both_paper_presets() {
+        let fig5 = MpcSettings::atmo("fig5").unwrap();
+        assert_eq!(fig5.weights.q1[5], 20.0);
+        assert_eq!(fig5.weights.q2[..9], [0.0; 9]);
+        let other = MpcSettings::atmo("default").unwrap();
+        assert_eq!(other.weights.q1[8], 0.8);
+        assert_eq!(other.weights.q2[9..], [1.5, 2.7, 2.0]);
+        assert_eq!(other.horizon.steps, 10);
+        assert!((other.stage_dt() - 0.1).abs() < 1e-15);
+        assert_eq!(other.cost.alpha_refresh_ticks, 10);
+        assert_eq!(other.weights.r1, [0.1; 4]);
+    }
+
+    #[test]
+    fn unknown_key_is_an_error_naming_it() {
+        let text = SHIPPED.replace("steps = 10", "steps = 10\nstepz = 3");
+        let err = MpcFile::from_toml_str(&text, "mpc.toml")
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("stepz"), "{err}");
+        assert!(err.contains("mpc.toml"), "{err}");
+    }
+
+    #[test]
+    fn out_of_range_values_are_rejected() {
+        let zero_r = SHIPPED.replacen("r1 = [0.1, 0.1, 0.1, 0.1]", "r1 = [0.1, 0.0, 0.1, 0.1]", 1);
+        let err = MpcFile::from_toml_str(&zero_r, "mpc.toml")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains("presets.default.r1") || err.contains("presets.fig5.r1"),
+            "{err}"
+        );
+        let bad_tick = SHIPPED.replace("tick_period = 0.006666666666666667", "tick_period = 0.5");
+        let err = MpcFile::from_toml_str(&bad_tick, "mpc.toml")
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("horizon.tick_period"), "{err}");
+        let bad_formulation =
+            SHIPPED.replace("formulation = \"condensed\"", "formulation = \"dense\"");
+        assert!(MpcFile::from_toml_str(&bad_formulation, "mpc.toml").is_err());
+    }
+
+    #[test]
+    fn unknown_preset_lists_the_known_ones() {
+        let err = MpcSettings::atmo("fig6").unwrap_err().to_string();
+        assert!(err.contains("fig5") && err.contains("default"), "{err}");
+    }
+
+    #[test]
+    fn blend_is_linear_in_alpha() {
+        let p = MpcSettings::atmo("fig5").unwrap().weights;
+        assert_eq!(p.state_weight(1.0)[0], 1.0);
+        assert_eq!(p.state_weight(0.0)[0], 0.0);
+        assert!((p.state_weight(0.25)[5] - (0.25 * 20.0)).abs() < 1e-12);
+        assert!((p.input_weight(0.3)[2] - 0.1).abs() < 1e-15);
+    }
+}

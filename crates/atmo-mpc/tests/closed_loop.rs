@@ -1,0 +1,124 @@
+//! Closed-loop tests against the atmo-core model (no plant effects).
+
+mod common;
+
+use atmo_core::model::{State, idx};
+use atmo_mpc::Formulation;
+use common::{controller, hover_at, run};
+
+const TICKS_PER_SECOND: usize = 150;
+
+fn perturbed_hover() -> State {
+    // 0.5 m off in x, 20 deg roll, 1 m/s sideways, 1 m above the reference origin.
+    let mut x = hover_at(0.5, 0.0, 1.0);
+    x[idx::ROLL] = 20f64.to_radians();
+    x[idx::VY] = 1.0;
+    x
+}
+
+fn recovery(formulation: Formulation) {
+    let mut mpc = controller(formulation);
+    let reference = hover_at(0.0, 0.0, 1.0);
+    let trace = run(
+        &mut mpc,
+        perturbed_hover(),
+        4 * TICKS_PER_SECOND,
+        |m, _, _| {
+            m.set_reference_constant(&reference).unwrap();
+            m.set_alpha(1.0).unwrap();
+            m.set_tilt_ramp(0.0, 0.0, 0.0, 0.0).unwrap();
+            0.0
+        },
+    );
+    let x = trace.last();
+    assert!(trace.inputs_within_bounds());
+    assert_eq!(trace.fresh_fraction(), 1.0);
+    let pos_err = (x.fixed_rows::<3>(idx::X) - reference.fixed_rows::<3>(idx::X)).norm();
+    eprintln!("{formulation:?} recovery: error {pos_err:.4} m after 4 s");
+    assert!(pos_err < 0.02, "position error after 4 s: {pos_err} m");
+    assert!(x.fixed_rows::<3>(idx::YAW).amax() < 1f64.to_radians());
+    assert!(x.fixed_rows::<3>(idx::VX).norm() < 0.02);
+}
+
+#[test]
+fn recovers_to_hover_from_offset_roll_and_velocity_condensed() {
+    recovery(Formulation::Condensed);
+}
+
+#[test]
+fn recovers_to_hover_from_offset_roll_and_velocity_sparse() {
+    recovery(Formulation::Sparse);
+}
+
+#[test]
+fn position_step_settles() {
+    let mut mpc = controller(Formulation::Condensed);
+    let start = hover_at(0.0, 0.0, 1.0);
+    let target = hover_at(1.0, -0.5, 1.5);
+    let trace = run(&mut mpc, start, 4 * TICKS_PER_SECOND, |m, _, _| {
+        m.set_reference_constant(&target).unwrap();
+        m.set_alpha(1.0).unwrap();
+        m.set_tilt_ramp(0.0, 0.0, 0.0, 0.0).unwrap();
+        0.0
+    });
+    assert!(trace.inputs_within_bounds());
+    assert_eq!(trace.fresh_fraction(), 1.0);
+    let x = trace.last();
+    let pos_err = (x.fixed_rows::<3>(idx::X) - target.fixed_rows::<3>(idx::X)).norm();
+    assert!(pos_err < 0.02, "position error after 4 s: {pos_err} m");
+    // No wild excursion on the way: never more than 10 cm beyond the target in x.
+    let overshoot = trace
+        .states
+        .iter()
+        .map(|s| s[idx::X] - 1.0)
+        .fold(f64::MIN, f64::max);
+    eprintln!("position step: error {pos_err:.4} m, overshoot {overshoot:.4} m");
+    assert!(overshoot < 0.10, "overshoot {overshoot} m");
+    // The step saturates the rotors at first: the box constraint is active.
+    assert!(
+        trace
+            .inputs
+            .iter()
+            .any(|u| u.max() > 0.99 || u.min() < 0.01)
+    );
+}
+
+/// The paper's in-flight morph: tilt 0 -> 50 deg at the mechanism's speed
+/// while hovering, alpha refreshed every 10 ticks as the flight stack does.
+#[test]
+fn tilt_ramp_to_50_deg_holds_altitude() {
+    let mut mpc = controller(Formulation::Condensed);
+    let cfg = atmo_core::RobotConfig::atmo();
+    let rate = cfg.limits.tilt_rate_max;
+    let max = cfg.limits.tilt_flight_max();
+    assert!((rate - std::f64::consts::FRAC_PI_2 / 4.0).abs() < 1e-12);
+    let height = 2.0;
+    let reference = hover_at(0.0, 0.0, height);
+    let tick = mpc.settings().horizon.tick_period;
+    let mut schedule = atmo_mpc::AlphaSchedule::new(mpc.settings().cost.alpha_refresh_ticks);
+    let trace = run(&mut mpc, reference, 4 * TICKS_PER_SECOND, |m, k, x| {
+        let varphi = (rate * tick * k as f64).min(max);
+        let commanded = if varphi < max { rate } else { 0.0 };
+        let alpha = schedule.update(-x[idx::Z], varphi, cfg.limits.transition_height);
+        m.set_reference_constant(&reference).unwrap();
+        m.set_alpha(alpha).unwrap();
+        m.set_tilt_ramp(varphi, commanded, 0.0, max).unwrap();
+        varphi
+    });
+    assert!(trace.inputs_within_bounds());
+    assert_eq!(trace.fresh_fraction(), 1.0);
+    assert!(
+        (trace.tilts.last().unwrap() - max).abs() < 1e-12,
+        "the ramp reached 50 deg"
+    );
+    let worst = trace
+        .states
+        .iter()
+        .map(|s| (-s[idx::Z] - height).abs())
+        .fold(0.0, f64::max);
+    eprintln!("tilt ramp: worst altitude error {worst:.4} m");
+    assert!(worst < 0.05, "altitude error {worst} m during the ramp");
+    // At 50 deg the rotors work harder: the hover trim is about 0.73-0.76.
+    let u = trace.inputs.last().unwrap();
+    assert!(u.min() > 0.70 && u.max() < 0.80, "{u:?}");
+}
