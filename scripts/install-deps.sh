@@ -4,6 +4,8 @@
 set -euo pipefail
 need=()
 # (system packages the tests need are added here as the project grows)
+# cmake: osqp-sys (atmo-mpc's dev-dependency for the QP solver comparison) builds OSQP with it.
+command -v cmake >/dev/null || need+=(cmake)
 if ((${#need[@]})); then
     if command -v apt-get >/dev/null; then
         apt-get update -qq && apt-get install -y -qq "${need[@]}"
