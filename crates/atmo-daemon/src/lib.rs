@@ -1,5 +1,22 @@
-//! atmo-daemon: the flight stack and the onboard binary.
+//! atmo-daemon: the flight stack and the onboard control loop.
 //!
-//! Not built yet (issue 5). It will hold: `FlightStack` (mode state machine,
-//! reference generation, tilt and drive control, failsafes) with a pure
-//! `step(inputs, now)`, and the 150 Hz control loop that wires it to atmo-io.
+//! - [`modes`]: the paper's mode state machine as an explicit transition table.
+//! - [`flight_stack`]: `FlightStack::step(inputs)` (pure, deterministic, the
+//!   clock is an input): input validation, mode machine, tilt law with limits,
+//!   MPC feedback (thrusters), drive controller (wheels), failsafes, status.
+//! - [`control_loop`]: the 150 Hz control thread with absolute deadlines and
+//!   per-tick timing.
+//! - [`settings`], read from `config/flight.toml`.
+
+pub mod control_loop;
+pub mod error;
+pub mod flight_stack;
+pub mod modes;
+pub mod settings;
+
+pub use error::{DaemonError, Result};
+pub use flight_stack::{
+    Estimate, FlightStack, PilotInput, RejectCounters, SolverState, Status, StepInputs, StepOutputs,
+};
+pub use modes::Mode;
+pub use settings::FlightSettings;

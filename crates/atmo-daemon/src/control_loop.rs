@@ -1,0 +1,153 @@
+//! The periodic control loop: absolute deadlines, per-tick timing.
+//!
+//! Deadlines are `t0 + k T` (never `previous wake-up + T`), so sleep error
+//! and compute time never accumulate into drift. A tick that overruns
+//! its period is counted; if the loop falls more than a whole period behind,
+//! the missed deadlines are skipped (and counted) instead of being run back
+//! to back. The clock is a trait so that tests and replays drive time.
+
+use std::time::{Duration, Instant};
+
+/// Monotonic time source, ns since an arbitrary origin.
+pub trait Clock {
+    fn now_ns(&self) -> u64;
+    /// Blocks until `deadline_ns` (returns at once if it has passed).
+    fn sleep_until(&self, deadline_ns: u64);
+}
+
+/// The machine's monotonic clock.
+#[derive(Debug, Clone, Copy)]
+pub struct MonotonicClock {
+    origin: Instant,
+}
+
+impl MonotonicClock {
+    pub fn new() -> Self {
+        Self {
+            origin: Instant::now(),
+        }
+    }
+}
+
+impl Default for MonotonicClock {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl Clock for MonotonicClock {
+    fn now_ns(&self) -> u64 {
+        u64::try_from(self.origin.elapsed().as_nanos()).unwrap_or(u64::MAX)
+    }
+
+    fn sleep_until(&self, deadline_ns: u64) {
+        let now = self.now_ns();
+        if deadline_ns > now {
+            std::thread::sleep(Duration::from_nanos(deadline_ns - now));
+        }
+    }
+}
+
+/// Timing of one tick, for the status record.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct TickTiming {
+    /// Tick number since start.
+    pub tick: u64,
+    /// The deadline this tick was scheduled for, ns.
+    pub deadline_ns: u64,
+    /// Wake-up minus deadline, s (the period jitter; >= 0).
+    pub wake_latency: f64,
+    /// Time spent in the tick body, s.
+    pub compute: f64,
+    /// The body ran past the next deadline.
+    pub overrun: bool,
+    pub overruns_total: u64,
+    /// Deadlines skipped because the loop fell behind.
+    pub skipped_total: u64,
+}
+
+/// Scheduler state of a periodic loop.
+#[derive(Debug, Clone)]
+pub struct Scheduler {
+    period_ns: u64,
+    start_ns: u64,
+    tick: u64,
+    overruns: u64,
+    skipped: u64,
+}
+
+impl Scheduler {
+    /// A loop whose first deadline is `start_ns`.
+    pub fn new(period_ns: u64, start_ns: u64) -> Self {
+        Self {
+            period_ns: period_ns.max(1),
+            start_ns,
+            tick: 0,
+            overruns: 0,
+            skipped: 0,
+        }
+    }
+
+    pub fn period_ns(&self) -> u64 {
+        self.period_ns
+    }
+
+    fn deadline(&self, tick: u64) -> u64 {
+        self.start_ns + tick * self.period_ns
+    }
+
+    /// Sleeps until the next deadline and returns it with the wake-up time.
+    pub fn wait<C: Clock>(&mut self, clock: &C) -> (u64, u64) {
+        let mut deadline = self.deadline(self.tick);
+        let now = clock.now_ns();
+        if now > deadline + self.period_ns {
+            // More than a whole period behind: skip to the latest deadline.
+            let behind = (now - deadline) / self.period_ns;
+            self.skipped += behind;
+            self.tick += behind;
+            deadline = self.deadline(self.tick);
+        }
+        clock.sleep_until(deadline);
+        (deadline, clock.now_ns())
+    }
+
+    /// Closes the tick that woke at `woke_ns` for `deadline_ns`.
+    pub fn finish<C: Clock>(&mut self, clock: &C, deadline_ns: u64, woke_ns: u64) -> TickTiming {
+        let end = clock.now_ns();
+        let overrun = end > deadline_ns + self.period_ns;
+        if overrun {
+            self.overruns += 1;
+        }
+        let timing = TickTiming {
+            tick: self.tick,
+            deadline_ns,
+            wake_latency: woke_ns.saturating_sub(deadline_ns) as f64 * 1e-9,
+            compute: end.saturating_sub(woke_ns) as f64 * 1e-9,
+            overrun,
+            overruns_total: self.overruns,
+            skipped_total: self.skipped,
+        };
+        self.tick += 1;
+        timing
+    }
+}
+
+/// Runs `body` every `period` on the calling thread until it returns false.
+/// `body` gets the deadline (the tick's time stamp) and the previous tick's timing.
+pub fn run_periodic<C: Clock>(
+    clock: &C,
+    period: Duration,
+    mut body: impl FnMut(u64, &TickTiming) -> bool,
+) -> TickTiming {
+    let period_ns = u64::try_from(period.as_nanos()).unwrap_or(u64::MAX);
+    let mut scheduler = Scheduler::new(period_ns, clock.now_ns() + period_ns);
+    let mut last = TickTiming::default();
+    loop {
+        let (deadline, woke) = scheduler.wait(clock);
+        let go_on = body(deadline, &last);
+        last = scheduler.finish(clock, deadline, woke);
+        if !go_on {
+            return last;
+        }
+    }
+}

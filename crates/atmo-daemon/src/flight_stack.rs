@@ -1,0 +1,631 @@
+//! `FlightStack`: one pure, deterministic `step` per control tick.
+//!
+//! The clock is an input (`now_ns`), so the same code runs in real time
+//! onboard, faster than real time in simulation, and identically when
+//! replayed. Bad inputs are rejected, counted and the last good value held;
+//! `step` never panics and never allocates after `new` (tested).
+//!
+//! RTI split: [`FlightStack::step`] runs the MPC feedback phase (estimate in,
+//! command out); [`FlightStack::prepare_next`] runs the preparation phase for
+//! the next tick (reference, tilt sequence, alpha, linearization) and belongs
+//! after the outputs have been sent.
+
+use atmo_core::control::{DiffDrive, WheelRates, blending_alpha};
+use atmo_core::model::{Input, State, idx};
+use atmo_core::{Linkage, Model, RobotConfig};
+use atmo_mpc::{AlphaSchedule, Mpc, MpcSettings, Outcome};
+use nalgebra::Vector3;
+
+use crate::error::{DaemonError, Result};
+use crate::modes::{Conditions, Mode, Thresholds, next_mode};
+use crate::settings::FlightSettings;
+
+/// A state estimate and the time it was measured.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Estimate {
+    pub stamp_ns: u64,
+    pub state: State,
+}
+
+/// Pilot (or scenario) inputs.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct PilotInput {
+    /// Velocity command, NED world frame, m/s (limited to the configured norm).
+    pub velocity: [f64; 3],
+    /// Yaw-rate command, rad/s (FRD: positive turns right).
+    pub yaw_rate: f64,
+    /// Throttle stick in [0, 1].
+    pub throttle: f64,
+    pub arm: bool,
+    pub offboard: bool,
+    pub mpc_enabled: bool,
+}
+
+/// Everything one tick sees.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StepInputs {
+    /// The flight stack's clock, ns.
+    pub now_ns: u64,
+    /// Latest estimate received (possibly old, possibly the same as last tick).
+    pub estimate: Option<Estimate>,
+    /// Tilt encoder counts (continuous), if a reading arrived.
+    pub tilt_counts: Option<f64>,
+    pub pilot: PilotInput,
+    /// Wheel contact signal.
+    pub ground_contact: bool,
+    /// NED z of the ground plane under the robot, m.
+    pub ground_z: f64,
+}
+
+/// Solver outcome, flattened for logs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SolverState {
+    /// The MPC did not run this tick.
+    #[default]
+    Idle,
+    Solved,
+    Degraded,
+    Fallback,
+    Failed,
+}
+
+impl SolverState {
+    pub fn code(self) -> u8 {
+        self as u8
+    }
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Idle => "idle",
+            Self::Solved => "solved",
+            Self::Degraded => "degraded",
+            Self::Fallback => "fallback",
+            Self::Failed => "failed",
+        }
+    }
+}
+
+/// Inputs rejected so far, by kind.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct RejectCounters {
+    /// Non-finite entries, stamps in the future or going backwards.
+    pub estimate: u64,
+    /// Non-finite or out-of-range encoder counts.
+    pub tilt: u64,
+    /// Non-finite or out-of-range pilot inputs.
+    pub pilot: u64,
+    /// Non-finite ground height.
+    pub ground: u64,
+}
+
+/// The status record of one tick (fixed size, copied into logs).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Status {
+    pub now_ns: u64,
+    pub mode: Mode,
+    /// Reason of the transition taken this tick, if any.
+    pub transition: Option<&'static str>,
+    pub alpha: f64,
+    /// Tilt used this tick, rad.
+    pub tilt: f64,
+    /// Tilt limit in force this tick, rad.
+    pub tilt_limit: f64,
+    /// Height of the base origin above the ground, m.
+    pub height: f64,
+    /// Age of the estimate used, s (infinite if none).
+    pub estimate_age: f64,
+    /// State used (the last good estimate).
+    pub state: State,
+    /// MPC reference for stage 0 (or the drive reference).
+    pub reference: State,
+    /// Predicted state at the next MPC stage.
+    pub predicted_next: State,
+    pub solver: SolverState,
+    pub mpc_failed_ticks: u32,
+    pub mpc_failures_total: u64,
+    /// MPC feedback and preparation times, s (preparation: of the previous `prepare_next`).
+    pub feedback_time: f64,
+    pub preparation_time: f64,
+    pub solver_iterations: u32,
+    /// Drive reference: forward speed m/s and yaw rate rad/s.
+    pub drive_velocity: [f64; 2],
+    pub rejected: RejectCounters,
+}
+
+/// What one tick commands.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StepOutputs {
+    /// Normalized thruster commands, each in [0, 1].
+    pub thrust: [f64; 4],
+    /// Tilt velocity, rad/s, positive towards drive.
+    pub tilt_velocity: f64,
+    pub wheel_rates: WheelRates,
+    pub status: Status,
+}
+
+/// The flight stack.
+pub struct FlightStack {
+    settings: FlightSettings,
+    thresholds: Thresholds,
+    model: Model,
+    linkage: Linkage,
+    drive: DiffDrive,
+    mpc: Mpc,
+    alpha: AlphaSchedule,
+    /// Per-stage reference buffer (N + 1), allocated once.
+    reference: Vec<State>,
+    stage_dt: f64,
+    tilt_rate_max: f64,
+    flight_tilt_max: f64,
+    transition_tilt_max: f64,
+    tilt_max: f64,
+    mode: Mode,
+    mode_since_ns: u64,
+    mpc_warm: bool,
+    mpc_failures_total: u64,
+    last_estimate: Option<Estimate>,
+    last_tilt: f64,
+    last_pilot: PilotInput,
+    last_ground_z: f64,
+    last_thrust: Input,
+    touchdown_thrust: Input,
+    hold_position: Vector3<f64>,
+    hold_yaw: f64,
+    holding: bool,
+    last_preparation_time: f64,
+    rejected: RejectCounters,
+    tilt_command: f64,
+}
+
+impl FlightStack {
+    /// Builds the stack and its MPC (all allocations happen here).
+    pub fn new(
+        robot: &RobotConfig,
+        mpc_settings: MpcSettings,
+        settings: FlightSettings,
+    ) -> Result<Self> {
+        let model = Model::new(robot);
+        let linkage = Linkage::from_config(&robot.linkage, robot.limits.tilt_max())?;
+        let mpc = Mpc::new(model.clone(), mpc_settings)?;
+        let steps = mpc.steps();
+        let stage_dt = mpc.stage_dt();
+        let alpha = AlphaSchedule::new(mpc.settings().cost.alpha_refresh_ticks);
+        let lim = &robot.limits;
+        if settings.modes.takeoff_max_tilt_deg > lim.tilt_flight_max_deg {
+            return Err(DaemonError::Setup(format!(
+                "modes.takeoff_max_tilt_deg ({}) must not exceed the robot's limits.tilt_flight_max_deg ({})",
+                settings.modes.takeoff_max_tilt_deg, lim.tilt_flight_max_deg
+            )));
+        }
+        let thresholds = Thresholds {
+            takeoff_throttle: settings.modes.takeoff_throttle,
+            takeoff_height: settings.modes.takeoff_height,
+            morph_height: lim.morph_height,
+            morph_hysteresis: settings.modes.morph_hysteresis,
+            transition_height: lim.transition_height,
+            thrust_cut_time: settings.modes.thrust_cut_time,
+            failsafe_recovery_time: settings.failsafe.recovery_time,
+            failsafe_recovery_tilt: settings.failsafe.recovery_tilt_deg.to_radians(),
+        };
+        Ok(Self {
+            thresholds,
+            linkage,
+            drive: DiffDrive::new(&robot.wheels),
+            mpc,
+            alpha,
+            reference: vec![State::zeros(); steps + 1],
+            stage_dt,
+            tilt_rate_max: lim.tilt_rate_max,
+            flight_tilt_max: lim.tilt_flight_max(),
+            transition_tilt_max: lim.tilt_transition_max(),
+            tilt_max: lim.tilt_max(),
+            mode: Mode::Disarmed,
+            mode_since_ns: 0,
+            mpc_warm: false,
+            mpc_failures_total: 0,
+            last_estimate: None,
+            last_tilt: 0.0,
+            last_pilot: PilotInput::default(),
+            last_ground_z: 0.0,
+            last_thrust: Input::zeros(),
+            touchdown_thrust: Input::zeros(),
+            hold_position: Vector3::zeros(),
+            hold_yaw: 0.0,
+            holding: false,
+            last_preparation_time: 0.0,
+            rejected: RejectCounters::default(),
+            tilt_command: 0.0,
+            model,
+            settings,
+        })
+    }
+
+    pub fn mode(&self) -> Mode {
+        self.mode
+    }
+
+    pub fn settings(&self) -> &FlightSettings {
+        &self.settings
+    }
+
+    pub fn mpc(&self) -> &Mpc {
+        &self.mpc
+    }
+
+    pub fn rejected(&self) -> RejectCounters {
+        self.rejected
+    }
+
+    /// Control period, s.
+    pub fn period(&self) -> f64 {
+        self.settings.control_loop.period()
+    }
+
+    /// Accepts or rejects this tick's raw inputs; keeps the last good values.
+    fn ingest(&mut self, inputs: &StepInputs) {
+        if let Some(est) = inputs.estimate {
+            let finite = est.state.iter().all(|v| v.is_finite());
+            let from_future = est.stamp_ns > inputs.now_ns;
+            let backwards = self
+                .last_estimate
+                .is_some_and(|last| est.stamp_ns < last.stamp_ns);
+            let repeated = self.last_estimate.is_some_and(|last| last == est);
+            if !repeated {
+                if finite && !from_future && !backwards {
+                    self.last_estimate = Some(est);
+                } else {
+                    self.rejected.estimate += 1;
+                }
+            }
+        }
+        if let Some(counts) = inputs.tilt_counts {
+            match self.linkage.tilt_from_counts(counts) {
+                Ok(tilt) => self.last_tilt = tilt,
+                Err(_) => self.rejected.tilt += 1,
+            }
+        }
+        let p = inputs.pilot;
+        let pilot_ok = p.velocity.iter().all(|v| v.is_finite())
+            && p.yaw_rate.is_finite()
+            && (0.0..=1.0).contains(&p.throttle);
+        if pilot_ok {
+            let mut accepted = p;
+            let v = Vector3::from(p.velocity);
+            let limit = self.settings.pilot.max_speed;
+            if v.norm() > limit {
+                accepted.velocity = (v * (limit / v.norm())).into();
+            }
+            let yaw_limit = self.settings.pilot.max_yaw_rate;
+            accepted.yaw_rate = p.yaw_rate.clamp(-yaw_limit, yaw_limit);
+            self.last_pilot = accepted;
+        } else {
+            self.rejected.pilot += 1;
+        }
+        if inputs.ground_z.is_finite() {
+            self.last_ground_z = inputs.ground_z;
+        } else {
+            self.rejected.ground += 1;
+        }
+    }
+
+    /// Tilt limit in force in `mode`, rad.
+    fn tilt_limit(&self, mode: Mode) -> f64 {
+        match mode {
+            Mode::Transition => self.transition_tilt_max,
+            Mode::Takeoff | Mode::Flight | Mode::Morphing | Mode::Failsafe => self.flight_tilt_max,
+            Mode::Disarmed | Mode::Drive | Mode::Touchdown => self.tilt_max,
+        }
+    }
+
+    /// The tilt velocity the mode asks for, before limits.
+    fn tilt_velocity_wanted(&self, mode: Mode) -> f64 {
+        let v = self.tilt_rate_max;
+        match mode {
+            Mode::Disarmed | Mode::Drive | Mode::Touchdown => 0.0,
+            Mode::Takeoff | Mode::Flight | Mode::Failsafe => -v,
+            Mode::Morphing | Mode::Transition => v,
+        }
+    }
+
+    /// Enforces `[0, limit]` on the tilt whatever is wanted: never move
+    /// further out, come back at full speed when outside, never overshoot.
+    fn limit_tilt_velocity(&self, wanted: f64, tilt: f64, limit: f64) -> f64 {
+        let dt = self.period();
+        let v = self.tilt_rate_max;
+        if tilt > limit {
+            return -v;
+        }
+        wanted.clamp(-v, v).clamp(-tilt / dt, (limit - tilt) / dt)
+    }
+
+    /// One control tick: validate inputs, run the mode machine, command
+    /// thrusters (MPC feedback phase), tilt and wheels.
+    pub fn step(&mut self, inputs: &StepInputs) -> StepOutputs {
+        self.ingest(inputs);
+        let now = inputs.now_ns;
+        let pilot = self.last_pilot;
+        let tilt = self.last_tilt;
+        let estimate_age = self.last_estimate.map_or(f64::INFINITY, |e| {
+            now.saturating_sub(e.stamp_ns) as f64 * 1e-9
+        });
+        let estimate_fresh = estimate_age <= self.settings.failsafe.estimate_timeout;
+        let state = self.last_estimate.map_or(State::zeros(), |e| e.state);
+        let height = self.last_ground_z - state[idx::Z];
+        let mpc_failed_ticks = self.mpc.failed_ticks();
+        let conditions = Conditions {
+            armed: pilot.arm && pilot.offboard,
+            grounded: inputs.ground_contact,
+            height,
+            throttle: pilot.throttle,
+            descent_commanded: pilot.velocity[2] > self.settings.pilot.descent_threshold,
+            estimate_fresh,
+            mpc_failed: mpc_failed_ticks > self.mpc.settings().failure.grace_ticks
+                || (self.mode.is_airborne_mode() && !pilot.mpc_enabled),
+            tilt,
+            time_in_mode: now.saturating_sub(self.mode_since_ns) as f64 * 1e-9,
+        };
+        let (mode, transition) = next_mode(self.mode, &conditions, &self.thresholds);
+        if mode != self.mode {
+            self.enter(mode, now, &state);
+        }
+
+        let limit = self.tilt_limit(mode);
+        let tilt_velocity = self.limit_tilt_velocity(self.tilt_velocity_wanted(mode), tilt, limit);
+        self.tilt_command = tilt_velocity;
+
+        let mut status = Status {
+            now_ns: now,
+            mode,
+            transition,
+            alpha: self.mpc.alpha(),
+            tilt,
+            tilt_limit: limit,
+            height,
+            estimate_age,
+            state,
+            reference: self.reference[0],
+            predicted_next: self.mpc.plan_states().get(1).copied().unwrap_or(state),
+            solver: SolverState::Idle,
+            mpc_failed_ticks,
+            mpc_failures_total: self.mpc_failures_total,
+            feedback_time: 0.0,
+            preparation_time: self.last_preparation_time,
+            solver_iterations: 0,
+            drive_velocity: [0.0, 0.0],
+            rejected: self.rejected,
+        };
+
+        let thrust = self.thrust(mode, &state, estimate_fresh, pilot, tilt, &mut status);
+        let wheel_rates = self.wheels(mode, &state, height, pilot, &mut status);
+        self.last_thrust = thrust;
+        status.rejected = self.rejected;
+        StepOutputs {
+            thrust: [thrust[0], thrust[1], thrust[2], thrust[3]],
+            tilt_velocity,
+            wheel_rates,
+            status,
+        }
+    }
+
+    fn enter(&mut self, mode: Mode, now: u64, state: &State) {
+        self.mode = mode;
+        self.mode_since_ns = now;
+        self.hold_position = Vector3::new(state[idx::X], state[idx::Y], state[idx::Z]);
+        self.hold_yaw = state[idx::YAW];
+        self.holding = false;
+        if mode == Mode::Touchdown {
+            self.touchdown_thrust = self.last_thrust;
+        }
+        if !mode.is_airborne_mode() {
+            self.mpc_warm = false;
+        }
+    }
+
+    fn thrust(
+        &mut self,
+        mode: Mode,
+        state: &State,
+        estimate_fresh: bool,
+        pilot: PilotInput,
+        tilt: f64,
+        status: &mut Status,
+    ) -> Input {
+        match mode {
+            Mode::Disarmed | Mode::Drive => Input::zeros(),
+            Mode::Touchdown => {
+                let t = status.now_ns.saturating_sub(self.mode_since_ns) as f64 * 1e-9;
+                let cut = self.settings.modes.thrust_cut_time;
+                let scale = if cut > 0.0 {
+                    (1.0 - t / cut).clamp(0.0, 1.0)
+                } else {
+                    0.0
+                };
+                self.touchdown_thrust * scale
+            }
+            Mode::Takeoff if tilt > self.settings.modes.takeoff_max_tilt_deg.to_radians() => {
+                Input::zeros()
+            }
+            Mode::Failsafe if !estimate_fresh || !pilot.mpc_enabled => {
+                // No state to fly on: open-loop hover trim at the current
+                // tilt, slightly under, for a slow level descent.
+                let trim = self.model.at_tilt(tilt).hover_trim();
+                (trim * self.settings.failsafe.open_loop_thrust_scale).map(|u| u.clamp(0.0, 1.0))
+            }
+            _ => self.mpc_feedback(state, status),
+        }
+    }
+
+    fn mpc_feedback(&mut self, state: &State, status: &mut Status) -> Input {
+        if !self.mpc_warm {
+            // First MPC tick of this flight: start the plan at the estimate.
+            if self.mpc.reset(state).is_err() {
+                status.solver = SolverState::Failed;
+                return self.last_thrust;
+            }
+            self.fill_reference(state);
+            self.configure_mpc(state);
+            if let Ok(prep) = self.mpc.prepare() {
+                self.last_preparation_time = prep.as_secs_f64();
+            }
+            self.mpc_warm = true;
+        }
+        let Ok(out) = self.mpc.feedback(state) else {
+            self.mpc_failures_total += 1;
+            status.solver = SolverState::Failed;
+            return self.last_thrust;
+        };
+        status.solver = match out.outcome {
+            Outcome::Solved => SolverState::Solved,
+            Outcome::Degraded(_) => SolverState::Degraded,
+            Outcome::Fallback { .. } => SolverState::Fallback,
+            Outcome::Failed { .. } => SolverState::Failed,
+        };
+        if !out.outcome.is_fresh() {
+            self.mpc_failures_total += 1;
+        }
+        status.mpc_failures_total = self.mpc_failures_total;
+        status.feedback_time = out.timings.feedback.as_secs_f64();
+        status.solver_iterations = out.timings.solver_iterations;
+        status.predicted_next = self.mpc.plan_states().get(1).copied().unwrap_or(*state);
+        status.alpha = self.mpc.alpha();
+        status.reference = self.reference[0];
+        out.u.map(|u| {
+            if u.is_finite() {
+                u.clamp(0.0, 1.0)
+            } else {
+                0.0
+            }
+        })
+    }
+
+    fn wheels(
+        &self,
+        mode: Mode,
+        state: &State,
+        height: f64,
+        pilot: PilotInput,
+        status: &mut Status,
+    ) -> WheelRates {
+        let yaw = state[idx::YAW];
+        let (sy, cy) = yaw.sin_cos();
+        let forward = |v: [f64; 3]| cy * v[0] + sy * v[1];
+        match mode {
+            Mode::Drive => {
+                let v = forward(pilot.velocity);
+                status.drive_velocity = [v, pilot.yaw_rate];
+                self.drive.wheel_rates(v, pilot.yaw_rate)
+            }
+            Mode::Transition | Mode::Touchdown
+                if mode == Mode::Touchdown || height < self.settings.modes.wheel_spinup_height =>
+            {
+                // Spin up to the ground speed so that the wheels land rolling.
+                let v = forward([state[idx::VX], state[idx::VY], 0.0]);
+                status.drive_velocity = [v, 0.0];
+                self.drive.wheel_rates(v, 0.0)
+            }
+            _ => WheelRates {
+                left: 0.0,
+                right: 0.0,
+            },
+        }
+    }
+
+    /// Fills the per-stage MPC reference for the current mode.
+    fn fill_reference(&mut self, state: &State) {
+        let p = Vector3::new(state[idx::X], state[idx::Y], state[idx::Z]);
+        let pilot = self.last_pilot;
+        let mut v = Vector3::from(pilot.velocity);
+        let ts = self.period();
+        // Position reference: the paper's p_ref = p + v T_s while the pilot
+        // commands a velocity, and a held position when the sticks are centred.
+        let moving = v.norm() > 1e-6;
+        if moving {
+            self.holding = false;
+        } else if !self.holding {
+            self.hold_position = p;
+            self.holding = true;
+        }
+        let mut anchor = if moving {
+            p + v * ts
+        } else {
+            self.hold_position
+        };
+        match self.mode {
+            Mode::Takeoff if pilot.velocity[2].abs() < 1e-6 => {
+                // Climb to the take-off height unless the pilot commands vertically.
+                anchor.z = self.last_ground_z - self.settings.modes.takeoff_target_height;
+                v.z = 0.0;
+            }
+            Mode::Transition => {
+                // Descent reference towards the ground.
+                let speed = self.settings.modes.transition_descent_speed;
+                v.z = speed;
+                anchor.z = p.z + speed * ts;
+            }
+            Mode::Failsafe => {
+                anchor = self.hold_position;
+                v = Vector3::zeros();
+            }
+            _ => {}
+        }
+        let yaw_rate = pilot.yaw_rate;
+        if yaw_rate.abs() > 1e-9 {
+            self.hold_yaw = state[idx::YAW];
+        }
+        for (k, r) in self.reference.iter_mut().enumerate() {
+            let t = k as f64 * self.stage_dt;
+            let pos = anchor + v * t;
+            *r = State::zeros();
+            r[idx::X] = pos.x;
+            r[idx::Y] = pos.y;
+            r[idx::Z] = pos.z;
+            r[idx::YAW] = self.hold_yaw + yaw_rate * t;
+            r[idx::VX] = v.x;
+            r[idx::VY] = v.y;
+            r[idx::VZ] = v.z;
+            r[idx::WZ] = yaw_rate;
+        }
+    }
+
+    fn configure_mpc(&mut self, state: &State) {
+        let height = self.last_ground_z - state[idx::Z];
+        let tilt = self.last_tilt;
+        let limit = self.tilt_limit(self.mode);
+        let alpha = self
+            .alpha
+            .update(height, tilt, self.thresholds.transition_height);
+        // Setters only refuse non-finite or mis-sized data, which cannot
+        // reach here (inputs are validated); a refusal keeps the old value.
+        let _ = self.mpc.set_reference(&self.reference);
+        let _ = self
+            .mpc
+            .set_tilt_ramp(tilt, self.tilt_command, 0.0, limit.max(tilt));
+        let _ = self.mpc.set_alpha(alpha);
+    }
+
+    /// The RTI preparation phase for the next tick. Call after the outputs
+    /// of `step` have been sent; does nothing when the MPC is idle.
+    pub fn prepare_next(&mut self) {
+        if !self.mpc_warm || !self.mode.is_airborne_mode() {
+            return;
+        }
+        let Some(est) = self.last_estimate else {
+            return;
+        };
+        self.fill_reference(&est.state);
+        self.configure_mpc(&est.state);
+        if let Ok(prep) = self.mpc.prepare() {
+            self.last_preparation_time = prep.as_secs_f64();
+        }
+    }
+
+    /// alpha as the paper defines it for the current state (for logs).
+    pub fn alpha_now(&self) -> f64 {
+        let state = self.last_estimate.map_or(State::zeros(), |e| e.state);
+        blending_alpha(
+            self.last_ground_z - state[idx::Z],
+            self.last_tilt,
+            self.thresholds.transition_height,
+        )
+    }
+}

@@ -1,0 +1,266 @@
+//! The mode state machine of the paper, as an explicit transition table.
+//!
+//! ```text
+//!            armed & grounded            throttle >= 0.5             airborne & h > h_takeoff
+//! Disarmed ----------------> Drive ------------------------> Takeoff -------------------------> Flight
+//!    |                        ^  ^      throttle < 0.5 & grounded |                               |
+//!    | armed & airborne       |  +--------------------------------+          h < z_varphi & descent command
+//!    +------------------------|----------------------------------------------------------> Flight  v
+//!                             |                                                               Morphing
+//!                    thrust cut complete                      h > z_varphi + hysteresis  <----+  |
+//!                             |                                                                  | h < z*
+//!                        Touchdown <------------------- grounded ------------------------- Transition
+//!
+//! Failsafe: from Takeoff/Flight/Morphing/Transition on a stale estimate or an
+//! MPC failure past its grace; back to Flight once healthy and tilted back;
+//! to Touchdown when grounded. Any mode -> Disarmed when the arm switch drops.
+//! ```
+//!
+//! Rows are checked in order; the first whose `from` contains the current
+//! mode and whose guard holds fires. At most one transition per tick.
+
+use serde::Serialize;
+
+/// Flight-stack modes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Mode {
+    /// Outputs zero. Start-up state.
+    Disarmed,
+    /// On the wheels; thrusters off; wheels follow the pilot.
+    Drive,
+    /// Tilting back towards the flight configuration; thrusters start at or
+    /// below the take-off tilt, then climb.
+    Takeoff,
+    /// Free flight; the MPC tracks the pilot's velocity command.
+    Flight,
+    /// Below z_varphi and descending: tilting at v_max up to the flight limit.
+    Morphing,
+    /// Below z*: cost blended by alpha, tilt up to the transition limit,
+    /// descent reference, wheels spun up before impact.
+    Transition,
+    /// Grounded after a transition: thrust ramped to zero.
+    Touchdown,
+    /// Something is wrong: tilt back to 0 and hold.
+    Failsafe,
+}
+
+impl Mode {
+    pub const ALL: [Mode; 8] = [
+        Mode::Disarmed,
+        Mode::Drive,
+        Mode::Takeoff,
+        Mode::Flight,
+        Mode::Morphing,
+        Mode::Transition,
+        Mode::Touchdown,
+        Mode::Failsafe,
+    ];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Mode::Disarmed => "disarmed",
+            Mode::Drive => "drive",
+            Mode::Takeoff => "takeoff",
+            Mode::Flight => "flight",
+            Mode::Morphing => "morphing",
+            Mode::Transition => "transition",
+            Mode::Touchdown => "touchdown",
+            Mode::Failsafe => "failsafe",
+        }
+    }
+
+    /// Small integer for logs and messages (stable: append only).
+    pub fn code(self) -> u8 {
+        match self {
+            Mode::Disarmed => 0,
+            Mode::Drive => 1,
+            Mode::Takeoff => 2,
+            Mode::Flight => 3,
+            Mode::Morphing => 4,
+            Mode::Transition => 5,
+            Mode::Touchdown => 6,
+            Mode::Failsafe => 7,
+        }
+    }
+
+    /// Whether the MPC flies the thrusters in this mode.
+    pub fn is_airborne_mode(self) -> bool {
+        matches!(
+            self,
+            Mode::Takeoff | Mode::Flight | Mode::Morphing | Mode::Transition | Mode::Failsafe
+        )
+    }
+}
+
+/// Everything the guards look at, computed by the flight stack each tick.
+// The guards read switches and signals that are booleans by nature.
+#[allow(clippy::struct_excessive_bools)]
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Conditions {
+    pub armed: bool,
+    /// Wheel contact reported by the ground-contact signal.
+    pub grounded: bool,
+    /// Height of the base origin above the ground, m.
+    pub height: f64,
+    pub throttle: f64,
+    /// Pilot commands a descent (downward velocity above a threshold).
+    pub descent_commanded: bool,
+    /// The state estimate is recent enough to fly on.
+    pub estimate_fresh: bool,
+    /// The MPC has failed for longer than its grace period.
+    pub mpc_failed: bool,
+    /// Measured tilt, rad.
+    pub tilt: f64,
+    /// Seconds since the current mode was entered.
+    pub time_in_mode: f64,
+}
+
+/// Thresholds the guards use (from the flight settings and robot limits).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Thresholds {
+    pub takeoff_throttle: f64,
+    pub takeoff_height: f64,
+    /// z_varphi, m.
+    pub morph_height: f64,
+    pub morph_hysteresis: f64,
+    /// z*, m.
+    pub transition_height: f64,
+    /// Seconds the thrust takes to ramp to zero after touchdown.
+    pub thrust_cut_time: f64,
+    /// Minimum time in failsafe before recovering, s.
+    pub failsafe_recovery_time: f64,
+    /// Tilt below which a failsafe may hand back to flight, rad.
+    pub failsafe_recovery_tilt: f64,
+}
+
+type Guard = fn(&Conditions, &Thresholds) -> bool;
+
+/// One row of the transition table.
+#[derive(Clone, Copy)]
+pub struct Transition {
+    pub from: &'static [Mode],
+    pub to: Mode,
+    pub guard: Guard,
+    /// Why, for logs and the architecture drawing.
+    pub reason: &'static str,
+}
+
+const ARMED_MODES: &[Mode] = &[
+    Mode::Drive,
+    Mode::Takeoff,
+    Mode::Flight,
+    Mode::Morphing,
+    Mode::Transition,
+    Mode::Touchdown,
+    Mode::Failsafe,
+];
+const FLYING: &[Mode] = &[
+    Mode::Takeoff,
+    Mode::Flight,
+    Mode::Morphing,
+    Mode::Transition,
+];
+
+/// The table, in priority order.
+pub const TRANSITIONS: &[Transition] = &[
+    Transition {
+        from: ARMED_MODES,
+        to: Mode::Disarmed,
+        guard: |c, _| !c.armed,
+        reason: "arm switch off",
+    },
+    Transition {
+        from: &[Mode::Disarmed],
+        to: Mode::Drive,
+        guard: |c, _| c.armed && c.grounded,
+        reason: "armed on the ground",
+    },
+    Transition {
+        from: &[Mode::Disarmed],
+        to: Mode::Flight,
+        guard: |c, _| c.armed && !c.grounded && c.estimate_fresh,
+        reason: "armed in the air",
+    },
+    Transition {
+        from: FLYING,
+        to: Mode::Failsafe,
+        guard: |c, _| !c.estimate_fresh || c.mpc_failed,
+        reason: "stale estimate or MPC failed past its grace",
+    },
+    Transition {
+        from: &[Mode::Failsafe],
+        to: Mode::Touchdown,
+        guard: |c, _| c.grounded,
+        reason: "grounded in failsafe",
+    },
+    Transition {
+        from: &[Mode::Failsafe],
+        to: Mode::Flight,
+        guard: |c, t| {
+            c.estimate_fresh
+                && !c.mpc_failed
+                && c.time_in_mode >= t.failsafe_recovery_time
+                && c.tilt <= t.failsafe_recovery_tilt
+        },
+        reason: "healthy again and tilted back",
+    },
+    Transition {
+        from: &[Mode::Transition, Mode::Morphing, Mode::Flight],
+        to: Mode::Touchdown,
+        guard: |c, _| c.grounded,
+        reason: "wheels on the ground",
+    },
+    Transition {
+        from: &[Mode::Drive],
+        to: Mode::Takeoff,
+        guard: |c, t| c.throttle >= t.takeoff_throttle,
+        reason: "throttle up on the ground",
+    },
+    Transition {
+        from: &[Mode::Takeoff],
+        to: Mode::Drive,
+        guard: |c, t| c.grounded && c.throttle < t.takeoff_throttle,
+        reason: "take-off aborted",
+    },
+    Transition {
+        from: &[Mode::Takeoff],
+        to: Mode::Flight,
+        guard: |c, t| !c.grounded && c.height > t.takeoff_height,
+        reason: "airborne",
+    },
+    Transition {
+        from: &[Mode::Flight],
+        to: Mode::Morphing,
+        guard: |c, t| c.height < t.morph_height && c.descent_commanded,
+        reason: "descending below z_varphi",
+    },
+    Transition {
+        from: &[Mode::Morphing],
+        to: Mode::Flight,
+        guard: |c, t| c.height > t.morph_height + t.morph_hysteresis,
+        reason: "climbed back above z_varphi",
+    },
+    Transition {
+        from: &[Mode::Morphing],
+        to: Mode::Transition,
+        guard: |c, t| c.height < t.transition_height,
+        reason: "below z*",
+    },
+    Transition {
+        from: &[Mode::Touchdown],
+        to: Mode::Drive,
+        guard: |c, t| c.time_in_mode >= t.thrust_cut_time,
+        reason: "thrust cut complete",
+    },
+];
+
+/// The next mode: the first matching row of [`TRANSITIONS`], or `mode`.
+pub fn next_mode(mode: Mode, c: &Conditions, t: &Thresholds) -> (Mode, Option<&'static str>) {
+    for row in TRANSITIONS {
+        if row.from.contains(&mode) && (row.guard)(c, t) {
+            return (row.to, Some(row.reason));
+        }
+    }
+    (mode, None)
+}

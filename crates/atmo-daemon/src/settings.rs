@@ -1,0 +1,138 @@
+//! Flight-stack settings (`config/flight.toml`), strictly parsed and validated.
+
+use std::path::{Path, PathBuf};
+
+use atmo_core::config::{Checker, parse_toml, read_config_file};
+use serde::Deserialize;
+
+use crate::error::Result;
+
+#[derive(Debug, Clone, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct FlightSettings {
+    /// Cost preset of the MPC file.
+    pub mpc_preset: String,
+    pub pilot: PilotSettings,
+    pub modes: ModeSettings,
+    pub failsafe: FailsafeSettings,
+    #[serde(rename = "loop")]
+    pub control_loop: LoopSettings,
+}
+
+#[derive(Debug, Clone, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct PilotSettings {
+    pub max_speed: f64,
+    pub max_yaw_rate: f64,
+    pub descent_threshold: f64,
+}
+
+#[derive(Debug, Clone, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct ModeSettings {
+    pub takeoff_throttle: f64,
+    pub takeoff_max_tilt_deg: f64,
+    pub takeoff_height: f64,
+    pub takeoff_target_height: f64,
+    pub morph_hysteresis: f64,
+    pub transition_descent_speed: f64,
+    pub wheel_spinup_height: f64,
+    pub thrust_cut_time: f64,
+}
+
+#[derive(Debug, Clone, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct FailsafeSettings {
+    pub estimate_timeout: f64,
+    pub recovery_time: f64,
+    pub recovery_tilt_deg: f64,
+    pub open_loop_thrust_scale: f64,
+}
+
+#[derive(Debug, Clone, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct LoopSettings {
+    pub rate_hz: f64,
+}
+
+impl LoopSettings {
+    /// Control period, s.
+    pub fn period(&self) -> f64 {
+        1.0 / self.rate_hz
+    }
+}
+
+impl FlightSettings {
+    /// The shipped `config/flight.toml`.
+    pub fn atmo() -> Self {
+        Self::from_toml_str(
+            include_str!("../../../config/flight.toml"),
+            "config/flight.toml",
+        )
+        .expect("the shipped config/flight.toml is valid (tested)")
+    }
+
+    pub fn load(path: impl AsRef<Path>) -> Result<Self> {
+        let path = path.as_ref();
+        Ok(Self::from_toml_str(&read_config_file(path)?, path)?)
+    }
+
+    pub fn from_toml_str(text: &str, file: impl Into<PathBuf>) -> atmo_core::Result<Self> {
+        let file = file.into();
+        let settings: Self = parse_toml(text, &file)?;
+        settings.validate(&file)?;
+        Ok(settings)
+    }
+
+    pub fn validate(&self, file: &Path) -> atmo_core::Result<()> {
+        let c = Checker::new(file);
+        c.within("pilot.max_speed", self.pilot.max_speed, 0.0, 1.0)?;
+        c.within("pilot.max_yaw_rate", self.pilot.max_yaw_rate, 0.0, 5.0)?;
+        c.within(
+            "pilot.descent_threshold",
+            self.pilot.descent_threshold,
+            0.0,
+            self.pilot.max_speed,
+        )?;
+        let m = &self.modes;
+        c.within("modes.takeoff_throttle", m.takeoff_throttle, 0.0, 1.0)?;
+        c.within(
+            "modes.takeoff_max_tilt_deg",
+            m.takeoff_max_tilt_deg,
+            0.0,
+            90.0,
+        )?;
+        c.positive("modes.takeoff_height", m.takeoff_height)?;
+        if !(m.takeoff_target_height.is_finite() && m.takeoff_target_height > m.takeoff_height) {
+            return Err(c.fail(
+                "modes.takeoff_target_height",
+                format!(
+                    "a height above modes.takeoff_height ({} m)",
+                    m.takeoff_height
+                ),
+                m.takeoff_target_height,
+            ));
+        }
+        c.within("modes.morph_hysteresis", m.morph_hysteresis, 0.0, 5.0)?;
+        c.within(
+            "modes.transition_descent_speed",
+            m.transition_descent_speed,
+            0.01,
+            2.0,
+        )?;
+        c.within("modes.wheel_spinup_height", m.wheel_spinup_height, 0.0, 2.0)?;
+        c.within("modes.thrust_cut_time", m.thrust_cut_time, 0.0, 5.0)?;
+        let f = &self.failsafe;
+        c.within("failsafe.estimate_timeout", f.estimate_timeout, 0.001, 1.0)?;
+        c.within("failsafe.recovery_time", f.recovery_time, 0.0, 60.0)?;
+        c.within("failsafe.recovery_tilt_deg", f.recovery_tilt_deg, 0.0, 90.0)?;
+        c.within(
+            "failsafe.open_loop_thrust_scale",
+            f.open_loop_thrust_scale,
+            0.0,
+            1.5,
+        )?;
+        c.within("loop.rate_hz", self.control_loop.rate_hz, 1.0, 2000.0)?;
+        Ok(())
+    }
+}

@@ -1,0 +1,260 @@
+//! FlightStack against the atmo-core model (no plant effects): it flies,
+//! morphs within its limits, and each failsafe does what it says.
+
+use atmo_core::model::{Input, State, idx};
+use atmo_core::{Linkage, Model, RobotConfig};
+use atmo_daemon::{
+    Estimate, FlightSettings, FlightStack, Mode, PilotInput, SolverState, StepInputs, StepOutputs,
+};
+use atmo_mpc::MpcSettings;
+
+const NS: u64 = 1_000_000_000;
+
+/// A minimal closed loop: the nominal model integrated at 1 ms, a perfect
+/// estimate at the control rate, the tilt integrating its command.
+struct Loop {
+    stack: FlightStack,
+    model: Model,
+    linkage: Linkage,
+    x: State,
+    tilt: f64,
+    now_ns: u64,
+    pilot: PilotInput,
+    period_ns: u64,
+    /// When false, the estimate stops updating (a dead motion-capture link).
+    estimate_alive: bool,
+    last_estimate: Option<Estimate>,
+}
+
+impl Loop {
+    fn new(height: f64) -> Self {
+        let robot = RobotConfig::atmo();
+        let settings = FlightSettings::atmo();
+        let stack = FlightStack::new(
+            &robot,
+            MpcSettings::atmo(&settings.mpc_preset).unwrap(),
+            settings,
+        )
+        .unwrap();
+        let mut x = State::zeros();
+        x[idx::Z] = -height;
+        let period_ns = (stack.period() * 1e9).round() as u64;
+        Self {
+            stack,
+            model: Model::new(&robot),
+            linkage: Linkage::from_config(&robot.linkage, robot.limits.tilt_max()).unwrap(),
+            x,
+            tilt: 0.0,
+            now_ns: NS,
+            pilot: PilotInput {
+                arm: true,
+                offboard: true,
+                mpc_enabled: true,
+                ..PilotInput::default()
+            },
+            period_ns,
+            estimate_alive: true,
+            last_estimate: None,
+        }
+    }
+
+    fn inputs(&mut self) -> StepInputs {
+        if self.estimate_alive {
+            self.last_estimate = Some(Estimate {
+                stamp_ns: self.now_ns,
+                state: self.x,
+            });
+        }
+        StepInputs {
+            now_ns: self.now_ns,
+            estimate: self.last_estimate,
+            tilt_counts: Some(self.linkage.counts_from_tilt(self.tilt).unwrap()),
+            pilot: self.pilot,
+            ground_contact: false,
+            ground_z: 0.0,
+        }
+    }
+
+    fn tick(&mut self) -> StepOutputs {
+        let inputs = self.inputs();
+        let out = self.stack.step(&inputs);
+        self.stack.prepare_next();
+        let u = Input::from_column_slice(&out.thrust);
+        let substeps = 7;
+        let dt = self.period_ns as f64 * 1e-9 / f64::from(substeps);
+        for _ in 0..substeps {
+            self.x = self.model.at_tilt(self.tilt).rk4_step(&self.x, &u, dt);
+            self.tilt =
+                (self.tilt + out.tilt_velocity * dt).clamp(0.0, std::f64::consts::FRAC_PI_2);
+        }
+        self.now_ns += self.period_ns;
+        out
+    }
+
+    fn run(&mut self, seconds: f64) -> Vec<StepOutputs> {
+        let ticks = (seconds * 150.0).round() as usize;
+        (0..ticks).map(|_| self.tick()).collect()
+    }
+
+    fn height(&self) -> f64 {
+        -self.x[idx::Z]
+    }
+}
+
+#[test]
+fn armed_in_the_air_it_hovers_with_inputs_in_range() {
+    let mut lp = Loop::new(1.5);
+    let outs = lp.run(3.0);
+    assert_eq!(outs[0].status.mode, Mode::Flight);
+    for o in &outs {
+        assert!(o.thrust.iter().all(|u| (0.0..=1.0).contains(u)));
+        assert!(
+            matches!(o.status.solver, SolverState::Solved | SolverState::Degraded),
+            "{:?}",
+            o.status.solver
+        );
+    }
+    assert!((lp.height() - 1.5).abs() < 0.02, "height {}", lp.height());
+}
+
+#[test]
+fn descending_below_z_varphi_morphs_and_respects_the_flight_tilt_limit() {
+    let mut lp = Loop::new(1.5);
+    lp.run(0.5);
+    lp.pilot.velocity = [0.0, 0.0, 0.2];
+    let outs = lp.run(4.0);
+    assert!(outs.iter().any(|o| o.status.mode == Mode::Morphing));
+    let max_tilt = outs.iter().map(|o| o.status.tilt).fold(0.0, f64::max);
+    assert!(
+        max_tilt > 45f64.to_radians(),
+        "morphing tilted only to {:.1} deg",
+        max_tilt.to_degrees()
+    );
+    assert!(
+        max_tilt <= 50f64.to_radians() + 1e-9,
+        "flight limit broken: {:.3} deg",
+        max_tilt.to_degrees()
+    );
+}
+
+#[test]
+fn stale_estimate_triggers_failsafe_with_open_loop_trim_and_tilt_back() {
+    let mut lp = Loop::new(1.5);
+    lp.run(0.3);
+    lp.tilt = 0.3; // as if it had morphed a little
+    lp.estimate_alive = false;
+    let outs = lp.run(0.2);
+    let first = outs
+        .iter()
+        .position(|o| o.status.mode == Mode::Failsafe)
+        .expect("no failsafe");
+    // 50 ms timeout at 150 Hz: within 8 ticks, not before 7.
+    assert!((6..=8).contains(&first), "failsafe after {first} ticks");
+    let o = &outs[first];
+    assert!(o.status.estimate_age > 0.05);
+    assert!(o.tilt_velocity < 0.0, "tilts back to 0");
+    let trim = Model::new(&RobotConfig::atmo())
+        .at_tilt(o.status.tilt)
+        .hover_trim();
+    for i in 0..4 {
+        assert!(
+            (o.thrust[i] - 0.95 * trim[i]).abs() < 1e-12,
+            "open-loop trim on rotor {}",
+            i + 1
+        );
+    }
+    // The estimate comes back: after the recovery time and tilted back, flight again.
+    lp.estimate_alive = true;
+    let outs = lp.run(2.0);
+    assert!(outs.iter().any(|o| o.status.mode == Mode::Flight));
+}
+
+#[test]
+fn non_finite_and_out_of_range_inputs_are_rejected_counted_and_held() {
+    let mut lp = Loop::new(1.5);
+    lp.run(0.2);
+    let good_state = lp.last_estimate.unwrap().state;
+    let mut inputs = lp.inputs();
+    let mut bad = good_state;
+    bad[idx::VX] = f64::NAN;
+    inputs.now_ns += 1000;
+    inputs.estimate = Some(Estimate {
+        stamp_ns: inputs.now_ns,
+        state: bad,
+    });
+    inputs.tilt_counts = Some(-1e6);
+    inputs.pilot.throttle = 3.0;
+    inputs.ground_z = f64::INFINITY;
+    let out = lp.stack.step(&inputs);
+    let r = out.status.rejected;
+    assert_eq!((r.estimate, r.tilt, r.pilot, r.ground), (1, 1, 1, 1));
+    assert!(
+        out.status.state.iter().all(|v| v.is_finite()),
+        "held the last good estimate"
+    );
+    assert_eq!(out.status.state, good_state);
+    assert!(
+        out.thrust
+            .iter()
+            .all(|u| u.is_finite() && (0.0..=1.0).contains(u))
+    );
+    // Timestamps going backwards are refused too.
+    inputs.estimate = Some(Estimate {
+        stamp_ns: 1,
+        state: good_state,
+    });
+    inputs.pilot.throttle = 0.0;
+    inputs.tilt_counts = None;
+    inputs.ground_z = 0.0;
+    let out = lp.stack.step(&inputs);
+    assert_eq!(out.status.rejected.estimate, 2);
+    assert_eq!(out.status.rejected.pilot, 1);
+}
+
+#[test]
+fn velocity_commands_are_limited_to_one_metre_per_second() {
+    let mut lp = Loop::new(1.5);
+    lp.pilot.velocity = [3.0, 0.0, 0.0];
+    let outs = lp.run(3.0);
+    let vx_ref = outs.last().unwrap().status.reference[idx::VX];
+    assert!((vx_ref - 1.0).abs() < 1e-12, "reference speed {vx_ref}");
+    let vx = lp.x[idx::VX];
+    assert!(vx < 1.1, "flies at {vx} m/s");
+}
+
+#[test]
+fn mpc_switch_off_in_flight_is_a_failsafe() {
+    let mut lp = Loop::new(1.5);
+    lp.run(0.2);
+    lp.pilot.mpc_enabled = false;
+    let out = lp.tick();
+    assert_eq!(out.status.mode, Mode::Failsafe);
+}
+
+#[test]
+fn transition_limit_is_enforced_whatever_is_commanded() {
+    // Start morphing at 0.5 m: the stack goes to transition and tilts at most to 70 deg.
+    let mut lp = Loop::new(0.6);
+    lp.tilt = 55f64.to_radians(); // already past the flight limit when morphing starts
+    lp.pilot.velocity = [0.0, 0.0, 0.3];
+    let outs = lp.run(3.0);
+    let morph = outs
+        .iter()
+        .find(|o| o.status.mode == Mode::Morphing)
+        .expect("morphing");
+    assert!(
+        morph.tilt_velocity < 0.0,
+        "above the 50 deg flight limit it must tilt back"
+    );
+    for o in &outs {
+        assert!(o.status.tilt <= 70f64.to_radians() + 1e-9);
+        let next = o.status.tilt + o.tilt_velocity / 150.0;
+        if o.status.tilt <= o.status.tilt_limit {
+            assert!(
+                next <= o.status.tilt_limit + 1e-9,
+                "would overshoot the {:?} limit",
+                o.status.mode
+            );
+        }
+    }
+}

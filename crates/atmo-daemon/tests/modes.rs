@@ -1,0 +1,404 @@
+//! One test per transition of the mode table, and the guards that must not fire.
+
+use atmo_daemon::Mode;
+use atmo_daemon::modes::{Conditions, TRANSITIONS, Thresholds, next_mode};
+
+fn thresholds() -> Thresholds {
+    Thresholds {
+        takeoff_throttle: 0.5,
+        takeoff_height: 0.3,
+        morph_height: 1.2,
+        morph_hysteresis: 0.1,
+        transition_height: 0.45,
+        thrust_cut_time: 0.3,
+        failsafe_recovery_time: 0.5,
+        failsafe_recovery_tilt: 2f64.to_radians(),
+    }
+}
+
+/// Healthy, armed, hovering at 2 m in the quadrotor configuration.
+fn flying() -> Conditions {
+    Conditions {
+        armed: true,
+        grounded: false,
+        height: 2.0,
+        throttle: 0.0,
+        descent_commanded: false,
+        estimate_fresh: true,
+        mpc_failed: false,
+        tilt: 0.0,
+        time_in_mode: 10.0,
+    }
+}
+
+fn on_ground() -> Conditions {
+    Conditions {
+        grounded: true,
+        height: 0.2,
+        tilt: 1.1,
+        ..flying()
+    }
+}
+
+fn step(mode: Mode, c: Conditions) -> Mode {
+    next_mode(mode, &c, &thresholds()).0
+}
+
+#[test]
+fn disarm_from_every_armed_mode() {
+    for mode in Mode::ALL {
+        let c = Conditions {
+            armed: false,
+            ..flying()
+        };
+        assert_eq!(step(mode, c), Mode::Disarmed, "{mode:?}");
+    }
+}
+
+#[test]
+fn disarmed_to_drive_when_armed_on_the_ground() {
+    assert_eq!(step(Mode::Disarmed, on_ground()), Mode::Drive);
+    assert_eq!(
+        step(
+            Mode::Disarmed,
+            Conditions {
+                armed: false,
+                ..on_ground()
+            }
+        ),
+        Mode::Disarmed
+    );
+}
+
+#[test]
+fn disarmed_to_flight_when_armed_in_the_air_with_an_estimate() {
+    assert_eq!(step(Mode::Disarmed, flying()), Mode::Flight);
+    let stale = Conditions {
+        estimate_fresh: false,
+        ..flying()
+    };
+    assert_eq!(step(Mode::Disarmed, stale), Mode::Disarmed);
+}
+
+#[test]
+fn flying_modes_to_failsafe_on_stale_estimate_or_mpc_failure() {
+    for mode in [
+        Mode::Takeoff,
+        Mode::Flight,
+        Mode::Morphing,
+        Mode::Transition,
+    ] {
+        assert_eq!(
+            step(
+                mode,
+                Conditions {
+                    estimate_fresh: false,
+                    ..flying()
+                }
+            ),
+            Mode::Failsafe,
+            "{mode:?}"
+        );
+        assert_eq!(
+            step(
+                mode,
+                Conditions {
+                    mpc_failed: true,
+                    ..flying()
+                }
+            ),
+            Mode::Failsafe,
+            "{mode:?}"
+        );
+    }
+    // Driving needs neither.
+    assert_eq!(
+        step(
+            Mode::Drive,
+            Conditions {
+                estimate_fresh: false,
+                mpc_failed: true,
+                ..on_ground()
+            }
+        ),
+        Mode::Drive
+    );
+}
+
+#[test]
+fn failsafe_to_touchdown_when_grounded() {
+    assert_eq!(
+        step(
+            Mode::Failsafe,
+            Conditions {
+                estimate_fresh: false,
+                ..on_ground()
+            }
+        ),
+        Mode::Touchdown
+    );
+}
+
+#[test]
+fn failsafe_to_flight_only_when_healthy_tilted_back_and_after_the_recovery_time() {
+    assert_eq!(step(Mode::Failsafe, flying()), Mode::Flight);
+    assert_eq!(
+        step(
+            Mode::Failsafe,
+            Conditions {
+                time_in_mode: 0.2,
+                ..flying()
+            }
+        ),
+        Mode::Failsafe
+    );
+    assert_eq!(
+        step(
+            Mode::Failsafe,
+            Conditions {
+                tilt: 0.3,
+                ..flying()
+            }
+        ),
+        Mode::Failsafe
+    );
+    assert_eq!(
+        step(
+            Mode::Failsafe,
+            Conditions {
+                mpc_failed: true,
+                ..flying()
+            }
+        ),
+        Mode::Failsafe
+    );
+    assert_eq!(
+        step(
+            Mode::Failsafe,
+            Conditions {
+                estimate_fresh: false,
+                ..flying()
+            }
+        ),
+        Mode::Failsafe
+    );
+}
+
+#[test]
+fn drive_to_takeoff_at_half_throttle() {
+    assert_eq!(
+        step(
+            Mode::Drive,
+            Conditions {
+                throttle: 0.5,
+                ..on_ground()
+            }
+        ),
+        Mode::Takeoff
+    );
+    assert_eq!(
+        step(
+            Mode::Drive,
+            Conditions {
+                throttle: 0.49,
+                ..on_ground()
+            }
+        ),
+        Mode::Drive
+    );
+}
+
+#[test]
+fn takeoff_to_drive_when_aborted_on_the_ground() {
+    assert_eq!(
+        step(
+            Mode::Takeoff,
+            Conditions {
+                throttle: 0.2,
+                ..on_ground()
+            }
+        ),
+        Mode::Drive
+    );
+    assert_eq!(
+        step(
+            Mode::Takeoff,
+            Conditions {
+                throttle: 0.7,
+                ..on_ground()
+            }
+        ),
+        Mode::Takeoff
+    );
+}
+
+#[test]
+fn takeoff_to_flight_when_airborne_above_the_takeoff_height() {
+    assert_eq!(
+        step(
+            Mode::Takeoff,
+            Conditions {
+                height: 0.35,
+                throttle: 0.7,
+                ..flying()
+            }
+        ),
+        Mode::Flight
+    );
+    assert_eq!(
+        step(
+            Mode::Takeoff,
+            Conditions {
+                height: 0.25,
+                throttle: 0.7,
+                ..flying()
+            }
+        ),
+        Mode::Takeoff
+    );
+}
+
+#[test]
+fn flight_to_morphing_below_z_varphi_when_descending() {
+    let low = Conditions {
+        height: 1.0,
+        descent_commanded: true,
+        ..flying()
+    };
+    assert_eq!(step(Mode::Flight, low), Mode::Morphing);
+    assert_eq!(
+        step(
+            Mode::Flight,
+            Conditions {
+                descent_commanded: false,
+                ..low
+            }
+        ),
+        Mode::Flight
+    );
+    assert_eq!(
+        step(Mode::Flight, Conditions { height: 1.5, ..low }),
+        Mode::Flight
+    );
+}
+
+#[test]
+fn morphing_to_flight_when_climbing_back_past_the_hysteresis() {
+    assert_eq!(
+        step(
+            Mode::Morphing,
+            Conditions {
+                height: 1.35,
+                ..flying()
+            }
+        ),
+        Mode::Flight
+    );
+    assert_eq!(
+        step(
+            Mode::Morphing,
+            Conditions {
+                height: 1.25,
+                ..flying()
+            }
+        ),
+        Mode::Morphing
+    );
+}
+
+#[test]
+fn morphing_to_transition_below_z_star() {
+    assert_eq!(
+        step(
+            Mode::Morphing,
+            Conditions {
+                height: 0.44,
+                ..flying()
+            }
+        ),
+        Mode::Transition
+    );
+    assert_eq!(
+        step(
+            Mode::Morphing,
+            Conditions {
+                height: 0.46,
+                ..flying()
+            }
+        ),
+        Mode::Morphing
+    );
+}
+
+#[test]
+fn transition_to_touchdown_on_contact() {
+    for mode in [Mode::Transition, Mode::Morphing, Mode::Flight] {
+        assert_eq!(step(mode, on_ground()), Mode::Touchdown, "{mode:?}");
+    }
+    assert_eq!(
+        step(
+            Mode::Transition,
+            Conditions {
+                height: 0.1,
+                ..flying()
+            }
+        ),
+        Mode::Transition
+    );
+}
+
+#[test]
+fn touchdown_to_drive_once_the_thrust_is_cut() {
+    assert_eq!(
+        step(
+            Mode::Touchdown,
+            Conditions {
+                time_in_mode: 0.31,
+                ..on_ground()
+            }
+        ),
+        Mode::Drive
+    );
+    assert_eq!(
+        step(
+            Mode::Touchdown,
+            Conditions {
+                time_in_mode: 0.1,
+                ..on_ground()
+            }
+        ),
+        Mode::Touchdown
+    );
+}
+
+#[test]
+fn every_row_of_the_table_is_exercised_above() {
+    // A new row without a test shows up here: each (from, to) pair must be one
+    // of the pairs the tests above cover.
+    let covered = [
+        (Mode::Drive, Mode::Disarmed),
+        (Mode::Disarmed, Mode::Drive),
+        (Mode::Disarmed, Mode::Flight),
+        (Mode::Flight, Mode::Failsafe),
+        (Mode::Failsafe, Mode::Touchdown),
+        (Mode::Failsafe, Mode::Flight),
+        (Mode::Drive, Mode::Takeoff),
+        (Mode::Takeoff, Mode::Drive),
+        (Mode::Takeoff, Mode::Flight),
+        (Mode::Flight, Mode::Morphing),
+        (Mode::Morphing, Mode::Flight),
+        (Mode::Morphing, Mode::Transition),
+        (Mode::Transition, Mode::Touchdown),
+        (Mode::Touchdown, Mode::Drive),
+    ];
+    for row in TRANSITIONS {
+        assert!(
+            covered
+                .iter()
+                .any(|(from, to)| row.from.contains(from) && row.to == *to),
+            "untested row to {:?} ({})",
+            row.to,
+            row.reason
+        );
+    }
+}
