@@ -1,0 +1,305 @@
+//! Ground effect of a tilted rotor: the thrust gain surface `T / T_inf - 1`
+//! over rotor height above ground and tilt varphi.
+//!
+//! Three regions (docs/ground_effect.md gives every number and its source):
+//!
+//! - varphi <= `classical_below_deg` (30 deg): the classical rotor law of
+//!   Cheeseman and Bennett (1955), `T / T_inf = 1 / (1 - (R_p / (4 z))^2)`,
+//!   with the distance along the (tilted) slipstream `z = h / cos varphi` and
+//!   z held at or above `R_p / 2`, where the law stops being valid.
+//! - varphi in [40, 70] deg: a table read from the description of the
+//!   paper's load-cell results (Fig. 3C), bilinear in (h, varphi). Outside
+//!   the measured heights the value is held (below 0.25 m) or the table's
+//!   last column is used (above 0.72 m, where it is zero). Above 70 deg the
+//!   70 deg row is held.
+//! - between 30 and 40 deg: a linear blend from the classical law to the
+//!   40 deg row, so the surface is continuous.
+//!
+//! Each entry has a mean and a standard deviation: near the ground at large
+//! tilts the measured thrust fluctuates strongly. The plant draws the
+//! fluctuation as a unit-variance first-order Gauss-Markov process per rotor
+//! (correlation time `correlation_time`), so the thrust of rotor i is
+//! `kT u_i (1 + mean(h_i, varphi) + std(h_i, varphi) n_i(t))`.
+
+use std::path::Path;
+
+use atmo_core::config::Checker;
+use serde::Deserialize;
+
+use crate::error::Result;
+
+/// Heights of the default table (m of rotor hub above the ground plane).
+pub const DEFAULT_HEIGHTS: [f64; 6] = [0.25, 0.35, 0.45, 0.55, 0.65, 0.72];
+/// Tilts of the default table (deg).
+pub const DEFAULT_TILTS_DEG: [f64; 4] = [40.0, 50.0, 60.0, 70.0];
+/// Mean gain `T / T_inf - 1`, one row per tilt of [`DEFAULT_TILTS_DEG`].
+pub const DEFAULT_GAIN: [[f64; 6]; 4] = [
+    [0.090, 0.060, 0.035, 0.015, 0.005, 0.0], // 40 deg: clearly positive
+    [0.190, 0.120, 0.070, 0.035, 0.010, 0.0], // 50 deg: largest, almost +20 %
+    [0.070, 0.045, 0.025, 0.010, 0.003, 0.0], // 60 deg: clearly positive
+    [-0.070, -0.045, -0.025, -0.010, -0.003, 0.0], // 70 deg: suction
+];
+/// Standard deviation of the gain, same layout as [`DEFAULT_GAIN`].
+pub const DEFAULT_STD: [[f64; 6]; 4] = [
+    [0.010, 0.008, 0.005, 0.003, 0.002, 0.0],
+    [0.015, 0.010, 0.007, 0.004, 0.002, 0.0],
+    [0.025, 0.018, 0.010, 0.005, 0.003, 0.0],
+    [0.080, 0.055, 0.030, 0.015, 0.005, 0.0], // mean - std = -15 % at 0.25 m
+];
+
+fn default_true() -> bool {
+    true
+}
+fn default_rotor_radius() -> f64 {
+    0.11
+}
+fn default_classical_below_deg() -> f64 {
+    30.0
+}
+fn default_correlation_time() -> f64 {
+    0.05
+}
+fn default_heights() -> Vec<f64> {
+    DEFAULT_HEIGHTS.to_vec()
+}
+fn default_tilts_deg() -> Vec<f64> {
+    DEFAULT_TILTS_DEG.to_vec()
+}
+fn default_gain() -> Vec<Vec<f64>> {
+    DEFAULT_GAIN.iter().map(|r| r.to_vec()).collect()
+}
+fn default_std() -> Vec<Vec<f64>> {
+    DEFAULT_STD.iter().map(|r| r.to_vec()).collect()
+}
+
+/// `[effects.ground_effect]`.
+#[derive(Debug, Clone, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct GroundEffectConfig {
+    #[serde(default = "default_true")]
+    pub enabled: bool,
+    /// m, propeller radius R_p of the classical law.
+    #[serde(default = "default_rotor_radius")]
+    pub rotor_radius: f64,
+    /// deg, at and below this tilt only the classical law applies; between
+    /// it and the first table tilt the two are blended linearly.
+    #[serde(default = "default_classical_below_deg")]
+    pub classical_below_deg: f64,
+    /// s, correlation time of the thrust fluctuation.
+    #[serde(default = "default_correlation_time")]
+    pub correlation_time: f64,
+    /// m, rotor hub heights of the table columns, increasing.
+    #[serde(default = "default_heights")]
+    pub heights: Vec<f64>,
+    /// deg, tilts of the table rows, increasing.
+    #[serde(default = "default_tilts_deg")]
+    pub tilts_deg: Vec<f64>,
+    /// Mean `T / T_inf - 1`, rows by tilt, columns by height.
+    #[serde(default = "default_gain")]
+    pub gain: Vec<Vec<f64>>,
+    /// Standard deviation of `T / T_inf - 1`, same layout.
+    #[serde(default = "default_std")]
+    pub std: Vec<Vec<f64>>,
+}
+
+impl Default for GroundEffectConfig {
+    fn default() -> Self {
+        Self {
+            enabled: true,
+            rotor_radius: default_rotor_radius(),
+            classical_below_deg: default_classical_below_deg(),
+            correlation_time: default_correlation_time(),
+            heights: default_heights(),
+            tilts_deg: default_tilts_deg(),
+            gain: default_gain(),
+            std: default_std(),
+        }
+    }
+}
+
+impl GroundEffectConfig {
+    /// Checks the table's shape and values; `prefix` is the key of the section.
+    pub fn validate(&self, c: &Checker<'_>, prefix: &str) -> Result<()> {
+        c.within(
+            &format!("{prefix}.rotor_radius"),
+            self.rotor_radius,
+            0.01,
+            1.0,
+        )?;
+        c.positive(&format!("{prefix}.correlation_time"), self.correlation_time)?;
+        increasing(c, &format!("{prefix}.heights"), &self.heights, 0.0, 10.0)?;
+        increasing(
+            c,
+            &format!("{prefix}.tilts_deg"),
+            &self.tilts_deg,
+            0.0,
+            90.0,
+        )?;
+        let first_tilt = self.tilts_deg[0];
+        c.within(
+            &format!("{prefix}.classical_below_deg"),
+            self.classical_below_deg,
+            0.0,
+            first_tilt,
+        )?;
+        for (name, table, min) in [("gain", &self.gain, -0.99), ("std", &self.std, 0.0)] {
+            if table.len() != self.tilts_deg.len() {
+                return Err(c
+                    .fail(
+                        &format!("{prefix}.{name}"),
+                        format!("{} rows (one per tilt)", self.tilts_deg.len()),
+                        table.len(),
+                    )
+                    .into());
+            }
+            for (r, row) in table.iter().enumerate() {
+                let key = format!("{prefix}.{name}[{r}]");
+                if row.len() != self.heights.len() {
+                    return Err(c
+                        .fail(
+                            &key,
+                            format!("{} entries (one per height)", self.heights.len()),
+                            row.len(),
+                        )
+                        .into());
+                }
+                for v in row {
+                    c.within(&key, *v, min, 10.0)?;
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+fn increasing(c: &Checker<'_>, key: &str, values: &[f64], min: f64, max: f64) -> Result<()> {
+    if values.len() < 2 {
+        return Err(c.fail(key, "at least two values", values.len()).into());
+    }
+    for v in values {
+        c.within(key, *v, min, max)?;
+    }
+    if values.windows(2).any(|w| w[1] <= w[0]) {
+        return Err(c
+            .fail(key, "strictly increasing values", format!("{values:?}"))
+            .into());
+    }
+    Ok(())
+}
+
+/// The ground-effect surface, ready to evaluate (no allocation per call).
+#[derive(Debug, Clone, PartialEq)]
+pub struct GroundEffect {
+    rotor_radius: f64,
+    classical_below: f64,
+    table_from: f64,
+    pub correlation_time: f64,
+    heights: Vec<f64>,
+    tilts: Vec<f64>,
+    gain: Vec<Vec<f64>>,
+    std: Vec<Vec<f64>>,
+}
+
+/// Mean and standard deviation of `T / T_inf - 1` at one point.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Gain {
+    pub mean: f64,
+    pub std: f64,
+}
+
+/// Cheeseman-Bennett: `T / T_inf - 1` for a rotor of radius `r` at distance
+/// `z` from the ground, with z held at or above `r / 2`.
+pub fn cheeseman_bennett(r: f64, z: f64) -> f64 {
+    let q = r / (4.0 * z.max(0.5 * r));
+    1.0 / (1.0 - q * q) - 1.0
+}
+
+/// Index i with `xs[i] <= x <= xs[i + 1]` and the weight of `xs[i + 1]`,
+/// with x clamped into the range.
+fn bracket(xs: &[f64], x: f64) -> (usize, f64) {
+    let n = xs.len();
+    if x <= xs[0] {
+        return (0, 0.0);
+    }
+    if x >= xs[n - 1] {
+        return (n - 2, 1.0);
+    }
+    let mut i = 0;
+    while xs[i + 1] < x {
+        i += 1;
+    }
+    (i, (x - xs[i]) / (xs[i + 1] - xs[i]))
+}
+
+impl GroundEffect {
+    /// Builds the surface from a validated config.
+    pub fn new(config: &GroundEffectConfig) -> Self {
+        Self {
+            rotor_radius: config.rotor_radius,
+            classical_below: config.classical_below_deg.to_radians(),
+            table_from: config.tilts_deg[0].to_radians(),
+            correlation_time: config.correlation_time,
+            heights: config.heights.clone(),
+            tilts: config.tilts_deg.iter().map(|d| d.to_radians()).collect(),
+            gain: config.gain.clone(),
+            std: config.std.clone(),
+        }
+    }
+
+    /// Bilinear table value at hub height `h` (m) and tilt `varphi` (rad).
+    fn table(&self, h: f64, varphi: f64) -> Gain {
+        let (i, wt) = bracket(&self.tilts, varphi);
+        let (j, wh) = bracket(&self.heights, h);
+        let lerp2 = |t: &Vec<Vec<f64>>| {
+            let a = t[i][j] * (1.0 - wh) + t[i][j + 1] * wh;
+            let b = t[i + 1][j] * (1.0 - wh) + t[i + 1][j + 1] * wh;
+            a * (1.0 - wt) + b * wt
+        };
+        Gain {
+            mean: lerp2(&self.gain),
+            std: lerp2(&self.std),
+        }
+    }
+
+    /// `T / T_inf - 1` (mean and standard deviation) for a rotor whose hub
+    /// is `h` m above the ground at tilt `varphi` rad.
+    pub fn gain(&self, h: f64, varphi: f64) -> Gain {
+        let classical = || {
+            let z = h / varphi.cos().max(0.05);
+            cheeseman_bennett(self.rotor_radius, z)
+        };
+        if varphi <= self.classical_below {
+            return Gain {
+                mean: classical(),
+                std: 0.0,
+            };
+        }
+        let table = self.table(h, varphi);
+        if varphi >= self.table_from {
+            return table;
+        }
+        let w = (varphi - self.classical_below) / (self.table_from - self.classical_below);
+        Gain {
+            mean: (1.0 - w) * classical() + w * table.mean,
+            std: w * table.std,
+        }
+    }
+
+    /// The gain applied to a rotor: mean plus `n` standard deviations.
+    pub fn sample(&self, h: f64, varphi: f64, n: f64) -> f64 {
+        let g = self.gain(h, varphi);
+        // Thrust never reverses, however far the noise reaches.
+        (g.mean + g.std * n).max(-0.9)
+    }
+
+    /// Validated config helper for tests and docs: the surface at the default table.
+    pub fn default_surface() -> Self {
+        Self::new(&GroundEffectConfig::default())
+    }
+
+    /// Checks a config against `file` (for callers outside a plant file).
+    pub fn from_config(config: &GroundEffectConfig, file: &Path) -> Result<Self> {
+        config.validate(&Checker::new(file), "effects.ground_effect")?;
+        Ok(Self::new(config))
+    }
+}

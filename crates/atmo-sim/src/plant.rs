@@ -1,0 +1,909 @@
+//! The plant: atmo-core's 7-body dynamics plus the effects of the plant
+//! config, integrated by classical RK4 at a fixed step.
+//!
+//! Continuous state (all integrated together by RK4): the 12 rigid-body
+//! states, the normalized thrust of each rotor (motor lag), the spin rate and
+//! speed-error integral of each side's wheel drive, the battery energy used,
+//! and the tangential contact spring of each contact point. The tilt varphi
+//! and the random processes (turbulence, ground-effect fluctuation) change
+//! once per step: varphi moves by the rate-limited command times dt, the
+//! composite body is rebuilt at the mid-step tilt, and the noise is held over
+//! the step.
+//!
+//! Rotor i produces the thrust `kT u_eff_i` along its axis, with
+//! `u_eff_i = t_i s_batt (1 + g_i)`: `t_i` the lagged normalized thrust
+//! (or the command when motor lag is off), `s_batt` the battery scale, and
+//! `g_i` the ground-effect gain. Drag and contact wrenches enter
+//! `TiltedBody::accelerations` as the extra body wrench.
+//!
+//! Wheels: each side's two wheels are belt-coupled (one spin rate per side,
+//! positive = forward). A PI speed controller with a torque limit drives
+//! each side: `J w_dot = tau_m + sum_wheels e . (r x F)`, with `e` the
+//! forward spin axis, `r` the contact point from the wheel centre and `F` the
+//! contact force. The body receives the contact wrench less its spin-axis
+//! part (that part turns the wheel) and the motor reaction `-tau_m e`.
+
+use atmo_core::control::WheelRates;
+use atmo_core::model::{Input, Model, State, TiltedBody, idx, rotation};
+use atmo_core::{Linkage, RobotConfig};
+use nalgebra::{Cholesky, Matrix3, SVector, U6, Vector3, Vector6};
+use rand_chacha::ChaCha8Rng;
+
+use crate::config::{
+    BatterySagConfig, DragConfig, GroundContactConfig, PlantConfig, SensorsConfig, TerrainConfig,
+    WindConfig,
+};
+use crate::contact::{ContactLaw, Plane, rim_lowest_point, wheel_lateral};
+use crate::error::{Result, SimError};
+use crate::ground_effect::GroundEffect;
+use crate::noise::{GaussMarkov, rng, stream};
+use crate::sensors::{Estimate, Mocap};
+
+/// Contact points: the four wheels (rotor order), then the 8 base-box corners.
+pub const N_CONTACTS: usize = 12;
+const N_WHEELS: usize = 4;
+
+const THRUST: usize = 12;
+const WHEEL: usize = 16;
+const WHEEL_INT: usize = 18;
+const ENERGY: usize = 20;
+const SPRING: usize = 21;
+/// Length of the plant's continuous state.
+pub const N_EXT: usize = SPRING + 3 * N_CONTACTS;
+type Ext = SVector<f64, N_EXT>;
+
+/// Which side each rotor's wheel is on (0 = left, 1 = right), PX4 quad-x:
+/// rotors 1 and 4 on the right arm, 2 and 3 on the left.
+const WHEEL_SIDE: [usize; 4] = [1, 0, 0, 1];
+/// Sign from the rotor axis to the forward spin axis: at varphi = 90 deg the
+/// right rotors' axes point +y and the left ones' -y; forward rolling is a
+/// spin about -y for both.
+const SPIN_SIGN: [f64; 4] = [-1.0, 1.0, 1.0, -1.0];
+
+/// What the daemon sends: 4 rotor commands, the tilt velocity and the two
+/// wheel rates.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Command {
+    /// Normalized rotor commands, held to [0, 1].
+    pub rotors: Input,
+    /// rad/s, positive towards drive (larger varphi).
+    pub tilt_rate: f64,
+    /// rad/s, positive forward.
+    pub wheel_rates: WheelRates,
+}
+
+impl Command {
+    /// Rotors off, tilt held, wheels stopped.
+    pub fn idle() -> Self {
+        Self::rotors(Input::zeros())
+    }
+
+    /// These rotor commands, tilt held, wheels stopped.
+    pub fn rotors(rotors: Input) -> Self {
+        Self {
+            rotors,
+            tilt_rate: 0.0,
+            wheel_rates: WheelRates {
+                left: 0.0,
+                right: 0.0,
+            },
+        }
+    }
+}
+
+/// The plant's initial condition.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct InitialState {
+    /// Rigid-body state (atmo-core order).
+    pub state: State,
+    /// rad.
+    pub tilt: f64,
+    /// Normalized thrust of each rotor at t = 0 (matters with motor lag).
+    pub thrust: Input,
+}
+
+impl InitialState {
+    /// At rest at `state`, tilt `tilt`, rotors off.
+    pub fn at(state: State, tilt: f64) -> Self {
+        Self {
+            state,
+            tilt,
+            thrust: Input::zeros(),
+        }
+    }
+}
+
+/// Why a crash was reported.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum CrashKind {
+    /// A base-box corner (0..8) touched the ground.
+    BodyContact { corner: usize },
+    /// A wheel (rotor index 0..4) hit the ground faster than `crash_speed` (m/s).
+    HardImpact { wheel: usize, speed: f64 },
+    /// The body z axis left the ground normal by more than `tip_over_deg` while touching.
+    TipOver { angle_deg: f64 },
+}
+
+/// Something that happened at the ground.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum EventKind {
+    /// The wheels started carrying load (contact signal rose).
+    Touchdown,
+    /// The wheels stopped carrying load (contact signal fell).
+    Liftoff,
+    Crash(CrashKind),
+}
+
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Event {
+    pub time: f64,
+    pub kind: EventKind,
+}
+
+/// Most events kept; later ones are counted in `events_dropped`.
+const EVENT_CAPACITY: usize = 256;
+
+#[derive(Debug, Clone, Copy)]
+struct Drive {
+    inertia: f64,
+    kp: f64,
+    ki: f64,
+    torque_max: f64,
+}
+
+#[derive(Debug, Clone)]
+struct Wind {
+    config: WindConfig,
+    turbulence: [GaussMarkov; 3],
+    rng: ChaCha8Rng,
+}
+
+impl Wind {
+    fn at(&self, time: f64) -> Vector3<f64> {
+        let c = &self.config;
+        let mut w = Vector3::from(c.steady);
+        for k in 0..3 {
+            w[k] += c.turbulence_std[k] * self.turbulence[k].value;
+        }
+        for g in &c.gusts {
+            if time >= g.t && time < g.t + g.duration {
+                let shape =
+                    0.5 * (1.0 - (2.0 * std::f64::consts::PI * (time - g.t) / g.duration).cos());
+                w += Vector3::from(g.velocity) * shape;
+            }
+        }
+        w
+    }
+}
+
+/// Per-contact result of the last post-step evaluation.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct ContactInfo {
+    /// N (0 when open).
+    pub normal_force: f64,
+    /// m/s, speed towards the ground.
+    pub approach_speed: f64,
+    pub touching: bool,
+}
+
+/// The truth plant.
+#[derive(Debug, Clone)]
+pub struct Plant {
+    model: Model,
+    linkage: Linkage,
+    dt: f64,
+    tilt_max: f64,
+    tilt_rate_max: f64,
+    quantize_encoder: bool,
+    wheel_rate_max: f64,
+    wheel_radius: f64,
+    plane: Plane,
+    // Effects (None = off).
+    ground_effect: Option<GroundEffect>,
+    motor_lag: Option<(f64, f64)>,
+    drag: Option<DragConfig>,
+    wind: Option<Wind>,
+    battery: Option<BatterySagConfig>,
+    com_offset: Option<Vector3<f64>>,
+    mass_error: Option<(f64, f64)>,
+    contact: Option<(ContactLaw, Drive, GroundContactConfig)>,
+    corners: [Vector3<f64>; 8],
+    // Noise held over a step.
+    ge_noise: [GaussMarkov; 4],
+    ge_rng: ChaCha8Rng,
+    wind_now: Vector3<f64>,
+    // State.
+    steps: u64,
+    ext: Ext,
+    tilt: f64,
+    body: TiltedBody,
+    command: Command,
+    mocap: Mocap,
+    contacts: [ContactInfo; N_CONTACTS],
+    grounded: bool,
+    tipped: bool,
+    crash: Option<Event>,
+    events: Vec<Event>,
+    events_dropped: usize,
+}
+
+fn skew(r: &Vector3<f64>) -> Matrix3<f64> {
+    Matrix3::new(0.0, -r.z, r.y, r.z, 0.0, -r.x, -r.y, r.x, 0.0)
+}
+
+/// The composite body at `tilt` with the mass-property errors applied:
+/// mass and first moment scaled by `ms`, inertia about B by `is`, then the
+/// whole mass distribution shifted by `d` (body frame):
+/// `c' = c + m d`, `I' = I + m (|d|^2 1 - d d^T) + 2 (c . d) 1 - c d^T - d c^T`.
+fn effective_body(
+    model: &Model,
+    tilt: f64,
+    mass_error: Option<(f64, f64)>,
+    com_offset: Option<Vector3<f64>>,
+) -> Option<TiltedBody> {
+    let mut b = model.at_tilt(tilt);
+    if mass_error.is_none() && com_offset.is_none() {
+        return Some(b);
+    }
+    if let Some((ms, is)) = mass_error {
+        b.mass *= ms;
+        b.first_moment *= ms;
+        b.inertia *= is;
+    }
+    if let Some(d) = com_offset {
+        let (m, c) = (b.mass, b.first_moment);
+        b.inertia += (Matrix3::identity() * d.norm_squared() - d * d.transpose()) * m
+            + Matrix3::identity() * (2.0 * c.dot(&d))
+            - c * d.transpose()
+            - d * c.transpose();
+        b.first_moment = c + d * m;
+    }
+    let mut mm = b.mass_matrix;
+    mm.fixed_view_mut::<3, 3>(0, 0).fill_with_identity();
+    mm.fixed_view_mut::<3, 3>(0, 0).scale_mut(b.mass);
+    mm.fixed_view_mut::<3, 3>(0, 3)
+        .copy_from(&(-skew(&b.first_moment)));
+    mm.fixed_view_mut::<3, 3>(3, 0)
+        .copy_from(&skew(&b.first_moment));
+    mm.fixed_view_mut::<3, 3>(3, 3).copy_from(&b.inertia);
+    b.mass_matrix = mm;
+    b.mass_matrix_inv = Cholesky::<f64, U6>::new(mm)?.inverse();
+    Some(b)
+}
+
+impl Plant {
+    /// Builds the plant for a robot, a validated plant config, the terrain
+    /// and the initial condition; `seed` drives every random process.
+    pub fn new(
+        robot: &RobotConfig,
+        config: &PlantConfig,
+        terrain: &TerrainConfig,
+        initial: &InitialState,
+        seed: u64,
+    ) -> Result<Self> {
+        config.validate()?;
+        let checker = atmo_core::config::Checker::new(&config.source);
+        terrain.validate(&checker, "terrain")?;
+        let fx = &config.effects;
+        let mut truth = robot.clone();
+        truth.arm.inertia_convention = config.arm_inertia_convention;
+        let model = Model::new(&truth);
+        let tilt_max = robot.limits.tilt_max();
+        let linkage = Linkage::from_config(&robot.linkage, tilt_max)?;
+        let dt = config.dt;
+
+        let tilt_mech = fx.tilt_mechanism.as_ref().filter(|e| e.enabled);
+        let tilt_rate_max = tilt_mech.map_or(f64::INFINITY, |e| {
+            e.rate_max.unwrap_or(robot.limits.tilt_rate_max)
+        });
+        let ground_effect = fx
+            .ground_effect
+            .as_ref()
+            .filter(|e| e.enabled)
+            .map(GroundEffect::new);
+        let motor_lag = fx
+            .motor_lag
+            .as_ref()
+            .filter(|e| e.enabled)
+            .map(|e| (e.time_constant, e.curve));
+        let drag = fx.drag.clone().filter(|e| e.enabled);
+        let battery = fx.battery_sag.clone().filter(|e| e.enabled);
+        let com_offset = fx
+            .com_offset
+            .as_ref()
+            .filter(|e| e.enabled)
+            .map(|e| Vector3::from(e.offset));
+        let mass_error = fx
+            .mass_error
+            .as_ref()
+            .filter(|e| e.enabled)
+            .map(|e| (e.mass_scale, e.inertia_scale));
+        let sensors: Option<SensorsConfig> = fx.sensors.clone().filter(|e| e.enabled);
+        let contact_cfg = fx.ground_contact.clone().filter(|e| e.enabled);
+
+        // The perturbed mass properties must stay physical at every tilt.
+        let steps = 90;
+        for k in 0..=steps {
+            let tilt = tilt_max * f64::from(k) / f64::from(steps);
+            if effective_body(&model, tilt, mass_error, com_offset).is_none() {
+                let key = if mass_error.is_some() {
+                    "effects.mass_error.inertia_scale"
+                } else {
+                    "effects.com_offset.offset"
+                };
+                return Err(checker
+                    .fail(
+                        key,
+                        "mass properties with a positive-definite mass matrix at every tilt",
+                        format!("not at {:.1} deg", tilt.to_degrees()),
+                    )
+                    .into());
+            }
+        }
+        let c = &initial.state;
+        checker.finite("initial.state", c.as_slice())?;
+        checker.within("initial.tilt", initial.tilt, 0.0, tilt_max)?;
+        for u in &initial.thrust {
+            checker.within("initial.thrust", *u, 0.0, 1.0)?;
+        }
+
+        let mut ge_rng = rng(seed, stream::GROUND_EFFECT);
+        let tau_ge = ground_effect.as_ref().map_or(1.0, |g| g.correlation_time);
+        let ge_noise = std::array::from_fn(|_| GaussMarkov::new(tau_ge, dt, &mut ge_rng));
+        let wind = fx.wind.clone().filter(|e| e.enabled).map(|config| {
+            let mut rng = rng(seed, stream::WIND);
+            let turbulence =
+                std::array::from_fn(|_| GaussMarkov::new(config.turbulence_time, dt, &mut rng));
+            Wind {
+                config,
+                turbulence,
+                rng,
+            }
+        });
+        let contact = contact_cfg.map(|c| {
+            (
+                ContactLaw::new(&c),
+                Drive {
+                    inertia: c.wheel_inertia,
+                    kp: c.wheel_kp,
+                    ki: c.wheel_ki,
+                    torque_max: c.wheel_torque_max,
+                },
+                c,
+            )
+        });
+        let (lo, hi) = contact.as_ref().map_or(
+            (
+                GroundContactConfig::default().base_box_min,
+                GroundContactConfig::default().base_box_max,
+            ),
+            |(_, _, c)| (c.base_box_min, c.base_box_max),
+        );
+        let corners = std::array::from_fn(|k| {
+            Vector3::new(
+                if k & 1 == 0 { lo[0] } else { hi[0] },
+                if k & 2 == 0 { lo[1] } else { hi[1] },
+                if k & 4 == 0 { lo[2] } else { hi[2] },
+            )
+        });
+
+        let mut ext = Ext::zeros();
+        ext.fixed_rows_mut::<12>(0).copy_from(&initial.state);
+        ext.fixed_rows_mut::<4>(THRUST).copy_from(&initial.thrust);
+        let tilt = initial.tilt;
+        let body = effective_body(&model, tilt, mass_error, com_offset)
+            .expect("checked at every tilt above");
+        let mut plant = Self {
+            linkage,
+            dt,
+            tilt_max,
+            tilt_rate_max,
+            quantize_encoder: tilt_mech.is_some(),
+            wheel_rate_max: robot.wheels.max_rate,
+            wheel_radius: robot.wheels.radius,
+            plane: Plane::new(terrain),
+            ground_effect,
+            motor_lag,
+            drag,
+            wind,
+            battery,
+            com_offset,
+            mass_error,
+            contact,
+            corners,
+            ge_noise,
+            ge_rng,
+            wind_now: Vector3::zeros(),
+            steps: 0,
+            ext,
+            tilt,
+            body,
+            command: Command::rotors(initial.thrust),
+            mocap: Mocap::new(sensors, dt, seed),
+            contacts: [ContactInfo::default(); N_CONTACTS],
+            grounded: false,
+            tipped: false,
+            crash: None,
+            events: Vec::with_capacity(EVENT_CAPACITY),
+            events_dropped: 0,
+            model,
+        };
+        if let Some(w) = &plant.wind {
+            plant.wind_now = w.at(0.0);
+        }
+        plant.observe();
+        plant.grounded = plant.contact_signal();
+        Ok(plant)
+    }
+
+    /// s, fixed step.
+    pub fn dt(&self) -> f64 {
+        self.dt
+    }
+
+    /// s, simulated time (step count times dt).
+    pub fn time(&self) -> f64 {
+        self.steps as f64 * self.dt
+    }
+
+    /// Steps taken.
+    pub fn steps(&self) -> u64 {
+        self.steps
+    }
+
+    /// The true rigid-body state.
+    pub fn state(&self) -> State {
+        self.ext.fixed_rows::<12>(0).into_owned()
+    }
+
+    /// rad, the true tilt.
+    pub fn tilt(&self) -> f64 {
+        self.tilt
+    }
+
+    /// The tilt encoder: counts via the linkage, whole counts when the tilt
+    /// mechanism effect is on.
+    pub fn encoder_counts(&self) -> Result<f64> {
+        let counts = self.linkage.counts_from_tilt(self.tilt)?;
+        Ok(if self.quantize_encoder {
+            counts.round()
+        } else {
+            counts
+        })
+    }
+
+    /// Normalized thrust of each rotor (after the motor lag and curve).
+    pub fn thrust(&self) -> Input {
+        if self.motor_lag.is_some() {
+            self.ext.fixed_rows::<4>(THRUST).into_owned()
+        } else {
+            self.command.rotors
+        }
+    }
+
+    /// rad/s, wheel spin rate per side (positive forward).
+    pub fn wheel_rates(&self) -> WheelRates {
+        if self.contact.is_some() {
+            WheelRates {
+                left: self.ext[WHEEL],
+                right: self.ext[WHEEL + 1],
+            }
+        } else {
+            self.command.wheel_rates
+        }
+    }
+
+    /// J, battery energy used since the start.
+    pub fn energy_used(&self) -> f64 {
+        self.ext[ENERGY]
+    }
+
+    /// Wind at the current step (NED, m/s).
+    pub fn wind(&self) -> Vector3<f64> {
+        self.wind_now
+    }
+
+    /// The composite body in use (with mass-property errors).
+    pub fn body(&self) -> &TiltedBody {
+        &self.body
+    }
+
+    /// The nominal model (what the controller knows).
+    pub fn model(&self) -> &Model {
+        &self.model
+    }
+
+    /// The terrain plane.
+    pub fn plane(&self) -> &Plane {
+        &self.plane
+    }
+
+    /// The latest published state estimate.
+    pub fn estimate(&self) -> Option<&Estimate> {
+        self.mocap.latest.as_ref()
+    }
+
+    /// The ground-contact signal the robot reports.
+    pub fn contact_signal(&self) -> bool {
+        let wheel_force: f64 = self.contacts[..N_WHEELS]
+            .iter()
+            .map(|c| c.normal_force)
+            .sum();
+        self.mocap.contact_signal(wheel_force)
+    }
+
+    /// Contact state after the last step (wheels in rotor order, then corners).
+    pub fn contacts(&self) -> &[ContactInfo; N_CONTACTS] {
+        &self.contacts
+    }
+
+    /// The first crash, if any.
+    pub fn crash(&self) -> Option<&Event> {
+        self.crash.as_ref()
+    }
+
+    /// Events so far (at most 256 kept).
+    pub fn events(&self) -> &[Event] {
+        &self.events
+    }
+
+    /// Events not kept because the list was full.
+    pub fn events_dropped(&self) -> usize {
+        self.events_dropped
+    }
+
+    /// `x_dot` of the rigid body now under `command` (with every effect;
+    /// ground-effect and wind noise as held for the current step).
+    pub fn body_derivative(&self, command: &Command) -> Result<State> {
+        let cmd = self.sanitize(command)?;
+        let d = self.derivative(&self.ext, &cmd, None);
+        Ok(d.fixed_rows::<12>(0).into_owned())
+    }
+
+    fn sanitize(&self, command: &Command) -> Result<Command> {
+        for (i, u) in command.rotors.iter().enumerate() {
+            if !u.is_finite() {
+                const NAMES: [&str; 4] = ["rotors[0]", "rotors[1]", "rotors[2]", "rotors[3]"];
+                return Err(SimError::NonFiniteCommand {
+                    name: NAMES[i],
+                    value: *u,
+                });
+            }
+        }
+        for (name, v) in [
+            ("tilt_rate", command.tilt_rate),
+            ("wheel_rates.left", command.wheel_rates.left),
+            ("wheel_rates.right", command.wheel_rates.right),
+        ] {
+            if !v.is_finite() {
+                return Err(SimError::NonFiniteCommand { name, value: v });
+            }
+        }
+        let wmax = self.wheel_rate_max;
+        Ok(Command {
+            rotors: command.rotors.map(|u| u.clamp(0.0, 1.0)),
+            tilt_rate: command
+                .tilt_rate
+                .clamp(-self.tilt_rate_max, self.tilt_rate_max),
+            wheel_rates: WheelRates {
+                left: command.wheel_rates.left.clamp(-wmax, wmax),
+                right: command.wheel_rates.right.clamp(-wmax, wmax),
+            },
+        })
+    }
+
+    /// Advances one step of `dt` under `command` (rotors held to [0, 1],
+    /// tilt rate and wheel rates to their limits; non-finite commands are
+    /// refused and leave the plant unchanged).
+    pub fn step(&mut self, command: &Command) -> Result<()> {
+        let cmd = self.sanitize(command)?;
+        self.command = cmd;
+        let dt = self.dt;
+
+        // Tilt: self-locking screw, moves only by the (limited) command.
+        let new_tilt = (self.tilt + cmd.tilt_rate * dt).clamp(0.0, self.tilt_max);
+        let mid = 0.5 * (self.tilt + new_tilt);
+        if mid != self.body.varphi {
+            if let Some(b) = effective_body(&self.model, mid, self.mass_error, self.com_offset) {
+                self.body = b;
+            }
+        }
+
+        // Random processes, held over the step.
+        if self.ground_effect.is_some() {
+            for n in &mut self.ge_noise {
+                n.advance(&mut self.ge_rng);
+            }
+        }
+        let mid_time = self.time() + 0.5 * dt;
+        if let Some(w) = &mut self.wind {
+            for n in &mut w.turbulence {
+                n.advance(&mut w.rng);
+            }
+            self.wind_now = w.at(mid_time);
+        }
+
+        let x = self.ext;
+        let k1 = self.derivative(&x, &cmd, None);
+        let k2 = self.derivative(&(x + k1 * (0.5 * dt)), &cmd, None);
+        let k3 = self.derivative(&(x + k2 * (0.5 * dt)), &cmd, None);
+        let k4 = self.derivative(&(x + k3 * dt), &cmd, None);
+        let next = x + (k1 + k2 * 2.0 + k3 * 2.0 + k4) * (dt / 6.0);
+        if !next.iter().all(|v| v.is_finite()) {
+            return Err(SimError::Diverged {
+                time: self.time() + dt,
+            });
+        }
+        self.ext = next;
+        self.tilt = new_tilt;
+        self.steps += 1;
+        self.observe();
+        Ok(())
+    }
+
+    /// Steps until `duration` more seconds have passed (rounded to whole steps).
+    pub fn advance(&mut self, command: &Command, duration: f64) -> Result<()> {
+        let n = (duration / self.dt).round().max(0.0) as u64;
+        for _ in 0..n {
+            self.step(command)?;
+        }
+        Ok(())
+    }
+
+    /// After a step: contact springs, drive integrators, contact report,
+    /// events, sensors.
+    fn observe(&mut self) {
+        let mut report = [ContactInfo::default(); N_CONTACTS];
+        let cmd = self.command;
+        let _ = self.derivative(&self.ext.clone(), &cmd, Some(&mut report));
+        let time = self.time();
+        let mut new_events: [Option<EventKind>; N_CONTACTS + 1] = [None; N_CONTACTS + 1];
+        if let Some((law, drive, cfg)) = &self.contact {
+            let n = self.plane.normal;
+            let xb = self.ext.fixed_rows::<12>(0);
+            let rot = rotation(xb[idx::YAW], xb[idx::PITCH], xb[idx::ROLL]);
+            for (j, info) in report.iter().enumerate() {
+                let range = SPRING + 3 * j..SPRING + 3 * j + 3;
+                let s = Vector3::new(
+                    self.ext[range.start],
+                    self.ext[range.start + 1],
+                    self.ext[range.start + 2],
+                );
+                let s = if info.touching {
+                    let lateral = if j < N_WHEELS {
+                        wheel_lateral(&(rot * self.body.rotor_axis[j]), &n)
+                    } else {
+                        None
+                    };
+                    law.limit_spring(&n, &s, info.normal_force, lateral.as_ref())
+                } else {
+                    Vector3::zeros()
+                };
+                self.ext.fixed_rows_mut::<3>(SPRING + 3 * j).copy_from(&s);
+            }
+            if drive.ki > 0.0 {
+                let limit = drive.torque_max / drive.ki;
+                for side in 0..2 {
+                    self.ext[WHEEL_INT + side] = self.ext[WHEEL_INT + side].clamp(-limit, limit);
+                }
+            }
+            // Crash reports.
+            let (crash_speed, tip_deg) = (cfg.crash_speed, cfg.tip_over_deg);
+            for j in 0..N_CONTACTS {
+                let was = self.contacts[j].touching;
+                let now = &report[j];
+                if now.touching && !was {
+                    // The speed just before contact: the first touching step
+                    // has already been slowed by the contact force.
+                    let speed = now.approach_speed.max(self.contacts[j].approach_speed);
+                    if j < N_WHEELS {
+                        if speed > crash_speed {
+                            new_events[j] =
+                                Some(EventKind::Crash(CrashKind::HardImpact { wheel: j, speed }));
+                        }
+                    } else {
+                        new_events[j] = Some(EventKind::Crash(CrashKind::BodyContact {
+                            corner: j - N_WHEELS,
+                        }));
+                    }
+                }
+            }
+            let any_touch = report.iter().any(|c| c.touching);
+            let x = self.ext.fixed_rows::<12>(0);
+            let r = rotation(x[idx::YAW], x[idx::PITCH], x[idx::ROLL]);
+            let body_down = r.column(2).into_owned();
+            let angle = (-body_down.dot(&n)).clamp(-1.0, 1.0).acos().to_degrees();
+            if any_touch && angle > tip_deg && !self.tipped {
+                self.tipped = true;
+                new_events[N_CONTACTS] =
+                    Some(EventKind::Crash(CrashKind::TipOver { angle_deg: angle }));
+            }
+        }
+        for kind in new_events.into_iter().flatten() {
+            self.push_event(Event { time, kind });
+        }
+        self.contacts = report;
+        let grounded = self.contact_signal();
+        if grounded != self.grounded {
+            self.grounded = grounded;
+            let kind = if grounded {
+                EventKind::Touchdown
+            } else {
+                EventKind::Liftoff
+            };
+            self.push_event(Event { time, kind });
+        }
+        let x = self.state();
+        self.mocap.record(self.steps, &x);
+    }
+
+    fn push_event(&mut self, event: Event) {
+        if matches!(event.kind, EventKind::Crash(_)) && self.crash.is_none() {
+            self.crash = Some(event);
+        }
+        if self.events.len() < EVENT_CAPACITY {
+            self.events.push(event);
+        } else {
+            self.events_dropped += 1;
+        }
+    }
+
+    /// The derivative of the continuous state; fills `report` with the
+    /// contact state when given.
+    fn derivative(
+        &self,
+        ext: &Ext,
+        cmd: &Command,
+        mut report: Option<&mut [ContactInfo; N_CONTACTS]>,
+    ) -> Ext {
+        let body = &self.body;
+        let x: State = ext.fixed_rows::<12>(0).into_owned();
+        let mut d = Ext::zeros();
+
+        // Rotor thrust: motor lag and curve, battery, ground effect.
+        let mut t = cmd.rotors;
+        if let Some((tau, f)) = self.motor_lag {
+            for i in 0..4 {
+                let u = cmd.rotors[i];
+                let target = (1.0 - f) * u + f * u * u;
+                t[i] = ext[THRUST + i];
+                d[THRUST + i] = (target - t[i]) / tau;
+            }
+        }
+        let mut u_eff = t;
+        if let Some(b) = &self.battery {
+            let used = b.used_wh * 3600.0 + ext[ENERGY];
+            let scale = 1.0 - b.sag * (used / (b.capacity_wh * 3600.0)).min(1.0);
+            u_eff *= scale;
+            d[ENERGY] = t
+                .iter()
+                .map(|ti| b.full_power_w * ti.max(0.0).powf(1.5))
+                .sum();
+        }
+
+        let needs_pose =
+            self.ground_effect.is_some() || self.drag.is_some() || self.contact.is_some();
+        let mut extra = Vector6::zeros();
+        if needs_pose {
+            let r = rotation(x[idx::YAW], x[idx::PITCH], x[idx::ROLL]);
+            let p = Vector3::new(x[idx::X], x[idx::Y], x[idx::Z]);
+            let v = Vector3::new(x[idx::VX], x[idx::VY], x[idx::VZ]);
+            let w = Vector3::new(x[idx::WX], x[idx::WY], x[idx::WZ]);
+
+            if let Some(ge) = &self.ground_effect {
+                for i in 0..4 {
+                    let hub = p + r * body.rotor_position[i];
+                    let h = self.plane.height(&hub);
+                    u_eff[i] *= 1.0 + ge.sample(h, body.varphi, self.ge_noise[i].value);
+                }
+            }
+
+            if let Some(drag) = &self.drag {
+                let v_air = r.transpose() * (v - self.wind_now);
+                let q = 0.5 * drag.air_density;
+                let mut force = -Vector3::new(
+                    q * drag.body_cd_area[0] * v_air.x.abs() * v_air.x,
+                    q * drag.body_cd_area[1] * v_air.y.abs() * v_air.y,
+                    q * drag.body_cd_area[2] * v_air.z.abs() * v_air.z,
+                );
+                let mut torque = Vector3::zeros();
+                for i in 0..4 {
+                    let n = &body.rotor_axis[i];
+                    let vi = v_air + w.cross(&body.rotor_position[i]);
+                    let fi = -(vi - n * vi.dot(n)) * (drag.rotor_drag * t[i].max(0.0));
+                    force += fi;
+                    torque += body.rotor_position[i].cross(&fi);
+                }
+                extra += Vector6::new(force.x, force.y, force.z, torque.x, torque.y, torque.z);
+            }
+
+            if let Some((law, drive, _)) = &self.contact {
+                let rt = r.transpose();
+                let n = self.plane.normal;
+                let down_b = -(rt * n);
+                let mut force = Vector3::zeros();
+                let mut torque = Vector3::zeros();
+                let mut wheel_torque = [0.0; 2];
+                let spin = [ext[WHEEL], ext[WHEEL + 1]];
+                for j in 0..N_CONTACTS {
+                    let (point, spin_axis, rim) = if j < N_WHEELS {
+                        let c = &body.rotor_position[j];
+                        let a = &body.rotor_axis[j];
+                        let pt = rim_lowest_point(c, a, &down_b, self.wheel_radius);
+                        (pt, a * SPIN_SIGN[j], pt - c)
+                    } else {
+                        (
+                            self.corners[j - N_WHEELS],
+                            Vector3::zeros(),
+                            Vector3::zeros(),
+                        )
+                    };
+                    let world = p + r * point;
+                    let depth = -self.plane.height(&world);
+                    if depth <= 0.0 {
+                        if let Some(rep) = report.as_deref_mut() {
+                            // Approaching but open: the speed a touchdown will have.
+                            rep[j].approach_speed = -(v + r * w.cross(&point)).dot(&n);
+                        }
+                        continue;
+                    }
+                    let mut v_local = w.cross(&point);
+                    if j < N_WHEELS {
+                        v_local += spin_axis.cross(&rim) * spin[WHEEL_SIDE[j]];
+                    }
+                    let v_point = v + r * v_local;
+                    let s = Vector3::new(
+                        ext[SPRING + 3 * j],
+                        ext[SPRING + 3 * j + 1],
+                        ext[SPRING + 3 * j + 2],
+                    );
+                    let lateral = if j < N_WHEELS {
+                        wheel_lateral(&(r * body.rotor_axis[j]), &n)
+                    } else {
+                        None
+                    };
+                    let (f_world, f_n, s_dot) =
+                        law.force(&n, depth, &v_point, &s, lateral.as_ref());
+                    d.fixed_rows_mut::<3>(SPRING + 3 * j).copy_from(&s_dot);
+                    let f_b = rt * f_world;
+                    force += f_b;
+                    let mut tq = point.cross(&f_b);
+                    if j < N_WHEELS {
+                        let axial = spin_axis.dot(&rim.cross(&f_b));
+                        tq -= spin_axis * axial;
+                        wheel_torque[WHEEL_SIDE[j]] += axial;
+                    }
+                    torque += tq;
+                    if let Some(rep) = report.as_deref_mut() {
+                        rep[j] = ContactInfo {
+                            normal_force: f_n,
+                            approach_speed: -v_point.dot(&n),
+                            touching: true,
+                        };
+                    }
+                }
+                // Wheel drives: PI speed control with a torque limit; the
+                // motor reaction acts on the body about the side's spin axis.
+                let cmd_rates = [cmd.wheel_rates.left, cmd.wheel_rates.right];
+                let side_axis = [
+                    body.rotor_axis[1] * SPIN_SIGN[1],
+                    body.rotor_axis[0] * SPIN_SIGN[0],
+                ];
+                for side in 0..2 {
+                    let err = cmd_rates[side] - spin[side];
+                    let tau = (drive.kp * err + drive.ki * ext[WHEEL_INT + side])
+                        .clamp(-drive.torque_max, drive.torque_max);
+                    d[WHEEL + side] = (tau + wheel_torque[side]) / drive.inertia;
+                    d[WHEEL_INT + side] = err;
+                    torque -= side_axis[side] * tau;
+                }
+                extra += Vector6::new(force.x, force.y, force.z, torque.x, torque.y, torque.z);
+            }
+        }
+
+        let acc = body.accelerations(&x, &u_eff, &extra);
+        d.fixed_rows_mut::<12>(0)
+            .copy_from(&TiltedBody::state_derivative(&x, &acc));
+        d
+    }
+}

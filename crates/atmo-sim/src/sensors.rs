@@ -1,0 +1,106 @@
+//! What the controller sees: a motion-capture state estimate (rate, latency,
+//! noise) and a ground-contact signal.
+//!
+//! The plant keeps the true state of the last `latency / dt` steps in a ring
+//! buffer allocated once. At each sample instant `k / rate` it publishes the
+//! true state from `latency` earlier plus white Gaussian noise (position,
+//! Euler angles, velocity, body rates, each with its own standard
+//! deviation). With sensors off the estimate is the true state at every step.
+
+use atmo_core::model::{NX, State};
+use rand_chacha::ChaCha8Rng;
+
+use crate::config::SensorsConfig;
+use crate::noise::{normal, rng, stream};
+
+/// One state estimate.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Estimate {
+    /// s, when the estimate became available.
+    pub time: f64,
+    /// s, the instant it describes (`time - latency`).
+    pub measured_at: f64,
+    pub state: State,
+    /// Counts up by one per published sample.
+    pub sequence: u64,
+}
+
+/// The motion-capture model.
+#[derive(Debug, Clone)]
+pub(crate) struct Mocap {
+    config: Option<SensorsConfig>,
+    dt: f64,
+    delay_steps: usize,
+    ring: Vec<State>,
+    head: usize,
+    filled: usize,
+    next_sample: u64,
+    rng: ChaCha8Rng,
+    pub latest: Option<Estimate>,
+}
+
+impl Mocap {
+    pub fn new(config: Option<SensorsConfig>, dt: f64, seed: u64) -> Self {
+        let delay_steps = config
+            .as_ref()
+            .map_or(0, |c| (c.latency / dt).round() as usize);
+        Self {
+            config,
+            dt,
+            delay_steps,
+            ring: vec![State::zeros(); delay_steps + 1],
+            head: 0,
+            filled: 0,
+            next_sample: 0,
+            rng: rng(seed, stream::SENSORS),
+            latest: None,
+        }
+    }
+
+    /// Records the true state after step number `step` (time `step * dt`)
+    /// and publishes a sample if one is due.
+    pub fn record(&mut self, step: u64, x: &State) {
+        let time = step as f64 * self.dt;
+        let Some(cfg) = &self.config else {
+            self.latest = Some(Estimate {
+                time,
+                measured_at: time,
+                state: *x,
+                sequence: step,
+            });
+            return;
+        };
+        self.head = (self.head + 1) % self.ring.len();
+        self.ring[self.head] = *x;
+        self.filled = (self.filled + 1).min(self.ring.len());
+        let period = 1.0 / cfg.rate_hz;
+        // Sample k is due at k / rate; publish at the first step at or after it.
+        if time + 1e-9 * self.dt < self.next_sample as f64 * period {
+            return;
+        }
+        let delay = self.delay_steps.min(self.filled - 1);
+        let index = (self.head + self.ring.len() - delay) % self.ring.len();
+        let mut state = self.ring[index];
+        let std = [
+            cfg.position_std,
+            cfg.attitude_std,
+            cfg.velocity_std,
+            cfg.rate_std,
+        ];
+        for i in 0..NX {
+            state[i] += std[i / 3] * normal(&mut self.rng);
+        }
+        self.latest = Some(Estimate {
+            time,
+            measured_at: time - delay as f64 * self.dt,
+            state,
+            sequence: self.next_sample,
+        });
+        self.next_sample += 1;
+    }
+
+    /// Ground contact signal for a total wheel normal force (N).
+    pub fn contact_signal(&self, wheel_force: f64) -> bool {
+        wheel_force > self.config.as_ref().map_or(0.0, |c| c.contact_threshold)
+    }
+}
