@@ -204,6 +204,20 @@ fn iteration_cap_gives_a_degraded_but_bounded_command() {
 }
 
 #[test]
+fn time_limit_gives_a_degraded_command() {
+    let mut s = settings(Formulation::Sparse);
+    s.solver.time_limit = 1e-5;
+    let mut mpc = Mpc::new(Model::new(&RobotConfig::atmo()), s).unwrap();
+    mpc.set_reference_constant(&hover_at(0.0, 0.0, 1.0))
+        .unwrap();
+    let x = perturbed(1.0);
+    mpc.reset(&x).unwrap();
+    let out = mpc.tick(&x).unwrap();
+    assert_eq!(out.outcome, Outcome::Degraded(DegradedCause::TimeLimit));
+    assert!(out.u.iter().all(|v| (0.0..=1.0).contains(v)));
+}
+
+#[test]
 fn bad_parameters_are_refused_not_panicked_on() {
     let mut mpc = controller(Formulation::Sparse);
     let x = hover_at(0.0, 0.0, 1.0);
