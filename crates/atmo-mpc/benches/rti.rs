@@ -1,1 +1,155 @@
-fn main() {}
+//! RTI timing: one full tick, the feedback phase alone, and the same QPs
+//! solved by Clarabel and OSQP in both formulations.
+
+#[path = "support/scenarios.rs"]
+mod scenarios;
+
+use std::hint::black_box;
+use std::time::{Duration, Instant};
+
+use atmo_mpc::{Formulation, Mpc, QpSnapshot};
+use clarabel::solver::IPSolver;
+use criterion::{Criterion, criterion_group, criterion_main};
+use scenarios::{NAMES, scenario};
+
+/// Closed-loop estimates replayed by the timed ticks.
+const RECORDED_TICKS: usize = 150;
+
+fn formulation() -> Formulation {
+    scenarios::settings(Formulation::Condensed)
+        .solver
+        .formulation
+}
+
+fn rti_tick(c: &mut Criterion) {
+    let mut group = c.benchmark_group("rti_tick");
+    for name in NAMES {
+        let sc = scenario(name);
+        let (mut mpc, estimates) = sc.warmed_up(formulation(), RECORDED_TICKS);
+        let mut i = 0;
+        group.bench_function(name, |b| {
+            b.iter(|| {
+                sc.apply(&mut mpc);
+                let out = mpc.tick(black_box(&estimates[i % RECORDED_TICKS])).unwrap();
+                i += 1;
+                black_box(out.u)
+            });
+        });
+    }
+    group.finish();
+}
+
+fn rti_feedback(c: &mut Criterion) {
+    let mut group = c.benchmark_group("rti_feedback");
+    for name in NAMES {
+        let sc = scenario(name);
+        let (mut mpc, estimates) = sc.warmed_up(formulation(), RECORDED_TICKS);
+        let mut i = 0;
+        group.bench_function(name, |b| {
+            b.iter_custom(|iters| {
+                let mut total = Duration::ZERO;
+                for _ in 0..iters {
+                    sc.apply(&mut mpc);
+                    mpc.prepare().unwrap();
+                    let x = estimates[i % RECORDED_TICKS];
+                    i += 1;
+                    let start = Instant::now();
+                    let out = mpc.feedback(black_box(&x)).unwrap();
+                    total += start.elapsed();
+                    black_box(out.u);
+                }
+                total
+            });
+        });
+    }
+    group.finish();
+}
+
+/// The QP of one morphing_50deg tick, in one formulation.
+fn morphing_qp(formulation: Formulation) -> (QpSnapshot, Mpc) {
+    let sc = scenario("morphing_50deg");
+    let (mut mpc, estimates) = sc.warmed_up(formulation, RECORDED_TICKS);
+    sc.apply(&mut mpc);
+    mpc.tick(&estimates[RECORDED_TICKS - 1]).unwrap();
+    (mpc.qp_snapshot(), mpc)
+}
+
+/// OSQP's `l <= A z <= u` from Clarabel's `A z + s = b`, `s` in {0}^m0 x R+.
+fn osqp_problem(qp: &QpSnapshot, eps: f64) -> osqp::Problem {
+    let to_osqp = |m: &clarabel::algebra::CscMatrix<f64>| osqp::CscMatrix {
+        nrows: m.m,
+        ncols: m.n,
+        indptr: m.colptr.clone().into(),
+        indices: m.rowval.clone().into(),
+        data: m.nzval.clone().into(),
+    };
+    let lower: Vec<f64> = (0..qp.b.len())
+        .map(|r| {
+            if r < qp.zero_rows {
+                qp.b[r]
+            } else {
+                f64::NEG_INFINITY
+            }
+        })
+        .collect();
+    let settings = osqp::Settings::default()
+        .verbose(false)
+        .eps_abs(eps)
+        .eps_rel(eps)
+        .warm_start(false)
+        .polish(true)
+        .max_iter(20_000);
+    osqp::Problem::new(
+        to_osqp(&qp.p),
+        &qp.q,
+        to_osqp(&qp.a),
+        &lower,
+        &qp.b,
+        &settings,
+    )
+    .unwrap()
+}
+
+fn qp_solver_compare(c: &mut Criterion) {
+    let mut group = c.benchmark_group("qp_solver_compare");
+    for (label, formulation) in [
+        ("condensed", Formulation::Condensed),
+        ("sparse", Formulation::Sparse),
+    ] {
+        let (qp, mpc) = morphing_qp(formulation);
+        let mut clarabel = qp.fresh_solver(&mpc.settings().solver).unwrap();
+        clarabel.solve();
+        let reference = clarabel.solution.x.clone();
+        group.bench_function(format!("clarabel_{label}"), |b| {
+            b.iter(|| {
+                clarabel.solve();
+                black_box(clarabel.solution.iterations)
+            });
+        });
+        for eps in [1e-4, 1e-6] {
+            let mut problem = osqp_problem(&qp, eps);
+            let (iterations, deviation) = {
+                let status = problem.solve();
+                let x = status.x().expect("OSQP solves the RTI QP");
+                let dev = x
+                    .iter()
+                    .zip(&reference)
+                    .map(|(a, b)| (a - b).abs())
+                    .fold(0.0, f64::max);
+                (status.iter(), dev)
+            };
+            eprintln!(
+                "qp_solver_compare/osqp_{label}_eps{eps:e}: {iterations} ADMM iterations, \
+                 max |x_osqp - x_clarabel| = {deviation:.2e} (Clarabel: {} IPM iterations)",
+                clarabel.solution.iterations
+            );
+            group.bench_function(format!("osqp_{label}_eps{eps:e}"), |b| {
+                b.iter(|| black_box(problem.solve().iter()));
+            });
+        }
+    }
+    group.finish();
+}
+
+criterion_group!(benches, rti_tick, rti_feedback, qp_solver_compare);
+criterion_main!(benches);

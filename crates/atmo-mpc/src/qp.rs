@@ -114,6 +114,7 @@ pub fn clarabel_settings(s: &SolverSettings) -> DefaultSettings<f64> {
         tol_gap_rel: s.tol_gap_rel,
         tol_feas: s.tol_feas,
         equilibrate_enable: s.equilibrate,
+        iterative_refinement_enable: s.iterative_refinement,
         ..DefaultSettings::default()
     }
 }

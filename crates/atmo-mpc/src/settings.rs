@@ -89,6 +89,8 @@ pub struct SolverSettings {
     pub tol_feas: f64,
     /// Clarabel's Ruiz equilibration (computed once, from the start-up QP).
     pub equilibrate: bool,
+    /// Clarabel's iterative refinement of each KKT solve.
+    pub iterative_refinement: bool,
 }
 
 #[derive(Debug, Clone, Copy, Deserialize, PartialEq)]
