@@ -20,6 +20,12 @@ pub enum SimError {
     /// for the configured stiffnesses, or the inputs drove it there).
     #[error("the plant state became non-finite at t = {time} s")]
     Diverged { time: f64 },
+    /// The flight stack or its MPC could not be built.
+    #[error("closed loop: {0}")]
+    Setup(String),
+    /// Writing an output (figure, summary, log) failed.
+    #[error("output: {0}")]
+    Output(String),
 }
 
 /// Result alias for atmo-sim.

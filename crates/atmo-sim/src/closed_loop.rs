@@ -1,0 +1,244 @@
+//! Closed loop: a scenario flown by the flight stack (FlightStack +
+//! atmo-mpc) against the plant, tick by tick, with a summary of the landing.
+//!
+//! Timing: the plant steps at its fixed `dt` (1 ms); the flight stack ticks
+//! at its control rate (150 Hz) on the plant's clock (tick k at `k T`, the
+//! first plant step at or after it). Each tick sees the latest
+//! motion-capture estimate (stamped with the instant it describes), the
+//! tilt encoder, the ground-contact signal, the ground height under the
+//! robot and the scenario's pilot inputs; its outputs are held until the
+//! next tick. Deterministic: the flight stack's clock is the plant's.
+
+use std::time::Instant;
+
+use atmo_core::model::{State, idx};
+use atmo_daemon::{Estimate, FlightSettings, FlightStack, Mode, PilotInput, StepInputs, StepOutputs};
+use atmo_mpc::MpcSettings;
+use nalgebra::Vector3;
+use serde::Serialize;
+
+use crate::error::{Result, SimError};
+use crate::plant::{Command, EventKind, Plant};
+use crate::scenario::Scenario;
+
+/// One control tick as the runner saw it (what is logged and plotted).
+#[derive(Debug, Clone, Copy)]
+pub struct TickRecord {
+    pub time: f64,
+    pub inputs: StepInputs,
+    pub outputs: StepOutputs,
+    /// The plant's true state and tilt at the tick.
+    pub truth: State,
+    pub truth_tilt: f64,
+    /// True height of the base origin above the ground, m.
+    pub truth_height: f64,
+}
+
+/// The landing, in numbers (`summary.json`).
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct Summary {
+    pub scenario: String,
+    pub seed: u64,
+    /// Tilt when the wheels first carried load, deg (null if never).
+    pub touchdown_tilt_deg: Option<f64>,
+    /// Vertical speed at first wheel contact, m/s (positive = downwards).
+    pub impact_speed_mps: Option<f64>,
+    pub touchdown_time_s: Option<f64>,
+    /// Max over the transition of the mean normalized thrust command.
+    pub max_mean_thrust: f64,
+    pub crashed: bool,
+    pub crash_reason: Option<String>,
+    /// Ground distance travelled after touchdown, m.
+    pub drive_distance_m: f64,
+    /// Modes in the order they were entered.
+    pub mode_sequence: Vec<String>,
+    /// Ticks whose MPC command did not come from a fresh solve.
+    pub mpc_failures: u64,
+    /// Inputs rejected by the flight stack (estimate, tilt, pilot, ground).
+    pub rejected_inputs: [u64; 4],
+    pub sim_time_s: f64,
+    pub wall_time_s: f64,
+    /// Median and max MPC feedback time, s.
+    pub feedback_time_median_s: f64,
+    pub feedback_time_max_s: f64,
+}
+
+/// What counts as a successful wheel landing.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SuccessCriteria {
+    pub min_touchdown_tilt_deg: f64,
+    pub max_impact_speed: f64,
+    pub min_drive_distance: f64,
+}
+
+impl Default for SuccessCriteria {
+    fn default() -> Self {
+        Self { min_touchdown_tilt_deg: 60.0, max_impact_speed: 0.5, min_drive_distance: 1.0 }
+    }
+}
+
+impl Summary {
+    /// No crash, touchdown tilt, impact speed and drive distance within `c`.
+    pub fn landed(&self, c: &SuccessCriteria) -> bool {
+        !self.crashed
+            && self.touchdown_tilt_deg.is_some_and(|t| t >= c.min_touchdown_tilt_deg)
+            && self.impact_speed_mps.is_some_and(|v| v <= c.max_impact_speed)
+            && self.drive_distance_m >= c.min_drive_distance
+    }
+}
+
+/// The controller side of a closed-loop run.
+#[derive(Debug, Clone)]
+pub struct ControllerConfig {
+    pub flight: FlightSettings,
+    pub mpc: MpcSettings,
+}
+
+impl ControllerConfig {
+    /// The shipped config/flight.toml and config/mpc.toml.
+    pub fn atmo() -> Result<Self> {
+        let flight = FlightSettings::atmo();
+        let mpc = MpcSettings::atmo(&flight.mpc_preset).map_err(|e| SimError::Setup(e.to_string()))?;
+        Ok(Self { flight, mpc })
+    }
+}
+
+/// NED z of the ground plane straight below (x, y) of `p`.
+fn ground_z_below(plant: &Plant, p: &Vector3<f64>) -> f64 {
+    let plane = plant.plane();
+    // height(p) = n . (p - P0) drops by -n_z per metre of z: solve for the plane.
+    p.z + plane.height(p) / -plane.normal.z
+}
+
+fn pilot_input(scenario: &Scenario, t: f64) -> PilotInput {
+    scenario.pilot_at(t).map_or(PilotInput::default(), |p| PilotInput {
+        velocity: p.velocity,
+        yaw_rate: p.yaw_rate,
+        throttle: p.throttle,
+        arm: p.arm,
+        offboard: p.offboard,
+        mpc_enabled: p.mpc,
+    })
+}
+
+/// Flies `scenario` in closed loop; `on_tick` sees every tick (for logs).
+pub fn fly(
+    scenario: &Scenario,
+    controller: &ControllerConfig,
+    mut on_tick: impl FnMut(&TickRecord),
+) -> Result<Summary> {
+    let wall = Instant::now();
+    let mut plant = scenario.build_plant()?;
+    let mut stack = FlightStack::new(&scenario.robot, controller.mpc.clone(), controller.flight.clone())
+        .map_err(|e| SimError::Setup(e.to_string()))?;
+    let period = stack.period();
+    let duration = scenario.file.duration;
+    let mut next_tick = 0.0;
+    let mut tick: u64 = 0;
+    let mut command = Command::idle();
+    let mut modes: Vec<Mode> = Vec::new();
+    let mut max_mean_thrust: f64 = 0.0;
+    let mut feedback_times: Vec<f64> = Vec::with_capacity((duration / period) as usize + 2);
+    let mut mpc_failures = 0;
+    let mut rejected = [0; 4];
+    let mut touchdown: Option<(f64, f64, f64)> = None; // time, tilt, vz
+    let mut last_ground_xy: Option<Vector3<f64>> = None;
+    let mut drive_distance = 0.0;
+
+    while plant.time() < duration - 1e-9 {
+        let t = plant.time();
+        if t + 1e-9 >= next_tick {
+            let state = plant.state();
+            let p = Vector3::new(state[idx::X], state[idx::Y], state[idx::Z]);
+            let ground_z = ground_z_below(&plant, &p);
+            let now_ns = (t * 1e9).round() as u64;
+            let estimate = plant.estimate().map(|e| Estimate {
+                stamp_ns: (e.measured_at.max(0.0) * 1e9).round() as u64,
+                state: e.state,
+            });
+            let inputs = StepInputs {
+                now_ns,
+                estimate,
+                tilt_counts: plant.encoder_counts().ok(),
+                pilot: pilot_input(scenario, t),
+                ground_contact: plant.contact_signal(),
+                ground_z,
+            };
+            let outputs = stack.step(&inputs);
+            command = Command {
+                rotors: atmo_core::model::Input::from(outputs.thrust),
+                tilt_rate: outputs.tilt_velocity,
+                wheel_rates: outputs.wheel_rates,
+            };
+            let s = &outputs.status;
+            if modes.last() != Some(&s.mode) {
+                modes.push(s.mode);
+            }
+            if s.mode == Mode::Transition {
+                let mean = outputs.thrust.iter().sum::<f64>() / 4.0;
+                max_mean_thrust = max_mean_thrust.max(mean);
+            }
+            if s.solver != atmo_daemon::SolverState::Idle {
+                feedback_times.push(s.feedback_time);
+            }
+            mpc_failures = s.mpc_failures_total;
+            rejected = [s.rejected.estimate, s.rejected.tilt, s.rejected.pilot, s.rejected.ground];
+            on_tick(&TickRecord {
+                time: t,
+                inputs,
+                outputs,
+                truth: state,
+                truth_tilt: plant.tilt(),
+                truth_height: ground_z - state[idx::Z],
+            });
+            stack.prepare_next();
+            tick += 1;
+            next_tick = tick as f64 * period;
+        }
+        let (force, torque) = scenario.disturbance_at(t);
+        plant.set_external_wrench(force, torque)?;
+        let was_grounded = plant.contact_signal();
+        plant.step(&command)?;
+        let state = plant.state();
+        if touchdown.is_none() && !was_grounded && plant.contact_signal() {
+            touchdown = Some((plant.time(), plant.tilt(), state[idx::VZ]));
+        }
+        if touchdown.is_some() {
+            let xy = Vector3::new(state[idx::X], state[idx::Y], 0.0);
+            if let Some(last) = last_ground_xy {
+                drive_distance += (xy - last).norm();
+            }
+            last_ground_xy = Some(xy);
+        }
+        if plant.crash().is_some() {
+            break;
+        }
+    }
+
+    // A touchdown the plant reported (first load on the wheels) wins over
+    // the signal edge: the contact signal can start high on the ground.
+    let first_touchdown = plant.events().iter().find(|e| e.kind == EventKind::Touchdown).map(|e| e.time);
+    if touchdown.is_none() && first_touchdown.is_some() {
+        touchdown = first_touchdown.map(|t| (t, plant.tilt(), 0.0));
+    }
+    feedback_times.sort_by(f64::total_cmp);
+    let crash = plant.crash().copied();
+    Ok(Summary {
+        scenario: scenario.file.name.clone(),
+        seed: scenario.file.seed,
+        touchdown_tilt_deg: touchdown.map(|(_, tilt, _)| tilt.to_degrees()),
+        impact_speed_mps: touchdown.map(|(_, _, vz)| vz),
+        touchdown_time_s: touchdown.map(|(t, _, _)| t),
+        max_mean_thrust,
+        crashed: crash.is_some(),
+        crash_reason: crash.map(|e| format!("{:?} at t = {:.3} s", e.kind, e.time)),
+        drive_distance_m: drive_distance,
+        mode_sequence: modes.iter().map(|m| m.name().to_string()).collect(),
+        mpc_failures,
+        rejected_inputs: rejected,
+        sim_time_s: plant.time(),
+        wall_time_s: wall.elapsed().as_secs_f64(),
+        feedback_time_median_s: feedback_times.get(feedback_times.len() / 2).copied().unwrap_or(0.0),
+        feedback_time_max_s: feedback_times.last().copied().unwrap_or(0.0),
+    })
+}
