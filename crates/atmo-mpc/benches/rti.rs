@@ -7,7 +7,7 @@ mod scenarios;
 use std::hint::black_box;
 use std::time::{Duration, Instant};
 
-use atmo_mpc::{Formulation, Mpc, QpSnapshot};
+use atmo_mpc::{Formulation, Mpc, Outcome, QpSnapshot};
 use clarabel::solver::IPSolver;
 use criterion::{Criterion, criterion_group, criterion_main};
 use scenarios::{NAMES, scenario};
@@ -27,14 +27,18 @@ fn rti_tick(c: &mut Criterion) {
         let sc = scenario(name);
         let (mut mpc, estimates) = sc.warmed_up(formulation(), RECORDED_TICKS);
         let mut i = 0;
+        let mut not_solved = 0;
         group.bench_function(name, |b| {
             b.iter(|| {
                 sc.apply(&mut mpc);
                 let out = mpc.tick(black_box(&estimates[i % RECORDED_TICKS])).unwrap();
                 i += 1;
+                not_solved += usize::from(out.outcome != Outcome::Solved);
                 black_box(out.u)
             });
         });
+        // Timing a solver that gave up early would flatter it: say so.
+        eprintln!("rti_tick/{name}: {not_solved} of {i} ticks not Solved");
     }
     group.finish();
 }
@@ -45,6 +49,7 @@ fn rti_feedback(c: &mut Criterion) {
         let sc = scenario(name);
         let (mut mpc, estimates) = sc.warmed_up(formulation(), RECORDED_TICKS);
         let mut i = 0;
+        let mut not_solved = 0;
         group.bench_function(name, |b| {
             b.iter_custom(|iters| {
                 let mut total = Duration::ZERO;
@@ -56,11 +61,40 @@ fn rti_feedback(c: &mut Criterion) {
                     let start = Instant::now();
                     let out = mpc.feedback(black_box(&x)).unwrap();
                     total += start.elapsed();
+                    not_solved += usize::from(out.outcome != Outcome::Solved);
                     black_box(out.u);
                 }
                 total
             });
         });
+        eprintln!("rti_feedback/{name}: {not_solved} of {i} ticks not Solved");
+    }
+    group.finish();
+}
+
+/// Full ticks in both formulations: the measurement behind the default.
+fn formulation_compare(c: &mut Criterion) {
+    let mut group = c.benchmark_group("formulation_compare");
+    for (label, formulation) in [
+        ("condensed", Formulation::Condensed),
+        ("sparse", Formulation::Sparse),
+    ] {
+        for name in NAMES {
+            let sc = scenario(name);
+            let (mut mpc, estimates) = sc.warmed_up(formulation, RECORDED_TICKS);
+            let mut i = 0;
+            let mut not_solved = 0;
+            group.bench_function(format!("{label}/{name}"), |b| {
+                b.iter(|| {
+                    sc.apply(&mut mpc);
+                    let out = mpc.tick(black_box(&estimates[i % RECORDED_TICKS])).unwrap();
+                    i += 1;
+                    not_solved += usize::from(out.outcome != Outcome::Solved);
+                    black_box(out.u)
+                });
+            });
+            eprintln!("formulation_compare/{label}/{name}: {not_solved} of {i} ticks not Solved");
+        }
     }
     group.finish();
 }
@@ -119,6 +153,10 @@ fn qp_solver_compare(c: &mut Criterion) {
         let (qp, mpc) = morphing_qp(formulation);
         let mut clarabel = qp.fresh_solver(&mpc.settings().solver).unwrap();
         clarabel.solve();
+        assert_eq!(
+            clarabel.solution.status,
+            clarabel::solver::SolverStatus::Solved
+        );
         let reference = clarabel.solution.x.clone();
         group.bench_function(format!("clarabel_{label}"), |b| {
             b.iter(|| {
@@ -151,5 +189,11 @@ fn qp_solver_compare(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, rti_tick, rti_feedback, qp_solver_compare);
+criterion_group!(
+    benches,
+    rti_tick,
+    rti_feedback,
+    formulation_compare,
+    qp_solver_compare
+);
 criterion_main!(benches);

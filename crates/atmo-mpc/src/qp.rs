@@ -89,16 +89,34 @@ impl QpSnapshot {
 
     /// A fresh Clarabel solver for this QP with the same settings as the controller.
     pub fn fresh_solver(&self, settings: &SolverSettings) -> Result<DefaultSolver<f64>> {
-        DefaultSolver::new(
-            &self.p,
-            &self.q,
-            &self.a,
-            &self.b,
-            &self.cones(),
-            clarabel_settings(settings),
-        )
-        .map_err(|e| MpcError::Solver(e.to_string()))
+        build_solver(&self.p, &self.q, &self.a, &self.b, &self.cones(), settings)
     }
+}
+
+/// Creates a Clarabel solver whose time limit counts from the start of each
+/// solve. Clarabel compares `time_limit` with the sum of all its top-level
+/// timers, and the "setup" timer of `DefaultSolver::new` is never reset: left
+/// alone, a set-up that took longer than the limit (a loaded machine at
+/// start-up) would end every later solve at iteration 0 with `MaxTime`.
+pub fn build_solver(
+    p: &CscMatrix<f64>,
+    q: &[f64],
+    a: &CscMatrix<f64>,
+    b: &[f64],
+    cones: &[SupportedConeT<f64>],
+    settings: &SolverSettings,
+) -> Result<DefaultSolver<f64>> {
+    let mut clarabel = clarabel_settings(settings);
+    clarabel.time_limit = f64::INFINITY;
+    let mut solver =
+        DefaultSolver::new(p, q, a, b, cones, clarabel.clone()).map_err(solver_error)?;
+    let setup = solver
+        .timers
+        .as_ref()
+        .map_or(0.0, |t| t.total_time().as_secs_f64());
+    clarabel.time_limit = setup + settings.time_limit;
+    solver.update_settings(clarabel).map_err(solver_error)?;
+    Ok(solver)
 }
 
 /// Clarabel settings for RTI: presolve off (it would forbid in-place
@@ -336,15 +354,7 @@ impl SparseQp {
             SupportedConeT::ZeroConeT(rows_eq),
             SupportedConeT::NonnegativeConeT(rows_box),
         ];
-        let solver = DefaultSolver::new(
-            &p_pattern,
-            &q,
-            &a_pattern,
-            &b,
-            &cones,
-            clarabel_settings(settings),
-        )
-        .map_err(solver_error)?;
+        let solver = build_solver(&p_pattern, &q, &a_pattern, &b, &cones, settings)?;
         Ok(Self {
             steps,
             solver,
@@ -467,15 +477,14 @@ impl CondensedQp {
         let mut qp = Self {
             steps,
             // Placeholder identity QP, replaced right below once values exist.
-            solver: DefaultSolver::new(
+            solver: build_solver(
                 &p_pattern,
                 &vec![0.0; n],
                 &a_pattern,
                 &vec![1.0; 2 * n],
                 &[SupportedConeT::NonnegativeConeT(2 * n)],
-                clarabel_settings(settings),
-            )
-            .map_err(solver_error)?,
+                settings,
+            )?,
             hessian: vec![0.0; n * n],
             p_vals: p_pattern.nzval.clone(),
             g0: vec![0.0; n],
@@ -496,15 +505,14 @@ impl CondensedQp {
         qp.q.copy_from_slice(&qp.g0);
         let mut p_now = qp.p_pattern.clone();
         p_now.nzval.copy_from_slice(&qp.p_vals);
-        qp.solver = DefaultSolver::new(
+        qp.solver = build_solver(
             &p_now,
             &qp.q,
             &qp.a_pattern,
             &qp.b,
             &[SupportedConeT::NonnegativeConeT(2 * n)],
-            clarabel_settings(settings),
-        )
-        .map_err(solver_error)?;
+            settings,
+        )?;
         Ok(qp)
     }
 
@@ -616,5 +624,27 @@ impl CondensedQp {
             zero_rows: 0,
             nonneg_rows: 2 * NU * self.steps,
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::settings::MpcSettings;
+
+    #[test]
+    fn time_limit_counts_from_the_solve_not_the_set_up() {
+        let settings = MpcSettings::atmo("default").unwrap().solver;
+        let lin = LinearizedHorizon::new(10);
+        let qp = QpBackend::new(&lin, &settings).unwrap();
+        let snapshot = qp.snapshot();
+        let solver = snapshot.fresh_solver(&settings).unwrap();
+        let setup = solver.timers.as_ref().unwrap().total_time().as_secs_f64();
+        assert!(setup > 0.0);
+        let limit = solver.settings().time_limit;
+        assert!(
+            (limit - setup - settings.time_limit).abs() < 1e-12,
+            "{limit} vs {setup}"
+        );
     }
 }
