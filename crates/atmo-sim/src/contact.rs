@@ -115,7 +115,11 @@ impl ContactLaw {
             Some(l) => {
                 let f_lat = f.dot(l);
                 let f_roll = (f - l * f_lat).norm();
-                (f_roll / (self.friction * f_n)).hypot(f_lat / (self.lateral_friction * f_n))
+                {
+                    let a = f_roll / (self.friction * f_n);
+                    let b = f_lat / (self.lateral_friction * f_n);
+                    (a * a + b * b).sqrt()
+                }
             }
         };
         if ratio > 1.0 { f / ratio } else { f }

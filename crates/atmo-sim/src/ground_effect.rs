@@ -200,6 +200,16 @@ pub struct GroundEffect {
     std: Vec<Vec<f64>>,
 }
 
+/// A tilt's share of the surface (see [`GroundEffect::slice`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TiltSlice {
+    inv_cos: f64,
+    row: usize,
+    row_weight: f64,
+    /// 1 = classical law only, 0 = table only.
+    classical_weight: f64,
+}
+
 /// Mean and standard deviation of `T / T_inf - 1` at one point.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Gain {
@@ -246,9 +256,28 @@ impl GroundEffect {
         }
     }
 
-    /// Bilinear table value at hub height `h` (m) and tilt `varphi` (rad).
-    fn table(&self, h: f64, varphi: f64) -> Gain {
-        let (i, wt) = bracket(&self.tilts, varphi);
+    /// Everything about tilt `varphi` (rad) that the surface needs, computed
+    /// once per tilt so that evaluating over heights costs no trigonometry.
+    pub fn slice(&self, varphi: f64) -> TiltSlice {
+        let (row, row_weight) = bracket(&self.tilts, varphi);
+        let classical_weight = if varphi <= self.classical_below {
+            1.0
+        } else if varphi >= self.table_from {
+            0.0
+        } else {
+            1.0 - (varphi - self.classical_below) / (self.table_from - self.classical_below)
+        };
+        TiltSlice {
+            inv_cos: 1.0 / varphi.cos().max(0.05),
+            row,
+            row_weight,
+            classical_weight,
+        }
+    }
+
+    /// Bilinear table value at hub height `h` (m) in a tilt slice.
+    fn table(&self, h: f64, s: &TiltSlice) -> Gain {
+        let (i, wt) = (s.row, s.row_weight);
         let (j, wh) = bracket(&self.heights, h);
         let lerp2 = |t: &Vec<Vec<f64>>| {
             let a = t[i][j] * (1.0 - wh) + t[i][j + 1] * wh;
@@ -261,33 +290,35 @@ impl GroundEffect {
         }
     }
 
-    /// `T / T_inf - 1` (mean and standard deviation) for a rotor whose hub
-    /// is `h` m above the ground at tilt `varphi` rad.
-    pub fn gain(&self, h: f64, varphi: f64) -> Gain {
-        let classical = || {
-            let z = h / varphi.cos().max(0.05);
-            cheeseman_bennett(self.rotor_radius, z)
-        };
-        if varphi <= self.classical_below {
+    /// `T / T_inf - 1` (mean and standard deviation) at hub height `h` (m)
+    /// in a tilt slice.
+    pub fn gain_in(&self, s: &TiltSlice, h: f64) -> Gain {
+        let w = s.classical_weight;
+        if w >= 1.0 {
             return Gain {
-                mean: classical(),
+                mean: cheeseman_bennett(self.rotor_radius, h * s.inv_cos),
                 std: 0.0,
             };
         }
-        let table = self.table(h, varphi);
-        if varphi >= self.table_from {
+        let table = self.table(h, s);
+        if w <= 0.0 {
             return table;
         }
-        let w = (varphi - self.classical_below) / (self.table_from - self.classical_below);
         Gain {
-            mean: (1.0 - w) * classical() + w * table.mean,
-            std: w * table.std,
+            mean: w * cheeseman_bennett(self.rotor_radius, h * s.inv_cos) + (1.0 - w) * table.mean,
+            std: (1.0 - w) * table.std,
         }
     }
 
+    /// `T / T_inf - 1` (mean and standard deviation) for a rotor whose hub
+    /// is `h` m above the ground at tilt `varphi` rad.
+    pub fn gain(&self, h: f64, varphi: f64) -> Gain {
+        self.gain_in(&self.slice(varphi), h)
+    }
+
     /// The gain applied to a rotor: mean plus `n` standard deviations.
-    pub fn sample(&self, h: f64, varphi: f64, n: f64) -> f64 {
-        let g = self.gain(h, varphi);
+    pub fn sample(&self, s: &TiltSlice, h: f64, n: f64) -> f64 {
+        let g = self.gain_in(s, h);
         // Thrust never reverses, however far the noise reaches.
         (g.mean + g.std * n).max(-0.9)
     }

@@ -52,7 +52,7 @@
 //! scenario seed; no global state, so a scenario and seed give a
 //! bit-identical trajectory.
 //!
-//! # Scenarios
+//! # Scenarios ([`scenario`])
 //!
 //! TOML files (config/scenarios/) with the initial state, terrain, effect
 //! overrides, disturbances, duration, seed, and what drives the robot:
@@ -65,8 +65,11 @@ pub mod error;
 pub mod ground_effect;
 pub mod noise;
 pub mod plant;
+mod rigid;
+pub mod scenario;
 pub mod sensors;
 
 pub use config::{EffectsConfig, PlantConfig, TerrainConfig};
 pub use error::{Result, SimError};
 pub use plant::{Command, CrashKind, Event, EventKind, InitialState, Plant};
+pub use scenario::Scenario;

@@ -35,8 +35,9 @@ use crate::config::{
 };
 use crate::contact::{ContactLaw, Plane, rim_lowest_point, wheel_lateral};
 use crate::error::{Result, SimError};
-use crate::ground_effect::GroundEffect;
+use crate::ground_effect::{GroundEffect, TiltSlice};
 use crate::noise::{GaussMarkov, rng, stream};
+use crate::rigid::{Attitude, accelerations, lerp_body, state_derivative};
 use crate::sensors::{Estimate, Mocap};
 
 /// Contact points: the four wheels (rotor order), then the 8 base-box corners.
@@ -140,6 +141,9 @@ pub struct Event {
     pub kind: EventKind,
 }
 
+/// Spacing of the exact bodies the moving tilt is interpolated between (rad).
+const TILT_GRID: f64 = 0.25 * std::f64::consts::PI / 180.0;
+
 /// Most events kept; later ones are counted in `events_dropped`.
 const EVENT_CAPACITY: usize = 256;
 
@@ -187,6 +191,9 @@ pub struct ContactInfo {
 }
 
 /// The truth plant.
+// The flags are independent facts of the plant's state (encoder mode,
+// contact signal, tip-over latch, interpolated body), not a mode in disguise.
+#[allow(clippy::struct_excessive_bools)]
 #[derive(Debug, Clone)]
 pub struct Plant {
     model: Model,
@@ -208,15 +215,26 @@ pub struct Plant {
     mass_error: Option<(f64, f64)>,
     contact: Option<(ContactLaw, Drive, GroundContactConfig)>,
     corners: [Vector3<f64>; 8],
+    /// m, farther from B than any contact point can be (at any tilt).
+    reach: f64,
+    /// m, farther from B than any base-box corner.
+    corner_reach: f64,
     // Noise held over a step.
     ge_noise: [GaussMarkov; 4],
     ge_rng: ChaCha8Rng,
     wind_now: Vector3<f64>,
+    /// External push: force (world frame, N) at B and torque (body frame, N m).
+    external: (Vector3<f64>, Vector3<f64>),
     // State.
     steps: u64,
     ext: Ext,
     tilt: f64,
     body: TiltedBody,
+    /// Whether `body` is interpolated (the tilt was moving).
+    body_interpolated: bool,
+    /// Exact bodies at the ends of the grid cell the moving tilt is in.
+    grid: Option<(usize, TiltedBody, TiltedBody)>,
+    ge_slice: TiltSlice,
     command: Command,
     mocap: Mocap,
     contacts: [ContactInfo; N_CONTACTS],
@@ -387,12 +405,29 @@ impl Plant {
             )
         });
 
+        // Farthest contact point from B at any tilt, plus a margin that no
+        // point can cover in one step.
+        let corner_reach = corners.iter().map(Vector3::norm).fold(0.0, f64::max);
+        let mut reach = corner_reach;
+        for k in 0..=90 {
+            let body = model.at_tilt(tilt_max * f64::from(k) / 90.0);
+            for c in &body.rotor_position {
+                reach = reach.max(c.norm() + robot.wheels.radius);
+            }
+        }
+        // 5 cm: no point covers that in one step below 50 m/s.
+        let (reach, corner_reach) = (reach + 0.05, corner_reach + 0.05);
+
         let mut ext = Ext::zeros();
         ext.fixed_rows_mut::<12>(0).copy_from(&initial.state);
         ext.fixed_rows_mut::<4>(THRUST).copy_from(&initial.thrust);
         let tilt = initial.tilt;
         let body = effective_body(&model, tilt, mass_error, com_offset)
             .expect("checked at every tilt above");
+        let ge_slice = ground_effect.as_ref().map_or_else(
+            || GroundEffect::default_surface().slice(tilt),
+            |g| g.slice(tilt),
+        );
         let mut plant = Self {
             linkage,
             dt,
@@ -411,13 +446,19 @@ impl Plant {
             mass_error,
             contact,
             corners,
+            reach,
+            corner_reach,
             ge_noise,
             ge_rng,
             wind_now: Vector3::zeros(),
+            external: (Vector3::zeros(), Vector3::zeros()),
             steps: 0,
             ext,
             tilt,
+            ge_slice,
             body,
+            body_interpolated: false,
+            grid: None,
             command: Command::rotors(initial.thrust),
             mocap: Mocap::new(sensors, dt, seed),
             contacts: [ContactInfo::default(); N_CONTACTS],
@@ -503,6 +544,25 @@ impl Plant {
         self.wind_now
     }
 
+    /// Sets the external disturbance held from now on: a force at B (world
+    /// frame, N) and a torque (body frame, N m). Non-finite values are refused.
+    pub fn set_external_wrench(
+        &mut self,
+        force_world: Vector3<f64>,
+        torque_body: Vector3<f64>,
+    ) -> Result<()> {
+        for (name, v) in [
+            ("external force", force_world),
+            ("external torque", torque_body),
+        ] {
+            if let Some(bad) = v.iter().find(|x| !x.is_finite()) {
+                return Err(SimError::NonFiniteCommand { name, value: *bad });
+            }
+        }
+        self.external = (force_world, torque_body);
+        Ok(())
+    }
+
     /// The composite body in use (with mass-property errors).
     pub fn body(&self) -> &TiltedBody {
         &self.body
@@ -556,7 +616,7 @@ impl Plant {
     /// ground-effect and wind noise as held for the current step).
     pub fn body_derivative(&self, command: &Command) -> Result<State> {
         let cmd = self.sanitize(command)?;
-        let d = self.derivative(&self.ext, &cmd, None);
+        let d = self.derivative(&self.ext, &cmd);
         Ok(d.fixed_rows::<12>(0).into_owned())
     }
 
@@ -602,12 +662,7 @@ impl Plant {
 
         // Tilt: self-locking screw, moves only by the (limited) command.
         let new_tilt = (self.tilt + cmd.tilt_rate * dt).clamp(0.0, self.tilt_max);
-        let mid = 0.5 * (self.tilt + new_tilt);
-        if mid != self.body.varphi {
-            if let Some(b) = effective_body(&self.model, mid, self.mass_error, self.com_offset) {
-                self.body = b;
-            }
-        }
+        self.update_body(0.5 * (self.tilt + new_tilt), new_tilt != self.tilt);
 
         // Random processes, held over the step.
         if self.ground_effect.is_some() {
@@ -624,10 +679,10 @@ impl Plant {
         }
 
         let x = self.ext;
-        let k1 = self.derivative(&x, &cmd, None);
-        let k2 = self.derivative(&(x + k1 * (0.5 * dt)), &cmd, None);
-        let k3 = self.derivative(&(x + k2 * (0.5 * dt)), &cmd, None);
-        let k4 = self.derivative(&(x + k3 * dt), &cmd, None);
+        let k1 = self.derivative(&x, &cmd);
+        let k2 = self.derivative(&(x + k1 * (0.5 * dt)), &cmd);
+        let k3 = self.derivative(&(x + k2 * (0.5 * dt)), &cmd);
+        let k4 = self.derivative(&(x + k3 * dt), &cmd);
         let next = x + (k1 + k2 * 2.0 + k3 * 2.0 + k4) * (dt / 6.0);
         if !next.iter().all(|v| v.is_finite()) {
             return Err(SimError::Diverged {
@@ -639,6 +694,57 @@ impl Plant {
         self.steps += 1;
         self.observe();
         Ok(())
+    }
+
+    /// Sets the composite body for a step whose mid-step tilt is `mid`:
+    /// exact (atmo-core's `at_tilt` with the mass errors) while the tilt
+    /// stands still; while it moves, interpolated between exact bodies on a
+    /// 0.25 deg grid, so that morphing does not rebuild and refactor the
+    /// body every step.
+    fn update_body(&mut self, mid: f64, moving: bool) {
+        if moving {
+            let cells = (self.tilt_max / TILT_GRID).ceil().max(1.0) as usize;
+            let k = ((mid / TILT_GRID).floor().max(0.0) as usize).min(cells - 1);
+            let lo_tilt = k as f64 * TILT_GRID;
+            let hi_tilt = ((k + 1) as f64 * TILT_GRID).min(self.tilt_max);
+            let cached = self.grid.as_ref().map(|g| g.0);
+            if cached != Some(k) {
+                let lo = match &self.grid {
+                    Some((c, _, hi)) if *c + 1 == k => Some(*hi),
+                    Some((c, lo, _)) if *c == k + 1 => {
+                        // Moving down: the old low end is the new high end.
+                        let hi = *lo;
+                        let lo =
+                            effective_body(&self.model, lo_tilt, self.mass_error, self.com_offset);
+                        if let Some(lo) = lo {
+                            self.grid = Some((k, lo, hi));
+                        }
+                        None
+                    }
+                    _ => effective_body(&self.model, lo_tilt, self.mass_error, self.com_offset),
+                };
+                if let Some(lo) = lo {
+                    if let Some(hi) =
+                        effective_body(&self.model, hi_tilt, self.mass_error, self.com_offset)
+                    {
+                        self.grid = Some((k, lo, hi));
+                    }
+                }
+            }
+            if let Some((_, lo, hi)) = &self.grid {
+                let w = ((mid - lo_tilt) / (hi_tilt - lo_tilt)).clamp(0.0, 1.0);
+                self.body = lerp_body(lo, hi, w, mid);
+                self.body_interpolated = true;
+            }
+        } else if mid != self.body.varphi || self.body_interpolated {
+            if let Some(b) = effective_body(&self.model, mid, self.mass_error, self.com_offset) {
+                self.body = b;
+                self.body_interpolated = false;
+            }
+        }
+        if let Some(ge) = &self.ground_effect {
+            self.ge_slice = ge.slice(self.body.varphi);
+        }
     }
 
     /// Steps until `duration` more seconds have passed (rounded to whole steps).
@@ -654,8 +760,18 @@ impl Plant {
     /// events, sensors.
     fn observe(&mut self) {
         let mut report = [ContactInfo::default(); N_CONTACTS];
-        let cmd = self.command;
-        let _ = self.derivative(&self.ext.clone(), &cmd, Some(&mut report));
+        if self.contact.is_some() {
+            let x = self.ext.fixed_rows::<12>(0);
+            let r = rotation(x[idx::YAW], x[idx::PITCH], x[idx::ROLL]);
+            let mut scratch = Ext::zeros();
+            let _ = self.contact_terms(
+                &self.ext,
+                &r,
+                &self.command,
+                &mut scratch,
+                Some(&mut report),
+            );
+        }
         let time = self.time();
         let mut new_events: [Option<EventKind>; N_CONTACTS + 1] = [None; N_CONTACTS + 1];
         if let Some((law, drive, cfg)) = &self.contact {
@@ -748,16 +864,117 @@ impl Plant {
         }
     }
 
-    /// The derivative of the continuous state; fills `report` with the
-    /// contact state when given.
-    fn derivative(
+    /// Contact wrench on the body (body force, torque about B) and the
+    /// derivatives of the contact springs and wheel drives, written into `d`.
+    /// Skips the contact points when B is farther from the ground than any
+    /// point of the robot can reach.
+    fn contact_terms(
         &self,
         ext: &Ext,
+        r: &Matrix3<f64>,
         cmd: &Command,
+        d: &mut Ext,
         mut report: Option<&mut [ContactInfo; N_CONTACTS]>,
-    ) -> Ext {
+    ) -> Vector6<f64> {
+        let Some((law, drive, _)) = &self.contact else {
+            return Vector6::zeros();
+        };
+        let body = &self.body;
+        let p = Vector3::new(ext[idx::X], ext[idx::Y], ext[idx::Z]);
+        let v = Vector3::new(ext[idx::VX], ext[idx::VY], ext[idx::VZ]);
+        let w = Vector3::new(ext[idx::WX], ext[idx::WY], ext[idx::WZ]);
+        let height = self.plane.height(&p);
+        let clear = height > self.reach;
+        let corners_clear = height > self.corner_reach;
+        let rt = r.transpose();
+        let n = self.plane.normal;
+        let down_b = -(rt * n);
+        let mut force = Vector3::zeros();
+        let mut torque = Vector3::zeros();
+        let mut wheel_torque = [0.0; 2];
+        let spin = [ext[WHEEL], ext[WHEEL + 1]];
+        for j in 0..N_CONTACTS {
+            if clear || (j >= N_WHEELS && corners_clear) {
+                break;
+            }
+            let (point, spin_axis, rim) = if j < N_WHEELS {
+                let c = &body.rotor_position[j];
+                let a = &body.rotor_axis[j];
+                let pt = rim_lowest_point(c, a, &down_b, self.wheel_radius);
+                (pt, a * SPIN_SIGN[j], pt - c)
+            } else {
+                (
+                    self.corners[j - N_WHEELS],
+                    Vector3::zeros(),
+                    Vector3::zeros(),
+                )
+            };
+            let world = p + r * point;
+            let depth = -self.plane.height(&world);
+            if depth <= 0.0 {
+                if let Some(rep) = report.as_deref_mut() {
+                    // Approaching but open: the speed a touchdown will have.
+                    rep[j].approach_speed = -(v + r * w.cross(&point)).dot(&n);
+                }
+                continue;
+            }
+            let mut v_local = w.cross(&point);
+            if j < N_WHEELS {
+                v_local += spin_axis.cross(&rim) * spin[WHEEL_SIDE[j]];
+            }
+            let v_point = v + r * v_local;
+            let s = Vector3::new(
+                ext[SPRING + 3 * j],
+                ext[SPRING + 3 * j + 1],
+                ext[SPRING + 3 * j + 2],
+            );
+            let lateral = if j < N_WHEELS {
+                wheel_lateral(&(r * body.rotor_axis[j]), &n)
+            } else {
+                None
+            };
+            let (f_world, f_n, s_dot) = law.force(&n, depth, &v_point, &s, lateral.as_ref());
+            d.fixed_rows_mut::<3>(SPRING + 3 * j).copy_from(&s_dot);
+            let f_b = rt * f_world;
+            force += f_b;
+            let mut tq = point.cross(&f_b);
+            if j < N_WHEELS {
+                let axial = spin_axis.dot(&rim.cross(&f_b));
+                tq -= spin_axis * axial;
+                wheel_torque[WHEEL_SIDE[j]] += axial;
+            }
+            torque += tq;
+            if let Some(rep) = report.as_deref_mut() {
+                rep[j] = ContactInfo {
+                    normal_force: f_n,
+                    approach_speed: -v_point.dot(&n),
+                    touching: true,
+                };
+            }
+        }
+        // Wheel drives: PI speed control with a torque limit; the
+        // motor reaction acts on the body about the side's spin axis.
+        let cmd_rates = [cmd.wheel_rates.left, cmd.wheel_rates.right];
+        let side_axis = [
+            body.rotor_axis[1] * SPIN_SIGN[1],
+            body.rotor_axis[0] * SPIN_SIGN[0],
+        ];
+        for side in 0..2 {
+            let err = cmd_rates[side] - spin[side];
+            let tau = (drive.kp * err + drive.ki * ext[WHEEL_INT + side])
+                .clamp(-drive.torque_max, drive.torque_max);
+            d[WHEEL + side] = (tau + wheel_torque[side]) / drive.inertia;
+            d[WHEEL_INT + side] = err;
+            torque -= side_axis[side] * tau;
+        }
+        Vector6::new(force.x, force.y, force.z, torque.x, torque.y, torque.z)
+    }
+
+    /// The derivative of the continuous state.
+    fn derivative(&self, ext: &Ext, cmd: &Command) -> Ext {
         let body = &self.body;
         let x: State = ext.fixed_rows::<12>(0).into_owned();
+        let att = Attitude::of(&x);
         let mut d = Ext::zeros();
 
         // Rotor thrust: motor lag and curve, battery, ground effect.
@@ -777,15 +994,24 @@ impl Plant {
             u_eff *= scale;
             d[ENERGY] = t
                 .iter()
-                .map(|ti| b.full_power_w * ti.max(0.0).powf(1.5))
+                .map(|ti| {
+                    let ti = ti.max(0.0);
+                    b.full_power_w * ti * ti.sqrt()
+                })
                 .sum();
         }
 
+        let pushed = self.external.0 != Vector3::zeros() || self.external.1 != Vector3::zeros();
         let needs_pose =
-            self.ground_effect.is_some() || self.drag.is_some() || self.contact.is_some();
+            pushed || self.ground_effect.is_some() || self.drag.is_some() || self.contact.is_some();
         let mut extra = Vector6::zeros();
         if needs_pose {
-            let r = rotation(x[idx::YAW], x[idx::PITCH], x[idx::ROLL]);
+            let r = att.r;
+            if pushed {
+                let f = r.transpose() * self.external.0;
+                let t = &self.external.1;
+                extra += Vector6::new(f.x, f.y, f.z, t.x, t.y, t.z);
+            }
             let p = Vector3::new(x[idx::X], x[idx::Y], x[idx::Z]);
             let v = Vector3::new(x[idx::VX], x[idx::VY], x[idx::VZ]);
             let w = Vector3::new(x[idx::WX], x[idx::WY], x[idx::WZ]);
@@ -794,7 +1020,7 @@ impl Plant {
                 for i in 0..4 {
                     let hub = p + r * body.rotor_position[i];
                     let h = self.plane.height(&hub);
-                    u_eff[i] *= 1.0 + ge.sample(h, body.varphi, self.ge_noise[i].value);
+                    u_eff[i] *= 1.0 + ge.sample(&self.ge_slice, h, self.ge_noise[i].value);
                 }
             }
 
@@ -817,93 +1043,14 @@ impl Plant {
                 extra += Vector6::new(force.x, force.y, force.z, torque.x, torque.y, torque.z);
             }
 
-            if let Some((law, drive, _)) = &self.contact {
-                let rt = r.transpose();
-                let n = self.plane.normal;
-                let down_b = -(rt * n);
-                let mut force = Vector3::zeros();
-                let mut torque = Vector3::zeros();
-                let mut wheel_torque = [0.0; 2];
-                let spin = [ext[WHEEL], ext[WHEEL + 1]];
-                for j in 0..N_CONTACTS {
-                    let (point, spin_axis, rim) = if j < N_WHEELS {
-                        let c = &body.rotor_position[j];
-                        let a = &body.rotor_axis[j];
-                        let pt = rim_lowest_point(c, a, &down_b, self.wheel_radius);
-                        (pt, a * SPIN_SIGN[j], pt - c)
-                    } else {
-                        (
-                            self.corners[j - N_WHEELS],
-                            Vector3::zeros(),
-                            Vector3::zeros(),
-                        )
-                    };
-                    let world = p + r * point;
-                    let depth = -self.plane.height(&world);
-                    if depth <= 0.0 {
-                        if let Some(rep) = report.as_deref_mut() {
-                            // Approaching but open: the speed a touchdown will have.
-                            rep[j].approach_speed = -(v + r * w.cross(&point)).dot(&n);
-                        }
-                        continue;
-                    }
-                    let mut v_local = w.cross(&point);
-                    if j < N_WHEELS {
-                        v_local += spin_axis.cross(&rim) * spin[WHEEL_SIDE[j]];
-                    }
-                    let v_point = v + r * v_local;
-                    let s = Vector3::new(
-                        ext[SPRING + 3 * j],
-                        ext[SPRING + 3 * j + 1],
-                        ext[SPRING + 3 * j + 2],
-                    );
-                    let lateral = if j < N_WHEELS {
-                        wheel_lateral(&(r * body.rotor_axis[j]), &n)
-                    } else {
-                        None
-                    };
-                    let (f_world, f_n, s_dot) =
-                        law.force(&n, depth, &v_point, &s, lateral.as_ref());
-                    d.fixed_rows_mut::<3>(SPRING + 3 * j).copy_from(&s_dot);
-                    let f_b = rt * f_world;
-                    force += f_b;
-                    let mut tq = point.cross(&f_b);
-                    if j < N_WHEELS {
-                        let axial = spin_axis.dot(&rim.cross(&f_b));
-                        tq -= spin_axis * axial;
-                        wheel_torque[WHEEL_SIDE[j]] += axial;
-                    }
-                    torque += tq;
-                    if let Some(rep) = report.as_deref_mut() {
-                        rep[j] = ContactInfo {
-                            normal_force: f_n,
-                            approach_speed: -v_point.dot(&n),
-                            touching: true,
-                        };
-                    }
-                }
-                // Wheel drives: PI speed control with a torque limit; the
-                // motor reaction acts on the body about the side's spin axis.
-                let cmd_rates = [cmd.wheel_rates.left, cmd.wheel_rates.right];
-                let side_axis = [
-                    body.rotor_axis[1] * SPIN_SIGN[1],
-                    body.rotor_axis[0] * SPIN_SIGN[0],
-                ];
-                for side in 0..2 {
-                    let err = cmd_rates[side] - spin[side];
-                    let tau = (drive.kp * err + drive.ki * ext[WHEEL_INT + side])
-                        .clamp(-drive.torque_max, drive.torque_max);
-                    d[WHEEL + side] = (tau + wheel_torque[side]) / drive.inertia;
-                    d[WHEEL_INT + side] = err;
-                    torque -= side_axis[side] * tau;
-                }
-                extra += Vector6::new(force.x, force.y, force.z, torque.x, torque.y, torque.z);
+            if self.contact.is_some() {
+                extra += self.contact_terms(ext, &r, cmd, &mut d, None);
             }
         }
 
-        let acc = body.accelerations(&x, &u_eff, &extra);
+        let acc = accelerations(body, &x, &att, &u_eff, &extra);
         d.fixed_rows_mut::<12>(0)
-            .copy_from(&TiltedBody::state_derivative(&x, &acc));
+            .copy_from(&state_derivative(&x, &att, &acc));
         d
     }
 }

@@ -1,0 +1,104 @@
+//! atmo-core's rigid-body equations with the attitude trigonometry computed
+//! once per evaluation, and the composite body between tilts.
+//!
+//! `TiltedBody::accelerations` and `TiltedBody::state_derivative` each take
+//! the sines and cosines of the Euler angles again (7 `sin_cos` per `f`);
+//! the plant also needs the rotation for its effects. Here the same
+//! formulas, operation for operation, share one set of 3 `sin_cos`. The
+//! plant test `with_every_effect_off_the_plant_is_atmo_core` checks that
+//! the result is atmo-core's bit for bit.
+
+use atmo_core::model::{Input, State, TiltedBody, idx};
+use nalgebra::{Matrix3, Vector3, Vector6};
+
+/// Sines, cosines and rotation of one attitude.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Attitude {
+    pub sp: f64,
+    pub cp: f64,
+    pub sr: f64,
+    pub cr: f64,
+    /// Body to world, `Rz(yaw) Ry(pitch) Rx(roll)` (atmo_core::model::rotation).
+    pub r: Matrix3<f64>,
+}
+
+impl Attitude {
+    pub fn of(x: &State) -> Self {
+        let (sy, cy) = x[idx::YAW].sin_cos();
+        let (sp, cp) = x[idx::PITCH].sin_cos();
+        let (sr, cr) = x[idx::ROLL].sin_cos();
+        let r = Matrix3::new(
+            cy * cp,
+            cy * sp * sr - sy * cr,
+            cy * sp * cr + sy * sr,
+            sy * cp,
+            sy * sp * sr + cy * cr,
+            sy * sp * cr - cy * sr,
+            -sp,
+            cp * sr,
+            cp * cr,
+        );
+        Self { sp, cp, sr, cr, r }
+    }
+}
+
+/// `TiltedBody::accelerations`.
+pub(crate) fn accelerations(
+    body: &TiltedBody,
+    x: &State,
+    att: &Attitude,
+    u: &Input,
+    extra: &Vector6<f64>,
+) -> Vector6<f64> {
+    let w = Vector3::new(x[idx::WX], x[idx::WY], x[idx::WZ]);
+    let g_b = Vector3::new(-att.sp, att.cp * att.sr, att.cp * att.cr) * body.gravity;
+    let c = &body.first_moment;
+    let force = body.thrust_force * u + g_b * body.mass - w.cross(&w.cross(c));
+    let torque = body.thrust_torque * u + c.cross(&g_b) - w.cross(&(body.inertia * w));
+    let rhs = Vector6::new(force.x, force.y, force.z, torque.x, torque.y, torque.z) + extra;
+    body.mass_matrix_inv * rhs
+}
+
+/// `TiltedBody::state_derivative`.
+pub(crate) fn state_derivative(x: &State, att: &Attitude, acc: &Vector6<f64>) -> State {
+    let a = att.r * Vector3::new(acc[0], acc[1], acc[2]);
+    let (sr, cr, sp, cp) = (att.sr, att.cr, att.sp, att.cp);
+    let (wx, wy, wz) = (x[idx::WX], x[idx::WY], x[idx::WZ]);
+    let q = sr * wy + cr * wz;
+    let mut xdot = State::zeros();
+    xdot[idx::X] = x[idx::VX];
+    xdot[idx::Y] = x[idx::VY];
+    xdot[idx::Z] = x[idx::VZ];
+    xdot[idx::YAW] = q / cp;
+    xdot[idx::PITCH] = cr * wy - sr * wz;
+    xdot[idx::ROLL] = wx + sp / cp * q;
+    xdot[idx::VX] = a.x;
+    xdot[idx::VY] = a.y;
+    xdot[idx::VZ] = a.z;
+    xdot[idx::WX] = acc[3];
+    xdot[idx::WY] = acc[4];
+    xdot[idx::WZ] = acc[5];
+    xdot
+}
+
+/// The composite body a fraction `w` of the way from `a` to `b` (two
+/// bodies at neighbouring tilts), every field interpolated linearly. On a
+/// 0.25 deg grid the error against the exact body is below 1e-5 relative
+/// (second-order in the spacing), far below the model errors the plant
+/// simulates on purpose.
+pub(crate) fn lerp_body(a: &TiltedBody, b: &TiltedBody, w: f64, varphi: f64) -> TiltedBody {
+    let v = 1.0 - w;
+    TiltedBody {
+        varphi,
+        gravity: a.gravity,
+        mass: a.mass * v + b.mass * w,
+        first_moment: a.first_moment * v + b.first_moment * w,
+        inertia: a.inertia * v + b.inertia * w,
+        mass_matrix: a.mass_matrix * v + b.mass_matrix * w,
+        mass_matrix_inv: a.mass_matrix_inv * v + b.mass_matrix_inv * w,
+        thrust_force: a.thrust_force * v + b.thrust_force * w,
+        thrust_torque: a.thrust_torque * v + b.thrust_torque * w,
+        rotor_position: std::array::from_fn(|i| a.rotor_position[i] * v + b.rotor_position[i] * w),
+        rotor_axis: std::array::from_fn(|i| a.rotor_axis[i] * v + b.rotor_axis[i] * w),
+    }
+}
