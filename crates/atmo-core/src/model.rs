@@ -290,6 +290,7 @@ impl Model {
             thrust_torque,
             rotor_position,
             rotor_axis,
+            disturbance: Vector6::zeros(),
         }
     }
 
@@ -353,6 +354,10 @@ pub struct TiltedBody {
     pub rotor_position: [Vector3<f64>; 4],
     /// Unit thrust directions, body frame.
     pub rotor_axis: [Vector3<f64>; 4],
+    /// A constant wrench (body force, body torque about B) added to the
+    /// dynamics: the disturbance an offset-free controller estimates (CoM
+    /// offset, mass error, steady wind...). Zero from [`Model::at_tilt`].
+    pub disturbance: Vector6<f64>,
 }
 
 /// `x_dot` with its Jacobians.
@@ -374,6 +379,14 @@ pub struct StepSensitivity {
 }
 
 impl TiltedBody {
+    /// The same body with a constant disturbance wrench (see `disturbance`).
+    /// The Jacobians do not change: the wrench is constant in x and u.
+    #[must_use]
+    pub fn with_disturbance(mut self, wrench: Vector6<f64>) -> Self {
+        self.disturbance = wrench;
+        self
+    }
+
     /// Gravity in body axes, `R^T (0, 0, g)`.
     fn gravity_body(&self, pitch: f64, roll: f64) -> Vector3<f64> {
         let (sp, cp) = pitch.sin_cos();
@@ -390,7 +403,9 @@ impl TiltedBody {
         let c = &self.first_moment;
         let force = self.thrust_force * u + g_b * self.mass - w.cross(&w.cross(c));
         let torque = self.thrust_torque * u + c.cross(&g_b) - w.cross(&(self.inertia * w));
-        let rhs = Vector6::new(force.x, force.y, force.z, torque.x, torque.y, torque.z) + extra;
+        let rhs = Vector6::new(force.x, force.y, force.z, torque.x, torque.y, torque.z)
+            + extra
+            + self.disturbance;
         self.mass_matrix_inv * rhs
     }
 
