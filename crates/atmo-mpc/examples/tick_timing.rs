@@ -51,7 +51,7 @@ fn main() {
                 tick.push(end - start);
                 iterations.push(out.timings.solver_iterations);
                 if out.outcome != atmo_mpc::Outcome::Solved {
-                    if not_solved < 3 {
+                    if not_solved < 5 {
                         eprintln!(
                             "{formulation:?} {name}: tick {i}: outcome not Solved: {:?} after {} iterations",
                             out.outcome, out.timings.solver_iterations

@@ -76,7 +76,7 @@ pub struct TickTimings {
     pub preparation: Duration,
     /// Estimate in, command out.
     pub feedback: Duration,
-    /// The Clarabel solve inside the feedback (its own clock).
+    /// The Clarabel solve inside the feedback.
     pub solve: Duration,
     pub solver_iterations: u32,
 }
@@ -161,6 +161,8 @@ pub struct Mpc {
     preparation_ok: bool,
     preparation_time: Duration,
     failed_ticks: u32,
+    /// Estimated disturbance wrench the predictions include (offset-free MPC).
+    disturbance: nalgebra::Vector6<f64>,
 }
 
 impl Mpc {
@@ -193,6 +195,7 @@ impl Mpc {
             preparation_ok: false,
             preparation_time: Duration::ZERO,
             failed_ticks: 0,
+            disturbance: nalgebra::Vector6::zeros(),
             settings,
         })
     }
@@ -363,11 +366,32 @@ impl Mpc {
         Ok(())
     }
 
+    /// Sets the disturbance wrench (body force, torque about B) that the
+    /// predictions and the input reference include from the next preparation.
+    pub fn set_disturbance(&mut self, wrench: &nalgebra::Vector6<f64>) -> Result<()> {
+        if let Some(bad) = wrench.iter().find(|v| !v.is_finite()) {
+            return Err(MpcError::OutOfRange {
+                what: "disturbance wrench",
+                value: *bad,
+                min: f64::MIN,
+                max: f64::MAX,
+            });
+        }
+        self.disturbance = *wrench;
+        Ok(())
+    }
+
+    /// The disturbance wrench in use.
+    pub fn disturbance(&self) -> nalgebra::Vector6<f64> {
+        self.disturbance
+    }
+
     fn refresh_input_reference(&mut self) {
         for k in 0..self.steps {
             self.u_ref[k] = self
                 .model
                 .at_tilt(self.varphi[k])
+                .with_disturbance(self.disturbance)
                 .hover_trim()
                 .map(|u| u.clamp(0.0, 1.0));
         }
@@ -392,7 +416,7 @@ impl Mpc {
         let r = weights.input_weight(self.alpha);
         let dt = self.stage_dt;
         for k in 0..self.steps {
-            let body = self.model.at_tilt(self.varphi[k]);
+            let body = self.model.at_tilt(self.varphi[k]).with_disturbance(self.disturbance);
             self.u_ref[k] = body.hover_trim().map(|u| u.clamp(0.0, 1.0));
             let s = body.rk4_step_sensitivity(&self.plan_x[k], &self.plan_u[k], dt);
             let defect = s.next - self.plan_x[k + 1];
@@ -429,7 +453,7 @@ impl Mpc {
     fn shift_plan(&mut self) {
         let s = self.shift_fraction;
         let n = self.steps;
-        let last = self.model.at_tilt(self.varphi[n]).rk4_step(
+        let last = self.model.at_tilt(self.varphi[n]).with_disturbance(self.disturbance).rk4_step(
             &self.plan_x[n],
             &self.plan_u[n - 1],
             self.stage_dt,
@@ -486,7 +510,10 @@ impl Mpc {
             SolverStatus::Solved => Outcome::Solved,
             SolverStatus::AlmostSolved => Outcome::Degraded(DegradedCause::ReducedAccuracy),
             SolverStatus::MaxIterations => Outcome::Degraded(DegradedCause::IterationLimit),
-            SolverStatus::MaxTime => Outcome::Degraded(DegradedCause::TimeLimit),
+            // Our per-solve clock ends a solve through the termination callback.
+            SolverStatus::MaxTime | SolverStatus::CallbackTerminated => {
+                Outcome::Degraded(DegradedCause::TimeLimit)
+            }
             other => return Ok(self.fail(FailureCause::Solver(other), timings, start)),
         };
         self.qp.extract(&self.lin, &e0, &mut self.dx, &mut self.du);

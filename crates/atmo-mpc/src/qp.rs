@@ -8,7 +8,13 @@
 
 use atmo_core::model::{Input, InputJacobian, NU, NX, State, StateJacobian};
 use clarabel::algebra::CscMatrix;
-use clarabel::solver::{DefaultSettings, DefaultSolver, IPSolver, SolverStatus, SupportedConeT};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::time::{Duration, Instant};
+
+use clarabel::solver::{
+    DefaultInfo, DefaultSettings, DefaultSolver, IPSolver, SolverStatus, SupportedConeT,
+};
 use nalgebra::{SMatrix, SVector};
 
 use crate::error::{MpcError, Result};
@@ -59,7 +65,8 @@ impl LinearizedHorizon {
 pub struct SolveReport {
     pub status: SolverStatus,
     pub iterations: u32,
-    /// s, as measured by Clarabel.
+    /// s, wall clock around the solve call (Clarabel's own figure includes
+    /// its set-up time).
     pub solve_time: f64,
 }
 
@@ -93,11 +100,11 @@ impl QpSnapshot {
     }
 }
 
-/// Creates a Clarabel solver whose time limit counts from the start of each
-/// solve. Clarabel compares `time_limit` with the sum of all its top-level
-/// timers, and the "setup" timer of `DefaultSolver::new` is never reset: left
-/// alone, a set-up that took longer than the limit (a loaded machine at
-/// start-up) would end every later solve at iteration 0 with `MaxTime`.
+/// Creates a Clarabel solver without its own time limit. Clarabel 0.11
+/// compares `time_limit` with the sum of its top-level timers, which include
+/// the set-up and a "post-process" timer that is never reset: after about
+/// 10^4 solves (a minute at 150 Hz) every solve would end at iteration 0 with
+/// `MaxTime`. [`TimedSolver`] enforces the limit with its own clock instead.
 pub fn build_solver(
     p: &CscMatrix<f64>,
     q: &[f64],
@@ -108,15 +115,63 @@ pub fn build_solver(
 ) -> Result<DefaultSolver<f64>> {
     let mut clarabel = clarabel_settings(settings);
     clarabel.time_limit = f64::INFINITY;
-    let mut solver =
-        DefaultSolver::new(p, q, a, b, cones, clarabel.clone()).map_err(solver_error)?;
-    let setup = solver
-        .timers
-        .as_ref()
-        .map_or(0.0, |t| t.total_time().as_secs_f64());
-    clarabel.time_limit = setup + settings.time_limit;
-    solver.update_settings(clarabel).map_err(solver_error)?;
-    Ok(solver)
+    DefaultSolver::new(p, q, a, b, cones, clarabel).map_err(solver_error)
+}
+
+/// Clarabel with a per-solve wall-clock limit measured by us: a termination
+/// callback (checked once per interior-point iteration) compares a monotonic
+/// clock with the deadline set just before the solve.
+pub struct TimedSolver {
+    pub solver: DefaultSolver<f64>,
+    epoch: Instant,
+    /// Nanoseconds after `epoch`; shared with the callback.
+    deadline: Arc<AtomicU64>,
+    limit: Duration,
+}
+
+impl TimedSolver {
+    pub fn new(
+        p: &CscMatrix<f64>,
+        q: &[f64],
+        a: &CscMatrix<f64>,
+        b: &[f64],
+        cones: &[SupportedConeT<f64>],
+        settings: &SolverSettings,
+    ) -> Result<Self> {
+        let mut solver = build_solver(p, q, a, b, cones, settings)?;
+        let epoch = Instant::now();
+        let deadline = Arc::new(AtomicU64::new(u64::MAX));
+        let shared = Arc::clone(&deadline);
+        solver.set_termination_callback(move |_info: &DefaultInfo<f64>| {
+            nanos_since(epoch) > shared.load(Ordering::Relaxed)
+        });
+        Ok(Self {
+            solver,
+            epoch,
+            deadline,
+            limit: Duration::from_secs_f64(settings.time_limit),
+        })
+    }
+
+    /// Solves; `CallbackTerminated` means the time limit was hit.
+    pub fn solve(&mut self) -> SolveReport {
+        let start = Instant::now();
+        let limit = u64::try_from(self.limit.as_nanos()).unwrap_or(u64::MAX);
+        self.deadline.store(
+            nanos_since(self.epoch).saturating_add(limit),
+            Ordering::Relaxed,
+        );
+        self.solver.solve();
+        SolveReport {
+            status: self.solver.solution.status,
+            iterations: self.solver.solution.iterations,
+            solve_time: start.elapsed().as_secs_f64(),
+        }
+    }
+}
+
+fn nanos_since(epoch: Instant) -> u64 {
+    u64::try_from(epoch.elapsed().as_nanos()).unwrap_or(u64::MAX)
 }
 
 /// Clarabel settings for RTI: presolve off (it would forbid in-place
@@ -203,15 +258,9 @@ impl QpBackend {
     }
 
     pub fn solve(&mut self) -> SolveReport {
-        let solver = match self {
-            Self::Sparse(qp) => &mut qp.solver,
-            Self::Condensed(qp) => &mut qp.solver,
-        };
-        solver.solve();
-        SolveReport {
-            status: solver.solution.status,
-            iterations: solver.solution.iterations,
-            solve_time: solver.solution.solve_time,
+        match self {
+            Self::Sparse(qp) => qp.solver.solve(),
+            Self::Condensed(qp) => qp.solver.solve(),
         }
     }
 
@@ -241,8 +290,8 @@ impl QpBackend {
     /// Primal solution vector of the last solve (layout of the formulation).
     pub fn raw_solution(&self) -> &[f64] {
         match self {
-            Self::Sparse(qp) => &qp.solver.solution.x,
-            Self::Condensed(qp) => &qp.solver.solution.x,
+            Self::Sparse(qp) => &qp.solver.solver.solution.x,
+            Self::Condensed(qp) => &qp.solver.solver.solution.x,
         }
     }
 }
@@ -256,7 +305,7 @@ impl QpBackend {
 /// then `8N` bounds (`du <= 1 - ubar`, `-du <= ubar`). P is diagonal.
 pub struct SparseQp {
     steps: usize,
-    solver: DefaultSolver<f64>,
+    solver: TimedSolver,
     p_vals: Vec<f64>,
     q: Vec<f64>,
     a_vals: Vec<f64>,
@@ -354,7 +403,7 @@ impl SparseQp {
             SupportedConeT::ZeroConeT(rows_eq),
             SupportedConeT::NonnegativeConeT(rows_box),
         ];
-        let solver = build_solver(&p_pattern, &q, &a_pattern, &b, &cones, settings)?;
+        let solver = TimedSolver::new(&p_pattern, &q, &a_pattern, &b, &cones, settings)?;
         Ok(Self {
             steps,
             solver,
@@ -377,11 +426,17 @@ impl SparseQp {
             }
         });
         Self::fill_vectors(lin, &mut self.p_vals, &mut self.q, &mut self.b);
-        self.solver.update_P(&self.p_vals).map_err(solver_error)?;
-        self.solver.update_A(&self.a_vals).map_err(solver_error)?;
-        self.solver.update_q(&self.q).map_err(solver_error)?;
+        self.solver
+            .solver
+            .update_P(&self.p_vals)
+            .map_err(solver_error)?;
+        self.solver
+            .solver
+            .update_A(&self.a_vals)
+            .map_err(solver_error)?;
+        self.solver.solver.update_q(&self.q).map_err(solver_error)?;
         // b without e0 yet: feedback writes the first NX rows.
-        self.solver.update_b(&self.b).map_err(solver_error)
+        self.solver.solver.update_b(&self.b).map_err(solver_error)
     }
 
     fn set_initial_deviation(&mut self, e0: &State) -> Result<()> {
@@ -389,12 +444,13 @@ impl SparseQp {
         // Only the first NX rows change: a selective update.
         let rows: &[usize; NX] = &[0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11];
         self.solver
+            .solver
             .update_b(&rows.iter().zip(self.b[..NX].iter()))
             .map_err(solver_error)
     }
 
     fn extract(&self, dx: &mut [State], du: &mut [Input]) {
-        let z = &self.solver.solution.x;
+        let z = &self.solver.solver.solution.x;
         for k in 0..=self.steps {
             dx[k].copy_from_slice(&z[x_offset(k)..x_offset(k) + NX]);
             if k < self.steps {
@@ -430,7 +486,7 @@ type Gain = SMatrix<f64, NU, NX>;
 /// `-ubar <= du <= 1 - ubar` only, so A = [I; -I] never changes.
 pub struct CondensedQp {
     steps: usize,
-    solver: DefaultSolver<f64>,
+    solver: TimedSolver,
     /// Dense Hessian, column-major n x n (both triangles).
     hessian: Vec<f64>,
     p_vals: Vec<f64>,
@@ -477,7 +533,7 @@ impl CondensedQp {
         let mut qp = Self {
             steps,
             // Placeholder identity QP, replaced right below once values exist.
-            solver: build_solver(
+            solver: TimedSolver::new(
                 &p_pattern,
                 &vec![0.0; n],
                 &a_pattern,
@@ -505,7 +561,7 @@ impl CondensedQp {
         qp.q.copy_from_slice(&qp.g0);
         let mut p_now = qp.p_pattern.clone();
         p_now.nzval.copy_from_slice(&qp.p_vals);
-        qp.solver = build_solver(
+        qp.solver = TimedSolver::new(
             &p_now,
             &qp.q,
             &qp.a_pattern,
@@ -589,9 +645,12 @@ impl CondensedQp {
     fn load(&mut self, lin: &LinearizedHorizon) -> Result<()> {
         self.condense(lin);
         self.q.copy_from_slice(&self.g0);
-        self.solver.update_P(&self.p_vals).map_err(solver_error)?;
-        self.solver.update_b(&self.b).map_err(solver_error)?;
-        self.solver.update_q(&self.q).map_err(solver_error)
+        self.solver
+            .solver
+            .update_P(&self.p_vals)
+            .map_err(solver_error)?;
+        self.solver.solver.update_b(&self.b).map_err(solver_error)?;
+        self.solver.solver.update_q(&self.q).map_err(solver_error)
     }
 
     fn set_initial_deviation(&mut self, e0: &State) -> Result<()> {
@@ -601,11 +660,11 @@ impl CondensedQp {
                 self.q[NU * i + d] = self.g0[NU * i + d] + gi[d];
             }
         }
-        self.solver.update_q(&self.q).map_err(solver_error)
+        self.solver.solver.update_q(&self.q).map_err(solver_error)
     }
 
     fn extract(&self, lin: &LinearizedHorizon, e0: &State, dx: &mut [State], du: &mut [Input]) {
-        let z = &self.solver.solution.x;
+        let z = &self.solver.solver.solution.x;
         dx[0] = *e0;
         for k in 0..self.steps {
             du[k] = SVector::<f64, NU>::from_column_slice(&z[NU * k..NU * (k + 1)]);
@@ -632,19 +691,47 @@ mod tests {
     use super::*;
     use crate::settings::MpcSettings;
 
+    /// min (x - 1)^2 s.t. x <= 2: a QP Clarabel solves in a few microseconds.
+    fn tiny(settings: &SolverSettings) -> TimedSolver {
+        let p = CscMatrix::new(1, 1, vec![0, 1], vec![0], vec![2.0]);
+        let a = CscMatrix::new(1, 1, vec![0, 1], vec![0], vec![1.0]);
+        TimedSolver::new(
+            &p,
+            &[-2.0],
+            &a,
+            &[2.0],
+            &[SupportedConeT::NonnegativeConeT(1)],
+            settings,
+        )
+        .unwrap()
+    }
+
+    // Clarabel's own time-limit clock drifts (it counts the set-up and an
+    // accumulating post-process timer); ours restarts with every solve.
     #[test]
-    fn time_limit_counts_from_the_solve_not_the_set_up() {
-        let settings = MpcSettings::atmo("default").unwrap().solver;
-        let lin = LinearizedHorizon::new(10);
-        let qp = QpBackend::new(&lin, &settings).unwrap();
-        let snapshot = qp.snapshot();
-        let solver = snapshot.fresh_solver(&settings).unwrap();
-        let setup = solver.timers.as_ref().unwrap().total_time().as_secs_f64();
-        assert!(setup > 0.0);
-        let limit = solver.settings().time_limit;
-        assert!(
-            (limit - setup - settings.time_limit).abs() < 1e-12,
-            "{limit} vs {setup}"
-        );
+    fn time_limit_holds_over_many_solves() {
+        let mut settings = MpcSettings::atmo("default").unwrap().solver;
+        settings.time_limit = 0.02;
+        let mut solver = tiny(&settings);
+        let clarabel_clock = |s: &TimedSolver| s.solver.timers.as_ref().unwrap().total_time();
+        solver.solve();
+        let first = clarabel_clock(&solver);
+        for k in 0..20_000 {
+            let report = solver.solve();
+            assert_eq!(report.status, SolverStatus::Solved, "solve {k}");
+            assert!(report.iterations > 0);
+        }
+        assert!((solver.solver.solution.x[0] - 1.0).abs() < 1e-6);
+        let drift = clarabel_clock(&solver).saturating_sub(first);
+        eprintln!("Clarabel's time-limit clock drifted by {drift:?} over 20000 solves");
+        assert!(drift > Duration::from_micros(100), "{drift:?}");
+    }
+
+    #[test]
+    fn time_limit_stops_a_solve() {
+        let mut settings = MpcSettings::atmo("default").unwrap().solver;
+        settings.time_limit = 0.0;
+        let mut solver = tiny(&settings);
+        assert_eq!(solver.solve().status, SolverStatus::CallbackTerminated);
     }
 }
