@@ -1,5 +1,16 @@
 //! atmo-io: the edges of the flight stack.
 //!
-//! Not built yet (issue 7). It will hold: ROS 2 messages and node
-//! (ros2-client), zero-copy driver ports (iceoryx2), the MCAP logger and
-//! reader, and CSV import of recordings.
+//! - [`msg`]: ROS 2 message types (`atmo_msgs`, standard and `px4_msgs`
+//!   types) with CDR (de)serialization, `.msg` schemas, and the ENU/FLU <->
+//!   NED/FRD conversion done at the ROS 2 edge only.
+//! - [`mcap_log`]: the MCAP logger (own thread, bounded channel, never
+//!   blocks the tick), the reader for the project's logs, and `recover`.
+//!
+//! Conventions: NED world, FRD body, Euler ZYX, the 12-state order of
+//! `atmo_core::model::idx`; time in u64 nanoseconds.
+
+pub mod error;
+pub mod mcap_log;
+pub mod msg;
+
+pub use error::{IoError, Result};

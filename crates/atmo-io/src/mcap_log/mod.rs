@@ -1,0 +1,32 @@
+//! MCAP logging for Foxglove and the reference readers, and reading back.
+//!
+//! - [`McapLogger`]: a writer thread behind a bounded channel. The control
+//!   thread calls [`LoggerHandle::try_log`], which copies a fixed-size record
+//!   into the channel and returns at once (no lock, no allocation; a full
+//!   channel drops the record and counts it). The writer thread owns the
+//!   `mcap::Writer`: `ros2` profile, `ros2msg` schemas with every dependency,
+//!   `cdr` messages with the encapsulation header, zstd chunks compressed on
+//!   that thread (compression threads 0), and a flush (chunk closed, file
+//!   flushed) at least every `flush_period` (<= 1 s), so a killed process
+//!   loses at most that much. Drops are written to the log itself on
+//!   [`LOGGER_TOPIC`] as a `diagnostic_msgs/DiagnosticArray`.
+//! - [`recover`]: turns a truncated log (killed writer) into a valid one.
+//! - [`read_log`] / [`read_topic`]: decode a log back into Rust types.
+
+mod logger;
+mod reader;
+mod recover;
+
+pub use logger::{
+    Channel, Compression, LOGGER_TOPIC, LogPayload, LogSummary, Loggable, LoggerHandle,
+    LoggerOptions, LoggerThread, McapLogger,
+};
+pub use reader::{AnyMessage, LoggedMessage, read_log, read_topic};
+pub use recover::{RecoverReport, recover};
+
+/// MCAP profile of every log.
+pub const PROFILE: &str = "ros2";
+/// Schema encoding of every channel.
+pub const SCHEMA_ENCODING: &str = "ros2msg";
+/// Message encoding of every channel.
+pub const MESSAGE_ENCODING: &str = "cdr";

@@ -1,0 +1,311 @@
+//! `atmo_msgs`: the flight stack's own messages (`ros2/atmo_msgs/msg/`).
+
+use serde::de::{Deserializer, Error as _};
+use serde::{Deserialize, Serialize, Serializer};
+
+use super::standard::Time;
+use super::{Label, RosMessage};
+
+/// Flight-stack mode (`MpcStatus.MODE_*`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+#[repr(u8)]
+pub enum Mode {
+    #[default]
+    Disarmed = 0,
+    Drive = 1,
+    Takeoff = 2,
+    Flight = 3,
+    Morphing = 4,
+    Transition = 5,
+    Touchdown = 6,
+    Failsafe = 7,
+}
+
+impl Mode {
+    pub const ALL: [Mode; 8] = [
+        Mode::Disarmed,
+        Mode::Drive,
+        Mode::Takeoff,
+        Mode::Flight,
+        Mode::Morphing,
+        Mode::Transition,
+        Mode::Touchdown,
+        Mode::Failsafe,
+    ];
+
+    pub fn code(self) -> u8 {
+        self as u8
+    }
+
+    pub fn from_code(code: u8) -> Option<Self> {
+        Self::ALL.get(usize::from(code)).copied()
+    }
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Disarmed => "disarmed",
+            Self::Drive => "drive",
+            Self::Takeoff => "takeoff",
+            Self::Flight => "flight",
+            Self::Morphing => "morphing",
+            Self::Transition => "transition",
+            Self::Touchdown => "touchdown",
+            Self::Failsafe => "failsafe",
+        }
+    }
+}
+
+/// MPC solver outcome (`MpcStatus.SOLVER_*`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+#[repr(u8)]
+pub enum SolverStatus {
+    /// The MPC did not run this tick.
+    #[default]
+    Idle = 0,
+    Solved = 1,
+    Degraded = 2,
+    Fallback = 3,
+    Failed = 4,
+}
+
+impl SolverStatus {
+    pub const ALL: [SolverStatus; 5] = [
+        SolverStatus::Idle,
+        SolverStatus::Solved,
+        SolverStatus::Degraded,
+        SolverStatus::Fallback,
+        SolverStatus::Failed,
+    ];
+
+    pub fn code(self) -> u8 {
+        self as u8
+    }
+
+    pub fn from_code(code: u8) -> Option<Self> {
+        Self::ALL.get(usize::from(code)).copied()
+    }
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Idle => "idle",
+            Self::Solved => "solved",
+            Self::Degraded => "degraded",
+            Self::Fallback => "fallback",
+            Self::Failed => "failed",
+        }
+    }
+}
+
+/// `atmo_msgs/msg/PilotInput`.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+#[allow(clippy::struct_excessive_bools)] // the pilot's three switches
+pub struct PilotInput {
+    /// NED world velocity command, m/s.
+    pub velocity: [f64; 3],
+    /// rad/s, FRD (positive turns right).
+    pub yaw_rate: f64,
+    /// In [0, 1].
+    pub throttle: f64,
+    pub arm: bool,
+    pub offboard: bool,
+    pub mpc_enabled: bool,
+}
+
+/// `atmo_msgs/msg/TickTiming`.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+pub struct TickTiming {
+    pub tick: u64,
+    pub deadline_ns: u64,
+    /// s.
+    pub wake_latency: f64,
+    /// s.
+    pub compute: f64,
+    pub overrun: bool,
+    pub overruns_total: u64,
+    pub skipped_total: u64,
+}
+
+/// `atmo_msgs/msg/MpcStatus`: one control tick (see the `.msg` for units
+/// and frames). `Copy` and allocation-free: built on the control thread,
+/// serialized elsewhere. On the wire the header's frame id is empty and
+/// `mode_name` / `solver_status_name` are derived from the codes.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct MpcStatus {
+    /// Flight-stack clock at the start of the tick, ns (header.stamp).
+    pub stamp_ns: u64,
+    pub tick: u64,
+    pub mode: Mode,
+    /// Reason of the transition taken this tick (empty if none).
+    pub transition: Label,
+    pub solver_status: SolverStatus,
+    pub solver_iterations: u32,
+    pub mpc_failed_ticks: u32,
+    pub mpc_failures_total: u64,
+    pub state: [f64; 12],
+    pub reference: [f64; 12],
+    pub predicted_next: [f64; 12],
+    pub thrust: [f64; 4],
+    pub alpha: f64,
+    pub varphi: f64,
+    pub tilt_limit: f64,
+    pub tilt_velocity: f64,
+    pub drive_velocity: [f64; 2],
+    pub wheel_rates: [f64; 2],
+    pub height: f64,
+    pub ground_contact: bool,
+    pub estimate_age: f64,
+    pub feedback_time: f64,
+    pub preparation_time: f64,
+    pub pilot: PilotInput,
+    pub timing: TickTiming,
+    pub rejected_estimate: u64,
+    pub rejected_tilt: u64,
+    pub rejected_pilot: u64,
+    pub rejected_ground: u64,
+}
+
+/// The wire layout of `MpcStatus.msg`, field for field; `S` is `&str` when
+/// writing (no allocation) and `String` when reading.
+#[derive(Serialize, Deserialize)]
+struct WireHeader<S> {
+    stamp: Time,
+    frame_id: S,
+}
+
+#[derive(Serialize, Deserialize)]
+struct Wire<S> {
+    header: WireHeader<S>,
+    tick: u64,
+    mode: u8,
+    mode_name: S,
+    transition: S,
+    solver_status: u8,
+    solver_status_name: S,
+    solver_iterations: u32,
+    mpc_failed_ticks: u32,
+    mpc_failures_total: u64,
+    state: [f64; 12],
+    reference: [f64; 12],
+    predicted_next: [f64; 12],
+    thrust: [f64; 4],
+    alpha: f64,
+    varphi: f64,
+    tilt_limit: f64,
+    tilt_velocity: f64,
+    drive_velocity: [f64; 2],
+    wheel_rates: [f64; 2],
+    height: f64,
+    ground_contact: bool,
+    estimate_age: f64,
+    feedback_time: f64,
+    preparation_time: f64,
+    pilot: PilotInput,
+    timing: TickTiming,
+    rejected_estimate: u64,
+    rejected_tilt: u64,
+    rejected_pilot: u64,
+    rejected_ground: u64,
+}
+
+impl Serialize for MpcStatus {
+    fn serialize<S: Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
+        Wire::<&str> {
+            header: WireHeader {
+                stamp: Time::from_ns(self.stamp_ns),
+                frame_id: "",
+            },
+            tick: self.tick,
+            mode: self.mode.code(),
+            mode_name: self.mode.name(),
+            transition: self.transition.as_str(),
+            solver_status: self.solver_status.code(),
+            solver_status_name: self.solver_status.name(),
+            solver_iterations: self.solver_iterations,
+            mpc_failed_ticks: self.mpc_failed_ticks,
+            mpc_failures_total: self.mpc_failures_total,
+            state: self.state,
+            reference: self.reference,
+            predicted_next: self.predicted_next,
+            thrust: self.thrust,
+            alpha: self.alpha,
+            varphi: self.varphi,
+            tilt_limit: self.tilt_limit,
+            tilt_velocity: self.tilt_velocity,
+            drive_velocity: self.drive_velocity,
+            wheel_rates: self.wheel_rates,
+            height: self.height,
+            ground_contact: self.ground_contact,
+            estimate_age: self.estimate_age,
+            feedback_time: self.feedback_time,
+            preparation_time: self.preparation_time,
+            pilot: self.pilot,
+            timing: self.timing,
+            rejected_estimate: self.rejected_estimate,
+            rejected_tilt: self.rejected_tilt,
+            rejected_pilot: self.rejected_pilot,
+            rejected_ground: self.rejected_ground,
+        }
+        .serialize(serializer)
+    }
+}
+
+impl<'de> Deserialize<'de> for MpcStatus {
+    fn deserialize<D: Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
+        let w = Wire::<String>::deserialize(deserializer)?;
+        let stamp_ns = w.header.stamp.to_ns().ok_or_else(|| {
+            D::Error::custom(format!(
+                "field `header.stamp`: {:?} is not a valid time",
+                w.header.stamp
+            ))
+        })?;
+        let mode = Mode::from_code(w.mode)
+            .ok_or_else(|| D::Error::custom(format!("field `mode`: unknown code {}", w.mode)))?;
+        let solver_status = SolverStatus::from_code(w.solver_status).ok_or_else(|| {
+            D::Error::custom(format!(
+                "field `solver_status`: unknown code {}",
+                w.solver_status
+            ))
+        })?;
+        Ok(Self {
+            stamp_ns,
+            tick: w.tick,
+            mode,
+            transition: Label::new(&w.transition),
+            solver_status,
+            solver_iterations: w.solver_iterations,
+            mpc_failed_ticks: w.mpc_failed_ticks,
+            mpc_failures_total: w.mpc_failures_total,
+            state: w.state,
+            reference: w.reference,
+            predicted_next: w.predicted_next,
+            thrust: w.thrust,
+            alpha: w.alpha,
+            varphi: w.varphi,
+            tilt_limit: w.tilt_limit,
+            tilt_velocity: w.tilt_velocity,
+            drive_velocity: w.drive_velocity,
+            wheel_rates: w.wheel_rates,
+            height: w.height,
+            ground_contact: w.ground_contact,
+            estimate_age: w.estimate_age,
+            feedback_time: w.feedback_time,
+            preparation_time: w.preparation_time,
+            pilot: w.pilot,
+            timing: w.timing,
+            rejected_estimate: w.rejected_estimate,
+            rejected_tilt: w.rejected_tilt,
+            rejected_pilot: w.rejected_pilot,
+            rejected_ground: w.rejected_ground,
+        })
+    }
+}
+
+impl RosMessage for PilotInput {
+    const TYPE_NAME: &'static str = "atmo_msgs/msg/PilotInput";
+}
+impl RosMessage for TickTiming {
+    const TYPE_NAME: &'static str = "atmo_msgs/msg/TickTiming";
+}
+impl RosMessage for MpcStatus {
+    const TYPE_NAME: &'static str = "atmo_msgs/msg/MpcStatus";
+}

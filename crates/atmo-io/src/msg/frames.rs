@@ -1,0 +1,207 @@
+//! Frame conversion at the ROS 2 edge: ROS (REP 103: ENU world, FLU body)
+//! to and from the flight stack's NED world, FRD body, Euler ZYX state.
+//!
+//! With T the ENU -> NED axis swap (x_ned = y_enu, y_ned = x_enu,
+//! z_ned = -z_enu) and B = diag(1, -1, -1) the FRD -> FLU body flip:
+//!
+//!   p_ned = T p_enu,  R_ned_frd = T R_enu_flu B,
+//!   v_ned = R_ned_frd B v_flu (odometry twist is in the child, body frame),
+//!   w_frd = B w_flu,
+//!
+//! and (yaw, pitch, roll) are the ZYX Euler angles of R_ned_frd
+//! (R = Rz(yaw) Ry(pitch) Rx(roll)).
+
+use atmo_core::model::{State, idx};
+use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector3 as V3};
+
+use super::standard::{Header, Odometry, Point, Pose, Quaternion, Time, Twist, Vector3};
+use crate::error::{IoError, Result};
+
+fn enu_to_ned() -> Matrix3<f64> {
+    Matrix3::new(0.0, 1.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, -1.0)
+}
+
+fn frd_to_flu() -> Matrix3<f64> {
+    Matrix3::from_diagonal(&V3::new(1.0, -1.0, -1.0))
+}
+
+/// Largest accepted deviation of the quaternion norm from 1.
+pub const QUATERNION_NORM_TOLERANCE: f64 = 1e-3;
+
+/// Converts a ROS odometry (ENU/FLU) to the 12-state (NED/FRD). Rejects
+/// non-finite fields and quaternions whose norm is not 1 (within
+/// [`QUATERNION_NORM_TOLERANCE`]); `topic` names the origin in errors.
+pub fn odometry_to_state(topic: &str, odom: &Odometry) -> Result<State> {
+    let invalid = |field: &'static str, reason: String| IoError::InvalidField {
+        topic: topic.to_string(),
+        field,
+        reason,
+    };
+    let p = odom.pose.pose.position;
+    let q = odom.pose.pose.orientation;
+    let v = odom.twist.twist.linear;
+    let w = odom.twist.twist.angular;
+    let checks: [(&'static str, [f64; 4]); 4] = [
+        ("pose.pose.position", [p.x, p.y, p.z, 0.0]),
+        ("pose.pose.orientation", [q.x, q.y, q.z, q.w]),
+        ("twist.twist.linear", [v.x, v.y, v.z, 0.0]),
+        ("twist.twist.angular", [w.x, w.y, w.z, 0.0]),
+    ];
+    for (field, values) in checks {
+        if let Some(bad) = values.iter().find(|x| !x.is_finite()) {
+            return Err(invalid(field, format!("non-finite value {bad}")));
+        }
+    }
+    let norm = (q.x * q.x + q.y * q.y + q.z * q.z + q.w * q.w).sqrt();
+    if (norm - 1.0).abs() > QUATERNION_NORM_TOLERANCE {
+        return Err(invalid(
+            "pose.pose.orientation",
+            format!("quaternion norm {norm} is not 1"),
+        ));
+    }
+    let t = enu_to_ned();
+    let b = frd_to_flu();
+    let r_enu_flu = UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(q.w, q.x, q.y, q.z))
+        .to_rotation_matrix()
+        .into_inner();
+    let r_ned_frd = t * r_enu_flu * b;
+    let (roll, pitch, yaw) = Rotation3::from_matrix_unchecked(r_ned_frd).euler_angles();
+    let p_ned = t * V3::new(p.x, p.y, p.z);
+    let v_ned = r_ned_frd * b * V3::new(v.x, v.y, v.z);
+    let w_frd = b * V3::new(w.x, w.y, w.z);
+
+    let mut x = State::zeros();
+    x[idx::X] = p_ned.x;
+    x[idx::Y] = p_ned.y;
+    x[idx::Z] = p_ned.z;
+    x[idx::YAW] = yaw;
+    x[idx::PITCH] = pitch;
+    x[idx::ROLL] = roll;
+    x[idx::VX] = v_ned.x;
+    x[idx::VY] = v_ned.y;
+    x[idx::VZ] = v_ned.z;
+    x[idx::WX] = w_frd.x;
+    x[idx::WY] = w_frd.y;
+    x[idx::WZ] = w_frd.z;
+    Ok(x)
+}
+
+/// The inverse of [`odometry_to_state`]: a ROS odometry (ENU world `odom`,
+/// FLU body `base_link`, zero covariances) for a 12-state.
+pub fn state_to_odometry(state: &State, stamp_ns: u64) -> Odometry {
+    let t = enu_to_ned(); // its own inverse
+    let b = frd_to_flu(); // its own inverse
+    let r_ned_frd =
+        Rotation3::from_euler_angles(state[idx::ROLL], state[idx::PITCH], state[idx::YAW])
+            .into_inner();
+    let r_enu_flu = t * r_ned_frd * b;
+    let q = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(r_enu_flu));
+    let p_enu = t * V3::new(state[idx::X], state[idx::Y], state[idx::Z]);
+    let v_flu = b * r_ned_frd.transpose() * V3::new(state[idx::VX], state[idx::VY], state[idx::VZ]);
+    let w_flu = b * V3::new(state[idx::WX], state[idx::WY], state[idx::WZ]);
+    let mut odom = Odometry {
+        header: Header {
+            stamp: Time::from_ns(stamp_ns),
+            frame_id: "odom".into(),
+        },
+        child_frame_id: "base_link".into(),
+        ..Odometry::default()
+    };
+    odom.pose.pose = Pose {
+        position: Point {
+            x: p_enu.x,
+            y: p_enu.y,
+            z: p_enu.z,
+        },
+        orientation: Quaternion {
+            x: q.i,
+            y: q.j,
+            z: q.k,
+            w: q.w,
+        },
+    };
+    odom.twist.twist = Twist {
+        linear: Vector3 {
+            x: v_flu.x,
+            y: v_flu.y,
+            z: v_flu.z,
+        },
+        angular: Vector3 {
+            x: w_flu.x,
+            y: w_flu.y,
+            z: w_flu.z,
+        },
+    };
+    odom
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn state(values: [f64; 12]) -> State {
+        State::from_row_slice(&values)
+    }
+
+    #[test]
+    fn facing_north_level() {
+        // NED: 1 m north, 2 m east, 3 m up, facing north, flying north at
+        // 1 m/s, turning right at 0.2 rad/s.
+        let x = state([1.0, 2.0, -3.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.2]);
+        let odom = state_to_odometry(&x, 5);
+        let p = odom.pose.pose.position;
+        assert_eq!((p.x, p.y, p.z), (2.0, 1.0, 3.0)); // ENU: east, north, up
+        let q = odom.pose.pose.orientation;
+        let h = std::f64::consts::FRAC_1_SQRT_2;
+        // Facing north in ENU is a +90 deg rotation about z (up).
+        assert!((q.w - h).abs() < 1e-12 && (q.z - h).abs() < 1e-12, "{q:?}");
+        assert!(q.x.abs() < 1e-12 && q.y.abs() < 1e-12);
+        let v = odom.twist.twist.linear; // body FLU: forward
+        assert!((v.x - 1.0).abs() < 1e-12 && v.y.abs() < 1e-12 && v.z.abs() < 1e-12);
+        // Turning right (FRD +z) is a negative FLU z rate.
+        assert!((odom.twist.twist.angular.z + 0.2).abs() < 1e-12);
+        let back = odometry_to_state("/odom", &odom).unwrap();
+        assert!((back - x).abs().max() < 1e-12, "{back}");
+    }
+
+    #[test]
+    fn round_trip_at_many_attitudes() {
+        let mut seed = 7u64;
+        let mut next = || {
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((seed >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
+        };
+        for _ in 0..200 {
+            let mut v = [0.0; 12];
+            for (i, slot) in v.iter_mut().enumerate() {
+                *slot = next() * if i == 4 { 1.5 } else { 3.0 };
+            }
+            let x = state(v);
+            let back = odometry_to_state("/odom", &state_to_odometry(&x, 0)).unwrap();
+            assert!((back - x).abs().max() < 1e-9, "{x} -> {back}");
+        }
+    }
+
+    #[test]
+    fn bad_odometry_is_rejected_with_the_field() {
+        let mut odom = state_to_odometry(&State::zeros(), 0);
+        odom.twist.twist.linear.y = f64::NAN;
+        let text = odometry_to_state("/mocap", &odom).unwrap_err().to_string();
+        assert!(
+            text.contains("/mocap") && text.contains("twist.twist.linear"),
+            "{text}"
+        );
+        let mut odom = state_to_odometry(&State::zeros(), 0);
+        odom.pose.pose.orientation.w = 2.0;
+        let text = odometry_to_state("/mocap", &odom).unwrap_err().to_string();
+        assert!(
+            text.contains("orientation") && text.contains("norm"),
+            "{text}"
+        );
+        let mut odom = state_to_odometry(&State::zeros(), 0);
+        odom.pose.pose.position.z = f64::INFINITY;
+        assert!(odometry_to_state("/mocap", &odom).is_err());
+    }
+}

@@ -1,0 +1,76 @@
+//! `px4_msgs` types for flying through PX4 offboard (PX4 v1.15 layouts).
+
+use serde::{Deserialize, Serialize};
+
+use super::RosMessage;
+
+/// `px4_msgs/msg/VehicleOdometry` (NED world, FRD body).
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+pub struct VehicleOdometry {
+    /// us since PX4 boot.
+    pub timestamp: u64,
+    pub timestamp_sample: u64,
+    pub pose_frame: u8,
+    pub position: [f32; 3],
+    /// Hamilton quaternion (w, x, y, z), FRD body to `pose_frame`.
+    pub q: [f32; 4],
+    pub velocity_frame: u8,
+    pub velocity: [f32; 3],
+    pub angular_velocity: [f32; 3],
+    pub position_variance: [f32; 3],
+    pub orientation_variance: [f32; 3],
+    pub velocity_variance: [f32; 3],
+    pub reset_counter: u8,
+    pub quality: i8,
+}
+
+impl VehicleOdometry {
+    pub const POSE_FRAME_UNKNOWN: u8 = 0;
+    pub const POSE_FRAME_NED: u8 = 1;
+    pub const POSE_FRAME_FRD: u8 = 2;
+    pub const VELOCITY_FRAME_UNKNOWN: u8 = 0;
+    pub const VELOCITY_FRAME_NED: u8 = 1;
+    pub const VELOCITY_FRAME_FRD: u8 = 2;
+    pub const VELOCITY_FRAME_BODY_FRD: u8 = 3;
+}
+
+/// `px4_msgs/msg/ActuatorMotors`: normalized motor commands (first four used,
+/// rotors 1..4 in PX4 quad-x order; NaN = disarmed).
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+pub struct ActuatorMotors {
+    /// us since PX4 boot.
+    pub timestamp: u64,
+    pub timestamp_sample: u64,
+    pub reversible_flags: u16,
+    pub control: [f32; 12],
+}
+
+impl ActuatorMotors {
+    pub const ACTUATOR_FUNCTION_MOTOR1: u8 = 101;
+    pub const NUM_CONTROLS: u8 = 12;
+}
+
+/// `px4_msgs/msg/OffboardControlMode`: which setpoint PX4 follows.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[allow(clippy::struct_excessive_bools)] // mirrors the PX4 message field for field
+pub struct OffboardControlMode {
+    /// us since PX4 boot.
+    pub timestamp: u64,
+    pub position: bool,
+    pub velocity: bool,
+    pub acceleration: bool,
+    pub attitude: bool,
+    pub body_rate: bool,
+    pub thrust_and_torque: bool,
+    pub direct_actuator: bool,
+}
+
+impl RosMessage for VehicleOdometry {
+    const TYPE_NAME: &'static str = "px4_msgs/msg/VehicleOdometry";
+}
+impl RosMessage for ActuatorMotors {
+    const TYPE_NAME: &'static str = "px4_msgs/msg/ActuatorMotors";
+}
+impl RosMessage for OffboardControlMode {
+    const TYPE_NAME: &'static str = "px4_msgs/msg/OffboardControlMode";
+}

@@ -1,0 +1,428 @@
+//! CDR round trips against byte vectors computed by hand from the XCDR1
+//! rules (little endian; alignment of each primitive to its size, counted
+//! from the start of the body after the 4-byte encapsulation header).
+
+use super::*;
+
+fn f64s(values: &[f64]) -> Vec<u8> {
+    values.iter().flat_map(|v| v.to_le_bytes()).collect()
+}
+
+fn f32s(values: &[f32]) -> Vec<u8> {
+    values.iter().flat_map(|v| v.to_le_bytes()).collect()
+}
+
+fn round_trip<M: RosMessage + PartialEq>(message: &M, expected_body: &[u8]) {
+    let bytes = encode_to_vec(message).unwrap();
+    assert_eq!(&bytes[..4], &CDR_LE_HEADER);
+    assert_eq!(&bytes[4..], expected_body, "{}", M::TYPE_NAME);
+    let back: M = decode("/test", &bytes).unwrap();
+    assert_eq!(&back, message);
+}
+
+#[test]
+fn time_and_header() {
+    round_trip(&Time { sec: 1, nanosec: 2 }, &[1, 0, 0, 0, 2, 0, 0, 0]);
+    let header = Header {
+        stamp: Time {
+            sec: -1,
+            nanosec: 7,
+        },
+        frame_id: "odom".into(),
+    };
+    round_trip(
+        &header,
+        &[
+            0xff, 0xff, 0xff, 0xff, 7, 0, 0, 0, // stamp
+            5, 0, 0, 0, b'o', b'd', b'o', b'm', 0, // string: length with NUL
+        ],
+    );
+    assert_eq!(Time::from_ns(3_000_000_004), Time { sec: 3, nanosec: 4 });
+    assert_eq!(Time { sec: 3, nanosec: 4 }.to_ns(), Some(3_000_000_004));
+    assert_eq!(
+        Time {
+            sec: -3,
+            nanosec: 4
+        }
+        .to_ns(),
+        None
+    );
+}
+
+#[test]
+fn twist_is_six_doubles() {
+    let twist = Twist {
+        linear: Vector3 {
+            x: 1.0,
+            y: -2.0,
+            z: 3.5,
+        },
+        angular: Vector3 {
+            x: 0.25,
+            y: 0.0,
+            z: -6.0,
+        },
+    };
+    round_trip(&twist, &f64s(&[1.0, -2.0, 3.5, 0.25, 0.0, -6.0]));
+}
+
+#[test]
+fn odometry_alignment_after_strings() {
+    let mut odom = Odometry {
+        header: Header {
+            stamp: Time {
+                sec: 10,
+                nanosec: 0,
+            },
+            frame_id: "map".into(), // 4 + 4 bytes: body offset 16 after it
+        },
+        child_frame_id: "base".into(), // 4 + 5 bytes: offset 25, pad to 32
+        ..Odometry::default()
+    };
+    odom.pose.pose.position = Point {
+        x: 1.0,
+        y: 2.0,
+        z: 3.0,
+    };
+    odom.pose.covariance[35] = 9.0;
+    odom.twist.twist.angular.z = 0.5;
+    odom.twist.covariance[0] = -1.0;
+
+    let mut body = vec![10, 0, 0, 0, 0, 0, 0, 0, 4, 0, 0, 0, b'm', b'a', b'p', 0];
+    body.extend_from_slice(&[5, 0, 0, 0, b'b', b'a', b's', b'e', 0, 0, 0, 0, 0, 0, 0, 0]);
+    assert_eq!(body.len(), 32);
+    body.extend(f64s(&[1.0, 2.0, 3.0, 0.0, 0.0, 0.0, 1.0])); // pose
+    let mut cov = [0.0; 36];
+    cov[35] = 9.0;
+    body.extend(f64s(&cov)); // fixed array: no length
+    body.extend(f64s(&[0.0, 0.0, 0.0, 0.0, 0.0, 0.5]));
+    let mut cov = [0.0; 36];
+    cov[0] = -1.0;
+    body.extend(f64s(&cov));
+    round_trip(&odom, &body);
+}
+
+#[test]
+fn diagnostics_sequences_and_bytes() {
+    let array = DiagnosticArray {
+        header: Header::default(),
+        status: vec![DiagnosticStatus {
+            level: DiagnosticStatus::WARN,
+            name: "a".into(),
+            message: String::new(),
+            hardware_id: "hw".into(),
+            values: vec![KeyValue {
+                key: "k".into(),
+                value: "vv".into(),
+            }],
+        }],
+    };
+    let body = vec![
+        0, 0, 0, 0, 0, 0, 0, 0, // stamp
+        1, 0, 0, 0, 0, // frame_id "" (length 1: the NUL), offset 13
+        0, 0, 0, // pad to 16
+        1, 0, 0, 0, // status: 1 element
+        1, // level (byte)
+        0, 0, 0, // pad
+        2, 0, 0, 0, b'a', 0, // name
+        0, 0, // pad
+        1, 0, 0, 0, 0, // message ""
+        0, 0, 0, // pad
+        3, 0, 0, 0, b'h', b'w', 0, // hardware_id
+        0, // pad
+        1, 0, 0, 0, // values: 1 element
+        2, 0, 0, 0, b'k', 0, // key
+        0, 0, // pad
+        3, 0, 0, 0, b'v', b'v', 0, // value
+    ];
+    round_trip(&array, &body);
+}
+
+#[test]
+fn px4_messages() {
+    let odom = VehicleOdometry {
+        timestamp: 1,
+        timestamp_sample: 2,
+        pose_frame: VehicleOdometry::POSE_FRAME_NED,
+        position: [1.0, 2.0, -3.0],
+        q: [1.0, 0.0, 0.0, 0.0],
+        velocity_frame: VehicleOdometry::VELOCITY_FRAME_NED,
+        velocity: [0.5, 0.0, 0.0],
+        angular_velocity: [0.0, 0.0, 0.1],
+        position_variance: [0.01; 3],
+        orientation_variance: [0.02; 3],
+        velocity_variance: [0.03; 3],
+        reset_counter: 4,
+        quality: -1,
+    };
+    let mut body = Vec::new();
+    body.extend(1u64.to_le_bytes());
+    body.extend(2u64.to_le_bytes());
+    body.extend([1, 0, 0, 0]); // pose_frame + pad to 4
+    body.extend(f32s(&[1.0, 2.0, -3.0, 1.0, 0.0, 0.0, 0.0]));
+    body.extend([1, 0, 0, 0]);
+    body.extend(f32s(&[0.5, 0.0, 0.0, 0.0, 0.0, 0.1]));
+    body.extend(f32s(&[
+        0.01, 0.01, 0.01, 0.02, 0.02, 0.02, 0.03, 0.03, 0.03,
+    ]));
+    body.extend([4, 0xff]);
+    round_trip(&odom, &body);
+
+    let motors = ActuatorMotors {
+        timestamp: 5,
+        timestamp_sample: 6,
+        reversible_flags: 0x0102,
+        control: [
+            0.1,
+            0.2,
+            0.3,
+            0.4,
+            f32::NAN,
+            f32::NAN,
+            f32::NAN,
+            f32::NAN,
+            f32::NAN,
+            f32::NAN,
+            f32::NAN,
+            f32::NAN,
+        ],
+    };
+    let mut body = Vec::new();
+    body.extend(5u64.to_le_bytes());
+    body.extend(6u64.to_le_bytes());
+    body.extend([2, 1, 0, 0]); // u16 + pad to 4
+    body.extend(f32s(&motors.control));
+    let bytes = encode_to_vec(&motors).unwrap();
+    assert_eq!(&bytes[4..], &body[..]);
+    let back: ActuatorMotors = decode("/m", &bytes).unwrap();
+    assert_eq!(back.control[..4], motors.control[..4]);
+    assert!(back.control[4..].iter().all(|c| c.is_nan()));
+
+    let mode = OffboardControlMode {
+        timestamp: 7,
+        direct_actuator: true,
+        ..OffboardControlMode::default()
+    };
+    let mut body = 7u64.to_le_bytes().to_vec();
+    body.extend([0, 0, 0, 0, 0, 0, 1]);
+    round_trip(&mode, &body);
+}
+
+pub(crate) fn sample_status() -> MpcStatus {
+    let mut status = MpcStatus {
+        stamp_ns: 12_000_000_345,
+        tick: 1800,
+        mode: Mode::Transition,
+        transition: Label::new("below z*"),
+        solver_status: SolverStatus::Degraded,
+        solver_iterations: 3,
+        mpc_failed_ticks: 1,
+        mpc_failures_total: 2,
+        thrust: [0.5, 0.6, 0.7, 0.8],
+        alpha: 0.25,
+        varphi: 1.0,
+        tilt_limit: 1.2,
+        tilt_velocity: 0.39,
+        drive_velocity: [0.1, -0.2],
+        wheel_rates: [3.0, 4.0],
+        height: 0.3,
+        ground_contact: true,
+        estimate_age: 0.004,
+        feedback_time: 0.0011,
+        preparation_time: 0.0022,
+        pilot: PilotInput {
+            velocity: [0.0, 0.0, 0.3],
+            yaw_rate: 0.1,
+            throttle: 0.6,
+            arm: true,
+            offboard: true,
+            mpc_enabled: true,
+        },
+        timing: TickTiming {
+            tick: 1800,
+            deadline_ns: 12_000_000_000,
+            wake_latency: 5e-5,
+            compute: 0.0015,
+            overrun: false,
+            overruns_total: 3,
+            skipped_total: 1,
+        },
+        rejected_estimate: 4,
+        rejected_tilt: 5,
+        rejected_pilot: 6,
+        rejected_ground: 7,
+        ..MpcStatus::default()
+    };
+    for i in 0..12 {
+        status.state[i] = i as f64;
+        status.reference[i] = -(i as f64);
+        status.predicted_next[i] = 0.5 * i as f64;
+    }
+    status
+}
+
+#[test]
+fn mpc_status_layout() {
+    let status = sample_status();
+    let mut body = Vec::new();
+    body.extend(12i32.to_le_bytes());
+    body.extend(345u32.to_le_bytes());
+    body.extend([1, 0, 0, 0, 0]); // frame_id ""
+    body.extend([0, 0, 0]); // pad to 16 for the u64 tick
+    body.extend(1800u64.to_le_bytes());
+    body.push(5); // mode, offset 24
+    body.extend([0, 0, 0]);
+    body.extend(11u32.to_le_bytes());
+    body.extend(b"transition\0"); // offset 32..43
+    body.push(0); // pad to 44
+    body.extend(9u32.to_le_bytes());
+    body.extend(b"below z*\0"); // 48..57
+    body.push(2); // solver_status, 57
+    body.extend([0, 0]); // pad to 60
+    body.extend(9u32.to_le_bytes());
+    body.extend(b"degraded\0"); // 64..73
+    body.extend([0, 0, 0]); // pad to 76
+    body.extend(3u32.to_le_bytes()); // solver_iterations 76..80
+    body.extend(1u32.to_le_bytes()); // mpc_failed_ticks 80..84
+    body.extend([0, 0, 0, 0]); // pad to 88
+    body.extend(2u64.to_le_bytes());
+    body.extend(f64s(&status.state));
+    body.extend(f64s(&status.reference));
+    body.extend(f64s(&status.predicted_next));
+    body.extend(f64s(&[
+        0.5, 0.6, 0.7, 0.8, 0.25, 1.0, 1.2, 0.39, 0.1, -0.2, 3.0, 4.0, 0.3,
+    ]));
+    body.push(1); // ground_contact
+    body.extend([0; 7]);
+    body.extend(f64s(&[0.004, 0.0011, 0.0022]));
+    body.extend(f64s(&[0.0, 0.0, 0.3, 0.1, 0.6]));
+    body.extend([1, 1, 1]);
+    body.extend([0; 5]);
+    body.extend(1800u64.to_le_bytes());
+    body.extend(12_000_000_000u64.to_le_bytes());
+    body.extend(f64s(&[5e-5, 0.0015]));
+    body.push(0);
+    body.extend([0; 7]);
+    for v in [3u64, 1, 4, 5, 6, 7] {
+        body.extend(v.to_le_bytes());
+    }
+    round_trip(&status, &body);
+}
+
+#[test]
+fn big_endian_payloads_decode() {
+    let mut bytes = CDR_BE_HEADER.to_vec();
+    bytes.extend(1i32.to_be_bytes());
+    bytes.extend(2u32.to_be_bytes());
+    assert_eq!(
+        decode::<Time>("/t", &bytes).unwrap(),
+        Time { sec: 1, nanosec: 2 }
+    );
+}
+
+#[test]
+fn malformed_payloads_are_errors_naming_the_topic() {
+    let good = encode_to_vec(&sample_status()).unwrap();
+    // Every truncation of a valid status fails cleanly.
+    for len in 0..good.len() - 3 {
+        let err = decode::<MpcStatus>("/atmo/status", &good[..len]).unwrap_err();
+        let text = err.to_string();
+        assert!(
+            text.contains("/atmo/status") && text.contains("MpcStatus"),
+            "{text}"
+        );
+    }
+    // Unknown encapsulation.
+    let mut bad = good.clone();
+    bad[1] = 0x07;
+    assert!(decode::<MpcStatus>("/s", &bad).is_err());
+    // A bad mode code names the field.
+    let mut bad = good.clone();
+    bad[4 + 24] = 42;
+    let text = decode::<MpcStatus>("/s", &bad).unwrap_err().to_string();
+    assert!(text.contains("mode"), "{text}");
+    // A huge string length does not allocate its way to a crash.
+    let mut bad = encode_to_vec(&Header::default()).unwrap();
+    bad[12..16].copy_from_slice(&u32::MAX.to_le_bytes());
+    assert!(decode::<Header>("/h", &bad).is_err());
+    // A message of another type: a Twist is not an Odometry, an Odometry is
+    // not a Twist (left-over bytes).
+    let twist = encode_to_vec(&Twist::default()).unwrap();
+    assert!(decode::<Odometry>("/o", &twist).is_err());
+    let odom = encode_to_vec(&Odometry::default()).unwrap();
+    assert!(decode::<Twist>("/o", &odom).is_err());
+}
+
+#[test]
+fn type_names_follow_ros2() {
+    assert_eq!(MpcStatus::TYPE_NAME, "atmo_msgs/msg/MpcStatus");
+    assert_eq!(
+        MpcStatus::dds_type_name(),
+        "atmo_msgs::msg::dds_::MpcStatus_"
+    );
+    assert_eq!(Odometry::dds_type_name(), "nav_msgs::msg::dds_::Odometry_");
+}
+
+#[test]
+fn schemas_carry_every_dependency_once() {
+    let schema = schema_text(Odometry::TYPE_NAME).unwrap();
+    let separator = "=".repeat(80);
+    let deps: Vec<&str> = schema
+        .lines()
+        .filter_map(|l| l.strip_prefix("MSG: "))
+        .collect();
+    for dep in [
+        "std_msgs/Header",
+        "builtin_interfaces/Time",
+        "geometry_msgs/PoseWithCovariance",
+        "geometry_msgs/TwistWithCovariance",
+        "geometry_msgs/Pose",
+        "geometry_msgs/Point",
+        "geometry_msgs/Quaternion",
+        "geometry_msgs/Twist",
+        "geometry_msgs/Vector3",
+    ] {
+        assert_eq!(
+            deps.iter().filter(|d| **d == dep).count(),
+            1,
+            "{dep} in {deps:?}"
+        );
+    }
+    assert_eq!(deps.len(), 9);
+    assert_eq!(schema.matches(&separator).count(), 9);
+    // Each separator is a whole line followed by its MSG line.
+    for (i, line) in schema.lines().enumerate() {
+        if line.starts_with('=') {
+            assert_eq!(line, separator);
+            assert!(schema.lines().nth(i + 1).unwrap().starts_with("MSG: "));
+        }
+    }
+    let status = schema_text(MpcStatus::TYPE_NAME).unwrap();
+    for dep in [
+        "std_msgs/Header",
+        "builtin_interfaces/Time",
+        "atmo_msgs/PilotInput",
+        "atmo_msgs/TickTiming",
+    ] {
+        assert!(status.contains(&format!("MSG: {dep}\n")), "{dep}");
+    }
+    for type_name in [
+        DiagnosticArray::TYPE_NAME,
+        VehicleOdometry::TYPE_NAME,
+        ActuatorMotors::TYPE_NAME,
+        OffboardControlMode::TYPE_NAME,
+        Twist::TYPE_NAME,
+    ] {
+        schema_text(type_name).unwrap();
+    }
+    assert!(schema_text("nope_msgs/msg/Nope").is_err());
+}
+
+#[test]
+fn labels_cut_at_char_boundaries() {
+    let long = "é".repeat(40); // 80 bytes
+    let label = Label::new(&long);
+    assert_eq!(label.as_str().len(), 62);
+    assert_eq!(Label::new("abc").as_str(), "abc");
+    assert!(Label::default().is_empty());
+}
