@@ -110,19 +110,28 @@ impl ContactLaw {
         if f_n <= 0.0 {
             return Vector3::zeros();
         }
-        let ratio = match lateral {
-            None => f.norm() / (self.friction * f_n),
-            Some(l) => {
-                let f_lat = f.dot(l);
-                let f_roll = (f - l * f_lat).norm();
-                {
-                    let a = f_roll / (self.friction * f_n);
-                    let b = f_lat / (self.lateral_friction * f_n);
-                    (a * a + b * b).sqrt()
+        let cap = self.friction * f_n;
+        let f_sq = f.norm_squared();
+        // Inside the limit (sticking, the usual case): no square root, no division.
+        let ratio_sq = match lateral {
+            None => {
+                if f_sq <= cap * cap {
+                    return f;
                 }
+                f_sq / (cap * cap)
+            }
+            Some(l) => {
+                let cap_lat = self.lateral_friction * f_n;
+                let f_lat_sq = f.dot(l).powi(2);
+                let f_roll_sq = (f_sq - f_lat_sq).max(0.0);
+                let (c2, l2) = (cap * cap, cap_lat * cap_lat);
+                if f_roll_sq * l2 + f_lat_sq * c2 <= c2 * l2 {
+                    return f;
+                }
+                f_roll_sq / c2 + f_lat_sq / l2
             }
         };
-        if ratio > 1.0 { f / ratio } else { f }
+        f / ratio_sq.sqrt()
     }
 
     /// Force (world frame) on a point `depth` m into the ground moving at `v`

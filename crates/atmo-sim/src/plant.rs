@@ -33,7 +33,7 @@ use crate::config::{
     BatterySagConfig, DragConfig, GroundContactConfig, PlantConfig, SensorsConfig, TerrainConfig,
     WindConfig,
 };
-use crate::contact::{ContactLaw, Plane, rim_lowest_point, wheel_lateral};
+use crate::contact::{ContactLaw, Plane, wheel_lateral};
 use crate::error::{Result, SimError};
 use crate::ground_effect::{GroundEffect, TiltSlice};
 use crate::noise::{GaussMarkov, rng, stream};
@@ -897,10 +897,23 @@ impl Plant {
             if clear || (j >= N_WHEELS && corners_clear) {
                 break;
             }
+            // Wheel: lowest rim point `c + R d_p / |d_p|` and sideways
+            // direction `l_p / |l_p|`, with d_p = d - a (a.d) and
+            // l_p = a - d (a.d); for unit a and d both have the length
+            // sqrt(1 - (a.d)^2), so one square root serves both.
+            let mut lateral_b = None;
             let (point, spin_axis, rim) = if j < N_WHEELS {
                 let c = &body.rotor_position[j];
                 let a = &body.rotor_axis[j];
-                let pt = rim_lowest_point(c, a, &down_b, self.wheel_radius);
+                let ad = a.dot(&down_b);
+                let len_sq = 1.0 - ad * ad;
+                let pt = if len_sq > 1e-12 {
+                    let inv = 1.0 / len_sq.sqrt();
+                    lateral_b = Some((a - down_b * ad) * inv);
+                    c + (down_b - a * ad) * (self.wheel_radius * inv)
+                } else {
+                    *c
+                };
                 (pt, a * SPIN_SIGN[j], pt - c)
             } else {
                 (
@@ -928,11 +941,7 @@ impl Plant {
                 ext[SPRING + 3 * j + 1],
                 ext[SPRING + 3 * j + 2],
             );
-            let lateral = if j < N_WHEELS {
-                wheel_lateral(&(r * body.rotor_axis[j]), &n)
-            } else {
-                None
-            };
+            let lateral = lateral_b.map(|l| r * l);
             let (f_world, f_n, s_dot) = law.force(&n, depth, &v_point, &s, lateral.as_ref());
             d.fixed_rows_mut::<3>(SPRING + 3 * j).copy_from(&s_dot);
             let f_b = rt * f_world;

@@ -55,7 +55,9 @@ pub(crate) fn accelerations(
     let c = &body.first_moment;
     let force = body.thrust_force * u + g_b * body.mass - w.cross(&w.cross(c));
     let torque = body.thrust_torque * u + c.cross(&g_b) - w.cross(&(body.inertia * w));
-    let rhs = Vector6::new(force.x, force.y, force.z, torque.x, torque.y, torque.z) + extra;
+    let rhs = Vector6::new(force.x, force.y, force.z, torque.x, torque.y, torque.z)
+        + extra
+        + body.disturbance;
     body.mass_matrix_inv * rhs
 }
 
@@ -100,5 +102,6 @@ pub(crate) fn lerp_body(a: &TiltedBody, b: &TiltedBody, w: f64, varphi: f64) -> 
         thrust_torque: a.thrust_torque * v + b.thrust_torque * w,
         rotor_position: std::array::from_fn(|i| a.rotor_position[i] * v + b.rotor_position[i] * w),
         rotor_axis: std::array::from_fn(|i| a.rotor_axis[i] * v + b.rotor_axis[i] * w),
+        disturbance: a.disturbance * v + b.disturbance * w,
     }
 }
