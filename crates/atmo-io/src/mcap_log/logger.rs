@@ -160,6 +160,8 @@ struct Shared {
     next_channel: AtomicU16,
     accepted: AtomicU64,
     dropped: AtomicU64,
+    /// Records the writer has taken off the queue (written or not).
+    processed: AtomicU64,
     closed: AtomicBool,
     topics: Mutex<Vec<String>>,
 }
@@ -242,6 +244,7 @@ impl McapLogger {
             next_channel: AtomicU16::new(1),
             accepted: AtomicU64::new(0),
             dropped: AtomicU64::new(0),
+            processed: AtomicU64::new(0),
             closed: AtomicBool::new(false),
             topics: Mutex::new(Vec::new()),
         });
@@ -363,6 +366,12 @@ impl LoggerHandle {
         self.shared.accepted.load(Ordering::Relaxed)
     }
 
+    /// Records accepted but not yet taken off the queue by the writer.
+    pub fn queued(&self) -> u64 {
+        self.accepted()
+            .saturating_sub(self.shared.processed.load(Ordering::Relaxed))
+    }
+
     /// Asks the writer to write what is queued and finish the file (summary,
     /// footer). Later `try_log` calls drop. Blocks until the request is queued;
     /// then join the [`LoggerThread`].
@@ -480,6 +489,7 @@ impl WriterLoop {
             } => {
                 payload.encode(&mut self.buffer)?;
                 self.write(channel, log_time, publish_time)?;
+                self.shared.processed.fetch_add(1, Ordering::Relaxed);
                 Ok(Some(log_time))
             }
             Command::Finish => Ok(None),
