@@ -416,7 +416,10 @@ impl Mpc {
         let r = weights.input_weight(self.alpha);
         let dt = self.stage_dt;
         for k in 0..self.steps {
-            let body = self.model.at_tilt(self.varphi[k]).with_disturbance(self.disturbance);
+            let body = self
+                .model
+                .at_tilt(self.varphi[k])
+                .with_disturbance(self.disturbance);
             self.u_ref[k] = body.hover_trim().map(|u| u.clamp(0.0, 1.0));
             let s = body.rk4_step_sensitivity(&self.plan_x[k], &self.plan_u[k], dt);
             let defect = s.next - self.plan_x[k + 1];
@@ -453,11 +456,11 @@ impl Mpc {
     fn shift_plan(&mut self) {
         let s = self.shift_fraction;
         let n = self.steps;
-        let last = self.model.at_tilt(self.varphi[n]).with_disturbance(self.disturbance).rk4_step(
-            &self.plan_x[n],
-            &self.plan_u[n - 1],
-            self.stage_dt,
-        );
+        let last = self
+            .model
+            .at_tilt(self.varphi[n])
+            .with_disturbance(self.disturbance)
+            .rk4_step(&self.plan_x[n], &self.plan_u[n - 1], self.stage_dt);
         for k in 0..n {
             self.plan_x[k] = self.plan_x[k] * (1.0 - s) + self.plan_x[k + 1] * s;
         }

@@ -315,3 +315,44 @@ fn transition_past_critical_angle_stays_solved_and_level() {
         .fold(0.0, f64::max);
     assert!(worst_tilt < 2f64.to_radians(), "{worst_tilt}");
 }
+
+#[test]
+fn horizon_length_and_preset_are_configurable() {
+    for (steps, preset) in [(5, "fig5"), (20, "default")] {
+        let mut s = atmo_mpc::MpcSettings::atmo(preset).unwrap();
+        s.horizon.steps = steps;
+        s.solver.time_limit = 1.0;
+        let mut mpc = Mpc::new(Model::new(&RobotConfig::atmo()), s).unwrap();
+        assert_eq!(mpc.steps(), steps);
+        assert!((mpc.stage_dt() - 1.0 / steps as f64).abs() < 1e-15);
+        let reference = hover_at(0.0, 0.0, 1.0);
+        let trace = run(&mut mpc, perturbed(1.0), 3 * 150, |m, _, _| {
+            m.set_reference_constant(&reference).unwrap();
+            m.set_alpha(1.0).unwrap();
+            m.set_tilt_ramp(0.0, 0.0, 0.0, 0.0).unwrap();
+            0.0
+        });
+        assert_eq!(mpc.plan_states().len(), steps + 1);
+        assert_eq!(mpc.plan_inputs().len(), steps);
+        assert!(trace.inputs_within_bounds());
+        let err = (trace.last().fixed_rows::<3>(idx::X) - reference.fixed_rows::<3>(idx::X)).norm();
+        assert!(err < 0.05, "N = {steps}, {preset}: {err} m off after 3 s");
+    }
+}
+
+#[test]
+fn alpha_is_refreshed_every_period_and_held_in_between() {
+    let mut schedule = atmo_mpc::AlphaSchedule::new(10);
+    let z_star = 0.45;
+    // First tick computes; the next nine hold even though the height changed.
+    let first = schedule.update(0.45, 0.0, z_star);
+    assert_eq!(first, 1.0);
+    for _ in 0..9 {
+        assert_eq!(schedule.update(0.0, 1.0, z_star), 1.0);
+    }
+    // Tick 11 refreshes: on the ground alpha is 0.
+    assert_eq!(schedule.update(0.0, 1.0, z_star), 0.0);
+    // Half the transition height at 60 deg: 0.5 * cos(60 deg) = 0.25.
+    let mut schedule = atmo_mpc::AlphaSchedule::new(1);
+    assert!((schedule.update(0.225, 60f64.to_radians(), z_star) - 0.25).abs() < 1e-12);
+}
