@@ -24,7 +24,7 @@
 //! part (that part turns the wheel) and the motor reaction `-tau_m e`.
 
 use atmo_core::control::WheelRates;
-use atmo_core::model::{Input, Model, State, TiltedBody, idx, rotation};
+use atmo_core::model::{Input, Model, State, TiltedBody, idx};
 use atmo_core::{Linkage, RobotConfig};
 use nalgebra::{Cholesky, Matrix3, SVector, U6, Vector3, Vector6};
 use rand_chacha::ChaCha8Rng;
@@ -760,13 +760,20 @@ impl Plant {
     /// events, sensors.
     fn observe(&mut self) {
         let mut report = [ContactInfo::default(); N_CONTACTS];
-        if self.contact.is_some() {
-            let x = self.ext.fixed_rows::<12>(0);
-            let r = rotation(x[idx::YAW], x[idx::PITCH], x[idx::ROLL]);
+        let p = Vector3::new(self.ext[idx::X], self.ext[idx::Y], self.ext[idx::Z]);
+        // Far above the ground nothing touches: skip the contact pass.
+        let near = self.contact.is_some() && self.plane.height(&p) <= self.reach;
+        let rot = if near {
+            let x: State = self.ext.fixed_rows::<12>(0).into_owned();
+            Attitude::of(&x).r
+        } else {
+            Matrix3::identity()
+        };
+        if near {
             let mut scratch = Ext::zeros();
             let _ = self.contact_terms(
                 &self.ext,
-                &r,
+                &rot,
                 &self.command,
                 &mut scratch,
                 Some(&mut report),
@@ -776,16 +783,13 @@ impl Plant {
         let mut new_events: [Option<EventKind>; N_CONTACTS + 1] = [None; N_CONTACTS + 1];
         if let Some((law, drive, cfg)) = &self.contact {
             let n = self.plane.normal;
-            let xb = self.ext.fixed_rows::<12>(0);
-            let rot = rotation(xb[idx::YAW], xb[idx::PITCH], xb[idx::ROLL]);
             for (j, info) in report.iter().enumerate() {
-                let range = SPRING + 3 * j..SPRING + 3 * j + 3;
-                let s = Vector3::new(
-                    self.ext[range.start],
-                    self.ext[range.start + 1],
-                    self.ext[range.start + 2],
-                );
                 let s = if info.touching {
+                    let s = Vector3::new(
+                        self.ext[SPRING + 3 * j],
+                        self.ext[SPRING + 3 * j + 1],
+                        self.ext[SPRING + 3 * j + 2],
+                    );
                     let lateral = if j < N_WHEELS {
                         wheel_lateral(&(rot * self.body.rotor_axis[j]), &n)
                     } else {
@@ -824,15 +828,14 @@ impl Plant {
                     }
                 }
             }
-            let any_touch = report.iter().any(|c| c.touching);
-            let x = self.ext.fixed_rows::<12>(0);
-            let r = rotation(x[idx::YAW], x[idx::PITCH], x[idx::ROLL]);
-            let body_down = r.column(2).into_owned();
-            let angle = (-body_down.dot(&n)).clamp(-1.0, 1.0).acos().to_degrees();
-            if any_touch && angle > tip_deg && !self.tipped {
-                self.tipped = true;
-                new_events[N_CONTACTS] =
-                    Some(EventKind::Crash(CrashKind::TipOver { angle_deg: angle }));
+            if !self.tipped && report.iter().any(|c| c.touching) {
+                let body_down = rot.column(2).into_owned();
+                let angle = (-body_down.dot(&n)).clamp(-1.0, 1.0).acos().to_degrees();
+                if angle > tip_deg {
+                    self.tipped = true;
+                    new_events[N_CONTACTS] =
+                        Some(EventKind::Crash(CrashKind::TipOver { angle_deg: angle }));
+                }
             }
         }
         for kind in new_events.into_iter().flatten() {
