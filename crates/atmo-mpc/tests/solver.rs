@@ -356,3 +356,18 @@ fn alpha_is_refreshed_every_period_and_held_in_between() {
     let mut schedule = atmo_mpc::AlphaSchedule::new(1);
     assert!((schedule.update(0.225, 60f64.to_radians(), z_star) - 0.25).abs() < 1e-12);
 }
+
+/// The flight stack moves the controller into its control thread.
+#[test]
+fn controller_can_move_to_the_control_thread() {
+    fn assert_send<T: Send>() {}
+    assert_send::<Mpc>();
+    let mut mpc = controller(Formulation::Condensed);
+    let x = hover_at(0.0, 0.0, 1.0);
+    let handle = std::thread::spawn(move || {
+        mpc.set_reference_constant(&x).unwrap();
+        mpc.reset(&x).unwrap();
+        mpc.tick(&x).unwrap().outcome
+    });
+    assert_eq!(handle.join().unwrap(), Outcome::Solved);
+}
