@@ -5,6 +5,8 @@
 //!   NED/FRD conversion done at the ROS 2 edge only.
 //! - [`mcap_log`]: the MCAP logger (own thread, bounded channel, never
 //!   blocks the tick), the reader for the project's logs, and `recover`.
+//! - [`ros2`]: the ROS 2 node (status out, estimates and drive commands in,
+//!   PX4 offboard outputs, diagnostics), never blocking the control thread.
 //!
 //! Conventions: NED world, FRD body, Euler ZYX, the 12-state order of
 //! `atmo_core::model::idx`; time in u64 nanoseconds.
@@ -12,5 +14,6 @@
 pub mod error;
 pub mod mcap_log;
 pub mod msg;
+pub mod ros2;
 
 pub use error::{IoError, Result};

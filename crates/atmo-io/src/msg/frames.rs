@@ -14,6 +14,7 @@
 use atmo_core::model::{State, idx};
 use nalgebra::{Matrix3, Rotation3, UnitQuaternion, Vector3 as V3};
 
+use super::px4::VehicleOdometry;
 use super::standard::{Header, Odometry, Point, Pose, Quaternion, Time, Twist, Vector3};
 use crate::error::{IoError, Result};
 
@@ -84,6 +85,59 @@ pub fn odometry_to_state(topic: &str, odom: &Odometry) -> Result<State> {
     x[idx::WY] = w_frd.y;
     x[idx::WZ] = w_frd.z;
     Ok(x)
+}
+
+/// Converts a PX4 odometry (NED world, FRD body; no frame change) to the
+/// 12-state. Only `pose_frame` NED is accepted; the velocity may be in NED or
+/// in the FRD body frame.
+pub fn vehicle_odometry_to_state(topic: &str, odom: &VehicleOdometry) -> Result<State> {
+    let invalid = |field: &'static str, reason: String| IoError::InvalidField {
+        topic: topic.to_string(),
+        field,
+        reason,
+    };
+    let checks: [(&'static str, &[f32]); 4] = [
+        ("position", &odom.position),
+        ("q", &odom.q),
+        ("velocity", &odom.velocity),
+        ("angular_velocity", &odom.angular_velocity),
+    ];
+    for (field, values) in checks {
+        if let Some(bad) = values.iter().find(|x| !x.is_finite()) {
+            return Err(invalid(field, format!("non-finite value {bad}")));
+        }
+    }
+    if odom.pose_frame != VehicleOdometry::POSE_FRAME_NED {
+        return Err(invalid(
+            "pose_frame",
+            format!("{} is not POSE_FRAME_NED (1)", odom.pose_frame),
+        ));
+    }
+    let [w, qx, qy, qz] = odom.q.map(f64::from);
+    let norm = (w * w + qx * qx + qy * qy + qz * qz).sqrt();
+    if (norm - 1.0).abs() > QUATERNION_NORM_TOLERANCE * 10.0 {
+        // float32 quaternions: 1e-2 on the norm.
+        return Err(invalid("q", format!("quaternion norm {norm} is not 1")));
+    }
+    let r = UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(w, qx, qy, qz))
+        .to_rotation_matrix();
+    let (roll, pitch, yaw) = r.euler_angles();
+    let v = V3::from(odom.velocity.map(f64::from));
+    let v_ned = match odom.velocity_frame {
+        VehicleOdometry::VELOCITY_FRAME_NED => v,
+        VehicleOdometry::VELOCITY_FRAME_BODY_FRD => r * v,
+        other => {
+            return Err(invalid(
+                "velocity_frame",
+                format!("{other} is neither NED (1) nor BODY_FRD (3)"),
+            ));
+        }
+    };
+    let p = odom.position.map(f64::from);
+    let wb = odom.angular_velocity.map(f64::from);
+    Ok(State::from_row_slice(&[
+        p[0], p[1], p[2], yaw, pitch, roll, v_ned.x, v_ned.y, v_ned.z, wb[0], wb[1], wb[2],
+    ]))
 }
 
 /// The inverse of [`odometry_to_state`]: a ROS odometry (ENU world `odom`,
@@ -182,6 +236,52 @@ mod tests {
             let back = odometry_to_state("/odom", &state_to_odometry(&x, 0)).unwrap();
             assert!((back - x).abs().max() < 1e-9, "{x} -> {back}");
         }
+    }
+
+    #[test]
+    fn px4_odometry_is_already_ned() {
+        // Yaw 90 deg (facing east), flying east at 2 m/s, given in the body frame.
+        let h = std::f32::consts::FRAC_1_SQRT_2;
+        let mut odom = VehicleOdometry {
+            pose_frame: VehicleOdometry::POSE_FRAME_NED,
+            position: [1.0, 2.0, -3.0],
+            q: [h, 0.0, 0.0, h],
+            velocity_frame: VehicleOdometry::VELOCITY_FRAME_BODY_FRD,
+            velocity: [2.0, 0.0, 0.0],
+            angular_velocity: [0.1, 0.2, 0.3],
+            ..VehicleOdometry::default()
+        };
+        let x = vehicle_odometry_to_state("/fmu/out/vehicle_odometry", &odom).unwrap();
+        let want = [
+            1.0,
+            2.0,
+            -3.0,
+            std::f64::consts::FRAC_PI_2,
+            0.0,
+            0.0,
+            0.0,
+            2.0,
+            0.0,
+            0.1,
+            0.2,
+            0.3,
+        ];
+        for i in 0..12 {
+            assert!(
+                (x[i] - want[i]).abs() < 1e-6,
+                "{i}: {} vs {}",
+                x[i],
+                want[i]
+            );
+        }
+        odom.pose_frame = VehicleOdometry::POSE_FRAME_FRD;
+        assert!(vehicle_odometry_to_state("/o", &odom).is_err());
+        odom.pose_frame = VehicleOdometry::POSE_FRAME_NED;
+        odom.q[0] = f32::NAN;
+        let text = vehicle_odometry_to_state("/o", &odom)
+            .unwrap_err()
+            .to_string();
+        assert!(text.contains("`q`"), "{text}");
     }
 
     #[test]

@@ -1,0 +1,650 @@
+//! The ROS 2 node (ros2-client over RustDDS).
+//!
+//! A dedicated thread owns the DDS participant, the publishers and the
+//! subscriptions. The control thread talks to it only through bounded
+//! channels: [`Ros2Publisher::try_publish_status`] (and the PX4 outputs)
+//! copies a fixed-size record and returns at once (a full queue drops and
+//! counts); [`Ros2Inputs::latest_estimate`] drains the newest accepted
+//! estimate without waiting. Streams use best-effort, volatile, keep-last-1
+//! QoS. The domain id comes from `ROS_DOMAIN_ID` (default 0); with
+//! `loopback_only` the participant uses 127.0.0.1 only.
+//!
+//! Received estimates are converted to NED/FRD here (ENU/FLU odometry) and
+//! checked: payloads that do not decode (malformed CDR, another type on the
+//! topic), non-finite fields and stamps that do not increase are rejected
+//! and counted ([`Ros2Counters`], also published on the diagnostics topic).
+
+mod config;
+
+pub use config::{Ros2Config, TopicConfig, Topics};
+
+use std::net::Ipv4Addr;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::mpsc::{Receiver, RecvTimeoutError, SyncSender, TrySendError, sync_channel};
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+use atmo_core::model::State;
+use ros2_client::dds::rustdds::DomainParticipantBuilder;
+use ros2_client::{
+    Context, MessageTypeName, Name, Node, NodeName, NodeOptions, Publisher, QosProfile,
+    Subscription,
+};
+use serde::Serialize;
+use serde::de::DeserializeOwned;
+
+use crate::error::{IoError, Result};
+use crate::msg::frames::{odometry_to_state, vehicle_odometry_to_state};
+use crate::msg::{
+    ActuatorMotors, DiagnosticArray, DiagnosticStatus, KeyValue, MpcStatus, Odometry,
+    OffboardControlMode, RosMessage, Time, Twist, VehicleOdometry,
+};
+
+/// Reads `ROS_DOMAIN_ID` (unset or empty: 0). Valid ids are 0..=232.
+pub fn domain_id_from_env() -> Result<u16> {
+    match std::env::var("ROS_DOMAIN_ID") {
+        Err(_) => Ok(0),
+        Ok(text) if text.trim().is_empty() => Ok(0),
+        Ok(text) => match text.trim().parse::<u16>() {
+            Ok(id) if id <= 232 => Ok(id),
+            _ => Err(IoError::Ros {
+                context: "ROS_DOMAIN_ID".into(),
+                reason: format!("`{text}` is not a domain id in 0..=232"),
+            }),
+        },
+    }
+}
+
+/// A state estimate accepted from ROS 2 (NED/FRD 12-state).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RosEstimate {
+    /// The message's own stamp, ns (header stamp, or PX4 `timestamp_sample` in ns).
+    pub stamp_ns: u64,
+    /// When the node thread accepted it.
+    pub received: Instant,
+    pub state: State,
+}
+
+/// A drive command accepted from ROS 2 (FRD: positive yaw rate turns right).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct DriveCommand {
+    /// Forward speed, m/s.
+    pub forward: f64,
+    /// Yaw rate, rad/s, FRD (the ROS FLU angular.z negated).
+    pub yaw_rate: f64,
+    pub received: Instant,
+}
+
+/// What the node has seen and done so far (monotonic counters).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Ros2Counters {
+    /// Estimates that decoded, whatever their values.
+    pub estimates_received: u64,
+    pub estimates_accepted: u64,
+    /// Payloads on an input topic that did not decode as its type
+    /// (malformed CDR or a message of another type).
+    pub malformed: u64,
+    /// Estimates with a non-finite or invalid field (NaN, bad quaternion, frame).
+    pub invalid: u64,
+    /// Estimates whose stamp did not increase.
+    pub stamp_backwards: u64,
+    pub drive_received: u64,
+    pub drive_rejected: u64,
+    /// Accepted inputs dropped because the control thread's queue was full.
+    pub inputs_dropped: u64,
+    pub published: u64,
+    /// Records dropped because the publish queue was full.
+    pub publish_dropped: u64,
+    /// Publishes the DDS layer refused.
+    pub publish_errors: u64,
+}
+
+#[derive(Default)]
+struct Counters {
+    estimates_received: AtomicU64,
+    estimates_accepted: AtomicU64,
+    malformed: AtomicU64,
+    invalid: AtomicU64,
+    stamp_backwards: AtomicU64,
+    drive_received: AtomicU64,
+    drive_rejected: AtomicU64,
+    inputs_dropped: AtomicU64,
+    published: AtomicU64,
+    publish_dropped: AtomicU64,
+    publish_errors: AtomicU64,
+}
+
+impl Counters {
+    fn snapshot(&self) -> Ros2Counters {
+        let g = |a: &AtomicU64| a.load(Ordering::Relaxed);
+        Ros2Counters {
+            estimates_received: g(&self.estimates_received),
+            estimates_accepted: g(&self.estimates_accepted),
+            malformed: g(&self.malformed),
+            invalid: g(&self.invalid),
+            stamp_backwards: g(&self.stamp_backwards),
+            drive_received: g(&self.drive_received),
+            drive_rejected: g(&self.drive_rejected),
+            inputs_dropped: g(&self.inputs_dropped),
+            published: g(&self.published),
+            publish_dropped: g(&self.publish_dropped),
+            publish_errors: g(&self.publish_errors),
+        }
+    }
+}
+
+fn bump(a: &AtomicU64) {
+    a.fetch_add(1, Ordering::Relaxed);
+}
+
+#[allow(clippy::large_enum_variant)] // inline on purpose: no allocation on the control thread
+enum Outgoing {
+    Status(MpcStatus),
+    Motors(ActuatorMotors),
+    Offboard(OffboardControlMode),
+    Diagnostics(Box<DiagnosticArray>),
+}
+
+/// The control thread's sending side (`Clone + Send`; never blocks).
+#[derive(Clone)]
+pub struct Ros2Publisher {
+    tx: SyncSender<Outgoing>,
+    counters: Arc<Counters>,
+}
+
+impl Ros2Publisher {
+    fn send(&self, message: Outgoing) -> bool {
+        match self.tx.try_send(message) {
+            Ok(()) => true,
+            Err(TrySendError::Full(_) | TrySendError::Disconnected(_)) => {
+                bump(&self.counters.publish_dropped);
+                false
+            }
+        }
+    }
+
+    /// Queues one status for the status topic; false if dropped (counted).
+    pub fn try_publish_status(&self, status: &MpcStatus) -> bool {
+        self.send(Outgoing::Status(*status))
+    }
+
+    /// Queues thruster commands (ignored if the topic is disabled).
+    pub fn try_publish_motors(&self, motors: &ActuatorMotors) -> bool {
+        self.send(Outgoing::Motors(*motors))
+    }
+
+    /// Queues the PX4 offboard heartbeat (ignored if the topic is disabled).
+    pub fn try_publish_offboard(&self, mode: &OffboardControlMode) -> bool {
+        self.send(Outgoing::Offboard(*mode))
+    }
+
+    /// Queues extra diagnostics (allocates: not for the control thread). The
+    /// node adds its own `atmo/ros2` status to each array it publishes.
+    pub fn try_publish_diagnostics(&self, diagnostics: DiagnosticArray) -> bool {
+        self.send(Outgoing::Diagnostics(Box::new(diagnostics)))
+    }
+
+    pub fn counters(&self) -> Ros2Counters {
+        self.counters.snapshot()
+    }
+}
+
+/// The control thread's receiving side (`Send`, one owner).
+pub struct Ros2Inputs {
+    estimates: Receiver<RosEstimate>,
+    drive: Receiver<DriveCommand>,
+    counters: Arc<Counters>,
+}
+
+impl Ros2Inputs {
+    /// The newest estimate accepted since the last call, if any. Never blocks.
+    pub fn latest_estimate(&mut self) -> Option<RosEstimate> {
+        self.estimates.try_iter().last()
+    }
+
+    /// The newest drive command accepted since the last call, if any.
+    pub fn latest_drive(&mut self) -> Option<DriveCommand> {
+        self.drive.try_iter().last()
+    }
+
+    pub fn counters(&self) -> Ros2Counters {
+        self.counters.snapshot()
+    }
+}
+
+/// The node thread; stop it with [`Ros2Thread::stop`].
+pub struct Ros2Thread {
+    stop: Arc<AtomicBool>,
+    join: Option<JoinHandle<Result<()>>>,
+}
+
+impl Ros2Thread {
+    /// Stops the node thread and returns how it ended.
+    pub fn stop(mut self) -> Result<()> {
+        self.stop.store(true, Ordering::SeqCst);
+        match self.join.take() {
+            Some(join) => join.join().unwrap_or_else(|_| {
+                Err(IoError::Ros {
+                    context: "node thread".into(),
+                    reason: "panicked".into(),
+                })
+            }),
+            None => Ok(()),
+        }
+    }
+}
+
+impl Drop for Ros2Thread {
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::SeqCst);
+        if let Some(join) = self.join.take() {
+            let _ = join.join();
+        }
+    }
+}
+
+/// Entry point: [`Ros2Node::start`].
+pub struct Ros2Node;
+
+/// Settings that are not in the config file.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Ros2StartOptions {
+    /// Overrides `ROS_DOMAIN_ID` (tests run on their own domain).
+    pub domain_id: Option<u16>,
+}
+
+fn ros_err(context: &str, e: impl std::fmt::Display) -> IoError {
+    IoError::Ros {
+        context: context.to_string(),
+        reason: e.to_string(),
+    }
+}
+
+/// `(namespace, base)` of an absolute topic name.
+fn split_name(topic: &str) -> Result<Name> {
+    let (ns, base) = topic.rsplit_once('/').unwrap_or(("", topic));
+    let ns = if ns.is_empty() { "/" } else { ns };
+    Name::new(ns, base).map_err(|e| ros_err(&format!("topic `{topic}`"), e))
+}
+
+fn type_name<M: RosMessage>() -> MessageTypeName {
+    let mut parts = M::TYPE_NAME.split('/');
+    let pkg = parts.next().unwrap_or_default();
+    let name = parts.nth(1).unwrap_or_default();
+    MessageTypeName::new(pkg, name)
+}
+
+fn qos() -> QosProfile {
+    // Best effort, volatile, keep last 1: a late sample is worth nothing.
+    QosProfile::subscription_default()
+}
+
+fn publisher<M: RosMessage + Serialize>(
+    node: &mut Node,
+    topic: &TopicConfig,
+) -> Result<Option<Publisher<M>>> {
+    if !topic.enabled {
+        return Ok(None);
+    }
+    let context = format!("publisher `{}`", topic.name);
+    let t = node
+        .create_topic(&split_name(&topic.name)?, type_name::<M>(), &qos())
+        .map_err(|e| ros_err(&context, e))?;
+    node.create_publisher::<M>(&t, Some(qos()))
+        .map(Some)
+        .map_err(|e| ros_err(&context, e))
+}
+
+fn subscription<M: RosMessage + DeserializeOwned>(
+    node: &mut Node,
+    topic: &TopicConfig,
+) -> Result<Option<Subscription<M>>> {
+    if !topic.enabled {
+        return Ok(None);
+    }
+    let context = format!("subscription `{}`", topic.name);
+    let t = node
+        .create_topic(&split_name(&topic.name)?, type_name::<M>(), &qos())
+        .map_err(|e| ros_err(&context, e))?;
+    node.create_subscription::<M>(&t, Some(qos()))
+        .map(Some)
+        .map_err(|e| ros_err(&context, e))
+}
+
+enum EstimateSub {
+    Odometry(Subscription<Odometry>),
+    Px4(Subscription<VehicleOdometry>),
+}
+
+struct NodeThread {
+    config: Ros2Config,
+    _context: Context,
+    _node: Node,
+    status: Option<Publisher<MpcStatus>>,
+    motors: Option<Publisher<ActuatorMotors>>,
+    offboard: Option<Publisher<OffboardControlMode>>,
+    diagnostics: Option<Publisher<DiagnosticArray>>,
+    estimate: Option<EstimateSub>,
+    drive: Option<Subscription<Twist>>,
+    out_rx: Receiver<Outgoing>,
+    estimate_tx: SyncSender<RosEstimate>,
+    drive_tx: SyncSender<DriveCommand>,
+    counters: Arc<Counters>,
+    stop: Arc<AtomicBool>,
+    last_stamp: Option<u64>,
+    started: Instant,
+}
+
+/// At most this many samples are taken from one subscription per loop.
+const TAKE_BURST: usize = 256;
+
+impl Ros2Node {
+    /// Creates the participant, node, publishers and subscriptions (errors
+    /// are returned here, not later), then starts the node thread.
+    pub fn start(
+        config: &Ros2Config,
+        options: Ros2StartOptions,
+    ) -> Result<(Ros2Publisher, Ros2Inputs, Ros2Thread)> {
+        config.validate(std::path::Path::new("(ros2 config)"))?;
+        let domain = match options.domain_id {
+            Some(id) => id,
+            None => domain_id_from_env()?,
+        };
+        let config = config.clone();
+        let counters = Arc::new(Counters::default());
+        let stop = Arc::new(AtomicBool::new(false));
+        let (out_tx, out_rx) = sync_channel(config.publish_queue);
+        let (estimate_tx, estimate_rx) = sync_channel(16);
+        let (drive_tx, drive_rx) = sync_channel(16);
+        let (ready_tx, ready_rx) = sync_channel::<Result<()>>(1);
+        let thread_counters = Arc::clone(&counters);
+        let thread_stop = Arc::clone(&stop);
+        // DDS entities are built on the thread that uses them.
+        let join = std::thread::Builder::new()
+            .name("ros2-node".into())
+            .spawn(move || {
+                let node = NodeThread::build(
+                    config,
+                    domain,
+                    out_rx,
+                    estimate_tx,
+                    drive_tx,
+                    thread_counters,
+                    thread_stop,
+                );
+                match node {
+                    Ok(node) => {
+                        let _ = ready_tx.send(Ok(()));
+                        node.run();
+                        Ok(())
+                    }
+                    Err(e) => {
+                        let text = e.to_string();
+                        let _ = ready_tx.send(Err(e));
+                        Err(IoError::Ros {
+                            context: "start".into(),
+                            reason: text,
+                        })
+                    }
+                }
+            })
+            .map_err(|e| ros_err("node thread", e))?;
+        let thread = Ros2Thread {
+            stop,
+            join: Some(join),
+        };
+        match ready_rx.recv() {
+            Ok(Ok(())) => {}
+            Ok(Err(e)) => return Err(e),
+            Err(_) => {
+                return Err(ros_err("node thread", "ended before it was ready"));
+            }
+        }
+        Ok((
+            Ros2Publisher {
+                tx: out_tx,
+                counters: Arc::clone(&counters),
+            },
+            Ros2Inputs {
+                estimates: estimate_rx,
+                drive: drive_rx,
+                counters,
+            },
+            thread,
+        ))
+    }
+}
+
+impl NodeThread {
+    fn build(
+        config: Ros2Config,
+        domain: u16,
+        out_rx: Receiver<Outgoing>,
+        estimate_tx: SyncSender<RosEstimate>,
+        drive_tx: SyncSender<DriveCommand>,
+        counters: Arc<Counters>,
+        stop: Arc<AtomicBool>,
+    ) -> Result<Self> {
+        let mut builder = DomainParticipantBuilder::new(domain);
+        if config.loopback_only {
+            builder = builder
+                .with_only_networks([Ipv4Addr::LOCALHOST])
+                .same_host_loopback(true);
+        }
+        let participant = builder
+            .build()
+            .map_err(|e| ros_err(&format!("DDS participant on domain {domain}"), e))?;
+        let context =
+            Context::from_domain_participant(participant).map_err(|e| ros_err("context", e))?;
+        let node_name = NodeName::new(&config.namespace, &config.node_name)
+            .map_err(|e| ros_err(&format!("node name `{}`", config.node_name), e))?;
+        let mut node = context
+            .new_node(node_name, NodeOptions::new().enable_rosout(false))
+            .map_err(|e| ros_err("node", e))?;
+        let t = &config.topics;
+        let status = publisher::<MpcStatus>(&mut node, &t.status)?;
+        let motors = publisher::<ActuatorMotors>(&mut node, &t.actuator_motors)?;
+        let offboard = publisher::<OffboardControlMode>(&mut node, &t.offboard_mode)?;
+        let diagnostics = publisher::<DiagnosticArray>(&mut node, &t.diagnostics)?;
+        let estimate = if t.estimate.type_name == VehicleOdometry::TYPE_NAME {
+            subscription::<VehicleOdometry>(&mut node, &t.estimate)?.map(EstimateSub::Px4)
+        } else {
+            subscription::<Odometry>(&mut node, &t.estimate)?.map(EstimateSub::Odometry)
+        };
+        let drive = subscription::<Twist>(&mut node, &t.drive_command)?;
+        Ok(Self {
+            config,
+            _context: context,
+            _node: node,
+            status,
+            motors,
+            offboard,
+            diagnostics,
+            estimate,
+            drive,
+            out_rx,
+            estimate_tx,
+            drive_tx,
+            counters,
+            stop,
+            last_stamp: None,
+            started: Instant::now(),
+        })
+    }
+
+    fn run(mut self) {
+        let period = Duration::from_millis(self.config.diagnostics_period_ms);
+        let mut next_diagnostics = Instant::now() + period;
+        while !self.stop.load(Ordering::Relaxed) {
+            match self.out_rx.recv_timeout(Duration::from_millis(1)) {
+                Ok(message) => {
+                    self.publish(message);
+                    while let Ok(message) = self.out_rx.try_recv() {
+                        self.publish(message);
+                    }
+                }
+                Err(RecvTimeoutError::Timeout) => {}
+                // Every publisher handle dropped: keep serving the inputs.
+                Err(RecvTimeoutError::Disconnected) => std::thread::sleep(Duration::from_millis(1)),
+            }
+            self.take_estimates();
+            self.take_drive();
+            if Instant::now() >= next_diagnostics {
+                self.publish(Outgoing::Diagnostics(Box::default()));
+                next_diagnostics = Instant::now() + period;
+            }
+        }
+    }
+
+    fn publish(&mut self, message: Outgoing) {
+        let result = match message {
+            Outgoing::Status(m) => self.status.as_ref().map(|p| p.publish(m).is_ok()),
+            Outgoing::Motors(m) => self.motors.as_ref().map(|p| p.publish(m).is_ok()),
+            Outgoing::Offboard(m) => self.offboard.as_ref().map(|p| p.publish(m).is_ok()),
+            Outgoing::Diagnostics(mut m) => {
+                m.status.push(self.own_diagnostics());
+                if m.header.stamp == Time::default() {
+                    m.header.stamp = Time::from_ns(wall_ns());
+                }
+                self.diagnostics.as_ref().map(|p| p.publish(*m).is_ok())
+            }
+        };
+        match result {
+            Some(true) => bump(&self.counters.published),
+            Some(false) => bump(&self.counters.publish_errors),
+            None => {} // topic disabled
+        }
+    }
+
+    fn own_diagnostics(&self) -> DiagnosticStatus {
+        let c = self.counters.snapshot();
+        let rejected = c.malformed + c.invalid + c.stamp_backwards + c.drive_rejected;
+        let pairs: [(&str, u64); 11] = [
+            ("estimates_received", c.estimates_received),
+            ("estimates_accepted", c.estimates_accepted),
+            ("malformed", c.malformed),
+            ("invalid", c.invalid),
+            ("stamp_backwards", c.stamp_backwards),
+            ("drive_received", c.drive_received),
+            ("drive_rejected", c.drive_rejected),
+            ("inputs_dropped", c.inputs_dropped),
+            ("published", c.published),
+            ("publish_dropped", c.publish_dropped),
+            ("publish_errors", c.publish_errors),
+        ];
+        DiagnosticStatus {
+            level: if rejected + c.publish_dropped + c.publish_errors > 0 {
+                DiagnosticStatus::WARN
+            } else {
+                DiagnosticStatus::OK
+            },
+            name: "atmo/ros2".into(),
+            message: if rejected > 0 {
+                format!("{rejected} inputs rejected")
+            } else {
+                "ok".into()
+            },
+            hardware_id: self.config.node_name.clone(),
+            values: pairs
+                .iter()
+                .map(|(k, v)| KeyValue {
+                    key: (*k).to_string(),
+                    value: v.to_string(),
+                })
+                .chain(std::iter::once(KeyValue {
+                    key: "uptime_s".into(),
+                    value: format!("{:.1}", self.started.elapsed().as_secs_f64()),
+                }))
+                .collect(),
+        }
+    }
+
+    fn take_estimates(&mut self) {
+        let topic = self.config.topics.estimate.name.clone();
+        for _ in 0..TAKE_BURST {
+            let converted: Option<std::result::Result<(u64, State), IoError>> = match &self.estimate
+            {
+                None => return,
+                Some(EstimateSub::Odometry(sub)) => match sub.take() {
+                    Ok(None) => return,
+                    Ok(Some((odom, _))) => Some(odom.header.stamp.to_ns().map_or_else(
+                        || {
+                            Err(IoError::InvalidField {
+                                topic: topic.clone(),
+                                field: "header.stamp",
+                                reason: "negative or invalid time".into(),
+                            })
+                        },
+                        |stamp| odometry_to_state(&topic, &odom).map(|x| (stamp, x)),
+                    )),
+                    Err(_) => None,
+                },
+                Some(EstimateSub::Px4(sub)) => match sub.take() {
+                    Ok(None) => return,
+                    Ok(Some((odom, _))) => Some(
+                        vehicle_odometry_to_state(&topic, &odom)
+                            .map(|x| (odom.timestamp_sample.saturating_mul(1000), x)),
+                    ),
+                    Err(_) => None,
+                },
+            };
+            match converted {
+                None => bump(&self.counters.malformed),
+                Some(Err(_)) => {
+                    bump(&self.counters.estimates_received);
+                    bump(&self.counters.invalid);
+                }
+                Some(Ok((stamp_ns, state))) => {
+                    bump(&self.counters.estimates_received);
+                    if self.last_stamp.is_some_and(|last| stamp_ns <= last) {
+                        bump(&self.counters.stamp_backwards);
+                        continue;
+                    }
+                    self.last_stamp = Some(stamp_ns);
+                    bump(&self.counters.estimates_accepted);
+                    let estimate = RosEstimate {
+                        stamp_ns,
+                        received: Instant::now(),
+                        state,
+                    };
+                    if self.estimate_tx.try_send(estimate).is_err() {
+                        bump(&self.counters.inputs_dropped);
+                    }
+                }
+            }
+        }
+    }
+
+    fn take_drive(&mut self) {
+        let Some(sub) = &self.drive else { return };
+        for _ in 0..TAKE_BURST {
+            match sub.take() {
+                Ok(None) => return,
+                Err(_) => bump(&self.counters.malformed),
+                Ok(Some((twist, _))) => {
+                    bump(&self.counters.drive_received);
+                    let (forward, yaw_rate) = (twist.linear.x, -twist.angular.z);
+                    if !forward.is_finite() || !yaw_rate.is_finite() {
+                        bump(&self.counters.drive_rejected);
+                        continue;
+                    }
+                    let command = DriveCommand {
+                        forward,
+                        yaw_rate,
+                        received: Instant::now(),
+                    };
+                    if self.drive_tx.try_send(command).is_err() {
+                        bump(&self.counters.inputs_dropped);
+                    }
+                }
+            }
+        }
+    }
+}
+
+fn wall_ns() -> u64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| u64::try_from(d.as_nanos()).unwrap_or(u64::MAX))
+}

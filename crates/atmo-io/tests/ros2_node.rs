@@ -1,0 +1,334 @@
+//! The ROS 2 node against a second RustDDS participant on loopback: status
+//! out with correct values, odometry in (ENU/FLU -> NED/FRD), drive commands
+//! in, and each kind of bad input counted without a panic: malformed CDR, a
+//! message of another type on the topic, NaN in odometry, stamps going
+//! backwards. Runs on its own domain id.
+
+mod support;
+
+use std::net::Ipv4Addr;
+use std::time::{Duration, Instant};
+
+use atmo_core::model::State;
+use atmo_io::msg::frames::{odometry_to_state, state_to_odometry};
+use atmo_io::msg::{DiagnosticArray, MpcStatus, Odometry, Time, Twist, Vector3};
+use atmo_io::ros2::{Ros2Config, Ros2Counters, Ros2Node, Ros2StartOptions};
+use ros2_client::dds::rustdds::DomainParticipantBuilder;
+use ros2_client::{Context, MessageTypeName, Name, Node, NodeName, NodeOptions, QosProfile};
+use serde::{Deserialize, Serialize};
+use support::status;
+
+fn domain() -> u16 {
+    // Away from 0 and from other test binaries running at the same time.
+    100 + (std::process::id() % 100) as u16
+}
+
+fn peer_node(domain: u16, name: &str) -> (Context, Node) {
+    let dp = DomainParticipantBuilder::new(domain)
+        .with_only_networks([Ipv4Addr::LOCALHOST])
+        .same_host_loopback(true)
+        .build()
+        .unwrap();
+    let context = Context::from_domain_participant(dp).unwrap();
+    let node = context
+        .new_node(
+            NodeName::new("/", name).unwrap(),
+            NodeOptions::new().enable_rosout(false),
+        )
+        .unwrap();
+    (context, node)
+}
+
+fn topic_name(full: &str) -> Name {
+    let (ns, base) = full.rsplit_once('/').unwrap();
+    Name::new(if ns.is_empty() { "/" } else { ns }, base).unwrap()
+}
+
+/// Something that is not an Odometry, sent under Odometry's type name.
+#[derive(Serialize, Deserialize, Clone, Debug)]
+struct Garbage {
+    a: u8,
+    b: u16,
+}
+
+fn odometry(k: u64, stamp_s: i32) -> Odometry {
+    let mut x = State::zeros();
+    x[0] = 0.1 * k as f64;
+    x[1] = -0.2;
+    x[2] = -1.5;
+    x[3] = 0.4;
+    x[4] = 0.05;
+    x[5] = -0.03;
+    x[6] = 1.0;
+    x[7] = 0.5;
+    x[11] = 0.2;
+    let mut odom = state_to_odometry(&x, 0);
+    odom.header.stamp = Time {
+        sec: stamp_s,
+        nanosec: 0,
+    };
+    odom
+}
+
+fn wait_for(what: &str, timeout: Duration, mut f: impl FnMut() -> bool) {
+    let start = Instant::now();
+    while !f() {
+        assert!(start.elapsed() < timeout, "timed out waiting for {what}");
+        std::thread::sleep(Duration::from_millis(10));
+    }
+}
+
+#[test]
+fn node_talks_to_a_second_participant_and_counts_bad_input() {
+    let domain = domain();
+    let config = Ros2Config {
+        diagnostics_period_ms: 100,
+        ..Ros2Config::default()
+    };
+    let (publisher, mut inputs, thread) = Ros2Node::start(
+        &config,
+        Ros2StartOptions {
+            domain_id: Some(domain),
+        },
+    )
+    .unwrap();
+
+    let qos = QosProfile::subscription_default();
+    let (_peer_context, mut peer) = peer_node(domain, "peer");
+    let t = peer
+        .create_topic(
+            &topic_name("/atmo/status"),
+            MessageTypeName::new("atmo_msgs", "MpcStatus"),
+            &qos,
+        )
+        .unwrap();
+    let status_sub = peer.create_subscription::<MpcStatus>(&t, None).unwrap();
+    let t = peer
+        .create_topic(
+            &topic_name("/diagnostics"),
+            MessageTypeName::new("diagnostic_msgs", "DiagnosticArray"),
+            &qos,
+        )
+        .unwrap();
+    let diag_sub = peer
+        .create_subscription::<DiagnosticArray>(&t, None)
+        .unwrap();
+    let t = peer
+        .create_topic(
+            &topic_name("/atmo/mocap/odom"),
+            MessageTypeName::new("nav_msgs", "Odometry"),
+            &qos,
+        )
+        .unwrap();
+    let odom_pub = peer.create_publisher::<Odometry>(&t, None).unwrap();
+    let t = peer
+        .create_topic(
+            &topic_name("/atmo/cmd_drive"),
+            MessageTypeName::new("geometry_msgs", "Twist"),
+            &qos,
+        )
+        .unwrap();
+    let drive_pub = peer.create_publisher::<Twist>(&t, None).unwrap();
+
+    // Discovery, then a stream both ways.
+    let mut sent_k = 0u64;
+    let mut received_status = Vec::new();
+    let mut estimates = Vec::new();
+    let mut odom_k = 0u64;
+    let start = Instant::now();
+    while received_status.len() < 20 || estimates.len() < 20 {
+        assert!(
+            start.elapsed() < Duration::from_secs(15),
+            "no traffic: {:?}",
+            publisher.counters()
+        );
+        assert!(publisher.try_publish_status(&status(sent_k)));
+        sent_k += 1;
+        odom_pub
+            .publish(odometry(odom_k, 100 + odom_k as i32))
+            .unwrap();
+        odom_k += 1;
+        std::thread::sleep(Duration::from_millis(10));
+        while let Ok(Some((s, _))) = status_sub.take() {
+            received_status.push(s);
+        }
+        if let Some(e) = inputs.latest_estimate() {
+            estimates.push(e);
+        }
+    }
+    for s in &received_status {
+        assert_eq!(*s, status(s.tick), "status {} arrived changed", s.tick);
+    }
+    for e in &estimates {
+        let k = e.stamp_ns / 1_000_000_000 - 100;
+        let want = odometry_to_state("/x", &odometry(k, 0)).unwrap();
+        assert_eq!(e.state, want);
+        assert!((e.state[3] - 0.4).abs() < 1e-12); // NED yaw survives the round trip
+    }
+    let good = inputs.counters();
+    assert_eq!(
+        good.malformed + good.invalid + good.stamp_backwards,
+        0,
+        "{good:?}"
+    );
+    let mut stamp = 100 + odom_k as i32;
+
+    // Drive commands: FLU angular.z left-positive -> FRD yaw rate.
+    wait_for("a drive command", Duration::from_secs(5), || {
+        drive_pub
+            .publish(Twist {
+                linear: Vector3 {
+                    x: 0.7,
+                    y: 0.0,
+                    z: 0.0,
+                },
+                angular: Vector3 {
+                    x: 0.0,
+                    y: 0.0,
+                    z: 0.3,
+                },
+            })
+            .unwrap();
+        inputs
+            .latest_drive()
+            .is_some_and(|d| d.forward == 0.7 && d.yaw_rate == -0.3)
+    });
+
+    // NaN in odometry.
+    let c0 = inputs.counters();
+    wait_for("a NaN estimate counted", Duration::from_secs(5), || {
+        let mut odom = odometry(1, stamp);
+        stamp += 1;
+        odom.pose.pose.position.z = f64::NAN;
+        odom_pub.publish(odom).unwrap();
+        inputs.counters().invalid > c0.invalid
+    });
+    // Stamps going backwards.
+    wait_for("a backwards stamp counted", Duration::from_secs(5), || {
+        odom_pub.publish(odometry(2, 50)).unwrap();
+        inputs.counters().stamp_backwards > c0.stamp_backwards
+    });
+    // Malformed CDR: another layout under Odometry's type name.
+    let (_bad_context, mut bad) = peer_node(domain, "bad_peer");
+    let t = bad
+        .create_topic(
+            &topic_name("/atmo/mocap/odom"),
+            MessageTypeName::new("nav_msgs", "Odometry"),
+            &qos,
+        )
+        .unwrap();
+    let garbage_pub = bad.create_publisher::<Garbage>(&t, None).unwrap();
+    wait_for(
+        "a malformed payload counted",
+        Duration::from_secs(10),
+        || {
+            garbage_pub.publish(Garbage { a: 1, b: 2 }).unwrap();
+            inputs.counters().malformed > c0.malformed
+        },
+    );
+    // A message of another type (Twist) on the odometry topic.
+    let (_wrong_context, mut wrong) = peer_node(domain, "wrong_peer");
+    let t = wrong
+        .create_topic(
+            &topic_name("/atmo/mocap/odom"),
+            MessageTypeName::new("geometry_msgs", "Twist"),
+            &qos,
+        )
+        .unwrap();
+    let wrong_pub = wrong.create_publisher::<Twist>(&t, None).unwrap();
+    let before_wrong = inputs.counters();
+    for _ in 0..50 {
+        wrong_pub.publish(Twist::default()).unwrap();
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let after_wrong = inputs.counters();
+    // Either DDS refuses to match the writer (type names differ) or the payload
+    // is counted as malformed; it is never accepted as an estimate.
+    assert_eq!(
+        after_wrong.estimates_accepted,
+        before_wrong.estimates_accepted
+    );
+    eprintln!(
+        "wrong type on the topic: {} counted as malformed",
+        after_wrong.malformed - before_wrong.malformed
+    );
+
+    // Good data is still accepted after all that.
+    let accepted = inputs.counters().estimates_accepted;
+    wait_for(
+        "a good estimate after the bad ones",
+        Duration::from_secs(5),
+        || {
+            odom_pub.publish(odometry(3, stamp)).unwrap();
+            stamp += 1;
+            inputs.latest_estimate();
+            inputs.counters().estimates_accepted > accepted
+        },
+    );
+
+    // The counters are in the node's diagnostics.
+    let c: Ros2Counters = inputs.counters();
+    wait_for(
+        "diagnostics with the counters",
+        Duration::from_secs(5),
+        || {
+            while let Ok(Some((d, _))) = diag_sub.take() {
+                let Some(own) = d.status.iter().find(|s| s.name == "atmo/ros2") else {
+                    continue;
+                };
+                let value = |key: &str| -> u64 {
+                    own.values
+                        .iter()
+                        .find(|kv| kv.key == key)
+                        .map(|kv| kv.value.parse().unwrap())
+                        .unwrap()
+                };
+                if value("malformed") >= c.malformed
+                    && value("invalid") >= c.invalid
+                    && value("stamp_backwards") >= c.stamp_backwards
+                {
+                    assert_eq!(own.level, atmo_io::msg::DiagnosticStatus::WARN);
+                    return true;
+                }
+            }
+            false
+        },
+    );
+    eprintln!("counters: {:?}", inputs.counters());
+    thread.stop().unwrap();
+}
+
+#[test]
+fn config_errors_name_file_and_key() {
+    let text = "[topics.estimate]\nname = \"/a/b\"\ntype = \"geometry_msgs/msg/Twist\"\n";
+    let err = Ros2Config::from_toml_str(text, "ros2.toml")
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("ros2.toml") && err.contains("topics.estimate.type"),
+        "{err}"
+    );
+    let text = "[topics.status]\nname = \"atmo/status\"\ntype = \"atmo_msgs/msg/MpcStatus\"\n";
+    let err = Ros2Config::from_toml_str(text, "ros2.toml")
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("topics.status.name"), "{err}");
+    let err = Ros2Config::from_toml_str("nodename = \"x\"\n", "ros2.toml")
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("ros2.toml:1") && err.contains("nodename"),
+        "{err}"
+    );
+    let text = "[topics.diagnostics]\nname = \"/atmo/status\"\ntype = \"diagnostic_msgs/msg/DiagnosticArray\"\n";
+    assert!(
+        Ros2Config::from_toml_str(text, "ros2.toml").is_err(),
+        "duplicate name"
+    );
+    let px4 = "[topics.estimate]\nname = \"/fmu/out/vehicle_odometry\"\ntype = \"px4_msgs/msg/VehicleOdometry\"\n";
+    let config = Ros2Config::from_toml_str(px4, "ros2.toml").unwrap();
+    assert_eq!(config.topics.status.name, "/atmo/status");
+    let shipped =
+        Ros2Config::load(concat!(env!("CARGO_MANIFEST_DIR"), "/ros2.example.toml")).unwrap();
+    assert_eq!(shipped, Ros2Config::default());
+}
