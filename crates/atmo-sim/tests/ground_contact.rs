@@ -250,3 +250,41 @@ fn driven_wheels_roll_the_robot_forward_and_turn_it() {
         "{rates:?}"
     );
 }
+
+#[test]
+fn the_wheels_touch_first_from_about_35_deg_of_tilt() {
+    // Gentle touchdowns (5 cm) at landing tilts: the shroud wheels take the load.
+    for deg in [40.0_f64, 60.0, 70.0, 90.0] {
+        let plant = drop_from(0.05, deg.to_radians());
+        assert!(plant.crash().is_none(), "{deg} deg: {:?}", plant.crash());
+        assert!(plant.contact_signal(), "{deg} deg");
+    }
+    // Below about 33 deg the base (bottom 0.06 m below B) reaches the ground
+    // before the wheels. Dropped with its lowest point 5 cm up.
+    for deg in [0.0_f64, 20.0] {
+        let tilt = deg.to_radians();
+        assert!(
+            wheel_drop(tilt) < 0.06,
+            "{deg} deg: the base is the lowest point"
+        );
+        let x = level_at(0.06 + 0.05);
+        let mut plant = Plant::new(
+            &robot(),
+            &contact_only(),
+            &TerrainConfig::flat(0.0),
+            &InitialState::at(x, tilt),
+            3,
+        )
+        .unwrap();
+        assert!(plant.crash().is_none());
+        plant.advance(&Command::idle(), 1.0).unwrap();
+        assert!(
+            matches!(
+                plant.crash().map(|c| c.kind),
+                Some(EventKind::Crash(CrashKind::BodyContact { .. }))
+            ),
+            "{deg} deg: {:?}",
+            plant.crash()
+        );
+    }
+}

@@ -315,3 +315,45 @@ fn battery_sag_lowers_thrust_as_energy_is_used() {
         "sag must weaken the thrust: {now} vs {unscaled}"
     );
 }
+
+#[test]
+fn a_moving_tilt_uses_a_body_within_1e_5_of_the_exact_one_and_the_exact_one_at_rest() {
+    let effects = EffectsConfig {
+        tilt_mechanism: Some(TiltMechanismConfig::default()),
+        ..EffectsConfig::none()
+    };
+    let model = truth_model();
+    let mut plant = Plant::new(
+        &robot(),
+        &plant_with(effects),
+        &far_above(),
+        &InitialState::at(level_at(0.0), 0.1),
+        1,
+    )
+    .unwrap();
+    let mut cmd = Command::idle();
+    cmd.tilt_rate = 0.3;
+    for _ in 0..2000 {
+        plant.step(&cmd).unwrap();
+        let b = plant.body();
+        let exact = model.at_tilt(b.varphi);
+        let rel = |a: f64, e: f64, scale: f64| (a - e).abs() / scale;
+        assert!(rel(b.mass, exact.mass, exact.mass) < 1e-12);
+        assert!((b.first_moment - exact.first_moment).norm() / exact.first_moment.norm() < 1e-5);
+        assert!((b.inertia - exact.inertia).norm() / exact.inertia.norm() < 1e-5);
+        assert!(
+            (b.mass_matrix_inv - exact.mass_matrix_inv).norm() / exact.mass_matrix_inv.norm()
+                < 1e-5
+        );
+        assert!((b.thrust_torque - exact.thrust_torque).norm() / exact.thrust_torque.norm() < 1e-5);
+    }
+    // Stopped: the exact body again, so the plant is atmo-core bit for bit.
+    plant.step(&Command::idle()).unwrap();
+    let tilt = plant.tilt();
+    assert_eq!(*plant.body(), model.at_tilt(tilt));
+    let u = Input::repeat(0.5);
+    assert_eq!(
+        plant.body_derivative(&Command::rotors(u)).unwrap(),
+        model.at_tilt(tilt).dynamics(&plant.state(), &u)
+    );
+}
