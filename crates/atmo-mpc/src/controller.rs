@@ -159,6 +159,8 @@ pub struct Mpc {
     du: Vec<Input>,
     prepared: bool,
     preparation_ok: bool,
+    /// The last preparation met a non-finite linearization.
+    plan_diverged: bool,
     preparation_time: Duration,
     failed_ticks: u32,
     /// Estimated disturbance wrench the predictions include (offset-free MPC).
@@ -193,6 +195,7 @@ impl Mpc {
             du: vec![Input::zeros(); steps],
             prepared: false,
             preparation_ok: false,
+            plan_diverged: false,
             preparation_time: Duration::ZERO,
             failed_ticks: 0,
             disturbance: nalgebra::Vector6::zeros(),
@@ -285,14 +288,20 @@ impl Mpc {
     /// and after a `NonFiniteLinearization`.
     pub fn reset(&mut self, x0: &State) -> Result<()> {
         check_finite("reset state", 0, x0.as_slice())?;
+        self.restart_plan(x0);
+        self.failed_ticks = 0;
+        self.prepared = false;
+        Ok(())
+    }
+
+    /// Plan held at `x0` with hover-trim inputs at the stage tilts.
+    fn restart_plan(&mut self, x0: &State) {
         self.refresh_input_reference();
         for x in &mut self.plan_x {
             *x = *x0;
         }
         self.plan_u.copy_from_slice(&self.u_ref);
-        self.failed_ticks = 0;
-        self.prepared = false;
-        Ok(())
+        self.plan_diverged = false;
     }
 
     /// Sets the same state reference for every stage.
@@ -428,6 +437,7 @@ impl Mpc {
                 && defect.iter().all(|v| v.is_finite()))
             {
                 self.preparation_time = start.elapsed();
+                self.plan_diverged = true;
                 return Err(MpcError::NonFiniteLinearization { stage: k });
             }
             self.lin.a[k] = s.a;
@@ -499,7 +509,13 @@ impl Mpc {
             return Ok(self.fail(FailureCause::NonFiniteEstimate { entry }, timings, start));
         }
         if !self.preparation_ok {
-            return Ok(self.fail(FailureCause::PreparationFailed, timings, start));
+            let out = self.fail(FailureCause::PreparationFailed, timings, start);
+            // A plan that could not be linearized (it diverged) is useless
+            // from now on: restart it from the estimate so the next tick can solve.
+            if self.plan_diverged {
+                self.restart_plan(x_est);
+            }
+            return Ok(out);
         }
         let mut e0 = x_est - self.plan_x[0];
         e0[idx::YAW] = wrap_angle(e0[idx::YAW]);

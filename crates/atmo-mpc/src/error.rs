@@ -37,8 +37,11 @@ pub enum MpcError {
         max: f64,
     },
     /// The linearization along the plan produced a non-finite number (the
-    /// plan diverged); call `reset` with the current estimate.
-    #[error("linearization at stage {stage} is not finite; the plan must be reset")]
+    /// plan diverged). The following `feedback` flies the fallback and
+    /// restarts the plan from its estimate.
+    #[error(
+        "linearization at stage {stage} is not finite; the plan restarts from the next estimate"
+    )]
     NonFiniteLinearization { stage: usize },
     /// Clarabel refused the start-up QP or an in-place update.
     #[error("QP solver: {0}")]

@@ -371,3 +371,31 @@ fn controller_can_move_to_the_control_thread() {
     });
     assert_eq!(handle.join().unwrap(), Outcome::Solved);
 }
+
+/// A plan that blows up (here: started at an absurd speed) fails one tick
+/// with a bounded fallback command and is restarted from the estimate.
+#[test]
+fn diverged_plan_is_restarted_from_the_estimate() {
+    let mut mpc = controller(Formulation::Condensed);
+    let x = hover_at(0.0, 0.0, 1.0);
+    mpc.set_reference_constant(&x).unwrap();
+    let mut absurd = x;
+    absurd[idx::WX] = 1e300;
+    mpc.reset(&absurd).unwrap();
+    assert!(matches!(
+        mpc.prepare(),
+        Err(MpcError::NonFiniteLinearization { .. })
+    ));
+    let out = mpc.feedback(&x).unwrap();
+    assert!(matches!(
+        out.outcome,
+        Outcome::Fallback {
+            cause: FailureCause::PreparationFailed,
+            failed_ticks: 1
+        }
+    ));
+    assert!(out.u.iter().all(|v| (0.0..=1.0).contains(v)));
+    let next = mpc.tick(&x).unwrap();
+    assert_eq!(next.outcome, Outcome::Solved);
+    assert_eq!(mpc.failed_ticks(), 0);
+}
