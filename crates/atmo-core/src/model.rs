@@ -574,7 +574,9 @@ impl TiltedBody {
     }
 
     /// Level hover trim: the rotor commands that hold zero acceleration at
-    /// zero attitude and rates. May exceed 1 past the critical angle.
+    /// zero attitude and rates (with the disturbance wrench, if any; its
+    /// lateral force is left to the attitude). May exceed 1 past the
+    /// critical angle.
     pub fn hover_trim(&self) -> Input {
         // Rows F_z, tau_x, tau_y, tau_z; F_x and F_y vanish by symmetry.
         let mut a = nalgebra::Matrix4::zeros();
@@ -584,11 +586,12 @@ impl TiltedBody {
         }
         let g_b = Vector3::new(0.0, 0.0, self.gravity);
         let gravity_torque = self.first_moment.cross(&g_b);
+        let d = &self.disturbance;
         let rhs = Vector4::new(
-            -self.mass * self.gravity,
-            -gravity_torque.x,
-            -gravity_torque.y,
-            -gravity_torque.z,
+            -self.mass * self.gravity - d[2],
+            -gravity_torque.x - d[3],
+            -gravity_torque.y - d[4],
+            -gravity_torque.z - d[5],
         );
         a.lu()
             .solve(&rhs)

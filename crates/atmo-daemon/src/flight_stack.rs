@@ -18,6 +18,7 @@ use nalgebra::Vector3;
 
 use crate::error::{DaemonError, Result};
 use crate::modes::{Conditions, Mode, Thresholds, next_mode};
+use crate::observer::{DisturbanceObserver, ObserverSettings};
 use crate::settings::FlightSettings;
 
 /// A state estimate and the time it was measured.
@@ -127,8 +128,12 @@ pub struct Status {
     pub feedback_time: f64,
     pub preparation_time: f64,
     pub solver_iterations: u32,
+    /// QP solves this tick: 1, or more when a mode change re-planned.
+    pub qp_solves: u32,
     /// Drive reference: forward speed m/s and yaw rate rad/s.
     pub drive_velocity: [f64; 2],
+    /// Disturbance wrench the MPC predicts with (body force N, torque N m).
+    pub disturbance: [f64; 6],
     pub rejected: RejectCounters,
 }
 
@@ -142,6 +147,10 @@ pub struct StepOutputs {
     pub wheel_rates: WheelRates,
     pub status: Status,
 }
+
+/// SQP iterations spent re-planning on a mode change (a one-off cost of a
+/// few feedback times).
+const REPLAN_ITERATIONS: usize = 4;
 
 /// The flight stack.
 pub struct FlightStack {
@@ -169,12 +178,17 @@ pub struct FlightStack {
     last_ground_z: f64,
     last_thrust: Input,
     touchdown_thrust: Input,
-    hold_position: Vector3<f64>,
+    /// Moving position reference (see `fill_reference`).
+    carrot: Vector3<f64>,
     hold_yaw: f64,
-    holding: bool,
     last_preparation_time: f64,
     rejected: RejectCounters,
     tilt_command: f64,
+    observer: DisturbanceObserver,
+    /// Tilt limit of the transition so far (it only grows), rad.
+    transition_limit: f64,
+    /// The mode changed: re-plan with a few SQP iterations before the next feedback.
+    replan: bool,
 }
 
 impl FlightStack {
@@ -195,6 +209,12 @@ impl FlightStack {
             return Err(DaemonError::Setup(format!(
                 "modes.takeoff_max_tilt_deg ({}) must not exceed the robot's limits.tilt_flight_max_deg ({})",
                 settings.modes.takeoff_max_tilt_deg, lim.tilt_flight_max_deg
+            )));
+        }
+        if settings.modes.transition_full_tilt_height >= lim.transition_height {
+            return Err(DaemonError::Setup(format!(
+                "modes.transition_full_tilt_height ({} m) must be below the robot's limits.transition_height ({} m)",
+                settings.modes.transition_full_tilt_height, lim.transition_height
             )));
         }
         let thresholds = Thresholds {
@@ -229,12 +249,19 @@ impl FlightStack {
             last_ground_z: 0.0,
             last_thrust: Input::zeros(),
             touchdown_thrust: Input::zeros(),
-            hold_position: Vector3::zeros(),
+            carrot: Vector3::zeros(),
             hold_yaw: 0.0,
-            holding: false,
             last_preparation_time: 0.0,
             rejected: RejectCounters::default(),
             tilt_command: 0.0,
+            observer: DisturbanceObserver::new(ObserverSettings {
+                force_gain: settings.observer.force_gain,
+                torque_gain: settings.observer.torque_gain,
+                max_force: settings.observer.max_force,
+                max_torque: settings.observer.max_torque,
+            }),
+            replan: false,
+            transition_limit: 0.0,
             model,
             settings,
         })
@@ -311,10 +338,22 @@ impl FlightStack {
     /// Tilt limit in force in `mode`, rad.
     fn tilt_limit(&self, mode: Mode) -> f64 {
         match mode {
-            Mode::Transition => self.transition_tilt_max,
+            Mode::Transition => self.transition_limit,
             Mode::Takeoff | Mode::Flight | Mode::Morphing | Mode::Failsafe => self.flight_tilt_max,
             Mode::Disarmed | Mode::Drive | Mode::Touchdown => self.tilt_max,
         }
+    }
+
+    /// The transition's tilt limit at `height`: from the flight limit at z*
+    /// to the transition limit at `transition_full_tilt_height`, linear in
+    /// between. Tilting past the critical angle while still high would make
+    /// ATMO fall the rest of the way; this keeps the tilt in step with the
+    /// descent so that the wheels meet the ground as the thrust runs out.
+    fn transition_schedule(&self, height: f64) -> f64 {
+        let top = self.thresholds.transition_height;
+        let bottom = self.settings.modes.transition_full_tilt_height;
+        let progress = ((top - height) / (top - bottom)).clamp(0.0, 1.0);
+        self.flight_tilt_max + (self.transition_tilt_max - self.flight_tilt_max) * progress
     }
 
     /// The tilt velocity the mode asks for, before limits.
@@ -369,6 +408,9 @@ impl FlightStack {
             self.enter(mode, now, &state);
         }
 
+        if mode == Mode::Transition {
+            self.transition_limit = self.transition_limit.max(self.transition_schedule(height));
+        }
         let limit = self.tilt_limit(mode);
         let tilt_velocity = self.limit_tilt_velocity(self.tilt_velocity_wanted(mode), tilt, limit);
         self.tilt_command = tilt_velocity;
@@ -391,9 +433,13 @@ impl FlightStack {
             feedback_time: 0.0,
             preparation_time: self.last_preparation_time,
             solver_iterations: 0,
+            qp_solves: 0,
             drive_velocity: [0.0, 0.0],
+            disturbance: [0.0; 6],
             rejected: self.rejected,
         };
+        self.observe(mode, tilt);
+        status.disturbance = self.observer.wrench().into();
 
         let thrust = self.thrust(mode, &state, estimate_fresh, pilot, tilt, &mut status);
         let wheel_rates = self.wheels(mode, &state, height, pilot, &mut status);
@@ -407,18 +453,46 @@ impl FlightStack {
         }
     }
 
+    /// Learns the disturbance in free flight, holds it near the ground
+    /// (ground effect and contact are not a constant wrench), forgets it on
+    /// the ground.
+    fn observe(&mut self, mode: Mode, tilt: f64) {
+        let learning = self.settings.observer.enabled
+            && matches!(mode, Mode::Flight | Mode::Morphing | Mode::Transition)
+            && self.last_estimate.is_some();
+        if learning {
+            if let Some(est) = self.last_estimate {
+                self.observer.update(
+                    &self.model,
+                    est.stamp_ns,
+                    &est.state,
+                    tilt,
+                    &self.last_thrust,
+                );
+            }
+        } else if mode.is_airborne_mode() {
+            self.observer.pause();
+        } else {
+            self.observer.reset();
+        }
+    }
+
     fn enter(&mut self, mode: Mode, now: u64, state: &State) {
         self.mode = mode;
         self.mode_since_ns = now;
-        self.hold_position = Vector3::new(state[idx::X], state[idx::Y], state[idx::Z]);
+        self.carrot = Vector3::new(state[idx::X], state[idx::Y], state[idx::Z]);
         self.hold_yaw = state[idx::YAW];
-        self.holding = false;
         if mode == Mode::Touchdown {
             self.touchdown_thrust = self.last_thrust;
         }
+        self.transition_limit = self.flight_tilt_max;
         if !mode.is_airborne_mode() {
             self.mpc_warm = false;
         }
+        // A new mode changes the horizon's tilt ramp, reference and weights at
+        // once: one Gauss-Newton step from the old plan can be far off (it
+        // was: a 50 % thrust dip entering the transition), so converge once.
+        self.replan = self.mpc_warm;
     }
 
     fn thrust(
@@ -469,6 +543,17 @@ impl FlightStack {
             }
             self.mpc_warm = true;
         }
+        if self.replan {
+            self.replan = false;
+            self.fill_reference(state);
+            self.configure_mpc(state);
+            // Failure here leaves the RTI plan, which the feedback then uses.
+            status.qp_solves += match self.mpc.converge_sqp(state, REPLAN_ITERATIONS, 1e-6) {
+                Ok(report) => report.iterations as u32,
+                Err(_) => REPLAN_ITERATIONS as u32,
+            };
+        }
+        status.qp_solves += 1;
         let Ok(out) = self.mpc.feedback(state) else {
             self.mpc_failures_total += 1;
             status.solver = SolverState::Failed;
@@ -536,37 +621,28 @@ impl FlightStack {
         let pilot = self.last_pilot;
         let mut v = Vector3::from(pilot.velocity);
         let ts = self.period();
-        // Position reference: the paper's p_ref = p + v T_s while the pilot
-        // commands a velocity, and a held position when the sticks are centred.
-        let moving = v.norm() > 1e-6;
-        if moving {
-            self.holding = false;
-        } else if !self.holding {
-            self.hold_position = p;
-            self.holding = true;
-        }
-        let mut anchor = if moving {
-            p + v * ts
-        } else {
-            self.hold_position
-        };
         match self.mode {
-            Mode::Takeoff if pilot.velocity[2].abs() < 1e-6 => {
-                // Climb to the take-off height unless the pilot commands vertically.
-                anchor.z = self.last_ground_z - self.settings.modes.takeoff_target_height;
-                v.z = 0.0;
-            }
-            Mode::Transition => {
-                // Descent reference towards the ground.
-                let speed = self.settings.modes.transition_descent_speed;
-                v.z = speed;
-                anchor.z = p.z + speed * ts;
-            }
-            Mode::Failsafe => {
-                anchor = self.hold_position;
-                v = Vector3::zeros();
-            }
+            Mode::Transition => v.z = self.settings.modes.transition_descent_speed,
+            Mode::Failsafe => v = Vector3::zeros(),
             _ => {}
+        }
+        // Position reference: a carrot that moves at the commanded velocity
+        // from where the mode began (held still when the sticks are centred),
+        // on a leash of `reference_leash` ahead of the robot. Unlike the
+        // paper's p_ref = p + v T_s, a robot that lags (heavier than the
+        // model, a head wind) builds a position error that the MPC corrects,
+        // so the commanded velocity is met without a steady offset.
+        self.carrot += v * ts;
+        let lead = self.carrot - p;
+        let leash = self.settings.pilot.reference_leash;
+        if lead.norm() > leash {
+            self.carrot = p + lead * (leash / lead.norm());
+        }
+        let mut anchor = self.carrot;
+        if self.mode == Mode::Takeoff && pilot.velocity[2].abs() < 1e-6 {
+            // Climb to the take-off height unless the pilot commands vertically.
+            anchor.z = self.last_ground_z - self.settings.modes.takeoff_target_height;
+            v.z = 0.0;
         }
         let yaw_rate = pilot.yaw_rate;
         if yaw_rate.abs() > 1e-9 {
@@ -601,6 +677,7 @@ impl FlightStack {
             .mpc
             .set_tilt_ramp(tilt, self.tilt_command, 0.0, limit.max(tilt));
         let _ = self.mpc.set_alpha(alpha);
+        let _ = self.mpc.set_disturbance(&self.observer.wrench());
     }
 
     /// The RTI preparation phase for the next tick. Call after the outputs

@@ -4,6 +4,7 @@
 //! - [`flight_stack`]: `FlightStack::step(inputs)` (pure, deterministic, the
 //!   clock is an input): input validation, mode machine, tilt law with limits,
 //!   MPC feedback (thrusters), drive controller (wheels), failsafes, status.
+//! - [`observer`]: disturbance observer that makes the MPC offset-free.
 //! - [`control_loop`]: the 150 Hz control thread with absolute deadlines and
 //!   per-tick timing.
 //! - [`settings`], read from `config/flight.toml`.
@@ -12,6 +13,7 @@ pub mod control_loop;
 pub mod error;
 pub mod flight_stack;
 pub mod modes;
+pub mod observer;
 pub mod settings;
 
 pub use error::{DaemonError, Result};

@@ -15,6 +15,7 @@ pub struct FlightSettings {
     pub pilot: PilotSettings,
     pub modes: ModeSettings,
     pub failsafe: FailsafeSettings,
+    pub observer: ObserverConfig,
     #[serde(rename = "loop")]
     pub control_loop: LoopSettings,
 }
@@ -25,6 +26,8 @@ pub struct PilotSettings {
     pub max_speed: f64,
     pub max_yaw_rate: f64,
     pub descent_threshold: f64,
+    /// m, how far the position reference may run ahead of the robot.
+    pub reference_leash: f64,
 }
 
 #[derive(Debug, Clone, Deserialize, PartialEq)]
@@ -37,6 +40,8 @@ pub struct ModeSettings {
     pub morph_hysteresis: f64,
     pub transition_descent_speed: f64,
     pub wheel_spinup_height: f64,
+    /// m, height at which the transition may use its full tilt limit.
+    pub transition_full_tilt_height: f64,
     pub thrust_cut_time: f64,
 }
 
@@ -47,6 +52,16 @@ pub struct FailsafeSettings {
     pub recovery_time: f64,
     pub recovery_tilt_deg: f64,
     pub open_loop_thrust_scale: f64,
+}
+
+#[derive(Debug, Clone, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct ObserverConfig {
+    pub enabled: bool,
+    pub force_gain: f64,
+    pub torque_gain: f64,
+    pub max_force: f64,
+    pub max_torque: f64,
 }
 
 #[derive(Debug, Clone, Deserialize, PartialEq)]
@@ -120,6 +135,12 @@ impl FlightSettings {
             0.01,
             2.0,
         )?;
+        c.within(
+            "modes.transition_full_tilt_height",
+            m.transition_full_tilt_height,
+            0.0,
+            2.0,
+        )?;
         c.within("modes.wheel_spinup_height", m.wheel_spinup_height, 0.0, 2.0)?;
         c.within("modes.thrust_cut_time", m.thrust_cut_time, 0.0, 5.0)?;
         let f = &self.failsafe;
@@ -132,6 +153,11 @@ impl FlightSettings {
             0.0,
             1.5,
         )?;
+        let o = &self.observer;
+        c.within("observer.force_gain", o.force_gain, 0.0, 1.0)?;
+        c.within("observer.torque_gain", o.torque_gain, 0.0, 1.0)?;
+        c.within("observer.max_force", o.max_force, 0.0, 200.0)?;
+        c.within("observer.max_torque", o.max_torque, 0.0, 20.0)?;
         c.within("loop.rate_hz", self.control_loop.rate_hz, 1.0, 2000.0)?;
         Ok(())
     }

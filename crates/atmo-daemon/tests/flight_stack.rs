@@ -24,6 +24,8 @@ struct Loop {
     /// When false, the estimate stops updating (a dead motion-capture link).
     estimate_alive: bool,
     last_estimate: Option<Estimate>,
+    /// A wrench the controller's model does not have (CoM offset, mass error).
+    disturbance: nalgebra::Vector6<f64>,
 }
 
 impl Loop {
@@ -55,6 +57,7 @@ impl Loop {
             period_ns,
             estimate_alive: true,
             last_estimate: None,
+            disturbance: nalgebra::Vector6::zeros(),
         }
     }
 
@@ -83,7 +86,11 @@ impl Loop {
         let substeps = 7;
         let dt = self.period_ns as f64 * 1e-9 / f64::from(substeps);
         for _ in 0..substeps {
-            self.x = self.model.at_tilt(self.tilt).rk4_step(&self.x, &u, dt);
+            self.x = self
+                .model
+                .at_tilt(self.tilt)
+                .with_disturbance(self.disturbance)
+                .rk4_step(&self.x, &u, dt);
             self.tilt =
                 (self.tilt + out.tilt_velocity * dt).clamp(0.0, std::f64::consts::FRAC_PI_2);
         }
@@ -257,4 +264,28 @@ fn transition_limit_is_enforced_whatever_is_commanded() {
             );
         }
     }
+}
+
+#[test]
+fn the_observer_removes_the_offset_of_an_unmodelled_torque_and_weight() {
+    // A 5 mm CoM offset (0.27 N m pitch torque) and 3 % more weight: without
+    // integral action the MPC trades the attitude error against collective
+    // thrust and sinks (0.9 m/s instead of 0.3 against the plant).
+    let mut lp = Loop::new(2.5);
+    lp.disturbance = nalgebra::Vector6::new(0.0, 0.0, 0.03 * 53.8, 0.0, -0.27, 0.0);
+    lp.pilot.velocity = [0.0, 0.0, 0.3];
+    let outs = lp.run(3.0);
+    assert!(outs.iter().all(|o| o.status.mode == Mode::Flight));
+    let vz = lp.x[idx::VZ];
+    assert!((vz - 0.3).abs() < 0.05, "descends at {vz:.3} m/s");
+    assert!(
+        lp.x[idx::PITCH].abs() < 1f64.to_radians(),
+        "pitch {:.2} deg",
+        lp.x[idx::PITCH].to_degrees()
+    );
+    let d = outs.last().unwrap().status.disturbance;
+    assert!(
+        (d[4] + 0.27).abs() < 0.05 && (d[2] - 1.61).abs() < 0.3,
+        "learned {d:?}"
+    );
 }

@@ -107,7 +107,11 @@ fn flight_stack_step_does_not_allocate_after_start_up() {
             assert_eq!(after - mid, 0, "prepare_next allocated at tick {tick}");
             // Only the Clarabel solve inside the feedback phase may allocate,
             // and no more than a bare solve does (measured above).
-            let solves = usize::from(out.status.solver != SolverState::Idle);
+            let solves = out.status.qp_solves as usize;
+            assert_eq!(
+                out.status.qp_solves > 0,
+                out.status.solver != SolverState::Idle
+            );
             step_allocations += mid - before;
             allowed += solves * clarabel_per_solve;
         }
