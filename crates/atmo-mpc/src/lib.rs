@@ -59,13 +59,20 @@
 //!
 //! Clarabel (interior point) is built once in [`Mpc::new`] with a fixed
 //! sparsity pattern (structural zeros kept, presolve off, verbose off); each
-//! tick only `update_P/q/A/b` write values. A solve ends as an [`Outcome`]:
-//! `Solved`, `Degraded` (reduced accuracy, iteration or time limit: the
-//! iterate is still used, inputs clamped to [0, 1]), `Fallback` (no usable
-//! solution, or a non-finite estimate: the shifted previous plan is flown,
-//! up to `failure.grace_ticks` ticks in a row) and then `Failed`.
+//! tick only `update_P/q/A/b` write values. The per-solve time limit is ours
+//! ([`qp::TimedSolver`], a termination callback on a monotonic clock):
+//! Clarabel 0.11's own limit counts set-up time and a timer that is never
+//! reset, and after about 10^4 solves it ended every solve at iteration 0.
 //!
-//! Nothing in the tick allocates in this crate (`tests/no_alloc.rs`).
+//! A solve ends as an [`Outcome`]: `Solved`, `Degraded` (reduced accuracy,
+//! iteration or time limit: the iterate is still used, inputs clamped to
+//! [0, 1]), `Fallback` (no usable solution, a non-finite estimate, or a
+//! failed preparation: the shifted previous plan is flown, up to
+//! `failure.grace_ticks` ticks in a row) and then `Failed`. A plan whose
+//! linearization is not finite is restarted from the next estimate.
+//!
+//! Nothing in the tick allocates in this crate (`tests/no_alloc.rs`; Clarabel's
+//! `solve` itself allocates one block per call in its timers).
 
 pub mod controller;
 pub mod error;
