@@ -18,4 +18,4 @@ if [[ ! -f "$stamp" || "$(cat "$stamp")" != "$want" ]]; then
     "$venv/bin/python" -m pip install --disable-pip-version-check -q -r "$req" >&2
     echo "$want" >"$stamp"
 fi
-echo "$venv/bin/python"
+echo "$(cd "$venv" && pwd)/bin/python"
