@@ -11,15 +11,18 @@
 
 use std::time::Instant;
 
+use atmo_core::RobotConfig;
 use atmo_core::model::{State, idx};
-use atmo_daemon::{Estimate, FlightSettings, FlightStack, Mode, PilotInput, StepInputs, StepOutputs};
+use atmo_daemon::{
+    Estimate, FlightSettings, FlightStack, Mode, PilotInput, StepInputs, StepOutputs,
+};
 use atmo_mpc::MpcSettings;
 use nalgebra::Vector3;
 use serde::Serialize;
 
 use crate::error::{Result, SimError};
 use crate::plant::{Command, EventKind, Plant};
-use crate::scenario::Scenario;
+use crate::scenario::{Scenario, SuccessConfig};
 
 /// One control tick as the runner saw it (what is logged and plotted).
 #[derive(Debug, Clone, Copy)]
@@ -63,43 +66,56 @@ pub struct Summary {
     pub feedback_time_max_s: f64,
 }
 
-/// What counts as a successful wheel landing.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct SuccessCriteria {
-    pub min_touchdown_tilt_deg: f64,
-    pub max_impact_speed: f64,
-    pub min_drive_distance: f64,
-}
-
-impl Default for SuccessCriteria {
-    fn default() -> Self {
-        Self { min_touchdown_tilt_deg: 60.0, max_impact_speed: 0.5, min_drive_distance: 1.0 }
-    }
-}
-
 impl Summary {
-    /// No crash, touchdown tilt, impact speed and drive distance within `c`.
-    pub fn landed(&self, c: &SuccessCriteria) -> bool {
-        !self.crashed
-            && self.touchdown_tilt_deg.is_some_and(|t| t >= c.min_touchdown_tilt_deg)
-            && self.impact_speed_mps.is_some_and(|v| v <= c.max_impact_speed)
-            && self.drive_distance_m >= c.min_drive_distance
+    /// Whether the run met the scenario's `[success]` criteria: a wheel
+    /// landing with no crash, enough tilt, a soft impact and a drive on; or,
+    /// for a flight, no crash and no ground contact.
+    pub fn succeeded(&self, c: &SuccessConfig) -> bool {
+        if c.landing {
+            !self.crashed
+                && self
+                    .touchdown_tilt_deg
+                    .is_some_and(|t| t >= c.min_touchdown_tilt_deg)
+                && self
+                    .impact_speed_mps
+                    .is_some_and(|v| v <= c.max_impact_speed)
+                && self.drive_distance_m >= c.min_drive_distance
+        } else {
+            !self.crashed && self.touchdown_time_s.is_none()
+        }
     }
 }
 
-/// The controller side of a closed-loop run.
+/// The controller side of a closed-loop run: the robot model it believes
+/// in (the plant may differ: see the scenario's robot and effects), its
+/// flight settings and MPC settings.
 #[derive(Debug, Clone)]
 pub struct ControllerConfig {
+    pub robot: RobotConfig,
     pub flight: FlightSettings,
     pub mpc: MpcSettings,
 }
 
 impl ControllerConfig {
-    /// The shipped config/flight.toml and config/mpc.toml.
+    /// The shipped config/atmo.toml, config/flight.toml and config/mpc.toml.
     pub fn atmo() -> Result<Self> {
         let flight = FlightSettings::atmo();
-        let mpc = MpcSettings::atmo(&flight.mpc_preset).map_err(|e| SimError::Setup(e.to_string()))?;
-        Ok(Self { flight, mpc })
+        let mpc =
+            MpcSettings::atmo(&flight.mpc_preset).map_err(|e| SimError::Setup(e.to_string()))?;
+        Ok(Self {
+            robot: RobotConfig::atmo(),
+            flight,
+            mpc,
+        })
+    }
+
+    /// Lifts the MPC's wall-clock time limit (its iteration cap still
+    /// bounds each solve) so that a simulated flight does not depend on how
+    /// busy the machine is: same scenario and seed, same flight.
+    #[must_use]
+    pub fn deterministic(mut self) -> Self {
+        self.mpc.solver.time_limit = 10.0;
+        self
     }
 }
 
@@ -111,14 +127,16 @@ fn ground_z_below(plant: &Plant, p: &Vector3<f64>) -> f64 {
 }
 
 fn pilot_input(scenario: &Scenario, t: f64) -> PilotInput {
-    scenario.pilot_at(t).map_or(PilotInput::default(), |p| PilotInput {
-        velocity: p.velocity,
-        yaw_rate: p.yaw_rate,
-        throttle: p.throttle,
-        arm: p.arm,
-        offboard: p.offboard,
-        mpc_enabled: p.mpc,
-    })
+    scenario
+        .pilot_at(t)
+        .map_or(PilotInput::default(), |p| PilotInput {
+            velocity: p.velocity,
+            yaw_rate: p.yaw_rate,
+            throttle: p.throttle,
+            arm: p.arm,
+            offboard: p.offboard,
+            mpc_enabled: p.mpc,
+        })
 }
 
 /// Flies `scenario` in closed loop; `on_tick` sees every tick (for logs).
@@ -129,8 +147,12 @@ pub fn fly(
 ) -> Result<Summary> {
     let wall = Instant::now();
     let mut plant = scenario.build_plant()?;
-    let mut stack = FlightStack::new(&scenario.robot, controller.mpc.clone(), controller.flight.clone())
-        .map_err(|e| SimError::Setup(e.to_string()))?;
+    let mut stack = FlightStack::new(
+        &controller.robot,
+        controller.mpc.clone(),
+        controller.flight.clone(),
+    )
+    .map_err(|e| SimError::Setup(e.to_string()))?;
     let period = stack.period();
     let duration = scenario.file.duration;
     let mut next_tick = 0.0;
@@ -182,7 +204,12 @@ pub fn fly(
                 feedback_times.push(s.feedback_time);
             }
             mpc_failures = s.mpc_failures_total;
-            rejected = [s.rejected.estimate, s.rejected.tilt, s.rejected.pilot, s.rejected.ground];
+            rejected = [
+                s.rejected.estimate,
+                s.rejected.tilt,
+                s.rejected.pilot,
+                s.rejected.ground,
+            ];
             on_tick(&TickRecord {
                 time: t,
                 inputs,
@@ -217,7 +244,11 @@ pub fn fly(
 
     // A touchdown the plant reported (first load on the wheels) wins over
     // the signal edge: the contact signal can start high on the ground.
-    let first_touchdown = plant.events().iter().find(|e| e.kind == EventKind::Touchdown).map(|e| e.time);
+    let first_touchdown = plant
+        .events()
+        .iter()
+        .find(|e| e.kind == EventKind::Touchdown)
+        .map(|e| e.time);
     if touchdown.is_none() && first_touchdown.is_some() {
         touchdown = first_touchdown.map(|t| (t, plant.tilt(), 0.0));
     }
@@ -238,7 +269,37 @@ pub fn fly(
         rejected_inputs: rejected,
         sim_time_s: plant.time(),
         wall_time_s: wall.elapsed().as_secs_f64(),
-        feedback_time_median_s: feedback_times.get(feedback_times.len() / 2).copied().unwrap_or(0.0),
+        feedback_time_median_s: feedback_times
+            .get(feedback_times.len() / 2)
+            .copied()
+            .unwrap_or(0.0),
         feedback_time_max_s: feedback_times.last().copied().unwrap_or(0.0),
     })
+}
+
+/// The per-tick series of the paper's Fig. 5A.
+pub fn trace_of(records: &[TickRecord]) -> crate::figure::FlightTrace {
+    use crate::figure::Phase;
+    let mut trace = crate::figure::FlightTrace::default();
+    for r in records {
+        let s = &r.outputs.status;
+        trace.time.push(r.time);
+        trace.height.push(r.truth_height);
+        trace.tilt_deg.push(r.truth_tilt.to_degrees());
+        trace.alpha.push(if s.mode.is_airborne_mode() {
+            s.alpha
+        } else {
+            0.0
+        });
+        trace
+            .mean_thrust
+            .push(r.outputs.thrust.iter().sum::<f64>() / 4.0);
+        trace.phase.push(match s.mode {
+            Mode::Morphing => Phase::Morphing,
+            Mode::Transition => Phase::Transition,
+            Mode::Touchdown | Mode::Drive => Phase::Ground,
+            _ => Phase::Air,
+        });
+    }
+    trace
 }

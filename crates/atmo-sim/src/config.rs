@@ -14,7 +14,7 @@ use serde::Deserialize;
 use crate::error::Result;
 use crate::ground_effect::GroundEffectConfig;
 
-fn default_true() -> bool {
+pub(crate) fn default_true() -> bool {
     true
 }
 fn default_dt() -> f64 {

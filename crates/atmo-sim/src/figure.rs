@@ -67,9 +67,16 @@ fn spans(trace: &FlightTrace, phase: Phase) -> Vec<(f64, f64)> {
 }
 
 /// Writes the figure to `path` (PNG).
-pub fn write_landing_figure(path: &Path, trace: &FlightTrace, markers: &Markers, title: &str) -> Result<()> {
+pub fn write_landing_figure(
+    path: &Path,
+    trace: &FlightTrace,
+    markers: &Markers,
+    title: &str,
+) -> Result<()> {
     if trace.time.len() < 2 {
-        return Err(SimError::Output("figure: fewer than two samples to plot".into()));
+        return Err(SimError::Output(
+            "figure: fewer than two samples to plot".into(),
+        ));
     }
     let t0 = trace.time[0];
     let t1 = *trace.time.last().unwrap_or(&t0);
@@ -77,13 +84,36 @@ pub fn write_landing_figure(path: &Path, trace: &FlightTrace, markers: &Markers,
     root.fill(&WHITE).map_err(plot_err)?;
     let root = root.titled(title, ("sans-serif", 26)).map_err(plot_err)?;
     let panels = root.split_evenly((4, 1));
-    let max_height = trace.height.iter().copied().fold(markers.morph_height, f64::max) * 1.1;
+    let max_height = trace
+        .height
+        .iter()
+        .copied()
+        .fold(markers.morph_height, f64::max)
+        * 1.1;
     let max_thrust = trace.mean_thrust.iter().copied().fold(1.0, f64::max);
     let series: [(&str, &Vec<f64>, f64, f64, RGBColor); 4] = [
         ("altitude [m]", &trace.height, 0.0, max_height, BLUE),
-        ("tilt angle varphi [deg]", &trace.tilt_deg, 0.0, 90.0, RGBColor(200, 80, 0)),
-        ("alpha = f(z) cos varphi", &trace.alpha, 0.0, 1.05, RGBColor(0, 130, 60)),
-        ("mean thrust (normalized)", &trace.mean_thrust, 0.0, max_thrust * 1.05, RGBColor(120, 0, 160)),
+        (
+            "tilt angle varphi [deg]",
+            &trace.tilt_deg,
+            0.0,
+            90.0,
+            RGBColor(200, 80, 0),
+        ),
+        (
+            "alpha = f(z) cos varphi",
+            &trace.alpha,
+            0.0,
+            1.05,
+            RGBColor(0, 130, 60),
+        ),
+        (
+            "mean thrust (normalized)",
+            &trace.mean_thrust,
+            0.0,
+            max_thrust * 1.05,
+            RGBColor(120, 0, 160),
+        ),
     ];
     let shades = [
         (Phase::Morphing, RGBColor(255, 200, 120)),
@@ -113,7 +143,10 @@ pub fn write_landing_figure(path: &Path, trace: &FlightTrace, markers: &Markers,
             let mut first = true;
             for (a, b) in spans(trace, phase) {
                 let drawn = chart
-                    .draw_series(std::iter::once(Rectangle::new([(a, lo), (b, hi)], shade.mix(0.35).filled())))
+                    .draw_series(std::iter::once(Rectangle::new(
+                        [(a, lo), (b, hi)],
+                        shade.mix(0.35).filled(),
+                    )))
                     .map_err(plot_err)?;
                 if first && label.starts_with("altitude") {
                     drawn.label(name).legend(move |(x, y)| {
@@ -135,27 +168,44 @@ pub fn write_landing_figure(path: &Path, trace: &FlightTrace, markers: &Markers,
                 (markers.transition_height, "z*", RED),
             ] {
                 chart
-                    .draw_series(DashedLineSeries::new([(t0, h), (t1, h)], 8, 6, c.stroke_width(2)))
+                    .draw_series(DashedLineSeries::new(
+                        [(t0, h), (t1, h)],
+                        8,
+                        6,
+                        c.stroke_width(2),
+                    ))
                     .map_err(plot_err)?
                     .label(format!("{name} = {h:.2} m"))
-                    .legend(move |(x, y)| PathElement::new([(x, y), (x + 16, y)], c.stroke_width(2)));
+                    .legend(move |(x, y)| {
+                        PathElement::new([(x, y), (x + 16, y)], c.stroke_width(2))
+                    });
             }
         }
         if label.starts_with("tilt") {
             for (deg, c) in [(50.0, RGBColor(90, 90, 90)), (70.0, RED)] {
                 chart
-                    .draw_series(DashedLineSeries::new([(t0, deg), (t1, deg)], 4, 6, c.stroke_width(1)))
+                    .draw_series(DashedLineSeries::new(
+                        [(t0, deg), (t1, deg)],
+                        4,
+                        6,
+                        c.stroke_width(1),
+                    ))
                     .map_err(plot_err)?;
             }
         }
         if let Some(td) = markers.touchdown {
             let drawn = chart
-                .draw_series(std::iter::once(PathElement::new([(td, lo), (td, hi)], BLACK.stroke_width(2))))
+                .draw_series(std::iter::once(PathElement::new(
+                    [(td, lo), (td, hi)],
+                    BLACK.stroke_width(2),
+                )))
                 .map_err(plot_err)?;
             if label.starts_with("altitude") {
                 drawn
                     .label(format!("touchdown t = {td:.2} s"))
-                    .legend(|(x, y)| PathElement::new([(x, y), (x + 16, y)], BLACK.stroke_width(2)));
+                    .legend(|(x, y)| {
+                        PathElement::new([(x, y), (x + 16, y)], BLACK.stroke_width(2))
+                    });
             }
         }
         if label.starts_with("altitude") {

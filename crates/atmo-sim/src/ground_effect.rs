@@ -47,9 +47,8 @@ pub const DEFAULT_STD: [[f64; 6]; 4] = [
     [0.080, 0.055, 0.030, 0.015, 0.005, 0.0], // mean - std = -15 % at 0.25 m
 ];
 
-fn default_true() -> bool {
-    true
-}
+use crate::config::default_true;
+
 fn default_rotor_radius() -> f64 {
     0.11
 }

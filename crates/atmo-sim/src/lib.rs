@@ -59,10 +59,13 @@
 //! pilot inputs and references over time for a flight stack, and scripted
 //! actuator commands for open-loop runs.
 
+pub mod closed_loop;
 pub mod config;
 pub mod contact;
 pub mod error;
+pub mod figure;
 pub mod ground_effect;
+pub mod monte_carlo;
 pub mod noise;
 pub mod plant;
 mod rigid;

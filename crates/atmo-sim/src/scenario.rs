@@ -161,6 +161,50 @@ pub struct ScenarioFile {
     pub reference: Vec<ReferenceInput>,
     #[serde(default)]
     pub open_loop: Vec<OpenLoopInput>,
+    /// What a closed-loop run of this scenario must achieve.
+    #[serde(default)]
+    pub success: SuccessConfig,
+}
+
+/// `[success]`: the closed-loop pass criteria of a scenario.
+#[derive(Debug, Clone, Copy, Deserialize, serde::Serialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct SuccessConfig {
+    /// true: a wheel landing (touchdown tilt, impact speed, drive on);
+    /// false: a flight that must not touch the ground.
+    #[serde(default = "crate::config::default_true")]
+    pub landing: bool,
+    #[serde(default = "SuccessConfig::default_tilt")]
+    pub min_touchdown_tilt_deg: f64,
+    /// m/s, vertical speed at first wheel contact.
+    #[serde(default = "SuccessConfig::default_impact")]
+    pub max_impact_speed: f64,
+    /// m driven after touchdown.
+    #[serde(default = "SuccessConfig::default_drive")]
+    pub min_drive_distance: f64,
+}
+
+impl SuccessConfig {
+    fn default_tilt() -> f64 {
+        60.0
+    }
+    fn default_impact() -> f64 {
+        0.5
+    }
+    fn default_drive() -> f64 {
+        1.0
+    }
+}
+
+impl Default for SuccessConfig {
+    fn default() -> Self {
+        Self {
+            landing: true,
+            min_touchdown_tilt_deg: Self::default_tilt(),
+            max_impact_speed: Self::default_impact(),
+            min_drive_distance: Self::default_drive(),
+        }
+    }
 }
 
 /// A loaded, validated scenario with its robot and (merged) plant config.
@@ -253,6 +297,24 @@ impl ScenarioFile {
             }
         }
 
+        c.within(
+            "success.min_touchdown_tilt_deg",
+            self.success.min_touchdown_tilt_deg,
+            0.0,
+            90.0,
+        )?;
+        c.within(
+            "success.max_impact_speed",
+            self.success.max_impact_speed,
+            0.0,
+            10.0,
+        )?;
+        c.within(
+            "success.min_drive_distance",
+            self.success.min_drive_distance,
+            0.0,
+            1000.0,
+        )?;
         check_times(&c, "pilot", self.pilot.iter().map(|p| p.t), self.duration)?;
         for (i, p) in self.pilot.iter().enumerate() {
             let k = format!("pilot[{i}]");

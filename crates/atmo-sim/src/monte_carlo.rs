@@ -1,0 +1,215 @@
+//! Monte Carlo of a closed-loop scenario: N randomized copies flown in
+//! parallel, success rate and distributions.
+//!
+//! Each run perturbs the truth (the plant), never the controller's model:
+//! mass and inertia within +-5 % (`mass_error`), the rotors' thrust
+//! coefficient within +-5 % (the plant's robot file), wind turbulence and a
+//! random gust, sensor noise (the run's seed) and the initial state
+//! (position +-0.1 m, velocity +-0.1 m/s, attitude +-2 deg). Run i uses seed
+//! `seed + i`, so any run can be replayed alone.
+
+use std::sync::Mutex;
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use serde::Serialize;
+
+use crate::closed_loop::{ControllerConfig, Summary, fly};
+use crate::config::{GustConfig, MassErrorConfig};
+use crate::error::Result;
+use crate::scenario::{Scenario, SuccessConfig};
+
+/// Order statistics of one quantity over the runs that have it.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct Distribution {
+    pub count: usize,
+    pub min: f64,
+    pub p05: f64,
+    pub median: f64,
+    pub p95: f64,
+    pub max: f64,
+    pub mean: f64,
+    pub values: Vec<f64>,
+}
+
+impl Distribution {
+    pub fn of(mut values: Vec<f64>) -> Option<Self> {
+        if values.is_empty() {
+            return None;
+        }
+        values.sort_by(f64::total_cmp);
+        let q = |p: f64| values[((values.len() - 1) as f64 * p).round() as usize];
+        Some(Self {
+            count: values.len(),
+            min: values[0],
+            p05: q(0.05),
+            median: q(0.5),
+            p95: q(0.95),
+            max: values[values.len() - 1],
+            mean: values.iter().sum::<f64>() / values.len() as f64,
+            values,
+        })
+    }
+}
+
+/// A run that did not succeed, for replay.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct Failure {
+    pub run: usize,
+    pub seed: u64,
+    pub summary: Summary,
+}
+
+/// `monte_carlo.json`.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct MonteCarloReport {
+    pub scenario: String,
+    pub base_seed: u64,
+    pub runs: usize,
+    pub successes: usize,
+    pub success_rate: f64,
+    pub criteria: SuccessConfig,
+    pub touchdown_tilt_deg: Option<Distribution>,
+    pub impact_speed_mps: Option<Distribution>,
+    pub drive_distance_m: Option<Distribution>,
+    pub crashes: usize,
+    pub failures: Vec<Failure>,
+    pub wall_time_s: f64,
+    pub threads: usize,
+}
+
+/// The i-th randomized copy of `base`.
+pub fn randomized(base: &Scenario, seed: u64) -> Scenario {
+    let mut s = base.clone();
+    let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x4d43_5f41_544d_4f00);
+    let mut within = |half: f64| rng.random_range(-half..=half);
+    s.file.seed = seed;
+    let fx = &mut s.plant.effects;
+    let mass = fx.mass_error.clone().unwrap_or(MassErrorConfig {
+        enabled: true,
+        mass_scale: 1.0,
+        inertia_scale: 1.0,
+    });
+    fx.mass_error = Some(MassErrorConfig {
+        enabled: true,
+        mass_scale: mass.mass_scale * (1.0 + within(0.05)),
+        inertia_scale: mass.inertia_scale * (1.0 + within(0.05)),
+    });
+    s.robot.rotor.k_thrust *= 1.0 + within(0.05);
+    let mut wind = fx.wind.clone().unwrap_or_default();
+    wind.enabled = true;
+    let gust_t = within(0.5 * s.file.duration).abs();
+    wind.gusts.push(GustConfig {
+        t: gust_t,
+        duration: 1.0 + within(0.5),
+        velocity: [within(1.5), within(1.5), within(0.3)],
+    });
+    fx.wind = Some(wind);
+    let init = &mut s.file.initial;
+    for k in 0..3 {
+        init.position[k] += within(0.1);
+        init.velocity[k] += within(0.1);
+        init.euler_deg[k] += within(2.0);
+    }
+    if init.on_ground {
+        // A robot on its wheels starts on the ground, whatever the spread says.
+        init.position = base.file.initial.position;
+        init.velocity = base.file.initial.velocity;
+        init.euler_deg = base.file.initial.euler_deg;
+    }
+    s
+}
+
+/// Flies `runs` randomized copies on `threads` threads; `progress` is
+/// called after each run with the number finished.
+pub fn run(
+    base: &Scenario,
+    controller: &ControllerConfig,
+    runs: usize,
+    base_seed: u64,
+    threads: usize,
+    progress: &(dyn Fn(usize) + Sync),
+) -> Result<MonteCarloReport> {
+    let wall = std::time::Instant::now();
+    let criteria = base.file.success;
+    let next = AtomicUsize::new(0);
+    let done = AtomicUsize::new(0);
+    let results: Mutex<Vec<(usize, u64, Result<Summary>)>> = Mutex::new(Vec::with_capacity(runs));
+    let threads = threads.clamp(1, runs.max(1));
+    std::thread::scope(|scope| {
+        for _ in 0..threads {
+            scope.spawn(|| {
+                loop {
+                    let i = next.fetch_add(1, Ordering::Relaxed);
+                    if i >= runs {
+                        break;
+                    }
+                    let seed = base_seed.wrapping_add(i as u64);
+                    let scenario = randomized(base, seed);
+                    let summary = fly(&scenario, controller, |_| {});
+                    results
+                        .lock()
+                        .unwrap_or_else(std::sync::PoisonError::into_inner)
+                        .push((i, seed, summary));
+                    progress(done.fetch_add(1, Ordering::Relaxed) + 1);
+                }
+            });
+        }
+    });
+    let mut results = results
+        .into_inner()
+        .unwrap_or_else(std::sync::PoisonError::into_inner);
+    results.sort_by_key(|r| r.0);
+    let mut summaries = Vec::with_capacity(runs);
+    for (i, seed, r) in results {
+        summaries.push((i, seed, r?));
+    }
+    let successes = summaries
+        .iter()
+        .filter(|(_, _, s)| s.succeeded(&criteria))
+        .count();
+    let failures = summaries
+        .iter()
+        .filter(|(_, _, s)| !s.succeeded(&criteria))
+        .map(|(i, seed, s)| Failure {
+            run: *i,
+            seed: *seed,
+            summary: s.clone(),
+        })
+        .collect();
+    Ok(MonteCarloReport {
+        scenario: base.file.name.clone(),
+        base_seed,
+        runs,
+        successes,
+        success_rate: if runs == 0 {
+            0.0
+        } else {
+            successes as f64 / runs as f64
+        },
+        criteria,
+        touchdown_tilt_deg: Distribution::of(
+            summaries
+                .iter()
+                .filter_map(|(_, _, s)| s.touchdown_tilt_deg)
+                .collect(),
+        ),
+        impact_speed_mps: Distribution::of(
+            summaries
+                .iter()
+                .filter_map(|(_, _, s)| s.impact_speed_mps)
+                .collect(),
+        ),
+        drive_distance_m: Distribution::of(
+            summaries
+                .iter()
+                .map(|(_, _, s)| s.drive_distance_m)
+                .collect(),
+        ),
+        crashes: summaries.iter().filter(|(_, _, s)| s.crashed).count(),
+        failures,
+        wall_time_s: wall.elapsed().as_secs_f64(),
+        threads,
+    })
+}
