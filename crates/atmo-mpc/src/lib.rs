@@ -65,9 +65,10 @@
 //! reset, and after about 10^4 solves it ended every solve at iteration 0.
 //!
 //! A solve ends as an [`Outcome`]: `Solved`, `Degraded` (reduced accuracy,
-//! iteration or time limit: the iterate is still used, inputs clamped to
-//! [0, 1]), `Fallback` (no usable solution, a non-finite estimate, or a
-//! failed preparation: the shifted previous plan is flown, up to
+//! or an iteration or time limit hit with an iterate that meets Clarabel's
+//! reduced tolerances: it is used, inputs clamped to [0, 1]), `Fallback` (no
+//! usable solution, a limit hit earlier, a non-finite estimate, or a failed
+//! preparation: the shifted previous plan is flown, up to
 //! `failure.grace_ticks` ticks in a row) and then `Failed`. A plan whose
 //! linearization is not finite is restarted from the next estimate.
 //!

@@ -170,6 +170,21 @@ impl TimedSolver {
     }
 }
 
+impl TimedSolver {
+    /// Whether the last iterate meets Clarabel's reduced ("almost solved")
+    /// tolerances: the same test Clarabel applies before it turns an
+    /// iteration or time limit into `AlmostSolved`, which it does not do for
+    /// a callback termination.
+    pub fn iterate_meets_reduced_tolerances(&self) -> bool {
+        let info = &self.solver.info;
+        let s = self.solver.settings();
+        info.ktratio <= 1.0
+            && (info.gap_abs < s.reduced_tol_gap_abs || info.gap_rel < s.reduced_tol_gap_rel)
+            && info.res_primal < s.reduced_tol_feas
+            && info.res_dual < s.reduced_tol_feas
+    }
+}
+
 fn nanos_since(epoch: Instant) -> u64 {
     u64::try_from(epoch.elapsed().as_nanos()).unwrap_or(u64::MAX)
 }
@@ -277,6 +292,14 @@ impl QpBackend {
         match self {
             Self::Sparse(qp) => qp.snapshot(),
             Self::Condensed(qp) => qp.snapshot(),
+        }
+    }
+
+    /// See [`TimedSolver::iterate_meets_reduced_tolerances`].
+    pub fn iterate_usable(&self) -> bool {
+        match self {
+            Self::Sparse(qp) => qp.solver.iterate_meets_reduced_tolerances(),
+            Self::Condensed(qp) => qp.solver.iterate_meets_reduced_tolerances(),
         }
     }
 
