@@ -63,6 +63,7 @@ pub mod closed_loop;
 pub mod config;
 pub mod contact;
 pub mod error;
+pub mod explain;
 pub mod figure;
 pub mod ground_effect;
 pub mod monte_carlo;
