@@ -5,12 +5,15 @@
 //!   NED/FRD conversion done at the ROS 2 edge only.
 //! - [`mcap_log`]: the MCAP logger (own thread, bounded channel, never
 //!   blocks the tick), the reader for the project's logs, and `recover`.
+//! - [`drivers`]: zero-copy iceoryx2 driver ports (thrusters, tilt, wheels,
+//!   ground contact) with sequence numbers, stamps and driver liveness.
 //! - [`ros2`]: the ROS 2 node (status out, estimates and drive commands in,
 //!   PX4 offboard outputs, diagnostics), never blocking the control thread.
 //!
 //! Conventions: NED world, FRD body, Euler ZYX, the 12-state order of
 //! `atmo_core::model::idx`; time in u64 nanoseconds.
 
+pub mod drivers;
 pub mod error;
 pub mod mcap_log;
 pub mod msg;

@@ -1,0 +1,379 @@
+//! Driver ports across processes (iceoryx2, isolated by a per-test file
+//! prefix): the daemon side in this process, a driver in a child process
+//! (this test binary re-run as `child_driver`). Commands out, sensors and
+//! heartbeats in, tick-to-driver latency, a killed driver detected within
+//! the liveness timeout, a restarted driver reconnecting, and the stale
+//! resources of a crashed run cleaned at start-up.
+
+use std::process::{Child, Command};
+
+use std::time::Duration;
+
+use atmo_io::drivers::{
+    DriverEndpoint, DriverId, DriverPortsConfig, FlightPorts, GroundContact, PortHeader,
+    ThrusterCommand, TiltEncoder, cleanup_stale, monotonic_ns,
+};
+
+fn config(tag: &str) -> DriverPortsConfig {
+    DriverPortsConfig {
+        iceoryx_prefix: format!("atmo{tag}{}_", std::process::id()),
+        liveness_timeout_ms: 100,
+        ..DriverPortsConfig::default()
+    }
+}
+
+const DIRS: [&str; 4] = [
+    "/dev/shm",
+    "/tmp/iceoryx2",
+    "/tmp/iceoryx2/nodes",
+    "/tmp/iceoryx2/services",
+];
+
+/// Files iceoryx2 keeps for nodes and services of a prefix (shared memory
+/// and management files), without the one per-prefix `global_mgmt` segment
+/// that iceoryx2 keeps for the prefix itself.
+fn files_with(prefix: &str) -> usize {
+    let mut n = 0;
+    for dir in DIRS {
+        let Ok(entries) = std::fs::read_dir(dir) else {
+            continue;
+        };
+        for e in entries.flatten() {
+            let name = e.file_name().to_string_lossy().to_string();
+            if name.contains(prefix) && !name.ends_with(".global_mgmt") {
+                n += 1;
+            }
+        }
+    }
+    n
+}
+
+/// Test hygiene: removes the per-prefix global segment of a test prefix.
+fn remove_prefix_segment(prefix: &str) {
+    for dir in DIRS {
+        let Ok(entries) = std::fs::read_dir(dir) else {
+            continue;
+        };
+        for e in entries.flatten() {
+            if e.file_name().to_string_lossy().contains(prefix) {
+                let _ = std::fs::remove_file(e.path());
+            }
+        }
+    }
+}
+
+/// The process tests run one at a time (a spinning driver would disturb the
+/// others on a 2-core machine).
+static SERIAL: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
+fn serial() -> std::sync::MutexGuard<'static, ()> {
+    SERIAL
+        .lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner)
+}
+
+/// A child process killed when dropped (also when a test fails).
+struct Killed(Child);
+
+impl Killed {
+    fn kill(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+impl Drop for Killed {
+    fn drop(&mut self) {
+        self.kill();
+    }
+}
+
+fn spawn_driver(prefix: &str, name: &str) -> Killed {
+    spawn_driver_with(prefix, name, false)
+}
+
+fn spawn_driver_with(prefix: &str, name: &str, spin: bool) -> Killed {
+    Killed(
+        Command::new(std::env::current_exe().unwrap())
+            .args(["--exact", "child_driver", "--nocapture"])
+            .env("ATMO_DRIVER_CHILD_PREFIX", prefix)
+            .env("ATMO_DRIVER_CHILD_NAME", name)
+            .env("ATMO_DRIVER_CHILD_SPIN", if spin { "1" } else { "0" })
+            .spawn()
+            .unwrap(),
+    )
+}
+
+/// Child half: a driver process playing every driver. Echoes the last
+/// thruster command's sequence as encoder counts, sends heartbeats every
+/// 2 ms, until killed (or 60 s). With `ATMO_DRIVER_CHILD_SPIN=1` it polls
+/// without sleeping and answers each thruster command at once (latency).
+#[test]
+fn child_driver() {
+    let Ok(prefix) = std::env::var("ATMO_DRIVER_CHILD_PREFIX") else {
+        return;
+    };
+    let name = std::env::var("ATMO_DRIVER_CHILD_NAME").unwrap();
+    let config = DriverPortsConfig {
+        iceoryx_prefix: prefix,
+        ..DriverPortsConfig::default()
+    };
+    let spin = std::env::var("ATMO_DRIVER_CHILD_SPIN").is_ok_and(|v| v == "1");
+    let mut driver = DriverEndpoint::open(&config, &name).unwrap();
+    let mut last_sequence = -1i64;
+    let start = monotonic_ns();
+    let mut next_beat = start;
+    let limit = if spin { 10_000_000_000 } else { 60_000_000_000 };
+    while monotonic_ns() - start < limit {
+        let commands = driver.receive();
+        if let Some(c) = commands.thrust {
+            last_sequence = c.header.sequence as i64;
+            if spin {
+                driver.publish_heartbeat(DriverId::Thrusters);
+            }
+        }
+        if monotonic_ns() >= next_beat {
+            driver.publish_tilt_encoder(last_sequence);
+            driver.publish_ground_contact(true);
+            for id in DriverId::ALL {
+                driver.publish_heartbeat(id);
+            }
+            next_beat += 2_000_000;
+        }
+        if spin {
+            std::hint::spin_loop();
+        } else {
+            std::thread::sleep(Duration::from_millis(2));
+        }
+    }
+}
+
+fn percentile(sorted: &[u64], p: f64) -> u64 {
+    sorted[((sorted.len() - 1) as f64 * p).round() as usize]
+}
+
+#[test]
+fn driver_process_round_trip_death_and_restart() {
+    let _serial = serial();
+    let config = config("rt");
+    let mut ports = FlightPorts::open(&config).unwrap();
+    let mut child = spawn_driver(&config.iceoryx_prefix, "driver_a");
+
+    // Up: every driver alive within 5 s of starting the process.
+    let period = Duration::from_micros(6667);
+    let start = monotonic_ns();
+    let mut sent = 0u64;
+    let mut latencies = Vec::new();
+    let mut last_echo = u64::MAX;
+    let mut alive_since = None;
+    let mut encoder_seen = 0;
+    while monotonic_ns() - start < 8_000_000_000 {
+        assert!(ports.send_thrust([0.1, 0.2, 0.3, 0.4]));
+        assert!(ports.send_tilt_velocity(0.1));
+        assert!(ports.send_wheel_rates([1.0, -1.0]));
+        sent += 1;
+        std::thread::sleep(period);
+        let now = monotonic_ns();
+        let inputs = ports.poll(now);
+        if let Some(e) = inputs.tilt_encoder {
+            assert!(e.counts < sent as i64, "echo of a command not sent yet");
+            if e.counts >= 0 {
+                encoder_seen += 1;
+            }
+        }
+        if let Some(c) = inputs.ground_contact {
+            assert_eq!(c.contact, 1);
+        }
+        if let Some(beat) = inputs.heartbeats[DriverId::Thrusters as usize]
+            && beat.last_command_stamp_ns != 0
+            && beat.last_command_sequence != last_echo
+        {
+            last_echo = beat.last_command_sequence;
+            latencies.push(beat.last_command_received_ns - beat.last_command_stamp_ns);
+        }
+        if inputs.health.all_required_alive() {
+            alive_since.get_or_insert(now);
+        } else {
+            assert!(
+                alive_since.is_none(),
+                "a driver died while running: {:?}",
+                inputs.health
+            );
+        }
+        if alive_since.is_some_and(|t| now - t > 1_500_000_000) {
+            break;
+        }
+    }
+    assert!(
+        alive_since.is_some(),
+        "drivers never came up: {:?}",
+        ports.counters()
+    );
+    assert!(encoder_seen > 50, "{encoder_seen} encoder samples");
+    latencies.sort_unstable();
+    assert!(latencies.len() > 50);
+    eprintln!(
+        "tick-to-driver latency over {} commands: median {:.1} us, p99 {:.1} us, max {:.1} us \
+         (driver polls every 2 ms)",
+        latencies.len(),
+        percentile(&latencies, 0.5) as f64 * 1e-3,
+        percentile(&latencies, 0.99) as f64 * 1e-3,
+        *latencies.last().unwrap() as f64 * 1e-3
+    );
+
+    // Killed: detected within the timeout (plus one poll period and the
+    // heartbeat period).
+    child.kill();
+    let killed = monotonic_ns();
+    let detected = loop {
+        std::thread::sleep(Duration::from_millis(1));
+        let now = monotonic_ns();
+        let health = ports.poll(now).health;
+        if !health.all_required_alive() {
+            assert!(DriverId::ALL.iter().all(|d| !health.is_alive(*d)));
+            break now - killed;
+        }
+        assert!(now - killed < 1_000_000_000, "death not detected");
+    };
+    let detected_ms = detected as f64 * 1e-6;
+    eprintln!("killed driver detected after {detected_ms:.1} ms (timeout 100 ms)");
+    assert!(detected_ms <= 100.0 + 10.0, "{detected_ms} ms");
+    assert!(ports.counters().deaths.iter().all(|d| *d == 1));
+
+    // Restarted: reconnects without restarting the daemon side.
+    let mut child = spawn_driver(&config.iceoryx_prefix, "driver_b");
+    let restart = monotonic_ns();
+    loop {
+        ports.send_thrust([0.0; 4]);
+        std::thread::sleep(period);
+        if ports.poll(monotonic_ns()).health.all_required_alive() {
+            break;
+        }
+        assert!(
+            monotonic_ns() - restart < 8_000_000_000,
+            "restarted driver not seen"
+        );
+    }
+    let c = ports.counters();
+    assert!(c.tilt_encoder.restarts >= 1, "{c:?}");
+    assert_eq!(c.send_errors, 0);
+    child.kill();
+    drop(ports);
+    // Our own resources are gone with the ports; the killed child's are
+    // cleaned by the next start-up.
+    cleanup_stale(&config).unwrap();
+    assert_eq!(files_with(&config.iceoryx_prefix), 0);
+    remove_prefix_segment(&config.iceoryx_prefix);
+}
+
+/// Tick-to-driver latency through iceoryx2 with a driver that polls
+/// continuously (the latency of the transport, not of a polling period):
+/// command stamp in the daemon to receipt in the driver process, both
+/// CLOCK_MONOTONIC. Printed for BENCHMARKS.md; bounded loosely (a loaded
+/// 2-core machine).
+#[test]
+fn tick_to_driver_latency_with_a_spinning_driver() {
+    let _serial = serial();
+    let config = config("lat");
+    let mut ports = FlightPorts::open(&config).unwrap();
+    let mut child = spawn_driver_with(&config.iceoryx_prefix, "fast_driver", true);
+    let start = monotonic_ns();
+    while !ports
+        .poll(monotonic_ns())
+        .health
+        .is_alive(DriverId::Thrusters)
+    {
+        assert!(
+            monotonic_ns() - start < 5_000_000_000,
+            "driver never came up"
+        );
+        std::thread::sleep(Duration::from_millis(5));
+    }
+    let mut latencies = Vec::new();
+    let mut last_echo = u64::MAX;
+    for _ in 0..450 {
+        ports.send_thrust([0.5; 4]);
+        std::thread::sleep(Duration::from_micros(6667));
+        if let Some(beat) = ports.poll(monotonic_ns()).heartbeats[DriverId::Thrusters as usize]
+            && beat.last_command_sequence != last_echo
+            && beat.last_command_stamp_ns != 0
+        {
+            last_echo = beat.last_command_sequence;
+            latencies.push(beat.last_command_received_ns - beat.last_command_stamp_ns);
+        }
+    }
+    child.kill();
+    drop(ports);
+    cleanup_stale(&config).unwrap();
+    remove_prefix_segment(&config.iceoryx_prefix);
+    latencies.sort_unstable();
+    assert!(latencies.len() > 300, "{} echoes", latencies.len());
+    let us = |ns: u64| ns as f64 * 1e-3;
+    eprintln!(
+        "tick-to-driver latency (spinning driver) over {} commands: median {:.1} us, p90 {:.1} us, p99 {:.1} us, max {:.1} us",
+        latencies.len(),
+        us(percentile(&latencies, 0.5)),
+        us(percentile(&latencies, 0.9)),
+        us(percentile(&latencies, 0.99)),
+        us(*latencies.last().unwrap())
+    );
+    assert!(percentile(&latencies, 0.5) < 1_000_000, "median above 1 ms");
+}
+
+#[test]
+fn stale_resources_of_a_crashed_run_are_cleaned_at_start_up() {
+    let _serial = serial();
+    let config = config("st");
+    // A driver that dies holding its ports.
+    let mut child = spawn_driver(&config.iceoryx_prefix, "crashing_driver");
+    let start = monotonic_ns();
+    while files_with(&config.iceoryx_prefix) == 0 {
+        assert!(
+            monotonic_ns() - start < 5_000_000_000,
+            "child never opened its ports"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    std::thread::sleep(Duration::from_millis(300));
+    child.kill();
+    let left = files_with(&config.iceoryx_prefix);
+    assert!(left > 0, "a killed process leaves its files");
+    assert_eq!(cleanup_stale(&config).unwrap(), 1, "one dead node");
+    assert_eq!(files_with(&config.iceoryx_prefix), 0, "everything removed");
+    // And a fresh start works on the same prefix.
+    let ports = FlightPorts::open(&config).unwrap();
+    assert_eq!(ports.counters().cleaned_nodes, 0);
+    drop(ports);
+    assert_eq!(files_with(&config.iceoryx_prefix), 0);
+    remove_prefix_segment(&config.iceoryx_prefix);
+}
+
+#[test]
+fn payloads_are_plain_fixed_layouts() {
+    use std::mem::{align_of, size_of};
+    assert_eq!(size_of::<PortHeader>(), 16);
+    assert_eq!(size_of::<ThrusterCommand>(), 48);
+    assert_eq!(size_of::<TiltEncoder>(), 24);
+    assert_eq!(size_of::<GroundContact>(), 24);
+    assert_eq!(align_of::<ThrusterCommand>(), 8);
+}
+
+#[test]
+fn config_is_checked() {
+    let file = std::path::Path::new("drivers.toml");
+    let bad = DriverPortsConfig {
+        liveness_timeout_ms: 0,
+        ..DriverPortsConfig::default()
+    };
+    let err = bad.validate(file).unwrap_err().to_string();
+    assert!(
+        err.contains("drivers.toml") && err.contains("liveness_timeout_ms"),
+        "{err}"
+    );
+    let bad = DriverPortsConfig {
+        required: vec!["rotors".into()],
+        ..DriverPortsConfig::default()
+    };
+    assert!(bad.validate(file).is_err());
+    DriverPortsConfig::default().validate(file).unwrap();
+}
