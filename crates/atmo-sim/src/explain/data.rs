@@ -13,7 +13,7 @@
 
 use atmo_core::RobotConfig;
 use atmo_core::model::{Input, Model, TiltedBody, idx, rotation};
-use nalgebra::{Matrix3, Vector3, Vector6};
+use nalgebra::{Matrix3, Matrix6x4, Vector3, Vector6};
 
 use super::ExplainError;
 use super::recording::Recording;
@@ -115,6 +115,9 @@ pub struct Prepared {
     pub gaps: usize,
     pub table: BodyTable,
     pub wheel_radius: f64,
+    /// Per row: `M^-1 [A_F; A_T]`, the generalized acceleration per unit
+    /// rotor command.
+    pub act: Vec<Matrix6x4<f64>>,
 }
 
 /// Savitzky-Golay first-derivative taps of a local quadratic (= local
@@ -341,6 +344,7 @@ impl Prepared {
             gaps,
             table,
             wheel_radius,
+            act: Vec::with_capacity(n),
         };
 
         // Measured: differentiate world velocity and body rates.
@@ -368,6 +372,11 @@ impl Prepared {
         let mut raw = vec![0.0; 6 * n];
         for (k, s) in samples.iter().enumerate() {
             let body = prep.table.at(s.varphi);
+            let mut a = Matrix6x4::zeros();
+            a.fixed_view_mut::<3, 4>(0, 0).copy_from(&body.thrust_force);
+            a.fixed_view_mut::<3, 4>(3, 0)
+                .copy_from(&body.thrust_torque);
+            prep.act.push(body.mass_matrix_inv * a);
             let a = body.accelerations(&s.x, &s.u, &Vector6::zeros());
             raw[6 * k..6 * k + 6].copy_from_slice(a.as_slice());
         }

@@ -19,7 +19,7 @@
 //! onto rotor i's disc plane.
 
 use atmo_core::model::{Input, idx};
-use nalgebra::{Matrix3, Matrix6x4, Vector3, Vector4, Vector6};
+use nalgebra::{Matrix3, Vector3, Vector4, Vector6};
 
 use super::data::{Prepared, cross_matrix};
 use super::recording::Recording;
@@ -289,11 +289,7 @@ pub fn build_columns(prep: &Prepared, rec: &Recording, knobs: &Knobs, accel: &[f
         }
         let body = prep.table.at(s.varphi);
         let minv = &body.mass_matrix_inv;
-        let mut a = Matrix6x4::zeros();
-        a.fixed_view_mut::<3, 4>(0, 0).copy_from(&body.thrust_force);
-        a.fixed_view_mut::<3, 4>(3, 0)
-            .copy_from(&body.thrust_torque);
-        let b = minv * a;
+        let b = &prep.act[k];
         let r = &prep.rot[k];
         let x = &s.x;
         let p = Vector3::new(x[idx::X], x[idx::Y], x[idx::Z]);
@@ -440,12 +436,7 @@ pub fn lag_column(prep: &Prepared, rec: &Recording, tau: f64) -> Vec<f64> {
     let thrust = super::data::lagged_commands(&prep.t, &u, tau);
     let mut raw = vec![0.0; 6 * n];
     for k in 0..n {
-        let body = prep.table.at(rec.samples[k].varphi);
-        let mut a = Matrix6x4::zeros();
-        a.fixed_view_mut::<3, 4>(0, 0).copy_from(&body.thrust_force);
-        a.fixed_view_mut::<3, 4>(3, 0)
-            .copy_from(&body.thrust_torque);
-        let g = body.mass_matrix_inv * (a * (thrust[k] - u[k]));
+        let g = prep.act[k] * (thrust[k] - u[k]);
         raw[6 * k..6 * k + 6].copy_from_slice(g.as_slice());
     }
     let mut out = vec![0.0; 6 * n];

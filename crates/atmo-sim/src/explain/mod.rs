@@ -29,6 +29,7 @@
 //!
 //! Input format: docs/recording_format.md ([`recording`]).
 
+pub mod cli;
 pub mod data;
 pub mod effects;
 pub mod locate;
@@ -513,7 +514,7 @@ pub fn explain(
     let active = vec![true; nseg];
     lap("regressors", &mut timings);
     progress.step("motor lag profile");
-    let taus: Vec<f64> = (0..16).map(|i| 0.004 * (1.3_f64).powi(i)).collect();
+    let taus: Vec<f64> = (0..12).map(|i| 0.004 * (1.4_f64).powi(i)).collect();
     let mut profile = vec![(0.0, base_stats.cv(&all_idx, &active))];
     for &tau in &taus {
         let col = lag_column(&prep, rec, tau);
@@ -539,6 +540,8 @@ pub fn explain(
         let st = base_stats.with_fixed_term(&cross, &own, &own_y);
         profile.push((tau, st.cv(&all_idx, &active)));
     }
+    drop(cols);
+    drop(base);
     let best = profile
         .iter()
         .copied()
@@ -596,6 +599,7 @@ pub fn explain(
                     .sum::<f64>();
             }
         }
+        drop(columns);
         columns = build_columns(&prep, rec, &knobs, &accel);
         stats = stats_of(&columns, &weights, &seg_of, nseg);
         (chosen, steps) = select::select(&stats, &layout, &candidates, &active);
@@ -622,6 +626,7 @@ pub fn explain(
                 break;
             }
             knobs.wind = [knobs.wind[0] + w[0], knobs.wind[1] + w[1]];
+            drop(columns);
             columns = build_columns(&prep, rec, &knobs, &accel);
             stats = stats_of(&columns, &weights, &seg_of, nseg);
         }
