@@ -1,6 +1,12 @@
-//! `try_log` of the fixed-size message kinds does not allocate: a counting
-//! global allocator counts the allocations made on this thread while the
-//! control-path calls run (the writer thread allocates freely).
+//! The control thread's I/O calls and their allocations: `try_log` of the
+//! fixed-size message kinds, the ROS 2 node's `try_publish_*` and input
+//! polling, and the driver ports' poll do not allocate; a driver-port send
+//! allocates exactly once, inside iceoryx2 0.10 (`Publisher::loan_uninit`
+//! creates a 48-byte shared-state `Arc` per sample, iceoryx2-cal's
+//! single-threaded arc policy; `send_copy` goes through the same loan). A
+//! counting global allocator counts the allocations made on the calling
+//! thread while those calls run (the logger, DDS and iceoryx2 threads
+//! allocate freely).
 
 #![allow(unsafe_code)] // a GlobalAlloc impl is unsafe by definition
 
@@ -10,8 +16,10 @@ use std::alloc::{GlobalAlloc, Layout, System};
 use std::cell::Cell;
 use std::sync::atomic::{AtomicU64, Ordering};
 
+use atmo_io::drivers::{DriverPortsConfig, FlightPorts, monotonic_ns};
 use atmo_io::mcap_log::{LoggerOptions, McapLogger, read_log};
-use atmo_io::msg::{ActuatorMotors, MpcStatus};
+use atmo_io::msg::{ActuatorMotors, MpcStatus, OffboardControlMode};
+use atmo_io::ros2::{Ros2Config, Ros2Node, Ros2StartOptions};
 use support::{drive, motors, status};
 
 struct Counting;
@@ -97,4 +105,73 @@ fn try_log_does_not_allocate() {
     let written = read_log(&path).unwrap();
     assert!(written.len() as u64 > accepted);
     std::fs::remove_file(&path).unwrap();
+}
+
+#[test]
+fn ros2_and_driver_port_calls_do_not_allocate() {
+    let (ros, mut inputs, node) = Ros2Node::start(
+        &Ros2Config::default(),
+        Ros2StartOptions {
+            domain_id: Some(200 + (std::process::id() % 30) as u16),
+        },
+    )
+    .unwrap();
+    let config = DriverPortsConfig {
+        iceoryx_prefix: format!("atmona{}_", std::process::id()),
+        ..DriverPortsConfig::default()
+    };
+    let mut ports = FlightPorts::open(&config).unwrap();
+    let statuses: Vec<MpcStatus> = (0..300).map(status).collect();
+    let commands: Vec<ActuatorMotors> = (0..300).map(motors).collect();
+    let offboard = OffboardControlMode::default();
+    // Warm up (first sends may set up lazily).
+    for k in 0..10 {
+        ros.try_publish_status(&statuses[k]);
+        ports.send_thrust([0.1; 4]);
+        ports.poll(monotonic_ns());
+    }
+    let mut ros_allocations = 0;
+    let mut send_allocations = 0;
+    let mut poll_allocations = 0;
+    for k in 0..300 {
+        let ((), n) = counted(|| {
+            ros.try_publish_status(&statuses[k]);
+            ros.try_publish_motors(&commands[k]);
+            ros.try_publish_offboard(&offboard);
+            let _ = inputs.latest_estimate();
+            let _ = inputs.latest_drive();
+            let _ = ros.counters();
+        });
+        ros_allocations += n;
+        let ((), n) = counted(|| {
+            assert!(ports.send_thrust([0.1, 0.2, 0.3, 0.4]));
+            assert!(ports.send_tilt_velocity(0.1));
+            assert!(ports.send_wheel_rates([1.0, 1.0]));
+        });
+        send_allocations += n;
+        let (_, n) = counted(|| ports.poll(monotonic_ns()));
+        poll_allocations += n;
+        std::thread::sleep(std::time::Duration::from_micros(200));
+    }
+    assert_eq!(ros_allocations, 0, "the ROS 2 calls allocated");
+    assert_eq!(poll_allocations, 0, "the driver-port poll allocated");
+    assert_eq!(
+        send_allocations,
+        3 * 300,
+        "one allocation per iceoryx2 send"
+    );
+    drop(ports);
+    node.stop().unwrap();
+    // Test hygiene: the per-prefix segments of this run.
+    for dir in ["/dev/shm", "/tmp/iceoryx2/nodes", "/tmp/iceoryx2/services"] {
+        for entry in std::fs::read_dir(dir).into_iter().flatten().flatten() {
+            if entry
+                .file_name()
+                .to_string_lossy()
+                .contains(&config.iceoryx_prefix)
+            {
+                let _ = std::fs::remove_file(entry.path());
+            }
+        }
+    }
 }
