@@ -248,6 +248,12 @@ pub struct Plant {
     events_dropped: usize,
 }
 
+/// The 12 rigid-body states at the head of the plant's state (a plain copy;
+/// nalgebra's `into_owned` goes through a generic iterator).
+fn body_state(ext: &Ext) -> State {
+    State::from_column_slice(&ext.as_slice()[..12])
+}
+
 fn skew(r: &Vector3<f64>) -> Matrix3<f64> {
     Matrix3::new(0.0, -r.z, r.y, r.z, 0.0, -r.x, -r.y, r.x, 0.0)
 }
@@ -497,7 +503,7 @@ impl Plant {
 
     /// The true rigid-body state.
     pub fn state(&self) -> State {
-        self.ext.fixed_rows::<12>(0).into_owned()
+        body_state(&self.ext)
     }
 
     /// rad, the true tilt.
@@ -644,7 +650,12 @@ impl Plant {
         }
         let wmax = self.wheel_rate_max;
         Ok(Command {
-            rotors: command.rotors.map(|u| u.clamp(0.0, 1.0)),
+            rotors: Input::new(
+                command.rotors[0].clamp(0.0, 1.0),
+                command.rotors[1].clamp(0.0, 1.0),
+                command.rotors[2].clamp(0.0, 1.0),
+                command.rotors[3].clamp(0.0, 1.0),
+            ),
             tilt_rate: command
                 .tilt_rate
                 .clamp(-self.tilt_rate_max, self.tilt_rate_max),
@@ -767,7 +778,7 @@ impl Plant {
         // Far above the ground nothing touches: skip the contact pass.
         let near = self.contact.is_some() && self.plane.height(&p) <= self.reach;
         let rot = if near {
-            let x: State = self.ext.fixed_rows::<12>(0).into_owned();
+            let x = body_state(&self.ext);
             Attitude::of(&x).r
         } else {
             Matrix3::identity()
@@ -988,7 +999,7 @@ impl Plant {
     /// The derivative of the continuous state.
     fn derivative(&self, ext: &Ext, cmd: &Command) -> Ext {
         let body = &self.body;
-        let x: State = ext.fixed_rows::<12>(0).into_owned();
+        let x = body_state(ext);
         let att = Attitude::of(&x);
         let mut d = Ext::zeros();
 
