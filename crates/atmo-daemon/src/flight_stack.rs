@@ -357,10 +357,15 @@ impl FlightStack {
     }
 
     /// The tilt velocity the mode asks for, before limits.
-    fn tilt_velocity_wanted(&self, mode: Mode) -> f64 {
+    /// On the ground a take-off tilts back only to the take-off tilt, where
+    /// the thrusters start: folding further before lift-off would put the
+    /// body on the ground (the wheels stop holding it up below ~35 deg).
+    fn tilt_velocity_wanted(&self, mode: Mode, grounded: bool, tilt: f64) -> f64 {
         let v = self.tilt_rate_max;
+        let takeoff_tilt = self.settings.modes.takeoff_max_tilt_deg.to_radians();
         match mode {
             Mode::Disarmed | Mode::Drive | Mode::Touchdown => 0.0,
+            Mode::Takeoff if grounded && tilt <= takeoff_tilt => 0.0,
             Mode::Takeoff | Mode::Flight | Mode::Failsafe => -v,
             Mode::Morphing | Mode::Transition => v,
         }
@@ -412,7 +417,11 @@ impl FlightStack {
             self.transition_limit = self.transition_limit.max(self.transition_schedule(height));
         }
         let limit = self.tilt_limit(mode);
-        let tilt_velocity = self.limit_tilt_velocity(self.tilt_velocity_wanted(mode), tilt, limit);
+        let tilt_velocity = self.limit_tilt_velocity(
+            self.tilt_velocity_wanted(mode, inputs.ground_contact, tilt),
+            tilt,
+            limit,
+        );
         self.tilt_command = tilt_velocity;
 
         let mut status = Status {
@@ -478,9 +487,14 @@ impl FlightStack {
     }
 
     fn enter(&mut self, mode: Mode, now: u64, state: &State) {
+        let previous = self.mode;
         self.mode = mode;
         self.mode_since_ns = now;
         self.carrot = Vector3::new(state[idx::X], state[idx::Y], state[idx::Z]);
+        if previous == Mode::Takeoff && mode == Mode::Flight {
+            // Airborne: keep climbing to the take-off height, not hold here.
+            self.carrot.z = self.last_ground_z - self.settings.modes.takeoff_target_height;
+        }
         self.hold_yaw = state[idx::YAW];
         if mode == Mode::Touchdown {
             self.touchdown_thrust = self.last_thrust;
@@ -627,18 +641,22 @@ impl FlightStack {
             _ => {}
         }
         // Position reference: a carrot that moves at the commanded velocity
-        // from where the mode began (held still when the sticks are centred),
-        // on a leash of `reference_leash` ahead of the robot. Unlike the
-        // paper's p_ref = p + v T_s, a robot that lags (heavier than the
-        // model, a head wind) builds a position error that the MPC corrects,
-        // so the commanded velocity is met without a steady offset.
-        self.carrot += v * ts;
-        let lead = self.carrot - p;
+        // from where the mode began (held still when the sticks are centred).
+        // Unlike the paper's p_ref = p + v T_s, a robot that lags (heavier
+        // than the model, a head wind) builds a position error that the MPC
+        // corrects, so the commanded velocity is met without a steady offset.
+        // The MPC sees the carrot at most `reference_leash` away; the carrot
+        // stops advancing while it is that far ahead (no wind-up).
         let leash = self.settings.pilot.reference_leash;
-        if lead.norm() > leash {
-            self.carrot = p + lead * (leash / lead.norm());
+        if (self.carrot - p).norm() < leash {
+            self.carrot += v * ts;
         }
-        let mut anchor = self.carrot;
+        let lead = self.carrot - p;
+        let mut anchor = if lead.norm() > leash {
+            p + lead * (leash / lead.norm())
+        } else {
+            self.carrot
+        };
         if self.mode == Mode::Takeoff && pilot.velocity[2].abs() < 1e-6 {
             // Climb to the take-off height unless the pilot commands vertically.
             anchor.z = self.last_ground_z - self.settings.modes.takeoff_target_height;

@@ -173,13 +173,13 @@ pub const TRANSITIONS: &[Transition] = &[
     Transition {
         from: &[Mode::Disarmed],
         to: Mode::Drive,
-        guard: |c, _| c.armed && c.grounded,
+        guard: |c, t| c.armed && (c.grounded || c.height <= t.takeoff_height),
         reason: "armed on the ground",
     },
     Transition {
         from: &[Mode::Disarmed],
         to: Mode::Flight,
-        guard: |c, _| c.armed && !c.grounded && c.estimate_fresh,
+        guard: |c, t| c.armed && !c.grounded && c.height > t.takeoff_height && c.estimate_fresh,
         reason: "armed in the air",
     },
     Transition {

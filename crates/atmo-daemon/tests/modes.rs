@@ -58,6 +58,17 @@ fn disarm_from_every_armed_mode() {
 #[test]
 fn disarmed_to_drive_when_armed_on_the_ground() {
     assert_eq!(step(Mode::Disarmed, on_ground()), Mode::Drive);
+    // Standing on its wheels before the contact signal rises: still the ground.
+    assert_eq!(
+        step(
+            Mode::Disarmed,
+            Conditions {
+                grounded: false,
+                ..on_ground()
+            }
+        ),
+        Mode::Drive
+    );
     assert_eq!(
         step(
             Mode::Disarmed,
@@ -78,6 +89,11 @@ fn disarmed_to_flight_when_armed_in_the_air_with_an_estimate() {
         ..flying()
     };
     assert_eq!(step(Mode::Disarmed, stale), Mode::Disarmed);
+    let low = Conditions {
+        height: 0.25,
+        ..flying()
+    };
+    assert_eq!(step(Mode::Disarmed, low), Mode::Drive);
 }
 
 #[test]

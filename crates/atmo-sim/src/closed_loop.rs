@@ -21,7 +21,7 @@ use nalgebra::Vector3;
 use serde::Serialize;
 
 use crate::error::{Result, SimError};
-use crate::plant::{Command, EventKind, Plant};
+use crate::plant::{Command, Plant};
 use crate::scenario::{Scenario, SuccessConfig};
 
 /// One control tick as the runner saw it (what is logged and plotted).
@@ -166,6 +166,7 @@ pub fn fly(
     let mut touchdown: Option<(f64, f64, f64)> = None; // time, tilt, vz
     let mut last_ground_xy: Option<Vector3<f64>> = None;
     let mut drive_distance = 0.0;
+    let mut has_flown = false;
 
     while plant.time() < duration - 1e-9 {
         let t = plant.time();
@@ -196,6 +197,7 @@ pub fn fly(
             if modes.last() != Some(&s.mode) {
                 modes.push(s.mode);
             }
+            has_flown |= matches!(s.mode, Mode::Flight | Mode::Morphing | Mode::Transition);
             if s.mode == Mode::Transition {
                 let mean = outputs.thrust.iter().sum::<f64>() / 4.0;
                 max_mean_thrust = max_mean_thrust.max(mean);
@@ -227,7 +229,9 @@ pub fn fly(
         let was_grounded = plant.contact_signal();
         plant.step(&command)?;
         let state = plant.state();
-        if touchdown.is_none() && !was_grounded && plant.contact_signal() {
+        // The landing is the first wheel contact after flying (a scenario may
+        // start on the ground, and then take off).
+        if touchdown.is_none() && has_flown && !was_grounded && plant.contact_signal() {
             touchdown = Some((plant.time(), plant.tilt(), state[idx::VZ]));
         }
         if touchdown.is_some() {
@@ -242,16 +246,6 @@ pub fn fly(
         }
     }
 
-    // A touchdown the plant reported (first load on the wheels) wins over
-    // the signal edge: the contact signal can start high on the ground.
-    let first_touchdown = plant
-        .events()
-        .iter()
-        .find(|e| e.kind == EventKind::Touchdown)
-        .map(|e| e.time);
-    if touchdown.is_none() && first_touchdown.is_some() {
-        touchdown = first_touchdown.map(|t| (t, plant.tilt(), 0.0));
-    }
     feedback_times.sort_by(f64::total_cmp);
     let crash = plant.crash().copied();
     Ok(Summary {
