@@ -11,8 +11,10 @@ use std::time::{Duration, Instant};
 
 use atmo_core::model::State;
 use atmo_io::msg::frames::{odometry_to_state, state_to_odometry};
-use atmo_io::msg::{DiagnosticArray, MpcStatus, Odometry, Time, Twist, Vector3};
-use atmo_io::ros2::{Ros2Config, Ros2Counters, Ros2Node, Ros2StartOptions};
+use atmo_io::msg::{DiagnosticArray, MpcStatus, Odometry, Time, Twist, Vector3, VehicleOdometry};
+use atmo_io::ros2::{
+    Ros2Config, Ros2Counters, Ros2Node, Ros2StartOptions, TopicConfig, domain_id_from_env,
+};
 use ros2_client::dds::rustdds::DomainParticipantBuilder;
 use ros2_client::{Context, MessageTypeName, Name, Node, NodeName, NodeOptions, QosProfile};
 use serde::{Deserialize, Serialize};
@@ -331,4 +333,101 @@ fn config_errors_name_file_and_key() {
     let shipped =
         Ros2Config::load(concat!(env!("CARGO_MANIFEST_DIR"), "/ros2.example.toml")).unwrap();
     assert_eq!(shipped, Ros2Config::default());
+}
+
+/// PX4's odometry (NED already) as the estimate source, through DDS.
+#[test]
+fn px4_vehicle_odometry_as_the_estimate() {
+    let domain = domain() + 1;
+    let mut config = Ros2Config::default();
+    config.topics.estimate = TopicConfig {
+        name: "/fmu/out/vehicle_odometry".into(),
+        type_name: "px4_msgs/msg/VehicleOdometry".into(),
+        enabled: true,
+    };
+    let (_publisher, mut inputs, thread) = Ros2Node::start(
+        &config,
+        Ros2StartOptions {
+            domain_id: Some(domain),
+        },
+    )
+    .unwrap();
+    let (_peer_context, mut peer) = peer_node(domain, "px4");
+    let t = peer
+        .create_topic(
+            &topic_name("/fmu/out/vehicle_odometry"),
+            MessageTypeName::new("px4_msgs", "VehicleOdometry"),
+            &QosProfile::subscription_default(),
+        )
+        .unwrap();
+    let px4 = peer.create_publisher::<VehicleOdometry>(&t, None).unwrap();
+    let mut k = 1u64;
+    let mut got = None;
+    wait_for("a PX4 estimate", Duration::from_secs(10), || {
+        px4.publish(VehicleOdometry {
+            timestamp: k * 1000,
+            timestamp_sample: k * 1000,
+            pose_frame: VehicleOdometry::POSE_FRAME_NED,
+            position: [1.0, 2.0, -3.0],
+            q: [1.0, 0.0, 0.0, 0.0],
+            velocity_frame: VehicleOdometry::VELOCITY_FRAME_NED,
+            velocity: [0.5, 0.0, -0.25],
+            angular_velocity: [0.0, 0.0, 0.125],
+            ..VehicleOdometry::default()
+        })
+        .unwrap();
+        k += 1;
+        got = inputs.latest_estimate();
+        got.is_some()
+    });
+    let e = got.unwrap();
+    assert_eq!(e.stamp_ns % 1_000_000, 0, "us -> ns");
+    let want = [
+        1.0, 2.0, -3.0, 0.0, 0.0, 0.0, 0.5, 0.0, -0.25, 0.0, 0.0, 0.125,
+    ];
+    assert_eq!(e.state.as_slice(), &want);
+    thread.stop().unwrap();
+}
+
+/// Child half of the domain-id test: checks `domain_id_from_env` under the
+/// environment the parent gave it.
+#[test]
+fn child_domain_id() {
+    let Ok(expect) = std::env::var("ATMO_EXPECT_DOMAIN") else {
+        return;
+    };
+    match expect.as_str() {
+        "error" => {
+            let err = domain_id_from_env().unwrap_err().to_string();
+            assert!(err.contains("ROS_DOMAIN_ID"), "{err}");
+        }
+        id => assert_eq!(domain_id_from_env().unwrap(), id.parse::<u16>().unwrap()),
+    }
+}
+
+#[test]
+fn domain_id_comes_from_ros_domain_id() {
+    for (value, expect) in [
+        (Some("42"), "42"),
+        (None, "0"),
+        (Some(""), "0"),
+        (Some("233"), "error"),
+        (Some("x"), "error"),
+    ] {
+        let mut command = std::process::Command::new(std::env::current_exe().unwrap());
+        command
+            .args(["--exact", "child_domain_id"])
+            .env("ATMO_EXPECT_DOMAIN", expect)
+            .env_remove("ROS_DOMAIN_ID");
+        if let Some(v) = value {
+            command.env("ROS_DOMAIN_ID", v);
+        }
+        let out = command.output().unwrap();
+        assert!(
+            out.status.success(),
+            "ROS_DOMAIN_ID={value:?}: {}",
+            String::from_utf8_lossy(&out.stdout)
+        );
+        assert!(String::from_utf8_lossy(&out.stdout).contains("1 passed"));
+    }
 }
