@@ -34,8 +34,9 @@ pub enum Profile {
     Mixed,
     /// Hover at 1.5 m with the lateral sweeps only.
     Cruise,
-    /// A wheel landing approach: descend from 1.2 m at 50 deg while the
-    /// tilt rises to 58 deg, down to a hub height of 0.2 m.
+    /// A wheel-landing approach: descend at 0.12 m/s from a hub height of
+    /// 1.2 m to 0.22 m while moving forward at 0.3 m/s, tilt 50 deg rising
+    /// to 55 deg.
     Landing,
 }
 
@@ -86,10 +87,10 @@ fn raw_reference(profile: Profile, model: &Model, t: f64) -> (Vector3<f64>, f64,
             let tilt = if t < 3.0 {
                 50.0
             } else {
-                (50.0 + (t - 3.0) * 2.0).min(58.0)
+                (50.0 + (t - 3.0) * 2.0).min(55.0)
             };
-            let hub = (1.2 - 0.12 * t).max(0.2);
-            let v = tilt.to_radians();
+            let hub = (1.2 - 0.12 * t).max(0.22);
+            let v = f64::to_radians(tilt);
             (
                 Vector3::new(0.3 * t, 0.0, -(hub - hub_offset(model, v))),
                 0.0,
