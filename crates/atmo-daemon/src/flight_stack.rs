@@ -557,18 +557,18 @@ impl FlightStack {
             }
             self.mpc_warm = true;
         }
-        if self.replan {
+        let result = if self.replan {
             self.replan = false;
             self.fill_reference(state);
             self.configure_mpc(state);
-            // Failure here leaves the RTI plan, which the feedback then uses.
-            status.qp_solves += match self.mpc.converge_sqp(state, REPLAN_ITERATIONS, 1e-6) {
-                Ok(report) => report.iterations as u32,
-                Err(_) => REPLAN_ITERATIONS as u32,
-            };
-        }
-        status.qp_solves += 1;
-        let Ok(out) = self.mpc.feedback(state) else {
+            let result = self.mpc.replan(state, REPLAN_ITERATIONS);
+            status.qp_solves += REPLAN_ITERATIONS as u32;
+            result
+        } else {
+            status.qp_solves += 1;
+            self.mpc.feedback(state)
+        };
+        let Ok(out) = result else {
             self.mpc_failures_total += 1;
             status.solver = SolverState::Failed;
             return self.last_thrust;

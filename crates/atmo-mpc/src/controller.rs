@@ -613,6 +613,25 @@ impl Mpc {
     /// Runs Gauss-Newton SQP on the current problem (no shift, same
     /// estimate and parameters) until the step is below `tol`: the fully
     /// converged solution that one RTI iteration approximates. Diagnostic.
+    /// Re-plans at the current time when the problem changed a lot (a new
+    /// flight mode): up to `iterations` Gauss-Newton iterations without
+    /// shifting, each ending in a feedback with `x_est`; returns the last
+    /// feedback (stops early at the first one without a fresh solution).
+    /// A one-off cost of `iterations` feedback phases.
+    pub fn replan(&mut self, x_est: &State, iterations: usize) -> Result<TickOutput> {
+        let mut out = None;
+        for _ in 0..iterations.max(1) {
+            self.prepare_inner(false)?;
+            let tick = self.feedback(x_est)?;
+            let fresh = tick.outcome.is_fresh();
+            out = Some(tick);
+            if !fresh {
+                break;
+            }
+        }
+        out.ok_or(MpcError::NotPrepared)
+    }
+
     pub fn converge_sqp(&mut self, x_est: &State, max_iter: usize, tol: f64) -> Result<SqpReport> {
         let mut last_step = f64::INFINITY;
         for it in 1..=max_iter {

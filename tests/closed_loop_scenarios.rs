@@ -1,0 +1,162 @@
+//! The flight stack (FlightStack + atmo-mpc) flies every scenario of
+//! config/scenarios against the built-in plant (ground effect, motor lag,
+//! sensor noise and latency, CoM offset, mass errors, wind turbulence, wheel
+//! contact...) and meets the scenario's success criteria: for the landings,
+//! no crash, touchdown tilt past the critical angle region, a soft impact
+//! and a drive on.
+
+use std::path::PathBuf;
+
+use atmo_sim::closed_loop::{ControllerConfig, Summary, fly};
+use atmo_sim::monte_carlo;
+use atmo_sim::scenario::Scenario;
+
+fn scenario(name: &str) -> Scenario {
+    let path: PathBuf = [
+        env!("CARGO_MANIFEST_DIR"),
+        "config",
+        "scenarios",
+        &format!("{name}.toml"),
+    ]
+    .iter()
+    .collect();
+    Scenario::load(&path).unwrap_or_else(|e| panic!("{e}"))
+}
+
+fn controller() -> ControllerConfig {
+    ControllerConfig::atmo().unwrap().deterministic()
+}
+
+fn fly_checked(name: &str) -> Summary {
+    let s = scenario(name);
+    let summary = fly(&s, &controller(), |_| {}).unwrap();
+    eprintln!("{name}: {summary:?}");
+    assert!(
+        !summary.crashed,
+        "{name} crashed: {:?}",
+        summary.crash_reason
+    );
+    assert!(
+        summary.succeeded(&s.file.success),
+        "{name} missed its success criteria: {summary:#?}"
+    );
+    summary
+}
+
+fn assert_wheel_landing(s: &Summary, min_tilt: f64) {
+    let tilt = s.touchdown_tilt_deg.expect("touched down");
+    let impact = s.impact_speed_mps.expect("touched down");
+    assert!(tilt >= min_tilt, "touchdown tilt {tilt:.1} deg");
+    assert!(impact <= 0.5, "impact {impact:.2} m/s");
+    let modes: Vec<&str> = s.mode_sequence.iter().map(String::as_str).collect();
+    let landing = ["morphing", "transition", "touchdown", "drive"];
+    assert!(modes.windows(4).any(|w| w == landing), "modes {modes:?}");
+}
+
+/// Past the critical angle (61.4 deg) the rotors cannot carry the weight:
+/// a flat-ground transition ends at (nearly) full thrust.
+fn assert_saturated_transition(s: &Summary) {
+    assert!(
+        s.max_mean_thrust > 0.9,
+        "max mean thrust {:.2}",
+        s.max_mean_thrust
+    );
+}
+
+#[test]
+fn wheel_landing_of_fig5_lands_past_60_deg_softly_and_drives_on() {
+    let s = fly_checked("wheel_landing");
+    assert_wheel_landing(&s, 60.0);
+    assert_saturated_transition(&s);
+    assert!(
+        s.drive_distance_m >= 1.0,
+        "drove {:.2} m",
+        s.drive_distance_m
+    );
+    assert_eq!(s.mpc_failures, 0);
+}
+
+#[test]
+fn landing_with_forward_velocity_of_fig6c() {
+    let s = fly_checked("landing_forward_velocity");
+    assert_wheel_landing(&s, 60.0);
+    assert_saturated_transition(&s);
+    assert!(
+        s.drive_distance_m >= 1.0,
+        "drove {:.2} m",
+        s.drive_distance_m
+    );
+}
+
+#[test]
+fn drive_takeoff_fly_land_of_fig6ab() {
+    let s = fly_checked("drive_takeoff_land");
+    let modes: Vec<&str> = s.mode_sequence.iter().map(String::as_str).collect();
+    assert_eq!(&modes[..3], ["drive", "takeoff", "flight"], "{modes:?}");
+    assert_wheel_landing(&s, 60.0);
+    assert!(
+        s.drive_distance_m >= 1.0,
+        "drove {:.2} m",
+        s.drive_distance_m
+    );
+}
+
+#[test]
+fn landing_on_a_25_deg_slope_of_fig6d() {
+    let s = fly_checked("landing_slope_25deg");
+    // The scenario's criterion on a slope is 55 deg (see its [success]).
+    assert_wheel_landing(&s, 55.0);
+}
+
+#[test]
+fn hover_holds_through_a_lateral_push() {
+    let s = fly_checked("hover");
+    assert_eq!(s.mode_sequence, ["flight"]);
+    assert_eq!(s.mpc_failures, 0);
+}
+
+#[test]
+fn a_flight_is_deterministic() {
+    let s = scenario("wheel_landing");
+    let c = controller();
+    let mut a = fly(&s, &c, |_| {}).unwrap();
+    let mut b = fly(&s, &c, |_| {}).unwrap();
+    for x in [&mut a, &mut b] {
+        x.wall_time_s = 0.0;
+        x.feedback_time_median_s = 0.0;
+        x.feedback_time_max_s = 0.0;
+    }
+    assert_eq!(a, b);
+}
+
+#[test]
+fn monte_carlo_of_the_wheel_landing() {
+    // The 200-run figure is in README.md (`atmo-sim fly --runs 200`); the test
+    // flies 40 randomized copies (mass, inertia and thrust +-5 %, gusts,
+    // sensor noise, initial spread) on the cores there are.
+    let runs = 40;
+    let threads = std::thread::available_parallelism().map_or(1, std::num::NonZero::get);
+    let report = monte_carlo::run(
+        &scenario("wheel_landing"),
+        &controller(),
+        runs,
+        1,
+        threads,
+        &|_| {},
+    )
+    .unwrap();
+    eprintln!(
+        "monte carlo: {}/{} in {:.1} s",
+        report.successes, report.runs, report.wall_time_s
+    );
+    for f in &report.failures {
+        eprintln!("  failed run {} seed {}: {:?}", f.run, f.seed, f.summary);
+    }
+    assert_eq!(report.runs, runs);
+    assert_eq!(report.crashes, 0);
+    assert!(
+        report.success_rate >= 0.95,
+        "success rate {}",
+        report.success_rate
+    );
+}
