@@ -89,16 +89,16 @@ impl Drop for Killed {
 }
 
 fn spawn_driver(prefix: &str, name: &str) -> Killed {
-    spawn_driver_with(prefix, name, false)
+    spawn_driver_with(prefix, name, "sleep")
 }
 
-fn spawn_driver_with(prefix: &str, name: &str, spin: bool) -> Killed {
+fn spawn_driver_with(prefix: &str, name: &str, mode: &str) -> Killed {
     Killed(
         Command::new(std::env::current_exe().unwrap())
             .args(["--exact", "child_driver", "--nocapture"])
             .env("ATMO_DRIVER_CHILD_PREFIX", prefix)
             .env("ATMO_DRIVER_CHILD_NAME", name)
-            .env("ATMO_DRIVER_CHILD_SPIN", if spin { "1" } else { "0" })
+            .env("ATMO_DRIVER_CHILD_MODE", mode)
             .spawn()
             .unwrap(),
     )
@@ -106,8 +106,10 @@ fn spawn_driver_with(prefix: &str, name: &str, spin: bool) -> Killed {
 
 /// Child half: a driver process playing every driver. Echoes the last
 /// thruster command's sequence as encoder counts, sends heartbeats every
-/// 2 ms, until killed (or 60 s). With `ATMO_DRIVER_CHILD_SPIN=1` it polls
-/// without sleeping and answers each thruster command at once (latency).
+/// 2 ms, until killed (or 60 s). `ATMO_DRIVER_CHILD_MODE`: `sleep` polls
+/// every 2 ms; `spin` polls without sleeping; `wait` sleeps in
+/// `wait_for_commands` until the daemon's event. In `spin` and `wait` it
+/// answers each thruster command at once (latency).
 #[test]
 fn child_driver() {
     let Ok(prefix) = std::env::var("ATMO_DRIVER_CHILD_PREFIX") else {
@@ -118,17 +120,23 @@ fn child_driver() {
         iceoryx_prefix: prefix,
         ..DriverPortsConfig::default()
     };
-    let spin = std::env::var("ATMO_DRIVER_CHILD_SPIN").is_ok_and(|v| v == "1");
+    let mode = std::env::var("ATMO_DRIVER_CHILD_MODE").unwrap_or_default();
+    let spin = mode == "spin";
+    let wait = mode == "wait";
     let mut driver = DriverEndpoint::open(&config, &name).unwrap();
     let mut last_sequence = -1i64;
     let start = monotonic_ns();
     let mut next_beat = start;
     let limit = if spin { 10_000_000_000 } else { 60_000_000_000 };
     while monotonic_ns() - start < limit {
-        let commands = driver.receive();
+        let commands = if wait {
+            driver.wait_for_commands(Duration::from_millis(2)).unwrap()
+        } else {
+            driver.receive()
+        };
         if let Some(c) = commands.thrust {
             last_sequence = c.header.sequence as i64;
-            if spin {
+            if spin || wait {
                 driver.publish_heartbeat(DriverId::Thrusters);
             }
         }
@@ -142,7 +150,7 @@ fn child_driver() {
         }
         if spin {
             std::hint::spin_loop();
-        } else {
+        } else if !wait {
             std::thread::sleep(Duration::from_millis(2));
         }
     }
@@ -266,17 +274,15 @@ fn driver_process_round_trip_death_and_restart() {
     remove_prefix_segment(&config.iceoryx_prefix);
 }
 
-/// Tick-to-driver latency through iceoryx2 with a driver that polls
-/// continuously (the latency of the transport, not of a polling period):
-/// command stamp in the daemon to receipt in the driver process, both
-/// CLOCK_MONOTONIC. Printed for BENCHMARKS.md; bounded loosely (a loaded
-/// 2-core machine).
-#[test]
-fn tick_to_driver_latency_with_a_spinning_driver() {
-    let _serial = serial();
-    let config = config("lat");
+/// Tick-to-driver latency through iceoryx2: command stamp in the daemon to
+/// receipt in the driver process, both CLOCK_MONOTONIC, for a driver that
+/// polls continuously (the transport) and one that sleeps until the
+/// daemon's event (what a real driver should do). Printed for
+/// BENCHMARKS.md; bounded loosely (a loaded 2-core machine).
+fn latency(mode: &str) -> Vec<u64> {
+    let config = config(&format!("lat{mode}"));
     let mut ports = FlightPorts::open(&config).unwrap();
-    let mut child = spawn_driver_with(&config.iceoryx_prefix, "fast_driver", true);
+    let mut child = spawn_driver_with(&config.iceoryx_prefix, "fast_driver", mode);
     let start = monotonic_ns();
     while !ports
         .poll(monotonic_ns())
@@ -287,12 +293,14 @@ fn tick_to_driver_latency_with_a_spinning_driver() {
             monotonic_ns() - start < 5_000_000_000,
             "driver never came up"
         );
+        ports.notify_drivers();
         std::thread::sleep(Duration::from_millis(5));
     }
     let mut latencies = Vec::new();
     let mut last_echo = u64::MAX;
     for _ in 0..450 {
         ports.send_thrust([0.5; 4]);
+        assert!(ports.notify_drivers());
         std::thread::sleep(Duration::from_micros(6667));
         if let Some(beat) = ports.poll(monotonic_ns()).heartbeats[DriverId::Thrusters as usize]
             && beat.last_command_sequence != last_echo
@@ -310,14 +318,23 @@ fn tick_to_driver_latency_with_a_spinning_driver() {
     assert!(latencies.len() > 300, "{} echoes", latencies.len());
     let us = |ns: u64| ns as f64 * 1e-3;
     eprintln!(
-        "tick-to-driver latency (spinning driver) over {} commands: median {:.1} us, p90 {:.1} us, p99 {:.1} us, max {:.1} us",
+        "tick-to-driver latency ({mode} driver) over {} commands: median {:.1} us, p90 {:.1} us, p99 {:.1} us, max {:.1} us",
         latencies.len(),
         us(percentile(&latencies, 0.5)),
         us(percentile(&latencies, 0.9)),
         us(percentile(&latencies, 0.99)),
         us(*latencies.last().unwrap())
     );
-    assert!(percentile(&latencies, 0.5) < 1_000_000, "median above 1 ms");
+    latencies
+}
+
+#[test]
+fn tick_to_driver_latency() {
+    let _serial = serial();
+    let spinning = latency("spin");
+    assert!(percentile(&spinning, 0.5) < 1_000_000, "median above 1 ms");
+    let waiting = latency("wait");
+    assert!(percentile(&waiting, 0.5) < 1_000_000, "median above 1 ms");
 }
 
 #[test]

@@ -1,6 +1,6 @@
 //! The control thread's I/O calls and their allocations: `try_log` of the
 //! fixed-size message kinds, the ROS 2 node's `try_publish_*` and input
-//! polling, and the driver ports' poll do not allocate; a driver-port send
+//! polling, and the driver ports' notify and poll do not allocate; a driver-port send
 //! allocates exactly once, inside iceoryx2 0.10 (`Publisher::loan_uninit`
 //! creates a 48-byte shared-state `Arc` per sample, iceoryx2-cal's
 //! single-threaded arc policy; `send_copy` goes through the same loan). A
@@ -149,12 +149,15 @@ fn ros2_and_driver_port_calls_do_not_allocate() {
             assert!(ports.send_wheel_rates([1.0, 1.0]));
         });
         send_allocations += n;
-        let (_, n) = counted(|| ports.poll(monotonic_ns()));
+        let (_, n) = counted(|| {
+            assert!(ports.notify_drivers());
+            ports.poll(monotonic_ns())
+        });
         poll_allocations += n;
         std::thread::sleep(std::time::Duration::from_micros(200));
     }
     assert_eq!(ros_allocations, 0, "the ROS 2 calls allocated");
-    assert_eq!(poll_allocations, 0, "the driver-port poll allocated");
+    assert_eq!(poll_allocations, 0, "the driver-port notify and poll allocated");
     assert_eq!(
         send_allocations,
         3 * 300,

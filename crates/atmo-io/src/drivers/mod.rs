@@ -10,6 +10,7 @@
 //! | `<prefix>/tilt_encoder` | [`TiltEncoder`] | tilt driver -> daemon |
 //! | `<prefix>/ground_contact` | [`GroundContact`] | contact sensor -> daemon |
 //! | `<prefix>/heartbeat` | [`DriverHeartbeat`] | every driver -> daemon |
+//! | `<prefix>/commands_sent` | event | daemon -> drivers: wakes drivers waiting for commands |
 //!
 //! Every sample carries a per-publisher sequence number and a
 //! CLOCK_MONOTONIC stamp ([`monotonic_ns`]). Sending never blocks: a full
@@ -36,6 +37,8 @@ pub use payloads::{
 use std::fmt::Debug;
 
 use iceoryx2::node::{Node, NodeBuilder, NodeState};
+use iceoryx2::port::listener::Listener;
+use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::{
@@ -254,6 +257,28 @@ fn service<T: Debug + ZeroCopySend + Copy + 'static>(
     Ok((name, factory))
 }
 
+/// The event service that wakes drivers when commands were sent (same
+/// settings on both sides).
+fn command_event(
+    node: &Node<ipc::Service>,
+    config: &DriverPortsConfig,
+) -> Result<(
+    String,
+    iceoryx2::service::port_factory::event::PortFactory<ipc::Service>,
+)> {
+    let name = format!("{}/commands_sent", config.prefix);
+    let service_name = ServiceName::new(&name).map_err(|e| iox_err(&name, e))?;
+    let factory = node
+        .service_builder(&service_name)
+        .event()
+        .max_notifiers(8)
+        .max_listeners(8)
+        .max_nodes(16)
+        .open_or_create()
+        .map_err(|e| iox_err(&name, e))?;
+    Ok((name, factory))
+}
+
 fn publisher<T: Debug + ZeroCopySend + Copy + 'static>(
     node: &Node<ipc::Service>,
     config: &DriverPortsConfig,
@@ -422,6 +447,8 @@ pub struct FlightPorts {
     tilt_encoder: Receiver<TiltEncoder>,
     ground_contact: Receiver<GroundContact>,
     heartbeat: Receiver<DriverHeartbeat>,
+    notifier: Notifier<ipc::Service>,
+    notify_errors: u64,
     last_heard_ns: [Option<u64>; 4],
     was_alive: [bool; 4],
     bad_heartbeats: u64,
@@ -436,7 +463,14 @@ impl FlightPorts {
         config.validate(std::path::Path::new("(driver ports config)"))?;
         let cleaned = cleanup_stale(config)?;
         let node = node(config, "atmo_daemon")?;
+        let (event_name, event) = command_event(&node, config)?;
+        let notifier = event
+            .notifier_builder()
+            .create()
+            .map_err(|e| iox_err(&event_name, e))?;
         Ok(Self {
+            notifier,
+            notify_errors: 0,
             thrusters: publisher(&node, config, "thrusters")?,
             tilt_velocity: publisher(&node, config, "tilt_velocity")?,
             wheel_rates: publisher(&node, config, "wheel_rates")?,
@@ -454,6 +488,7 @@ impl FlightPorts {
     }
 
     /// Sends thruster commands (never blocks; false if refused, counted).
+    /// Call [`Self::notify_drivers`] after the tick's sends.
     pub fn send_thrust(&mut self, thrust: [f64; 4]) -> bool {
         self.thrusters
             .send(|header| ThrusterCommand { header, thrust })
@@ -467,6 +502,18 @@ impl FlightPorts {
     pub fn send_wheel_rates(&mut self, rates: [f64; 2]) -> bool {
         self.wheel_rates
             .send(|header| WheelRateCommand { header, rates })
+    }
+
+    /// Wakes drivers blocked in [`DriverEndpoint::wait_for_commands`] (one
+    /// iceoryx2 event per tick, after the sends; never blocks). Drivers that
+    /// poll do not need it.
+    pub fn notify_drivers(&mut self) -> bool {
+        if self.notifier.notify().is_ok() {
+            true
+        } else {
+            self.notify_errors += 1;
+            false
+        }
     }
 
     /// Reads every waiting sample and updates liveness at `now_ns`
@@ -532,7 +579,8 @@ impl FlightPorts {
         FlightPortsCounters {
             send_errors: self.thrusters.errors
                 + self.tilt_velocity.errors
-                + self.wheel_rates.errors,
+                + self.wheel_rates.errors
+                + self.notify_errors,
             tilt_encoder: self.tilt_encoder.counters,
             ground_contact: self.ground_contact.counters,
             heartbeat: self.heartbeat.counters,
@@ -579,6 +627,7 @@ pub struct DriverEndpoint {
     tilt_encoder: Sender<TiltEncoder>,
     ground_contact: Sender<GroundContact>,
     heartbeat: Sender<DriverHeartbeat>,
+    listener: Listener<ipc::Service>,
     last_command: [(u64, u64, u64); 3],
 }
 
@@ -587,7 +636,13 @@ impl DriverEndpoint {
     pub fn open(config: &DriverPortsConfig, name: &str) -> Result<Self> {
         config.validate(std::path::Path::new("(driver ports config)"))?;
         let node = node(config, name)?;
+        let (event_name, event) = command_event(&node, config)?;
+        let listener = event
+            .listener_builder()
+            .create()
+            .map_err(|e| iox_err(&event_name, e))?;
         Ok(Self {
+            listener,
             thrusters: subscriber(&node, config, "thrusters")?,
             tilt_velocity: subscriber(&node, config, "tilt_velocity")?,
             wheel_rates: subscriber(&node, config, "wheel_rates")?,
@@ -597,6 +652,16 @@ impl DriverEndpoint {
             _node: node,
             last_command: [(0, 0, 0); 3],
         })
+    }
+
+    /// Sleeps until the daemon signals new commands
+    /// ([`FlightPorts::notify_drivers`]) or `timeout` passes, then returns
+    /// what [`Self::receive`] returns.
+    pub fn wait_for_commands(&mut self, timeout: std::time::Duration) -> Result<DriverCommands> {
+        self.listener
+            .timed_wait(|_| {}, timeout)
+            .map_err(|e| iox_err("commands_sent", e))?;
+        Ok(self.receive())
     }
 
     /// The newest command of each kind since the last call.
