@@ -393,4 +393,14 @@ fn config_is_checked() {
     };
     assert!(bad.validate(file).is_err());
     DriverPortsConfig::default().validate(file).unwrap();
+    let parsed = DriverPortsConfig::from_toml_str("liveness_timeout_ms = 50\n", file).unwrap();
+    assert_eq!(parsed.liveness_timeout_ms, 50);
+    assert_eq!(parsed.prefix, "atmo/drivers");
+    let err = DriverPortsConfig::from_toml_str("timeout = 50\n", file)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("drivers.toml:1") && err.contains("timeout"),
+        "{err}"
+    );
 }

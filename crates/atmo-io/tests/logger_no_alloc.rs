@@ -157,7 +157,10 @@ fn ros2_and_driver_port_calls_do_not_allocate() {
         std::thread::sleep(std::time::Duration::from_micros(200));
     }
     assert_eq!(ros_allocations, 0, "the ROS 2 calls allocated");
-    assert_eq!(poll_allocations, 0, "the driver-port notify and poll allocated");
+    assert_eq!(
+        poll_allocations, 0,
+        "the driver-port notify and poll allocated"
+    );
     assert_eq!(
         send_allocations,
         3 * 300,

@@ -116,6 +116,15 @@ impl Default for DriverPortsConfig {
 }
 
 impl DriverPortsConfig {
+    /// Parses and validates a TOML document of these keys; `file` only
+    /// names the origin in errors.
+    pub fn from_toml_str(text: &str, file: impl Into<std::path::PathBuf>) -> Result<Self> {
+        let file = file.into();
+        let config: Self = atmo_core::config::parse_toml(text, &file)?;
+        config.validate(&file)?;
+        Ok(config)
+    }
+
     /// Checks the values; errors name `file` and the key.
     pub fn validate(&self, file: &std::path::Path) -> Result<()> {
         let c = atmo_core::config::Checker::new(file);

@@ -164,6 +164,15 @@ pub struct MpcStatus {
     pub rejected_ground: u64,
 }
 
+impl MpcStatus {
+    /// A 12-state as the message's array (state, reference, predicted_next).
+    pub fn array(x: &atmo_core::model::State) -> [f64; 12] {
+        let mut out = [0.0; 12];
+        out.copy_from_slice(x.as_slice());
+        out
+    }
+}
+
 /// The wire layout of `MpcStatus.msg`, field for field; `S` is `&str` when
 /// writing (no allocation) and `String` when reading.
 #[derive(Serialize, Deserialize)]

@@ -48,6 +48,21 @@ pub struct ActuatorMotors {
 impl ActuatorMotors {
     pub const ACTUATOR_FUNCTION_MOTOR1: u8 = 101;
     pub const NUM_CONTROLS: u8 = 12;
+
+    /// Four thruster commands in [0, 1] (rotors 1..4) for PX4: the other
+    /// eight controls NaN (disarmed), `timestamp_us` in both stamps.
+    pub fn from_thrust(timestamp_us: u64, thrust: [f64; 4]) -> Self {
+        let mut control = [f32::NAN; 12];
+        for (c, t) in control.iter_mut().zip(thrust) {
+            *c = t as f32;
+        }
+        Self {
+            timestamp: timestamp_us,
+            timestamp_sample: timestamp_us,
+            reversible_flags: 0,
+            control,
+        }
+    }
 }
 
 /// `px4_msgs/msg/OffboardControlMode`: which setpoint PX4 follows.
@@ -63,6 +78,17 @@ pub struct OffboardControlMode {
     pub body_rate: bool,
     pub thrust_and_torque: bool,
     pub direct_actuator: bool,
+}
+
+impl OffboardControlMode {
+    /// The heartbeat for direct actuator control (what the thrusters need).
+    pub fn direct_actuator(timestamp_us: u64) -> Self {
+        Self {
+            timestamp: timestamp_us,
+            direct_actuator: true,
+            ..Self::default()
+        }
+    }
 }
 
 impl RosMessage for VehicleOdometry {

@@ -426,3 +426,13 @@ fn labels_cut_at_char_boundaries() {
     assert_eq!(Label::new("abc").as_str(), "abc");
     assert!(Label::default().is_empty());
 }
+
+#[test]
+fn helpers_for_the_flight_stack() {
+    let m = ActuatorMotors::from_thrust(7, [0.1, 0.2, 0.3, 0.4]);
+    assert_eq!(m.control[..4], [0.1f32, 0.2, 0.3, 0.4]);
+    assert!(m.control[4..].iter().all(|c| c.is_nan()));
+    assert!(OffboardControlMode::direct_actuator(7).direct_actuator);
+    let x = atmo_core::model::State::from_fn(|i, _| i as f64);
+    assert_eq!(MpcStatus::array(&x)[11], 11.0);
+}
