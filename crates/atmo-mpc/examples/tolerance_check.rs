@@ -1,7 +1,7 @@
 //! How far the RTI command moves with the solver tolerance: each tick's QP
 //! solved at the shipped tolerances (as the controller does) and again by a
-//! fresh Clarabel at 1e-10; reports the largest |u_0| difference and the
-//! interior-point iterations. Evidence for `tol_*` in config/mpc.toml.
+//! fresh Clarabel at 1e-10; reports the largest |u_0| difference over the
+//! `Solved` ticks and the interior-point iterations. Evidence for `tol_*` in config/mpc.toml.
 //! `cargo run --release -p atmo-mpc --example tolerance_check [ticks]`
 
 #[path = "../benches/support/scenarios.rs"]
@@ -27,6 +27,7 @@ fn main() {
         precise.iterative_refinement = true;
         precise.time_limit = 1.0;
         let mut worst = 0.0_f64;
+        let mut not_solved = 0;
         let mut iterations = Vec::with_capacity(ticks);
         for i in 0..ticks {
             sc.apply(&mut mpc);
@@ -41,17 +42,21 @@ fn main() {
             let diff = (0..4)
                 .map(|j| (ours[j] - fresh.solution.x[j]).abs())
                 .fold(0.0, f64::max);
-            if diff > 1e-3 {
+            if out.outcome == atmo_mpc::Outcome::Solved {
+                worst = worst.max(diff);
+            } else {
+                // Flown only if degraded (reduced tolerances met); say how far it was.
                 eprintln!(
-                    "{name} tick {i}: diff {diff:.2e}, outcome {:?}, its {}",
+                    "{name} tick {i}: {:?} after {} iterations, |u0 - u0(1e-10)| = {diff:.2e}",
                     out.outcome, out.timings.solver_iterations
                 );
+                not_solved += 1;
             }
-            worst = worst.max(diff);
         }
         iterations.sort_unstable();
         println!(
-            "{name}: tol {:e}: max |u0 - u0(1e-10)| = {worst:.2e}, IPM iterations p50 {} max {}",
+            "{name}: tol {:e}: Solved ticks: max |u0 - u0(1e-10)| = {worst:.2e}; \
+             IPM iterations p50 {} max {}; {not_solved} of {ticks} ticks not Solved",
             mpc.settings().solver.tol_gap_abs,
             iterations[ticks / 2],
             iterations[ticks - 1]
