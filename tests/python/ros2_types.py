@@ -117,6 +117,18 @@ class TickTiming(IdlStruct, typename="atmo_msgs::msg::dds_::TickTiming_"):
 
 
 @dataclass
+class IoHealth(IdlStruct, typename="atmo_msgs::msg::dds_::IoHealth_"):
+    malformed: uint64 = 0
+    invalid: uint64 = 0
+    stamp_backwards: uint64 = 0
+    inputs_dropped: uint64 = 0
+    publish_dropped: uint64 = 0
+    log_dropped: uint64 = 0
+    drivers_alive: array[bool, 4] = field(default_factory=lambda: [False] * 4)
+    driver_deaths: array[uint64, 4] = field(default_factory=lambda: [0] * 4)
+
+
+@dataclass
 class MpcStatus(IdlStruct, typename="atmo_msgs::msg::dds_::MpcStatus_"):
     header: Header = field(default_factory=Header)
     tick: uint64 = 0
@@ -149,3 +161,4 @@ class MpcStatus(IdlStruct, typename="atmo_msgs::msg::dds_::MpcStatus_"):
     rejected_tilt: uint64 = 0
     rejected_pilot: uint64 = 0
     rejected_ground: uint64 = 0
+    io: IoHealth = field(default_factory=IoHealth)

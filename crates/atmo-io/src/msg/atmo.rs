@@ -125,6 +125,20 @@ pub struct TickTiming {
     pub skipped_total: u64,
 }
 
+/// `atmo_msgs/msg/IoHealth`: counters of the edges (see the `.msg`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+pub struct IoHealth {
+    pub malformed: u64,
+    pub invalid: u64,
+    pub stamp_backwards: u64,
+    pub inputs_dropped: u64,
+    pub publish_dropped: u64,
+    pub log_dropped: u64,
+    /// Thrusters, tilt, wheels, ground contact.
+    pub drivers_alive: [bool; 4],
+    pub driver_deaths: [u64; 4],
+}
+
 /// `atmo_msgs/msg/MpcStatus`: one control tick (see the `.msg` for units
 /// and frames). `Copy` and allocation-free: built on the control thread,
 /// serialized elsewhere. On the wire the header's frame id is empty and
@@ -162,6 +176,8 @@ pub struct MpcStatus {
     pub rejected_tilt: u64,
     pub rejected_pilot: u64,
     pub rejected_ground: u64,
+    /// ROS 2, log and driver health (filled by the daemon from atmo-io's counters).
+    pub io: IoHealth,
 }
 
 impl MpcStatus {
@@ -214,6 +230,7 @@ struct Wire<S> {
     rejected_tilt: u64,
     rejected_pilot: u64,
     rejected_ground: u64,
+    io: IoHealth,
 }
 
 impl Serialize for MpcStatus {
@@ -253,6 +270,7 @@ impl Serialize for MpcStatus {
             rejected_tilt: self.rejected_tilt,
             rejected_pilot: self.rejected_pilot,
             rejected_ground: self.rejected_ground,
+            io: self.io,
         }
         .serialize(serializer)
     }
@@ -305,6 +323,7 @@ impl<'de> Deserialize<'de> for MpcStatus {
             rejected_tilt: w.rejected_tilt,
             rejected_pilot: w.rejected_pilot,
             rejected_ground: w.rejected_ground,
+            io: w.io,
         })
     }
 }
@@ -314,6 +333,9 @@ impl RosMessage for PilotInput {
 }
 impl RosMessage for TickTiming {
     const TYPE_NAME: &'static str = "atmo_msgs/msg/TickTiming";
+}
+impl RosMessage for IoHealth {
+    const TYPE_NAME: &'static str = "atmo_msgs/msg/IoHealth";
 }
 impl RosMessage for MpcStatus {
     const TYPE_NAME: &'static str = "atmo_msgs/msg/MpcStatus";

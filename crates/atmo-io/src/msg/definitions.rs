@@ -78,6 +78,10 @@ const DEFINITIONS: &[(&str, &str)] = &[
         include_str!("../../../../ros2/atmo_msgs/msg/TickTiming.msg"),
     ),
     (
+        "atmo_msgs/IoHealth",
+        include_str!("../../../../ros2/atmo_msgs/msg/IoHealth.msg"),
+    ),
+    (
         "atmo_msgs/MpcStatus",
         include_str!("../../../../ros2/atmo_msgs/msg/MpcStatus.msg"),
     ),

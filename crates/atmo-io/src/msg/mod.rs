@@ -22,7 +22,7 @@ mod label;
 mod px4;
 mod standard;
 
-pub use atmo::{Mode, MpcStatus, PilotInput, SolverStatus, TickTiming};
+pub use atmo::{IoHealth, Mode, MpcStatus, PilotInput, SolverStatus, TickTiming};
 pub use definitions::{definition, schema_text};
 pub use label::Label;
 pub use px4::{ActuatorMotors, OffboardControlMode, VehicleOdometry};

@@ -251,6 +251,16 @@ pub(crate) fn sample_status() -> MpcStatus {
         rejected_tilt: 5,
         rejected_pilot: 6,
         rejected_ground: 7,
+        io: IoHealth {
+            malformed: 8,
+            invalid: 9,
+            stamp_backwards: 10,
+            inputs_dropped: 11,
+            publish_dropped: 12,
+            log_dropped: 13,
+            drivers_alive: [true, false, true, true],
+            driver_deaths: [0, 1, 0, 2],
+        },
         ..MpcStatus::default()
     };
     for i in 0..12 {
@@ -304,6 +314,14 @@ fn mpc_status_layout() {
     body.push(0);
     body.extend([0; 7]);
     for v in [3u64, 1, 4, 5, 6, 7] {
+        body.extend(v.to_le_bytes());
+    }
+    for v in [8u64, 9, 10, 11, 12, 13] {
+        body.extend(v.to_le_bytes());
+    }
+    body.extend([1, 0, 1, 1]); // drivers_alive
+    body.extend([0; 4]); // pad to 8
+    for v in [0u64, 1, 0, 2] {
         body.extend(v.to_le_bytes());
     }
     round_trip(&status, &body);
@@ -403,6 +421,7 @@ fn schemas_carry_every_dependency_once() {
         "builtin_interfaces/Time",
         "atmo_msgs/PilotInput",
         "atmo_msgs/TickTiming",
+        "atmo_msgs/IoHealth",
     ] {
         assert!(status.contains(&format!("MSG: {dep}\n")), "{dep}");
     }

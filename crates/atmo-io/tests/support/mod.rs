@@ -7,8 +7,8 @@ use std::path::PathBuf;
 use atmo_core::model::State;
 use atmo_io::mcap_log::{LoggedMessage, read_log};
 use atmo_io::msg::{
-    ActuatorMotors, DiagnosticArray, DiagnosticStatus, Header, KeyValue, Label, Mode, MpcStatus,
-    OffboardControlMode, PilotInput, SolverStatus, TickTiming, Time, Twist, Vector3,
+    ActuatorMotors, DiagnosticArray, DiagnosticStatus, Header, IoHealth, KeyValue, Label, Mode,
+    MpcStatus, OffboardControlMode, PilotInput, SolverStatus, TickTiming, Time, Twist, Vector3,
     VehicleOdometry, frames::state_to_odometry,
 };
 
@@ -97,6 +97,16 @@ pub fn status(k: u64) -> MpcStatus {
         rejected_tilt: 2 * k,
         rejected_pilot: 3 * k,
         rejected_ground: 4 * k,
+        io: IoHealth {
+            malformed: k,
+            invalid: k + 1,
+            stamp_backwards: k + 2,
+            inputs_dropped: k + 3,
+            publish_dropped: k + 4,
+            log_dropped: k + 5,
+            drivers_alive: [k % 2 == 0, true, k % 3 == 0, true],
+            driver_deaths: [k, 0, 1, 2],
+        },
         ..MpcStatus::default()
     };
     for i in 0..12 {
