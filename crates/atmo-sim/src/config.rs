@@ -471,7 +471,7 @@ impl GroundContactConfig {
         0.8
     }
     fn default_lateral_friction() -> f64 {
-        0.3
+        0.45
     }
     fn default_tangential_stiffness() -> f64 {
         5000.0
@@ -489,7 +489,7 @@ impl GroundContactConfig {
         10.0
     }
     fn default_wheel_torque_max() -> f64 {
-        2.0
+        3.0
     }
     fn default_box_min() -> [f64; 3] {
         [-0.10, -0.06, -0.05]

@@ -250,11 +250,14 @@ fn driven_wheels_roll_the_robot_forward_and_turn_it() {
     plant.advance(&cmd, 2.0).unwrap();
     let x = plant.state();
     let omega = x[idx::WZ];
-    // Kinematic value R (wl - wr) / (2 l) with the actual track.
+    // Kinematic value R (wl - wr) / (2 l) with the actual track. Four wheels
+    // on two belts turn by skidding (front and back wheels slide sideways),
+    // so the yaw rate is a fraction of it (about 0.42 with the default
+    // friction): right way round, and neither stuck nor above kinematic.
     let track_half = 0.138;
     let expected = 0.125 * 4.0 / (2.0 * track_half);
     assert!(
-        omega > 0.5 * expected && omega < 1.1 * expected,
+        omega > 0.3 * expected && omega < expected,
         "yaw rate {omega}, kinematic {expected}"
     );
     // Commands beyond the motor limit are held to it.

@@ -122,3 +122,61 @@ fn pilot_and_reference_inputs_are_piecewise_constant() {
     assert_eq!(sc.reference_at(0.5).unwrap().tilt_deg, Some(0.0));
     assert_eq!(sc.reference_at(1.5).unwrap().tilt_deg, Some(70.0));
 }
+
+#[test]
+fn on_ground_stands_the_robot_on_a_slope_in_any_heading() {
+    for (azimuth, yaw) in [(0.0, 0.0), (90.0, 0.0), (30.0, 120.0)] {
+        let text = format!(
+            r#"
+name = "parked"
+duration = 3.0
+seed = 1
+[terrain]
+slope_deg = 20.0
+slope_azimuth_deg = {azimuth}
+[initial]
+position = [1.0, -2.0, 0.0]
+euler_deg = [{yaw}, 0.0, 0.0]
+tilt_deg = 90.0
+on_ground = true
+[effects.ground_effect]
+enabled = false
+[effects.wind]
+enabled = false
+[effects.sensors]
+enabled = false
+[[open_loop]]
+t = 0.0
+rotors = [0.0, 0.0, 0.0, 0.0]
+"#
+        );
+        let sc = Scenario::from_toml_str(&text, path("parked")).unwrap();
+        let run = sc.run_open_loop(0.01).unwrap();
+        assert!(
+            run.crash.is_none(),
+            "azimuth {azimuth}, yaw {yaw}: {:?}",
+            run.crash
+        );
+        let first = run.samples[0].state;
+        let last = run.samples.last().unwrap().state;
+        assert!(
+            run.samples[5..].iter().all(|s| s.grounded),
+            "azimuth {azimuth}, yaw {yaw}"
+        );
+        // Settled where it was put (the wheel drives hold it): within 5 cm,
+        // heading kept, at rest.
+        let moved = ((last[idx::X] - first[idx::X]).powi(2)
+            + (last[idx::Y] - first[idx::Y]).powi(2))
+        .sqrt();
+        assert!(
+            moved < 0.05,
+            "azimuth {azimuth}, yaw {yaw}: moved {moved} m"
+        );
+        assert!(
+            (last[idx::YAW] - first[idx::YAW]).abs() < 0.02,
+            "azimuth {azimuth}, yaw {yaw}"
+        );
+        let speed = (last[idx::VX].powi(2) + last[idx::VY].powi(2) + last[idx::VZ].powi(2)).sqrt();
+        assert!(speed < 1e-3, "azimuth {azimuth}, yaw {yaw}: {speed} m/s");
+    }
+}
