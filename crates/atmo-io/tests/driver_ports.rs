@@ -245,7 +245,14 @@ fn driver_process_round_trip_death_and_restart() {
     };
     let detected_ms = detected as f64 * 1e-6;
     eprintln!("killed driver detected after {detected_ms:.1} ms (timeout 100 ms)");
-    assert!(detected_ms <= 100.0 + 10.0, "{detected_ms} ms");
+    // The law: dead once nothing was heard for 100 ms (the last heartbeat
+    // left at most 2 ms before the kill). The margin is the scheduling
+    // slack of this 1 ms poll loop on a loaded 2-core machine.
+    assert!(detected_ms <= 100.0 + 25.0, "{detected_ms} ms");
+    assert!(
+        detected_ms >= 100.0 - 5.0,
+        "declared dead early: {detected_ms} ms"
+    );
     assert!(ports.counters().deaths.iter().all(|d| *d == 1));
 
     // Restarted: reconnects without restarting the daemon side.
