@@ -344,3 +344,55 @@ fn recover_never_panics_on_any_truncation() {
     assert!(previous > 150);
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+#[test]
+fn the_recover_command_line() {
+    let dir = std::env::temp_dir().join(format!("atmo-io-cli-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let full = dir.join("full.mcap");
+    let options = LoggerOptions {
+        chunk_size: 4096, // several chunks, so that a cut keeps some
+        ..LoggerOptions::default()
+    };
+    let (log, thread) = McapLogger::spawn(&full, options).unwrap();
+    let ch = log.channel("/atmo/status").unwrap();
+    for k in 0..100 {
+        assert!(log.try_log(ch, k * 1000, &status(k)));
+    }
+    log.finish();
+    thread.join().unwrap();
+    let bytes = std::fs::read(&full).unwrap();
+    let cut = dir.join("cut.mcap");
+    std::fs::write(&cut, &bytes[..bytes.len() * 2 / 3]).unwrap();
+    let out = dir.join("out.mcap");
+    let exe = env!("CARGO_BIN_EXE_atmo-mcap");
+    let run = Command::new(exe)
+        .args(["recover", cut.to_str().unwrap(), out.to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    assert!(String::from_utf8_lossy(&run.stdout).contains("input truncated"));
+    assert!(read_log(&out).unwrap().len() > 10);
+    let info = Command::new(exe)
+        .args(["info", out.to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert!(info.status.success());
+    assert!(String::from_utf8_lossy(&info.stdout).contains("atmo_msgs/msg/MpcStatus"));
+    // Bad use: exit code 2; a missing file: 1 with the path named.
+    assert_eq!(
+        Command::new(exe).arg("nope").status().unwrap().code(),
+        Some(2)
+    );
+    let missing = Command::new(exe)
+        .args(["info", "/nonexistent.mcap"])
+        .output()
+        .unwrap();
+    assert_eq!(missing.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&missing.stderr).contains("/nonexistent.mcap"));
+    std::fs::remove_dir_all(&dir).unwrap();
+}
