@@ -431,3 +431,45 @@ fn domain_id_comes_from_ros_domain_id() {
         assert!(String::from_utf8_lossy(&out.stdout).contains("1 passed"));
     }
 }
+
+/// A full publish queue drops and counts; the caller never waits.
+#[test]
+fn a_full_publish_queue_drops_and_counts() {
+    let config = Ros2Config {
+        publish_queue: 1,
+        ..Ros2Config::default()
+    };
+    let (publisher, _inputs, thread) = Ros2Node::start(
+        &config,
+        Ros2StartOptions {
+            domain_id: Some(domain() + 2),
+        },
+    )
+    .unwrap();
+    let n = 5000u64;
+    let start = Instant::now();
+    let mut accepted = 0;
+    let mut slowest = Duration::ZERO;
+    for k in 0..n {
+        let t0 = Instant::now();
+        accepted += u64::from(publisher.try_publish_status(&status(k)));
+        slowest = slowest.max(t0.elapsed());
+    }
+    let elapsed = start.elapsed();
+    let c = publisher.counters();
+    assert_eq!(accepted + c.publish_dropped, n, "{c:?}");
+    assert!(
+        c.publish_dropped > 0,
+        "a 1-slot queue must overflow under a burst"
+    );
+    wait_for(
+        "the accepted ones published",
+        Duration::from_secs(5),
+        || publisher.counters().published >= accepted,
+    );
+    eprintln!(
+        "{n} try_publish_status in {elapsed:?} (slowest {slowest:?}), dropped {}",
+        c.publish_dropped
+    );
+    thread.stop().unwrap();
+}
