@@ -66,6 +66,48 @@ fn assert_saturated_transition(s: &Summary) {
 #[test]
 fn wheel_landing_of_fig5_lands_past_60_deg_softly_and_drives_on() {
     let s = fly_checked("wheel_landing");
+    let s = {
+        // The same flight through the MCAP logger: every tick is in the log.
+        let dir = std::env::temp_dir().join(format!("atmo-test-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("flight.mcap");
+        let mut ticks = 0u64;
+        let (logged, log) = atmo_sim::closed_loop::fly_logged(
+            &scenario("wheel_landing"),
+            &controller(),
+            &path,
+            |_| ticks += 1,
+        )
+        .unwrap();
+        let mut a = logged.clone();
+        let mut b = s;
+        for x in [&mut a, &mut b] {
+            x.wall_time_s = 0.0;
+            x.feedback_time_median_s = 0.0;
+            x.feedback_time_max_s = 0.0;
+        }
+        assert_eq!(a, b, "logging changed the flight");
+        assert_eq!(log.dropped, 0);
+        let status: Vec<(u64, atmo_io::msg::MpcStatus)> =
+            atmo_io::mcap_log::read_topic(&path, atmo_sim::closed_loop::STATUS_TOPIC).unwrap();
+        assert_eq!(status.len() as u64, ticks);
+        let mut modes: Vec<&str> = Vec::new();
+        for (_, m) in &status {
+            if modes.last() != Some(&m.mode.name()) {
+                modes.push(m.mode.name());
+            }
+        }
+        assert_eq!(
+            modes,
+            logged
+                .mode_sequence
+                .iter()
+                .map(String::as_str)
+                .collect::<Vec<_>>()
+        );
+        std::fs::remove_dir_all(&dir).unwrap();
+        logged
+    };
     assert_wheel_landing(&s, 60.0);
     assert_saturated_transition(&s);
     assert!(

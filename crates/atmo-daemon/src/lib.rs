@@ -7,6 +7,7 @@
 //! - [`observer`]: disturbance observer that makes the MPC offset-free.
 //! - [`control_loop`]: the 150 Hz control thread with absolute deadlines and
 //!   per-tick timing.
+//! - [`telemetry`]: the tick's status as the `atmo_msgs/MpcStatus` message.
 //! - [`settings`], read from `config/flight.toml`.
 
 pub mod control_loop;
@@ -15,6 +16,7 @@ pub mod flight_stack;
 pub mod modes;
 pub mod observer;
 pub mod settings;
+pub mod telemetry;
 
 pub use error::{DaemonError, Result};
 pub use flight_stack::{

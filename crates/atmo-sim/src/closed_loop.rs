@@ -297,3 +297,52 @@ pub fn trace_of(records: &[TickRecord]) -> crate::figure::FlightTrace {
     }
     trace
 }
+
+/// The topic of the per-tick status in the flight log.
+pub const STATUS_TOPIC: &str = "/atmo/status";
+
+/// Flies `scenario` and logs every tick's `atmo_msgs/MpcStatus` to the MCAP
+/// file `path` (ROS 2 profile: Foxglove plots every field). Errors if the
+/// logger dropped anything: a simulation has no excuse to lose records.
+pub fn fly_logged(
+    scenario: &Scenario,
+    controller: &ControllerConfig,
+    path: &std::path::Path,
+    mut on_tick: impl FnMut(&TickRecord),
+) -> Result<(Summary, atmo_io::mcap_log::LogSummary)> {
+    use atmo_io::mcap_log::{LoggerOptions, McapLogger};
+    let io = |e: atmo_io::IoError| SimError::Output(e.to_string());
+    // A simulation runs ~50x faster than real time: a deep queue.
+    let options = LoggerOptions {
+        queue_capacity: 1 << 16,
+        ..LoggerOptions::default()
+    };
+    let (log, thread) = McapLogger::spawn(path, options).map_err(io)?;
+    let channel = log
+        .channel::<atmo_io::msg::MpcStatus>(STATUS_TOPIC)
+        .map_err(io)?;
+    let mut tick = 0;
+    let summary = fly(scenario, controller, |r| {
+        let timing = atmo_daemon::control_loop::TickTiming {
+            tick,
+            deadline_ns: r.inputs.now_ns,
+            ..Default::default()
+        };
+        let message = atmo_daemon::telemetry::status_message(tick, &r.inputs, &r.outputs, &timing);
+        // Counted if dropped (queue full): reported as an error below.
+        log.try_log(channel, r.inputs.now_ns, &message);
+        tick += 1;
+        on_tick(r);
+    });
+    log.finish();
+    let written = thread.join().map_err(io)?;
+    let summary = summary?;
+    if written.dropped > 0 {
+        return Err(SimError::Output(format!(
+            "{}: the logger dropped {} records",
+            path.display(),
+            written.dropped
+        )));
+    }
+    Ok((summary, written))
+}

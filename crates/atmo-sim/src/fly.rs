@@ -3,7 +3,7 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
-use atmo_sim::closed_loop::{ControllerConfig, TickRecord, fly, trace_of};
+use atmo_sim::closed_loop::{ControllerConfig, TickRecord, fly_logged, trace_of};
 use atmo_sim::figure::{Markers, write_landing_figure};
 use atmo_sim::monte_carlo;
 use atmo_sim::scenario::Scenario;
@@ -29,7 +29,8 @@ pub fn run(
 
 fn single(scenario: &Scenario, controller: &ControllerConfig, dir: &Path) -> Result<()> {
     let mut records: Vec<TickRecord> = Vec::new();
-    let summary = fly(scenario, controller, |r| records.push(*r))?;
+    let log_path = dir.join("flight.mcap");
+    let (summary, log) = fly_logged(scenario, controller, &log_path, |r| records.push(*r))?;
     let summary_path = dir.join("summary.json");
     std::fs::write(
         &summary_path,
@@ -75,9 +76,11 @@ fn single(scenario: &Scenario, controller: &ControllerConfig, dir: &Path) -> Res
         summary.sim_time_s / summary.wall_time_s.max(1e-9)
     );
     println!(
-        "wrote             {} and {}",
+        "wrote             {}, {} and {} ({} messages)",
         summary_path.display(),
-        figure_path.display()
+        figure_path.display(),
+        log_path.display(),
+        log.written
     );
     println!(
         "result            {}",

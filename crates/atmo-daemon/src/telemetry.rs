@@ -1,0 +1,72 @@
+//! The status record of a tick as the `atmo_msgs/MpcStatus` message that
+//! goes to ROS 2 and the MCAP log. Copies fixed-size data only: safe on the
+//! control thread.
+
+use atmo_io::msg::{
+    Label, Mode as ModeMsg, MpcStatus, PilotInput as PilotMsg, SolverStatus,
+    TickTiming as TimingMsg,
+};
+
+use crate::control_loop::TickTiming;
+use crate::flight_stack::{StepInputs, StepOutputs};
+
+/// `MpcStatus` for one tick.
+pub fn status_message(
+    tick: u64,
+    inputs: &StepInputs,
+    outputs: &StepOutputs,
+    timing: &TickTiming,
+) -> MpcStatus {
+    let s = &outputs.status;
+    let p = &inputs.pilot;
+    MpcStatus {
+        stamp_ns: s.now_ns,
+        tick,
+        mode: ModeMsg::from_code(s.mode.code()).unwrap_or_default(),
+        transition: Label::new(s.transition.unwrap_or("")),
+        solver_status: SolverStatus::from_code(s.solver.code()).unwrap_or_default(),
+        solver_iterations: s.solver_iterations,
+        mpc_failed_ticks: s.mpc_failed_ticks,
+        mpc_failures_total: s.mpc_failures_total,
+        state: s.state.into(),
+        reference: s.reference.into(),
+        predicted_next: s.predicted_next.into(),
+        thrust: outputs.thrust,
+        alpha: s.alpha,
+        varphi: s.tilt,
+        tilt_limit: s.tilt_limit,
+        tilt_velocity: outputs.tilt_velocity,
+        drive_velocity: s.drive_velocity,
+        wheel_rates: [outputs.wheel_rates.left, outputs.wheel_rates.right],
+        height: s.height,
+        ground_contact: inputs.ground_contact,
+        estimate_age: if s.estimate_age.is_finite() {
+            s.estimate_age
+        } else {
+            -1.0
+        },
+        feedback_time: s.feedback_time,
+        preparation_time: s.preparation_time,
+        pilot: PilotMsg {
+            velocity: p.velocity,
+            yaw_rate: p.yaw_rate,
+            throttle: p.throttle,
+            arm: p.arm,
+            offboard: p.offboard,
+            mpc_enabled: p.mpc_enabled,
+        },
+        timing: TimingMsg {
+            tick: timing.tick,
+            deadline_ns: timing.deadline_ns,
+            wake_latency: timing.wake_latency,
+            compute: timing.compute,
+            overrun: timing.overrun,
+            overruns_total: timing.overruns_total,
+            skipped_total: timing.skipped_total,
+        },
+        rejected_estimate: s.rejected.estimate,
+        rejected_tilt: s.rejected.tilt,
+        rejected_pilot: s.rejected.pilot,
+        rejected_ground: s.rejected.ground,
+    }
+}
