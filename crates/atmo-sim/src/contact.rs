@@ -134,6 +134,12 @@ impl ContactLaw {
         f / ratio_sq.sqrt()
     }
 
+    /// Normal force (N) of a point `depth` m into the ground moving at
+    /// `v_n` m/s along the up-normal: spring-damper, never pulling.
+    pub fn normal_force(&self, depth: f64, v_n: f64) -> f64 {
+        (self.stiffness * depth - self.damping * v_n).max(0.0)
+    }
+
     /// Force (world frame) on a point `depth` m into the ground moving at `v`
     /// with tangential spring `s`; `lateral` is a wheel's sideways direction
     /// in the ground plane (None for body points). Returns (force, normal
@@ -147,7 +153,7 @@ impl ContactLaw {
         lateral: Option<&Vector3<f64>>,
     ) -> (Vector3<f64>, f64, Vector3<f64>) {
         let v_n = v.dot(n);
-        let f_n = (self.stiffness * depth - self.damping * v_n).max(0.0);
+        let f_n = self.normal_force(depth, v_n);
         let v_t = v - n * v_n;
         let f_t = -(s * self.tangential_stiffness) - v_t * self.tangential_damping;
         (n * f_n + self.limit(f_t, f_n, lateral), f_n, v_t)

@@ -784,14 +784,7 @@ impl Plant {
             Matrix3::identity()
         };
         if near {
-            let mut scratch = Ext::zeros();
-            let _ = self.contact_terms(
-                &self.ext,
-                &rot,
-                &self.command,
-                &mut scratch,
-                Some(&mut report),
-            );
+            report = self.contact_report(&rot);
         }
         let time = self.time();
         let mut new_events: [Option<EventKind>; N_CONTACTS + 1] = [None; N_CONTACTS + 1];
@@ -881,6 +874,58 @@ impl Plant {
         }
     }
 
+    /// Wheel j's lowest rim point towards `down_b` (body frame) and its
+    /// sideways direction (body frame; None when the wheel lies flat).
+    /// Lowest point `c + R d_p / |d_p|`, sideways `l_p / |l_p|`, with
+    /// d_p = d - a (a.d) and l_p = a - d (a.d): for unit a and d both have
+    /// the length sqrt(1 - (a.d)^2), so one square root serves both.
+    fn wheel_point(&self, j: usize, down_b: &Vector3<f64>) -> (Vector3<f64>, Option<Vector3<f64>>) {
+        let c = &self.body.rotor_position[j];
+        let a = &self.body.rotor_axis[j];
+        let ad = a.dot(down_b);
+        let len_sq = 1.0 - ad * ad;
+        if len_sq > 1e-12 {
+            let inv = 1.0 / len_sq.sqrt();
+            (
+                c + (down_b - a * ad) * (self.wheel_radius * inv),
+                Some((a - down_b * ad) * inv),
+            )
+        } else {
+            (*c, None)
+        }
+    }
+
+    /// Where each contact point is after a step: touching or not, its speed
+    /// towards the ground and its normal force (the contact law's normal
+    /// part; wheel spin moves the rim point along the ground, not into it).
+    fn contact_report(&self, r: &Matrix3<f64>) -> [ContactInfo; N_CONTACTS] {
+        let mut report = [ContactInfo::default(); N_CONTACTS];
+        let Some((law, _, _)) = &self.contact else {
+            return report;
+        };
+        let ext = &self.ext;
+        let p = Vector3::new(ext[idx::X], ext[idx::Y], ext[idx::Z]);
+        let v = Vector3::new(ext[idx::VX], ext[idx::VY], ext[idx::VZ]);
+        let w = Vector3::new(ext[idx::WX], ext[idx::WY], ext[idx::WZ]);
+        let n = self.plane.normal;
+        let down_b = -(r.transpose() * n);
+        for (j, info) in report.iter_mut().enumerate() {
+            let point = if j < N_WHEELS {
+                self.wheel_point(j, &down_b).0
+            } else {
+                self.corners[j - N_WHEELS]
+            };
+            let depth = -self.plane.height(&(p + r * point));
+            let v_n = (v + r * w.cross(&point)).dot(&n);
+            info.approach_speed = -v_n;
+            if depth > 0.0 {
+                info.touching = true;
+                info.normal_force = law.normal_force(depth, v_n);
+            }
+        }
+        report
+    }
+
     /// Contact wrench on the body (body force, torque about B) and the
     /// derivatives of the contact springs and wheel drives, written into `d`.
     /// Skips the contact points when B is farther from the ground than any
@@ -891,7 +936,6 @@ impl Plant {
         r: &Matrix3<f64>,
         cmd: &Command,
         d: &mut Ext,
-        mut report: Option<&mut [ContactInfo; N_CONTACTS]>,
     ) -> Vector6<f64> {
         let Some((law, drive, _)) = &self.contact else {
             return Vector6::zeros();
@@ -914,38 +958,21 @@ impl Plant {
             if clear || (j >= N_WHEELS && corners_clear) {
                 break;
             }
-            // Wheel: lowest rim point `c + R d_p / |d_p|` and sideways
-            // direction `l_p / |l_p|`, with d_p = d - a (a.d) and
-            // l_p = a - d (a.d); for unit a and d both have the length
-            // sqrt(1 - (a.d)^2), so one square root serves both.
-            let mut lateral_b = None;
-            let (point, spin_axis, rim) = if j < N_WHEELS {
+            let (point, spin_axis, rim, lateral_b) = if j < N_WHEELS {
+                let (pt, lateral_b) = self.wheel_point(j, &down_b);
                 let c = &body.rotor_position[j];
-                let a = &body.rotor_axis[j];
-                let ad = a.dot(&down_b);
-                let len_sq = 1.0 - ad * ad;
-                let pt = if len_sq > 1e-12 {
-                    let inv = 1.0 / len_sq.sqrt();
-                    lateral_b = Some((a - down_b * ad) * inv);
-                    c + (down_b - a * ad) * (self.wheel_radius * inv)
-                } else {
-                    *c
-                };
-                (pt, a * SPIN_SIGN[j], pt - c)
+                (pt, body.rotor_axis[j] * SPIN_SIGN[j], pt - c, lateral_b)
             } else {
                 (
                     self.corners[j - N_WHEELS],
                     Vector3::zeros(),
                     Vector3::zeros(),
+                    None,
                 )
             };
             let world = p + r * point;
             let depth = -self.plane.height(&world);
             if depth <= 0.0 {
-                if let Some(rep) = report.as_deref_mut() {
-                    // Approaching but open: the speed a touchdown will have.
-                    rep[j].approach_speed = -(v + r * w.cross(&point)).dot(&n);
-                }
                 continue;
             }
             let mut v_local = w.cross(&point);
@@ -959,7 +986,7 @@ impl Plant {
                 ext[SPRING + 3 * j + 2],
             );
             let lateral = lateral_b.map(|l| r * l);
-            let (f_world, f_n, s_dot) = law.force(&n, depth, &v_point, &s, lateral.as_ref());
+            let (f_world, _, s_dot) = law.force(&n, depth, &v_point, &s, lateral.as_ref());
             d.fixed_rows_mut::<3>(SPRING + 3 * j).copy_from(&s_dot);
             let f_b = rt * f_world;
             force += f_b;
@@ -970,13 +997,6 @@ impl Plant {
                 wheel_torque[WHEEL_SIDE[j]] += axial;
             }
             torque += tq;
-            if let Some(rep) = report.as_deref_mut() {
-                rep[j] = ContactInfo {
-                    normal_force: f_n,
-                    approach_speed: -v_point.dot(&n),
-                    touching: true,
-                };
-            }
         }
         // Wheel drives: PI speed control with a torque limit; the
         // motor reaction acts on the body about the side's spin axis.
@@ -1070,7 +1090,7 @@ impl Plant {
             }
 
             if self.contact.is_some() {
-                extra += self.contact_terms(ext, &r, cmd, &mut d, None);
+                extra += self.contact_terms(ext, &r, cmd, &mut d);
             }
         }
 
