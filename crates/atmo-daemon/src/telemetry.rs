@@ -3,7 +3,7 @@
 //! control thread.
 
 use atmo_io::msg::{
-    Label, Mode as ModeMsg, MpcStatus, PilotInput as PilotMsg, SolverStatus,
+    IoHealth, Label, Mode as ModeMsg, MpcStatus, PilotInput as PilotMsg, SolverStatus,
     TickTiming as TimingMsg,
 };
 
@@ -68,5 +68,7 @@ pub fn status_message(
         rejected_tilt: s.rejected.tilt,
         rejected_pilot: s.rejected.pilot,
         rejected_ground: s.rejected.ground,
+        // Filled in by the I/O layer that owns the transports (zero in simulation).
+        io: IoHealth::default(),
     }
 }
