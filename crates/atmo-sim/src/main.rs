@@ -65,7 +65,8 @@ enum Command {
     /// rates, normalized rotor commands); optional ground_z (NED z of the
     /// ground, 0 if absent) and battery_v. Unknown columns are ignored and
     /// listed; non-finite or time-reversing rows are skipped and counted.
-    /// See docs/recording_format.md. MCAP logs: not read yet (export to CSV).
+    /// See docs/recording_format.md. A file ending in .mcap is read as the
+    /// flight stack's log (topic /atmo/status, atmo_msgs/MpcStatus).
     /// Or --demo EFFECTS: generate a recording of the built-in plant with
     /// those effects concealed (e.g. --demo ground_effect,motor_lag).
     ///
@@ -86,7 +87,8 @@ enum Command {
     /// found; errors (bad input) exit non-zero with a message naming the
     /// file and the problem.
     Explain {
-        /// Recording (CSV, see docs/recording_format.md).
+        /// Recording: CSV, or the flight stack's MCAP log (*.mcap); see
+        /// docs/recording_format.md.
         recording: Option<PathBuf>,
         /// Robot parameter file: the nominal model.
         #[arg(long, default_value = "config/atmo.toml")]

@@ -35,6 +35,14 @@ fn row(t: f64) -> String {
     v.join(",")
 }
 
+/// The error of loading `path` (a test failure if it loads).
+fn load_error(path: &std::path::Path) -> ExplainError {
+    match Recording::load(path) {
+        Ok(_) => panic!("{} loaded but should not", path.display()),
+        Err(e) => e,
+    }
+}
+
 fn message(e: &ExplainError) -> String {
     e.to_string()
 }
@@ -108,7 +116,7 @@ fn bad_rows_are_skipped_and_counted_and_extra_columns_listed() {
 #[test]
 fn binary_and_mcap_inputs_are_errors_not_panics() {
     let dir = temp_dir("binary");
-    // A truncated / corrupted MCAP (magic bytes then garbage).
+    // A corrupted MCAP (magic bytes then garbage).
     let mcap = dir.join("flight.mcap");
     std::fs::write(&mcap, b"\x89MCAP0\r\n\x01\x02\x03").unwrap();
     let msg = message(&Recording::load(&mcap).unwrap_err());
@@ -196,4 +204,85 @@ fn csv_round_trip_and_outputs_are_written_and_loadable() {
     );
     let report = std::fs::read_to_string(dir.join("report.md")).unwrap();
     assert!(report.contains("motor_lag") && report.contains("heatmap_before.png"));
+}
+
+/// Writes `rec` as the flight stack's MCAP log (one `/atmo/status` per row,
+/// estimate age 0) and returns the path.
+fn write_mcap(rec: &Recording, path: &std::path::Path) {
+    use atmo_io::mcap_log::{LoggerOptions, McapLogger};
+    use atmo_io::msg::MpcStatus;
+    let (log, thread) = McapLogger::spawn(path, LoggerOptions::default()).unwrap();
+    let ch = log.channel::<MpcStatus>("/atmo/status").unwrap();
+    for (k, s) in rec.samples.iter().enumerate() {
+        let stamp_ns = (s.t * 1e9).round() as u64;
+        let mut state = [0.0; 12];
+        state.copy_from_slice(s.x.as_slice());
+        let msg = MpcStatus {
+            stamp_ns,
+            tick: k as u64,
+            state,
+            thrust: [s.u[0], s.u[1], s.u[2], s.u[3]],
+            varphi: s.varphi,
+            height: s.ground_z - s.x[2],
+            estimate_age: 0.0,
+            ..MpcStatus::default()
+        };
+        // The logger's queue is bounded: retry until accepted.
+        while !log.try_log(ch, stamp_ns, &msg) {
+            std::thread::sleep(std::time::Duration::from_millis(1));
+        }
+    }
+    log.finish();
+    thread.join().unwrap();
+}
+
+#[test]
+fn mcap_logs_are_read_and_truncated_ones_are_clear_errors() {
+    let robot = RobotConfig::atmo();
+    let mut plant = PlantConfig::ideal();
+    plant.arm_inertia_convention = robot.arm.inertia_convention;
+    plant.effects = EffectsConfig {
+        motor_lag: Some(MotorLagConfig::default()),
+        sensors: Some(SensorsConfig::default()),
+        ..EffectsConfig::none()
+    };
+    let rec = record(&robot, &plant, &Flight::new(Profile::Cruise, 24.0, 4)).unwrap();
+    let dir = temp_dir("mcap");
+    let path = dir.join("flight.mcap");
+    write_mcap(&rec, &path);
+    let back = Recording::load(&path).unwrap();
+    assert_eq!(back.samples.len(), rec.samples.len());
+    for (a, b) in back.samples.iter().zip(&rec.samples) {
+        assert!((a.t - b.t).abs() < 1e-8);
+        assert_eq!(a.u, b.u);
+        assert!((a.x - b.x).norm() < 1e-12);
+        assert!((a.varphi - b.varphi).abs() < 1e-12);
+        assert!((a.ground_z - b.ground_z).abs() < 1e-9);
+    }
+    let ex = explain(&back, &robot, &Options::default()).unwrap();
+    assert_eq!(ex.selected(), vec!["motor_lag"]);
+
+    // Cut short (a killed writer without recovery): a clear error, no panic.
+    let bytes = std::fs::read(&path).unwrap();
+    let cut = dir.join("cut.mcap");
+    std::fs::write(&cut, &bytes[..bytes.len() / 2]).unwrap();
+    let msg = message(&load_error(&cut));
+    assert!(msg.contains("cut.mcap") && msg.contains("MCAP"), "{msg}");
+    // Corrupted: the magic bytes overwritten.
+    let mut bad = bytes.clone();
+    for b in &mut bad[..8] {
+        *b ^= 0x5a;
+    }
+    let corrupt = dir.join("corrupt.mcap");
+    std::fs::write(&corrupt, &bad).unwrap();
+    let msg = message(&load_error(&corrupt));
+    assert!(
+        msg.contains("corrupt.mcap") && msg.contains("MCAP"),
+        "{msg}"
+    );
+    // Empty.
+    let empty = dir.join("empty.mcap");
+    std::fs::write(&empty, b"").unwrap();
+    let msg = message(&load_error(&empty));
+    assert!(msg.contains("empty.mcap"), "{msg}");
 }

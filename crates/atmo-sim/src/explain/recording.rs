@@ -20,6 +20,8 @@ pub const REQUIRED_COLUMNS: [&str; 18] = [
     "t", "x", "y", "z", "yaw", "pitch", "roll", "vx", "vy", "vz", "wx", "wy", "wz", "u1", "u2",
     "u3", "u4", "varphi",
 ];
+/// Topic of the flight stack's tick status in its MCAP logs.
+pub const STATUS_TOPIC: &str = "/atmo/status";
 /// Optional columns the tool uses.
 pub const OPTIONAL_COLUMNS: [&str; 2] = ["ground_z", "battery_v"];
 
@@ -63,8 +65,8 @@ impl Recording {
         }
     }
 
-    /// Reads a recording; the format is chosen by the extension (`.csv`;
-    /// `.mcap` logs are not read yet and say so).
+    /// Reads a recording; the format is chosen by the extension (`.mcap`:
+    /// the flight stack's log, anything else: CSV).
     pub fn load(path: impl AsRef<Path>) -> Result<Self, ExplainError> {
         let path = path.as_ref();
         let ext = path
@@ -73,12 +75,7 @@ impl Recording {
             .unwrap_or("")
             .to_ascii_lowercase();
         if ext == "mcap" {
-            return Err(ExplainError::Input {
-                file: path.to_path_buf(),
-                message: "MCAP logs are not read by this build of `explain` yet; export the \
-                          log to CSV (docs/recording_format.md)"
-                    .into(),
-            });
+            return Self::from_mcap(path);
         }
         let bytes = std::fs::read(path).map_err(|e| ExplainError::Input {
             file: path.to_path_buf(),
@@ -92,6 +89,98 @@ impl Recording {
             ),
         })?;
         Self::from_csv_str(&text, path)
+    }
+
+    /// Reads the flight stack's MCAP log: topic [`STATUS_TOPIC`]
+    /// (`atmo_msgs/MpcStatus`, one per tick). A row per distinct estimate:
+    /// `t` = tick stamp - estimate age (the instant the estimate describes),
+    /// the estimated state, the rotor commands of the last tick at or before
+    /// that instant, the tilt interpolated between ticks, and the ground
+    /// from the logged height (`ground_z = z + height`).
+    pub fn from_mcap(path: &Path) -> Result<Self, ExplainError> {
+        let fail = |message: String| ExplainError::Input {
+            file: path.to_path_buf(),
+            message,
+        };
+        let msgs = atmo_io::mcap_log::read_topic::<atmo_io::msg::MpcStatus>(path, STATUS_TOPIC)
+            .map_err(|e| {
+                fail(format!(
+                    "cannot read the MCAP log ({e}); a log cut short by a killed writer can be \
+                     repaired with atmo_io::mcap_log::recover"
+                ))
+            })?;
+        if msgs.is_empty() {
+            return Err(fail(format!(
+                "the MCAP log has no messages on {STATUS_TOPIC} (atmo_msgs/MpcStatus)"
+            )));
+        }
+        let ticks: Vec<(f64, &atmo_io::msg::MpcStatus)> = msgs
+            .iter()
+            .map(|(_, m)| (m.stamp_ns as f64 * 1e-9, m))
+            .collect();
+        let mut rec = Recording {
+            source: path.to_path_buf(),
+            ..Recording::default()
+        };
+        let mut last_t = f64::NEG_INFINITY;
+        let mut j = 0;
+        for (stamp, m) in &ticks {
+            if m.estimate_age < 0.0 {
+                continue; // no estimate yet
+            }
+            let t = stamp - m.estimate_age;
+            if (t - last_t).abs() < 1e-9 {
+                continue; // the same estimate, seen by another tick
+            }
+            let finite = m.state.iter().all(|v| v.is_finite())
+                && m.height.is_finite()
+                && m.varphi.is_finite()
+                && t.is_finite();
+            if !finite {
+                rec.skipped_nonfinite += 1;
+                continue;
+            }
+            if t < last_t {
+                rec.skipped_time += 1;
+                continue;
+            }
+            // Last tick at or before t: its commands were in effect.
+            while j + 1 < ticks.len() && ticks[j + 1].0 <= t + 1e-9 {
+                j += 1;
+            }
+            let (t0, m0) = ticks[j];
+            if t0 > t + 1e-9 {
+                continue; // before the first tick's commands
+            }
+            let u = m0.thrust;
+            if !u.iter().all(|v| v.is_finite()) {
+                rec.skipped_nonfinite += 1;
+                continue;
+            }
+            let varphi = match ticks.get(j + 1) {
+                Some((t1, m1)) if *t1 > t0 => {
+                    m0.varphi + (m1.varphi - m0.varphi) * (t - t0) / (t1 - t0)
+                }
+                _ => m0.varphi,
+            };
+            last_t = t;
+            let x = State::from_column_slice(&m.state);
+            rec.samples.push(Sample {
+                t,
+                x,
+                u: Input::from_column_slice(&u),
+                varphi,
+                ground_z: x[2] + m.height,
+                battery_v: None,
+            });
+        }
+        if rec.samples.is_empty() {
+            return Err(fail(format!(
+                "no usable rows on {STATUS_TOPIC}: {} non-finite, {} out of order",
+                rec.skipped_nonfinite, rec.skipped_time
+            )));
+        }
+        Ok(rec)
     }
 
     /// Parses CSV text; `file` names the origin in errors.
