@@ -133,6 +133,9 @@ fn summary(ex: &super::Explanation, out: &Path, elapsed: f64) -> String {
         ex.source, ex.rows, ex.duration_s, ex.rate_hz
     );
     let _ = writeln!(s, "verdict        {}", ex.verdict);
+    for n in &ex.notes {
+        let _ = writeln!(s, "note           {n}");
+    }
     for e in ex.effects.iter().filter(|e| e.selected) {
         let params: Vec<String> = e
             .parameters

@@ -199,6 +199,8 @@ pub struct Explanation {
     #[serde(skip)]
     pub series: Option<Series>,
     pub timings_s: Vec<(String, f64)>,
+    /// Warnings about how far the results can be trusted.
+    pub notes: Vec<String>,
 }
 
 struct Progress(Option<indicatif::ProgressBar>);
@@ -965,6 +967,21 @@ pub fn explain(
         sn.push(prep.nominal[6 * k + ch]);
         sf.push(prep.meas[6 * k + ch] - after[6 * k + ch]);
     }
+    let mut notes = Vec::new();
+    let used_segments = (0..nseg).filter(|&s| stats.entries[s] > 0).count();
+    if used_segments < 10 {
+        notes.push(format!(
+            "only {used_segments} segments of airborne data (about {:.0} s): held-out \
+             scores and confidences rest on few segments; record longer for firm answers",
+            fit_rows.len() as f64 * prep.dt
+        ));
+    }
+    if prep.contact_rows > 0 {
+        notes.push(format!(
+            "{} rows at the ground left out (ground contact is not a candidate effect)",
+            prep.contact_rows
+        ));
+    }
     progress.finish();
     lap("total", &mut timings);
     Ok(Explanation {
@@ -1007,6 +1024,7 @@ pub fn explain(
             fitted: sf,
         }),
         timings_s: timings,
+        notes,
     })
 }
 

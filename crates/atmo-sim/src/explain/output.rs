@@ -68,6 +68,7 @@ pub fn json(ex: &Explanation) -> serde_json::Value {
         "ground_effect_gain_grid": ex.ground_effect_gain_grid,
         "motor_lag_profile": ex.motor_lag_profile.iter().map(|(t, c)| json!({"time_constant_s": t, "heldout_error": c})).collect::<Vec<_>>(),
         "timings_s": ex.timings_s,
+        "notes": ex.notes,
     })
 }
 
@@ -98,6 +99,9 @@ pub fn report_md(ex: &Explanation) -> String {
         );
     }
     let _ = writeln!(s, "## Verdict\n\n**{}**\n", ex.verdict);
+    for n in &ex.notes {
+        let _ = writeln!(s, "Note: {n}.\n");
+    }
     let _ = writeln!(
         s,
         "## 1. Residuals\n\nNoise floor per channel (filtered sensor noise and command timing):\n"
