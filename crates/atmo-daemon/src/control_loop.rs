@@ -151,3 +151,88 @@ pub fn run_periodic<C: Clock>(
         }
     }
 }
+
+/// What the control thread publishes each tick.
+#[derive(Debug, Clone, Copy)]
+pub struct TickReport {
+    pub outputs: crate::flight_stack::StepOutputs,
+    pub timing: TickTiming,
+}
+
+/// Counters of the control thread's channels.
+#[derive(Debug, Default)]
+pub struct LoopCounters {
+    /// Ticks run.
+    pub ticks: std::sync::atomic::AtomicU64,
+    /// Reports dropped because the output channel was full.
+    pub reports_dropped: std::sync::atomic::AtomicU64,
+}
+
+/// A running control thread: `FlightStack::step` at a fixed rate on its own
+/// thread, inputs in and reports out through bounded channels it never
+/// blocks on (the latest input wins; a full output channel drops the report
+/// and counts it).
+pub struct ControlThread {
+    stop: std::sync::Arc<std::sync::atomic::AtomicBool>,
+    counters: std::sync::Arc<LoopCounters>,
+    join: std::thread::JoinHandle<crate::flight_stack::FlightStack>,
+}
+
+impl ControlThread {
+    /// Moves `stack` to a new thread ticking every `period`. `inputs` gives
+    /// the newest inputs (drained each tick, the last one used, `now_ns`
+    /// replaced by the tick's deadline on the monotonic clock); reports go
+    /// to `reports`.
+    pub fn spawn(
+        mut stack: crate::flight_stack::FlightStack,
+        period: Duration,
+        inputs: std::sync::mpsc::Receiver<crate::flight_stack::StepInputs>,
+        reports: std::sync::mpsc::SyncSender<TickReport>,
+    ) -> std::io::Result<Self> {
+        use std::sync::atomic::Ordering;
+        let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+        let counters = std::sync::Arc::new(LoopCounters::default());
+        let (stop_flag, shared) = (stop.clone(), counters.clone());
+        let join = std::thread::Builder::new()
+            .name("atmo-control".into())
+            .spawn(move || {
+                let clock = MonotonicClock::new();
+                let mut latest: Option<crate::flight_stack::StepInputs> = None;
+                run_periodic(&clock, period, |deadline, previous| {
+                    while let Ok(input) = inputs.try_recv() {
+                        latest = Some(input);
+                    }
+                    if let Some(mut input) = latest {
+                        input.now_ns = deadline;
+                        let outputs = stack.step(&input);
+                        let report = TickReport {
+                            outputs,
+                            timing: *previous,
+                        };
+                        if reports.try_send(report).is_err() {
+                            shared.reports_dropped.fetch_add(1, Ordering::Relaxed);
+                        }
+                        stack.prepare_next();
+                    }
+                    shared.ticks.fetch_add(1, Ordering::Relaxed);
+                    !stop_flag.load(Ordering::Relaxed)
+                });
+                stack
+            })?;
+        Ok(Self {
+            stop,
+            counters,
+            join,
+        })
+    }
+
+    pub fn counters(&self) -> &LoopCounters {
+        &self.counters
+    }
+
+    /// Stops after the current tick and hands the flight stack back.
+    pub fn stop(self) -> std::thread::Result<crate::flight_stack::FlightStack> {
+        self.stop.store(true, std::sync::atomic::Ordering::Relaxed);
+        self.join.join()
+    }
+}
