@@ -941,7 +941,18 @@ pub fn explain(
             reports
                 .iter()
                 .filter(|r| r.selected)
-                .map(|r| format!("{} (confidence {:.2})", r.name, r.confidence))
+                .map(|r| {
+                    if r.indistinguishable_from.is_empty() {
+                        format!("{} (confidence {:.2})", r.name, r.confidence)
+                    } else {
+                        format!(
+                            "{} (confidence {:.2}; this data cannot tell it apart from {})",
+                            r.name,
+                            r.confidence,
+                            r.indistinguishable_from.join(", ")
+                        )
+                    }
+                })
                 .collect::<Vec<_>>()
                 .join(", "),
             if high.is_empty() {
