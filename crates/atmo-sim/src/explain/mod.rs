@@ -970,9 +970,34 @@ pub fn explain(
         .max_by(|a, b| a.rms_ratio.total_cmp(&b.rms_ratio))
         .and_then(|l| CHANNELS.iter().position(|c| *c == l.channel))
         .unwrap_or(2);
+    // A 20 s window where the nominal residual of that channel is largest
+    // (the whole recording when it is shorter than 30 s).
+    let (w0, w1) = if duration > 30.0 {
+        let t0 = prep.t[0];
+        let nb = duration.ceil() as usize + 1;
+        let mut per_s = vec![0.0; nb];
+        for &k in &fit_rows {
+            let r = prep.resid[6 * k + ch];
+            per_s[((prep.t[k] - t0) as usize).min(nb - 1)] += r * r;
+        }
+        let best = (0..nb.saturating_sub(20))
+            .max_by(|&a, &b| {
+                per_s[a..a + 20]
+                    .iter()
+                    .sum::<f64>()
+                    .total_cmp(&per_s[b..b + 20].iter().sum::<f64>())
+            })
+            .unwrap_or(0);
+        (t0 + best as f64, t0 + best as f64 + 20.0)
+    } else {
+        (f64::NEG_INFINITY, f64::INFINITY)
+    };
     let mut ts = Vec::new();
     let (mut sm, mut sn, mut sf) = (Vec::new(), Vec::new(), Vec::new());
-    for &k in &fit_rows {
+    for &k in fit_rows
+        .iter()
+        .filter(|&&k| prep.t[k] >= w0 && prep.t[k] <= w1)
+    {
         ts.push(prep.t[k]);
         sm.push(prep.meas[6 * k + ch]);
         sn.push(prep.nominal[6 * k + ch]);
