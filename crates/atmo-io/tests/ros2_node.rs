@@ -288,6 +288,8 @@ fn node_talks_to_a_second_participant_and_counts_bad_input() {
                 if value("malformed") >= c.malformed
                     && value("invalid") >= c.invalid
                     && value("stamp_backwards") >= c.stamp_backwards
+                    && value("pilot_received") >= c.pilot_received
+                    && value("pilot_rejected") >= c.pilot_rejected
                 {
                     assert_eq!(own.level, atmo_io::msg::DiagnosticStatus::WARN);
                     return true;

@@ -7,8 +7,8 @@ use serde::Deserialize;
 
 use crate::error::Result;
 use crate::msg::{
-    ActuatorMotors, DiagnosticArray, MpcStatus, Odometry, OffboardControlMode, RosMessage, Twist,
-    VehicleOdometry,
+    ActuatorMotors, DiagnosticArray, MpcStatus, Odometry, OffboardControlMode, PilotInput,
+    RosMessage, Twist, VehicleOdometry,
 };
 
 /// The node's settings: a `[ros2]`-style table (or a whole file).
@@ -56,6 +56,10 @@ pub struct Topics {
     /// In: drive commands (`geometry_msgs/msg/Twist`, FLU: linear.x forward,
     /// angular.z yaw rate left-positive).
     pub drive_command: TopicConfig,
+    /// In: pilot inputs (`atmo_msgs/msg/PilotInput`: NED velocity command,
+    /// FRD yaw rate, throttle in [0, 1], switches), e.g. from the SITL plant
+    /// server or a ground station.
+    pub pilot: TopicConfig,
     /// Out: thruster commands through PX4 offboard.
     pub actuator_motors: TopicConfig,
     /// Out: PX4 offboard heartbeat (direct actuator control).
@@ -78,6 +82,7 @@ impl Default for Topics {
             status: topic("/atmo/status", MpcStatus::TYPE_NAME),
             estimate: topic("/atmo/mocap/odom", Odometry::TYPE_NAME),
             drive_command: topic("/atmo/cmd_drive", Twist::TYPE_NAME),
+            pilot: topic("/atmo/pilot", PilotInput::TYPE_NAME),
             actuator_motors: topic("/fmu/in/actuator_motors", ActuatorMotors::TYPE_NAME),
             offboard_mode: topic(
                 "/fmu/in/offboard_control_mode",
@@ -167,7 +172,7 @@ impl Ros2Config {
                 .into());
         }
         let t = &self.topics;
-        let roles: [(&str, &TopicConfig, &[&str]); 6] = [
+        let roles: [(&str, &TopicConfig, &[&str]); 7] = [
             ("topics.status", &t.status, &[MpcStatus::TYPE_NAME]),
             (
                 "topics.estimate",
@@ -179,6 +184,7 @@ impl Ros2Config {
                 &t.drive_command,
                 &[Twist::TYPE_NAME],
             ),
+            ("topics.pilot", &t.pilot, &[PilotInput::TYPE_NAME]),
             (
                 "topics.actuator_motors",
                 &t.actuator_motors,

@@ -4,15 +4,20 @@
 //! subscriptions. The control thread talks to it only through bounded
 //! channels: [`Ros2Publisher::try_publish_status`] (and the PX4 outputs)
 //! copies a fixed-size record and returns at once (a full queue drops and
-//! counts); [`Ros2Inputs::latest_estimate`] drains the newest accepted
-//! estimate without waiting. Streams use best-effort, volatile, keep-last-1
-//! QoS. The domain id comes from `ROS_DOMAIN_ID` (default 0); with
-//! `loopback_only` the participant uses 127.0.0.1 only.
+//! counts); [`Ros2Inputs::latest_estimate`], [`Ros2Inputs::latest_drive`]
+//! and [`Ros2Inputs::latest_pilot`] drain the newest accepted input without
+//! waiting. Streams use best-effort, volatile, keep-last-1 QoS. The domain
+//! id comes from `ROS_DOMAIN_ID` (default 0); with `loopback_only` the
+//! participant uses 127.0.0.1 only.
 //!
-//! Received estimates are converted to NED/FRD here (ENU/FLU odometry) and
-//! checked: payloads that do not decode (malformed CDR, another type on the
-//! topic), non-finite fields and stamps that do not increase are rejected
-//! and counted ([`Ros2Counters`], also published on the diagnostics topic).
+//! Inputs are checked on the node thread and counted ([`Ros2Counters`],
+//! also published on the diagnostics topic). Payloads that do not decode
+//! (malformed CDR, another type on the topic) count as `malformed`.
+//! Estimates are converted to NED/FRD here (ENU/FLU odometry); non-finite
+//! fields and stamps that do not increase are rejected. Pilot inputs
+//! (`atmo_msgs/msg/PilotInput`, NED velocity, FRD yaw rate) are accepted
+//! only if every number is finite and the throttle is in [0, 1]. Drive
+//! commands need finite values.
 
 mod config;
 
@@ -38,7 +43,7 @@ use crate::error::{IoError, Result};
 use crate::msg::frames::{odometry_to_state, vehicle_odometry_to_state};
 use crate::msg::{
     ActuatorMotors, DiagnosticArray, DiagnosticStatus, KeyValue, MpcStatus, Odometry,
-    OffboardControlMode, RosMessage, Time, Twist, VehicleOdometry,
+    OffboardControlMode, PilotInput, RosMessage, Time, Twist, VehicleOdometry,
 };
 
 /// Reads `ROS_DOMAIN_ID` (unset or empty: 0). Valid ids are 0..=232.
@@ -76,6 +81,22 @@ pub struct DriveCommand {
     pub received: Instant,
 }
 
+/// A pilot input accepted from ROS 2 (`topics.pilot`): every number finite,
+/// throttle in [0, 1]. Velocity NED, yaw rate FRD, as in the message.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PilotCommand {
+    pub input: PilotInput,
+    /// When the node thread accepted it.
+    pub received: Instant,
+}
+
+/// Whether a pilot input may be used: every number finite, throttle in [0, 1].
+fn pilot_is_valid(p: &PilotInput) -> bool {
+    p.velocity.iter().all(|v| v.is_finite())
+        && p.yaw_rate.is_finite()
+        && (0.0..=1.0).contains(&p.throttle)
+}
+
 /// What the node has seen and done so far (monotonic counters).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct Ros2Counters {
@@ -91,6 +112,10 @@ pub struct Ros2Counters {
     pub stamp_backwards: u64,
     pub drive_received: u64,
     pub drive_rejected: u64,
+    /// Pilot inputs that decoded, whatever their values.
+    pub pilot_received: u64,
+    /// Pilot inputs with a non-finite number or a throttle outside [0, 1].
+    pub pilot_rejected: u64,
     /// Accepted inputs dropped because the control thread's queue was full.
     pub inputs_dropped: u64,
     pub published: u64,
@@ -109,6 +134,8 @@ struct Counters {
     stamp_backwards: AtomicU64,
     drive_received: AtomicU64,
     drive_rejected: AtomicU64,
+    pilot_received: AtomicU64,
+    pilot_rejected: AtomicU64,
     inputs_dropped: AtomicU64,
     published: AtomicU64,
     publish_dropped: AtomicU64,
@@ -126,6 +153,8 @@ impl Counters {
             stamp_backwards: g(&self.stamp_backwards),
             drive_received: g(&self.drive_received),
             drive_rejected: g(&self.drive_rejected),
+            pilot_received: g(&self.pilot_received),
+            pilot_rejected: g(&self.pilot_rejected),
             inputs_dropped: g(&self.inputs_dropped),
             published: g(&self.published),
             publish_dropped: g(&self.publish_dropped),
@@ -194,6 +223,7 @@ impl Ros2Publisher {
 pub struct Ros2Inputs {
     estimates: Receiver<RosEstimate>,
     drive: Receiver<DriveCommand>,
+    pilot: Receiver<PilotCommand>,
     counters: Arc<Counters>,
 }
 
@@ -206,6 +236,11 @@ impl Ros2Inputs {
     /// The newest drive command accepted since the last call, if any.
     pub fn latest_drive(&mut self) -> Option<DriveCommand> {
         self.drive.try_iter().last()
+    }
+
+    /// The newest pilot input accepted since the last call, if any. Never blocks.
+    pub fn latest_pilot(&mut self) -> Option<PilotCommand> {
+        self.pilot.try_iter().last()
     }
 
     pub fn counters(&self) -> Ros2Counters {
@@ -242,6 +277,75 @@ impl Drop for Ros2Thread {
             let _ = join.join();
         }
     }
+}
+
+/// Resolves the domain id: the option, else `ROS_DOMAIN_ID`.
+fn domain_id(options: Ros2StartOptions) -> Result<u16> {
+    match options.domain_id {
+        Some(id) => Ok(id),
+        None => domain_id_from_env(),
+    }
+}
+
+/// Starts a node thread: `build` makes the DDS entities on the new thread
+/// (errors come back from here, not later), then `run` serves until `stop`.
+fn spawn_node_thread<N: 'static>(
+    thread_name: &str,
+    stop: Arc<AtomicBool>,
+    build: impl FnOnce() -> Result<N> + Send + 'static,
+    run: fn(N),
+) -> Result<Ros2Thread> {
+    let (ready_tx, ready_rx) = sync_channel::<Result<()>>(1);
+    // DDS entities are built on the thread that uses them.
+    let join = std::thread::Builder::new()
+        .name(thread_name.into())
+        .spawn(move || match build() {
+            Ok(node) => {
+                let _ = ready_tx.send(Ok(()));
+                run(node);
+                Ok(())
+            }
+            Err(e) => {
+                let text = e.to_string();
+                let _ = ready_tx.send(Err(e));
+                Err(IoError::Ros {
+                    context: "start".into(),
+                    reason: text,
+                })
+            }
+        })
+        .map_err(|e| ros_err("node thread", e))?;
+    let thread = Ros2Thread {
+        stop,
+        join: Some(join),
+    };
+    match ready_rx.recv() {
+        Ok(Ok(())) => Ok(thread),
+        Ok(Err(e)) => Err(e),
+        Err(_) => Err(ros_err("node thread", "ended before it was ready")),
+    }
+}
+
+/// A DDS participant on `domain` (127.0.0.1 only with `loopback_only`) and
+/// a node named `node_name` in the config's namespace.
+fn dds_node(config: &Ros2Config, domain: u16, node_name: &str) -> Result<(Context, Node)> {
+    let mut builder = DomainParticipantBuilder::new(domain);
+    if config.loopback_only {
+        builder = builder
+            .with_only_networks([Ipv4Addr::LOCALHOST])
+            .same_host_loopback(true);
+    }
+    let participant = builder
+        .build()
+        .map_err(|e| ros_err(&format!("DDS participant on domain {domain}"), e))?;
+    let context =
+        Context::from_domain_participant(participant).map_err(|e| ros_err("context", e))?;
+    let name = NodeName::new(&config.namespace, node_name)
+        .map_err(|e| ros_err(&format!("node name `{node_name}`"), e))?;
+    let node = context
+        .new_node(name, NodeOptions::new().enable_rosout(false))
+        .map_err(|e| ros_err("node", e))?;
+    Ok((context, node))
 }
 
 /// Entry point: [`Ros2Node::start`].
@@ -327,9 +431,11 @@ struct NodeThread {
     diagnostics: Option<Publisher<DiagnosticArray>>,
     estimate: Option<EstimateSub>,
     drive: Option<Subscription<Twist>>,
+    pilot: Option<Subscription<PilotInput>>,
     out_rx: Receiver<Outgoing>,
     estimate_tx: SyncSender<RosEstimate>,
     drive_tx: SyncSender<DriveCommand>,
+    pilot_tx: SyncSender<PilotCommand>,
     counters: Arc<Counters>,
     stop: Arc<AtomicBool>,
     last_stamp: Option<u64>,
@@ -347,60 +453,28 @@ impl Ros2Node {
         options: Ros2StartOptions,
     ) -> Result<(Ros2Publisher, Ros2Inputs, Ros2Thread)> {
         config.validate(std::path::Path::new("(ros2 config)"))?;
-        let domain = match options.domain_id {
-            Some(id) => id,
-            None => domain_id_from_env()?,
-        };
+        let domain = domain_id(options)?;
         let config = config.clone();
         let counters = Arc::new(Counters::default());
         let stop = Arc::new(AtomicBool::new(false));
         let (out_tx, out_rx) = sync_channel(config.publish_queue);
         let (estimate_tx, estimate_rx) = sync_channel(16);
         let (drive_tx, drive_rx) = sync_channel(16);
-        let (ready_tx, ready_rx) = sync_channel::<Result<()>>(1);
+        let (pilot_tx, pilot_rx) = sync_channel(16);
+        let channels = NodeChannels {
+            out_rx,
+            estimate_tx,
+            drive_tx,
+            pilot_tx,
+        };
         let thread_counters = Arc::clone(&counters);
         let thread_stop = Arc::clone(&stop);
-        // DDS entities are built on the thread that uses them.
-        let join = std::thread::Builder::new()
-            .name("ros2-node".into())
-            .spawn(move || {
-                let node = NodeThread::build(
-                    config,
-                    domain,
-                    out_rx,
-                    estimate_tx,
-                    drive_tx,
-                    thread_counters,
-                    thread_stop,
-                );
-                match node {
-                    Ok(node) => {
-                        let _ = ready_tx.send(Ok(()));
-                        node.run();
-                        Ok(())
-                    }
-                    Err(e) => {
-                        let text = e.to_string();
-                        let _ = ready_tx.send(Err(e));
-                        Err(IoError::Ros {
-                            context: "start".into(),
-                            reason: text,
-                        })
-                    }
-                }
-            })
-            .map_err(|e| ros_err("node thread", e))?;
-        let thread = Ros2Thread {
+        let thread = spawn_node_thread(
+            "ros2-node",
             stop,
-            join: Some(join),
-        };
-        match ready_rx.recv() {
-            Ok(Ok(())) => {}
-            Ok(Err(e)) => return Err(e),
-            Err(_) => {
-                return Err(ros_err("node thread", "ended before it was ready"));
-            }
-        }
+            move || NodeThread::build(config, domain, channels, thread_counters, thread_stop),
+            NodeThread::run,
+        )?;
         Ok((
             Ros2Publisher {
                 tx: out_tx,
@@ -409,6 +483,7 @@ impl Ros2Node {
             Ros2Inputs {
                 estimates: estimate_rx,
                 drive: drive_rx,
+                pilot: pilot_rx,
                 counters,
             },
             thread,
@@ -416,32 +491,23 @@ impl Ros2Node {
     }
 }
 
+/// The node thread's ends of the channels to the control thread.
+struct NodeChannels {
+    out_rx: Receiver<Outgoing>,
+    estimate_tx: SyncSender<RosEstimate>,
+    drive_tx: SyncSender<DriveCommand>,
+    pilot_tx: SyncSender<PilotCommand>,
+}
+
 impl NodeThread {
     fn build(
         config: Ros2Config,
         domain: u16,
-        out_rx: Receiver<Outgoing>,
-        estimate_tx: SyncSender<RosEstimate>,
-        drive_tx: SyncSender<DriveCommand>,
+        channels: NodeChannels,
         counters: Arc<Counters>,
         stop: Arc<AtomicBool>,
     ) -> Result<Self> {
-        let mut builder = DomainParticipantBuilder::new(domain);
-        if config.loopback_only {
-            builder = builder
-                .with_only_networks([Ipv4Addr::LOCALHOST])
-                .same_host_loopback(true);
-        }
-        let participant = builder
-            .build()
-            .map_err(|e| ros_err(&format!("DDS participant on domain {domain}"), e))?;
-        let context =
-            Context::from_domain_participant(participant).map_err(|e| ros_err("context", e))?;
-        let node_name = NodeName::new(&config.namespace, &config.node_name)
-            .map_err(|e| ros_err(&format!("node name `{}`", config.node_name), e))?;
-        let mut node = context
-            .new_node(node_name, NodeOptions::new().enable_rosout(false))
-            .map_err(|e| ros_err("node", e))?;
+        let (context, mut node) = dds_node(&config, domain, &config.node_name)?;
         let t = &config.topics;
         let status = publisher::<MpcStatus>(&mut node, &t.status)?;
         let motors = publisher::<ActuatorMotors>(&mut node, &t.actuator_motors)?;
@@ -453,6 +519,13 @@ impl NodeThread {
             subscription::<Odometry>(&mut node, &t.estimate)?.map(EstimateSub::Odometry)
         };
         let drive = subscription::<Twist>(&mut node, &t.drive_command)?;
+        let pilot = subscription::<PilotInput>(&mut node, &t.pilot)?;
+        let NodeChannels {
+            out_rx,
+            estimate_tx,
+            drive_tx,
+            pilot_tx,
+        } = channels;
         Ok(Self {
             config,
             _context: context,
@@ -463,9 +536,11 @@ impl NodeThread {
             diagnostics,
             estimate,
             drive,
+            pilot,
             out_rx,
             estimate_tx,
             drive_tx,
+            pilot_tx,
             counters,
             stop,
             last_stamp: None,
@@ -490,6 +565,7 @@ impl NodeThread {
             }
             self.take_estimates();
             self.take_drive();
+            self.take_pilot();
             if Instant::now() >= next_diagnostics {
                 self.publish(Outgoing::Diagnostics(Box::default()));
                 next_diagnostics = Instant::now() + period;
@@ -519,8 +595,9 @@ impl NodeThread {
 
     fn own_diagnostics(&self) -> DiagnosticStatus {
         let c = self.counters.snapshot();
-        let rejected = c.malformed + c.invalid + c.stamp_backwards + c.drive_rejected;
-        let pairs: [(&str, u64); 11] = [
+        let rejected =
+            c.malformed + c.invalid + c.stamp_backwards + c.drive_rejected + c.pilot_rejected;
+        let pairs: [(&str, u64); 13] = [
             ("estimates_received", c.estimates_received),
             ("estimates_accepted", c.estimates_accepted),
             ("malformed", c.malformed),
@@ -528,6 +605,8 @@ impl NodeThread {
             ("stamp_backwards", c.stamp_backwards),
             ("drive_received", c.drive_received),
             ("drive_rejected", c.drive_rejected),
+            ("pilot_received", c.pilot_received),
+            ("pilot_rejected", c.pilot_rejected),
             ("inputs_dropped", c.inputs_dropped),
             ("published", c.published),
             ("publish_dropped", c.publish_dropped),
@@ -635,6 +714,30 @@ impl NodeThread {
                         received: Instant::now(),
                     };
                     if self.drive_tx.try_send(command).is_err() {
+                        bump(&self.counters.inputs_dropped);
+                    }
+                }
+            }
+        }
+    }
+
+    fn take_pilot(&mut self) {
+        let Some(sub) = &self.pilot else { return };
+        for _ in 0..TAKE_BURST {
+            match sub.take() {
+                Ok(None) => return,
+                Err(_) => bump(&self.counters.malformed),
+                Ok(Some((input, _))) => {
+                    bump(&self.counters.pilot_received);
+                    if !pilot_is_valid(&input) {
+                        bump(&self.counters.pilot_rejected);
+                        continue;
+                    }
+                    let command = PilotCommand {
+                        input,
+                        received: Instant::now(),
+                    };
+                    if self.pilot_tx.try_send(command).is_err() {
                         bump(&self.counters.inputs_dropped);
                     }
                 }
