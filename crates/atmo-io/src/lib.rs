@@ -7,8 +7,9 @@
 //!   blocks the tick), the reader for the project's logs, and `recover`.
 //! - [`drivers`]: zero-copy iceoryx2 driver ports (thrusters, tilt, wheels,
 //!   ground contact) with sequence numbers, stamps and driver liveness.
-//! - [`ros2`]: the ROS 2 node (status out, estimates and drive commands in,
-//!   PX4 offboard outputs, diagnostics), never blocking the control thread.
+//! - [`ros2`]: the ROS 2 node (status out, estimates, drive commands and
+//!   pilot inputs in, PX4 offboard outputs, diagnostics), never blocking the
+//!   control thread, and its SITL peer for the plant server.
 //!
 //! Conventions: NED world, FRD body, Euler ZYX, the 12-state order of
 //! `atmo_core::model::idx`; time in u64 nanoseconds.

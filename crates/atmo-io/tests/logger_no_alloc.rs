@@ -1,6 +1,6 @@
 //! The control thread's I/O calls and their allocations: `try_log` of the
 //! fixed-size message kinds, the ROS 2 node's `try_publish_*` and input
-//! polling, and the driver ports' notify and poll do not allocate; a driver-port send
+//! polling (and the SITL node's, for the plant server's loop), and the driver ports' notify and poll do not allocate; a driver-port send
 //! allocates exactly once, inside iceoryx2 0.10 (`Publisher::loan_uninit`
 //! creates a 48-byte shared-state `Arc` per sample, iceoryx2-cal's
 //! single-threaded arc policy; `send_copy` goes through the same loan). A
@@ -18,8 +18,8 @@ use std::sync::atomic::{AtomicU64, Ordering};
 
 use atmo_io::drivers::{DriverPortsConfig, FlightPorts, monotonic_ns};
 use atmo_io::mcap_log::{LoggerOptions, McapLogger, read_log};
-use atmo_io::msg::{ActuatorMotors, MpcStatus, OffboardControlMode};
-use atmo_io::ros2::{Ros2Config, Ros2Node, Ros2StartOptions};
+use atmo_io::msg::{ActuatorMotors, MpcStatus, OffboardControlMode, PilotInput};
+use atmo_io::ros2::{Ros2Config, Ros2Node, Ros2StartOptions, SitlNode};
 use support::{drive, motors, status};
 
 struct Counting;
@@ -109,13 +109,17 @@ fn try_log_does_not_allocate() {
 
 #[test]
 fn ros2_and_driver_port_calls_do_not_allocate() {
-    let (ros, mut inputs, node) = Ros2Node::start(
-        &Ros2Config::default(),
-        Ros2StartOptions {
-            domain_id: Some(200 + (std::process::id() % 30) as u16),
-        },
-    )
-    .unwrap();
+    let options = Ros2StartOptions {
+        domain_id: Some(200 + (std::process::id() % 30) as u16),
+    };
+    let (ros, mut inputs, node) = Ros2Node::start(&Ros2Config::default(), options).unwrap();
+    let (sitl, mut sitl_inputs, sitl_node) =
+        SitlNode::start(&Ros2Config::default(), options).unwrap();
+    let plant_state = atmo_core::model::State::zeros();
+    let pilot = PilotInput {
+        throttle: 0.5,
+        ..PilotInput::default()
+    };
     let config = DriverPortsConfig {
         iceoryx_prefix: format!("atmona{}_", std::process::id()),
         ..DriverPortsConfig::default()
@@ -140,7 +144,12 @@ fn ros2_and_driver_port_calls_do_not_allocate() {
             ros.try_publish_offboard(&offboard);
             let _ = inputs.latest_estimate();
             let _ = inputs.latest_drive();
+            let _ = inputs.latest_pilot();
             let _ = ros.counters();
+            sitl.try_publish_estimate(&plant_state, 1_000_000 * (k as u64 + 1));
+            sitl.try_publish_pilot(&pilot);
+            let _ = sitl_inputs.latest_status();
+            let _ = sitl.counters();
         });
         ros_allocations += n;
         let ((), n) = counted(|| {
@@ -168,6 +177,7 @@ fn ros2_and_driver_port_calls_do_not_allocate() {
     );
     drop(ports);
     node.stop().unwrap();
+    sitl_node.stop().unwrap();
     // Test hygiene: the per-prefix segments of this run.
     for dir in ["/dev/shm", "/tmp/iceoryx2/nodes", "/tmp/iceoryx2/services"] {
         for entry in std::fs::read_dir(dir).into_iter().flatten().flatten() {

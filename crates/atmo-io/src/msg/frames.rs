@@ -189,6 +189,30 @@ pub fn state_to_odometry(state: &State, stamp_ns: u64) -> Odometry {
     odom
 }
 
+/// The inverse of [`vehicle_odometry_to_state`]: a PX4 odometry (NED world,
+/// FRD body, velocity in NED, `float32` as on the wire) for a 12-state, both
+/// stamps `timestamp_us`. Variances are NaN (unknown, as PX4 writes them).
+#[allow(clippy::cast_possible_truncation)] // the message is float32
+pub fn state_to_vehicle_odometry(state: &State, timestamp_us: u64) -> VehicleOdometry {
+    let q = UnitQuaternion::from_euler_angles(state[idx::ROLL], state[idx::PITCH], state[idx::YAW]);
+    let f = |i: usize| state[i] as f32;
+    VehicleOdometry {
+        timestamp: timestamp_us,
+        timestamp_sample: timestamp_us,
+        pose_frame: VehicleOdometry::POSE_FRAME_NED,
+        position: [f(idx::X), f(idx::Y), f(idx::Z)],
+        q: [q.w as f32, q.i as f32, q.j as f32, q.k as f32],
+        velocity_frame: VehicleOdometry::VELOCITY_FRAME_NED,
+        velocity: [f(idx::VX), f(idx::VY), f(idx::VZ)],
+        angular_velocity: [f(idx::WX), f(idx::WY), f(idx::WZ)],
+        position_variance: [f32::NAN; 3],
+        orientation_variance: [f32::NAN; 3],
+        velocity_variance: [f32::NAN; 3],
+        reset_counter: 0,
+        quality: 0,
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -282,6 +306,17 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(text.contains("`q`"), "{text}");
+    }
+
+    #[test]
+    fn px4_round_trip_to_float32_precision() {
+        let x = state([
+            1.5, -2.25, -3.0, 2.5, 0.3, -0.2, 0.5, -1.0, 0.25, 0.1, -0.2, 0.3,
+        ]);
+        let odom = state_to_vehicle_odometry(&x, 1234);
+        assert_eq!((odom.timestamp, odom.timestamp_sample), (1234, 1234));
+        let back = vehicle_odometry_to_state("/fmu/out/vehicle_odometry", &odom).unwrap();
+        assert!((back - x).abs().max() < 1e-6, "{x} -> {back}");
     }
 
     #[test]

@@ -1,4 +1,4 @@
-//! The ROS 2 node (ros2-client over RustDDS).
+//! The ROS 2 node (ros2-client over RustDDS), and its SITL peer.
 //!
 //! A dedicated thread owns the DDS participant, the publishers and the
 //! subscriptions. The control thread talks to it only through bounded
@@ -18,10 +18,17 @@
 //! (`atmo_msgs/msg/PilotInput`, NED velocity, FRD yaw rate) are accepted
 //! only if every number is finite and the throttle is in [0, 1]. Drive
 //! commands need finite values.
+//!
+//! [`SitlNode`] is the other side for software-in-the-loop: the plant
+//! server publishes the simulated estimate (as the configured estimate
+//! type) and pilot inputs, and reads the daemon's status, on the topics of
+//! the same [`Ros2Config`], so the daemon binary runs unchanged against it.
 
 mod config;
+mod sitl;
 
 pub use config::{Ros2Config, TopicConfig, Topics};
+pub use sitl::{SitlCounters, SitlInputs, SitlNode, SitlPublisher};
 
 use std::net::Ipv4Addr;
 use std::sync::Arc;

@@ -1,0 +1,306 @@
+//! The plant side of software-in-the-loop: the peer of [`Ros2Node`].
+//!
+//! The SITL plant server runs the simulated robot and talks to the
+//! unchanged `atmo-daemon` binary over ROS 2, using the same [`Ros2Config`]
+//! as the daemon, so both sides agree on topic names and types:
+//!
+//! | topic | SITL side | daemon side |
+//! | --- | --- | --- |
+//! | `topics.estimate` | publishes the plant's state | [`Ros2Inputs::latest_estimate`](super::Ros2Inputs::latest_estimate) |
+//! | `topics.pilot` | publishes pilot inputs | [`Ros2Inputs::latest_pilot`](super::Ros2Inputs::latest_pilot) |
+//! | `topics.status` | [`SitlInputs::latest_status`] | publishes one status per tick |
+//!
+//! The estimate goes out as the type the config names: `nav_msgs/Odometry`
+//! (converted to ENU/FLU by [`state_to_odometry`]; the daemon converts it
+//! back to NED/FRD) or `px4_msgs/VehicleOdometry` (NED/FRD, float32, by
+//! [`state_to_vehicle_odometry`]; the stamp is sent in whole microseconds,
+//! so the daemon sees `stamp_ns` rounded down to a microsecond). The daemon
+//! drops estimates whose stamp does not increase: send increasing stamps.
+//!
+//! As on the daemon side, a dedicated thread owns the DDS entities; the
+//! plant's loop only touches bounded queues and never waits (a full queue
+//! drops and counts, [`SitlCounters`]). The node is named
+//! `<node_name>_sitl` in the config's namespace; the domain id comes from
+//! [`Ros2StartOptions::domain_id`] or `ROS_DOMAIN_ID`. A disabled topic is
+//! left out: its publishes are accepted and ignored, and
+//! [`SitlInputs::latest_status`] then never returns a status.
+//!
+//! [`Ros2Node`]: super::Ros2Node
+
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::mpsc::{Receiver, RecvTimeoutError, SyncSender, TrySendError, sync_channel};
+use std::time::Duration;
+
+use atmo_core::model::State;
+use ros2_client::{Context, Node, Publisher, Subscription};
+
+use super::{
+    Ros2Config, Ros2StartOptions, Ros2Thread, TAKE_BURST, bump, dds_node, domain_id, publisher,
+    spawn_node_thread, subscription,
+};
+use crate::error::Result;
+use crate::msg::frames::{state_to_odometry, state_to_vehicle_odometry};
+use crate::msg::{MpcStatus, Odometry, PilotInput, RosMessage, VehicleOdometry};
+
+/// What the SITL node has seen and done so far (monotonic counters).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct SitlCounters {
+    /// Messages handed to DDS (estimates and pilot inputs).
+    pub published: u64,
+    /// Records dropped because the publish queue was full.
+    pub publish_dropped: u64,
+    /// Publishes the DDS layer refused.
+    pub publish_errors: u64,
+    /// Statuses that decoded.
+    pub status_received: u64,
+    /// Payloads on the status topic that did not decode as `MpcStatus`.
+    pub malformed: u64,
+    /// Received statuses dropped because the reader's queue was full.
+    pub inputs_dropped: u64,
+}
+
+#[derive(Default)]
+struct Counters {
+    published: AtomicU64,
+    publish_dropped: AtomicU64,
+    publish_errors: AtomicU64,
+    status_received: AtomicU64,
+    malformed: AtomicU64,
+    inputs_dropped: AtomicU64,
+}
+
+impl Counters {
+    fn snapshot(&self) -> SitlCounters {
+        let g = |a: &AtomicU64| a.load(Ordering::Relaxed);
+        SitlCounters {
+            published: g(&self.published),
+            publish_dropped: g(&self.publish_dropped),
+            publish_errors: g(&self.publish_errors),
+            status_received: g(&self.status_received),
+            malformed: g(&self.malformed),
+            inputs_dropped: g(&self.inputs_dropped),
+        }
+    }
+}
+
+#[derive(Clone, Copy)]
+enum Outgoing {
+    Estimate { state: State, stamp_ns: u64 },
+    Pilot(PilotInput),
+}
+
+/// The plant's sending side (`Clone + Send`; never blocks, never allocates).
+#[derive(Clone)]
+pub struct SitlPublisher {
+    tx: SyncSender<Outgoing>,
+    counters: Arc<Counters>,
+}
+
+impl SitlPublisher {
+    fn send(&self, message: Outgoing) -> bool {
+        match self.tx.try_send(message) {
+            Ok(()) => true,
+            Err(TrySendError::Full(_) | TrySendError::Disconnected(_)) => {
+                bump(&self.counters.publish_dropped);
+                false
+            }
+        }
+    }
+
+    /// Queues the plant's state (NED/FRD 12-state) for `topics.estimate`,
+    /// stamped `stamp_ns`; false if dropped (counted). The node thread
+    /// converts it to the topic's type (see the module docs).
+    pub fn try_publish_estimate(&self, state: &State, stamp_ns: u64) -> bool {
+        self.send(Outgoing::Estimate {
+            state: *state,
+            stamp_ns,
+        })
+    }
+
+    /// Queues one pilot input for `topics.pilot`; false if dropped (counted).
+    /// Sent as given: the daemon's node rejects non-finite numbers and a
+    /// throttle outside [0, 1].
+    pub fn try_publish_pilot(&self, input: &PilotInput) -> bool {
+        self.send(Outgoing::Pilot(*input))
+    }
+
+    pub fn counters(&self) -> SitlCounters {
+        self.counters.snapshot()
+    }
+}
+
+/// The plant's receiving side (`Send`, one owner).
+pub struct SitlInputs {
+    status: Receiver<MpcStatus>,
+    counters: Arc<Counters>,
+}
+
+impl SitlInputs {
+    /// The newest daemon status received since the last call, if any.
+    /// Never blocks.
+    pub fn latest_status(&mut self) -> Option<MpcStatus> {
+        self.status.try_iter().last()
+    }
+
+    pub fn counters(&self) -> SitlCounters {
+        self.counters.snapshot()
+    }
+}
+
+/// Entry point: [`SitlNode::start`].
+pub struct SitlNode;
+
+impl SitlNode {
+    /// The SITL node's ROS 2 name: `<node_name>_sitl`.
+    pub fn node_name(config: &Ros2Config) -> String {
+        format!("{}_sitl", config.node_name.trim_end_matches('_'))
+    }
+
+    /// Validates `config` (the daemon's), creates the participant, node,
+    /// publishers and subscription (errors are returned here, not later),
+    /// then starts the node thread. Stop it with [`Ros2Thread::stop`].
+    pub fn start(
+        config: &Ros2Config,
+        options: Ros2StartOptions,
+    ) -> Result<(SitlPublisher, SitlInputs, Ros2Thread)> {
+        config.validate(std::path::Path::new("(ros2 config)"))?;
+        let domain = domain_id(options)?;
+        let config = config.clone();
+        let counters = Arc::new(Counters::default());
+        let stop = Arc::new(AtomicBool::new(false));
+        let (out_tx, out_rx) = sync_channel(config.publish_queue);
+        let (status_tx, status_rx) = sync_channel(16);
+        let thread_counters = Arc::clone(&counters);
+        let thread_stop = Arc::clone(&stop);
+        let thread = spawn_node_thread(
+            "ros2-sitl",
+            stop,
+            move || {
+                SitlThread::build(
+                    &config,
+                    domain,
+                    out_rx,
+                    status_tx,
+                    thread_counters,
+                    thread_stop,
+                )
+            },
+            SitlThread::run,
+        )?;
+        Ok((
+            SitlPublisher {
+                tx: out_tx,
+                counters: Arc::clone(&counters),
+            },
+            SitlInputs {
+                status: status_rx,
+                counters,
+            },
+            thread,
+        ))
+    }
+}
+
+enum EstimatePub {
+    Odometry(Publisher<Odometry>),
+    Px4(Publisher<VehicleOdometry>),
+}
+
+struct SitlThread {
+    _context: Context,
+    _node: Node,
+    estimate: Option<EstimatePub>,
+    pilot: Option<Publisher<PilotInput>>,
+    status: Option<Subscription<MpcStatus>>,
+    out_rx: Receiver<Outgoing>,
+    status_tx: SyncSender<MpcStatus>,
+    counters: Arc<Counters>,
+    stop: Arc<AtomicBool>,
+}
+
+impl SitlThread {
+    fn build(
+        config: &Ros2Config,
+        domain: u16,
+        out_rx: Receiver<Outgoing>,
+        status_tx: SyncSender<MpcStatus>,
+        counters: Arc<Counters>,
+        stop: Arc<AtomicBool>,
+    ) -> Result<Self> {
+        let (context, mut node) = dds_node(config, domain, &SitlNode::node_name(config))?;
+        let t = &config.topics;
+        let estimate = if t.estimate.type_name == VehicleOdometry::TYPE_NAME {
+            publisher::<VehicleOdometry>(&mut node, &t.estimate)?.map(EstimatePub::Px4)
+        } else {
+            publisher::<Odometry>(&mut node, &t.estimate)?.map(EstimatePub::Odometry)
+        };
+        let pilot = publisher::<PilotInput>(&mut node, &t.pilot)?;
+        let status = subscription::<MpcStatus>(&mut node, &t.status)?;
+        Ok(Self {
+            _context: context,
+            _node: node,
+            estimate,
+            pilot,
+            status,
+            out_rx,
+            status_tx,
+            counters,
+            stop,
+        })
+    }
+
+    fn run(self) {
+        while !self.stop.load(Ordering::Relaxed) {
+            match self.out_rx.recv_timeout(Duration::from_millis(1)) {
+                Ok(message) => {
+                    self.publish(message);
+                    while let Ok(message) = self.out_rx.try_recv() {
+                        self.publish(message);
+                    }
+                }
+                Err(RecvTimeoutError::Timeout) => {}
+                // Every publisher handle dropped: keep serving the status.
+                Err(RecvTimeoutError::Disconnected) => std::thread::sleep(Duration::from_millis(1)),
+            }
+            self.take_status();
+        }
+    }
+
+    fn publish(&self, message: Outgoing) {
+        let result = match message {
+            Outgoing::Estimate { state, stamp_ns } => match &self.estimate {
+                None => None,
+                Some(EstimatePub::Odometry(p)) => {
+                    Some(p.publish(state_to_odometry(&state, stamp_ns)).is_ok())
+                }
+                Some(EstimatePub::Px4(p)) => Some(
+                    p.publish(state_to_vehicle_odometry(&state, stamp_ns / 1000))
+                        .is_ok(),
+                ),
+            },
+            Outgoing::Pilot(m) => self.pilot.as_ref().map(|p| p.publish(m).is_ok()),
+        };
+        match result {
+            Some(true) => bump(&self.counters.published),
+            Some(false) => bump(&self.counters.publish_errors),
+            None => {} // topic disabled
+        }
+    }
+
+    fn take_status(&self) {
+        let Some(sub) = &self.status else { return };
+        for _ in 0..TAKE_BURST {
+            match sub.take() {
+                Ok(None) => return,
+                Err(_) => bump(&self.counters.malformed),
+                Ok(Some((status, _))) => {
+                    bump(&self.counters.status_received);
+                    if self.status_tx.try_send(status).is_err() {
+                        bump(&self.counters.inputs_dropped);
+                    }
+                }
+            }
+        }
+    }
+}
