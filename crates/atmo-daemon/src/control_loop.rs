@@ -6,7 +6,14 @@
 //! the missed deadlines are skipped (and counted) instead of being run back
 //! to back. The clock is a trait so that tests and replays drive time.
 
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::mpsc::{Receiver, SyncSender, sync_channel};
+use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
+
+use crate::error::{DaemonError, Result};
+use crate::flight_stack::{FlightStack, StepInputs, StepOutputs};
 
 /// Monotonic time source, ns since an arbitrary origin.
 pub trait Clock {
@@ -152,30 +159,74 @@ pub fn run_periodic<C: Clock>(
     }
 }
 
-/// What the control thread publishes each tick.
+/// What the channel-fed control thread publishes each tick.
 #[derive(Debug, Clone, Copy)]
 pub struct TickReport {
-    pub outputs: crate::flight_stack::StepOutputs,
+    pub outputs: StepOutputs,
     pub timing: TickTiming,
 }
 
-/// Counters of the control thread's channels.
+/// Counters of the control thread.
 #[derive(Debug, Default)]
 pub struct LoopCounters {
     /// Ticks run.
-    pub ticks: std::sync::atomic::AtomicU64,
+    pub ticks: AtomicU64,
     /// Reports dropped because the output channel was full.
-    pub reports_dropped: std::sync::atomic::AtomicU64,
+    pub reports_dropped: AtomicU64,
+}
+
+/// The I/O of one tick, run on the control thread. Implementations must
+/// never block and, after start-up, never allocate: they read what has
+/// arrived and hand out what must leave through bounded, non-blocking
+/// queues (or zero-copy ports).
+pub trait TickIo {
+    /// The inputs of the tick scheduled at `deadline_ns` (the flight
+    /// stack's clock); `None` skips the step (nothing to act on yet).
+    fn gather(&mut self, deadline_ns: u64) -> Option<StepInputs>;
+    /// The tick's outputs; `timing` is the previous tick's (the current one
+    /// is still running).
+    fn emit(&mut self, inputs: &StepInputs, outputs: &StepOutputs, timing: &TickTiming);
+}
+
+/// Tick I/O over std channels: the newest input wins; a full report
+/// channel drops the report and counts it.
+struct ChannelIo {
+    inputs: Receiver<StepInputs>,
+    latest: Option<StepInputs>,
+    reports: SyncSender<TickReport>,
+    counters: Arc<LoopCounters>,
+}
+
+impl TickIo for ChannelIo {
+    fn gather(&mut self, deadline_ns: u64) -> Option<StepInputs> {
+        while let Ok(input) = self.inputs.try_recv() {
+            self.latest = Some(input);
+        }
+        self.latest.map(|input| StepInputs {
+            now_ns: deadline_ns,
+            ..input
+        })
+    }
+
+    fn emit(&mut self, _inputs: &StepInputs, outputs: &StepOutputs, timing: &TickTiming) {
+        let report = TickReport {
+            outputs: *outputs,
+            timing: *timing,
+        };
+        if self.reports.try_send(report).is_err() {
+            self.counters
+                .reports_dropped
+                .fetch_add(1, Ordering::Relaxed);
+        }
+    }
 }
 
 /// A running control thread: `FlightStack::step` at a fixed rate on its own
-/// thread, inputs in and reports out through bounded channels it never
-/// blocks on (the latest input wins; a full output channel drops the report
-/// and counts it).
+/// thread with absolute deadlines, its I/O done by a [`TickIo`].
 pub struct ControlThread {
-    stop: std::sync::Arc<std::sync::atomic::AtomicBool>,
-    counters: std::sync::Arc<LoopCounters>,
-    join: std::thread::JoinHandle<crate::flight_stack::FlightStack>,
+    stop: Arc<AtomicBool>,
+    counters: Arc<LoopCounters>,
+    join: JoinHandle<FlightStack>,
 }
 
 impl ControlThread {
@@ -184,55 +235,89 @@ impl ControlThread {
     /// replaced by the tick's deadline on the monotonic clock); reports go
     /// to `reports`.
     pub fn spawn(
-        mut stack: crate::flight_stack::FlightStack,
+        stack: FlightStack,
         period: Duration,
-        inputs: std::sync::mpsc::Receiver<crate::flight_stack::StepInputs>,
-        reports: std::sync::mpsc::SyncSender<TickReport>,
-    ) -> std::io::Result<Self> {
-        use std::sync::atomic::Ordering;
-        let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
-        let counters = std::sync::Arc::new(LoopCounters::default());
+        inputs: Receiver<StepInputs>,
+        reports: SyncSender<TickReport>,
+    ) -> Result<Self> {
+        Self::spawn_with(stack, period, move |counters| {
+            Ok::<_, std::convert::Infallible>(ChannelIo {
+                inputs,
+                latest: None,
+                reports,
+                counters,
+            })
+        })
+    }
+
+    /// Like [`Self::spawn`], with the I/O built by `make_io` on the control
+    /// thread itself (ports that are not `Send` are opened where they are
+    /// used). An error from `make_io` is returned here and no tick runs.
+    pub fn spawn_with<I, E, F>(stack: FlightStack, period: Duration, make_io: F) -> Result<Self>
+    where
+        I: TickIo,
+        E: std::fmt::Display,
+        F: FnOnce(Arc<LoopCounters>) -> std::result::Result<I, E> + Send + 'static,
+    {
+        let stop = Arc::new(AtomicBool::new(false));
+        let counters = Arc::new(LoopCounters::default());
         let (stop_flag, shared) = (stop.clone(), counters.clone());
+        let (ready_tx, ready_rx) = sync_channel::<std::result::Result<(), String>>(1);
         let join = std::thread::Builder::new()
             .name("atmo-control".into())
             .spawn(move || {
-                let clock = MonotonicClock::new();
-                let mut latest: Option<crate::flight_stack::StepInputs> = None;
-                run_periodic(&clock, period, |deadline, previous| {
-                    while let Ok(input) = inputs.try_recv() {
-                        latest = Some(input);
+                let mut io = match make_io(shared.clone()) {
+                    Ok(io) => {
+                        let _ = ready_tx.send(Ok(()));
+                        io
                     }
-                    if let Some(mut input) = latest {
-                        input.now_ns = deadline;
-                        let outputs = stack.step(&input);
-                        let report = TickReport {
-                            outputs,
-                            timing: *previous,
-                        };
-                        if reports.try_send(report).is_err() {
-                            shared.reports_dropped.fetch_add(1, Ordering::Relaxed);
-                        }
+                    Err(e) => {
+                        let _ = ready_tx.send(Err(e.to_string()));
+                        return stack;
+                    }
+                };
+                let mut stack = stack;
+                let clock = MonotonicClock::new();
+                run_periodic(&clock, period, |deadline, previous| {
+                    if let Some(inputs) = io.gather(deadline) {
+                        let outputs = stack.step(&inputs);
+                        io.emit(&inputs, &outputs, previous);
                         stack.prepare_next();
                     }
                     shared.ticks.fetch_add(1, Ordering::Relaxed);
                     !stop_flag.load(Ordering::Relaxed)
                 });
                 stack
-            })?;
-        Ok(Self {
-            stop,
-            counters,
-            join,
-        })
+            })
+            .map_err(|e| DaemonError::Setup(format!("control thread: {e}")))?;
+        match ready_rx.recv() {
+            Ok(Ok(())) => Ok(Self {
+                stop,
+                counters,
+                join,
+            }),
+            Ok(Err(reason)) => {
+                let _ = join.join();
+                Err(DaemonError::Setup(format!("control thread I/O: {reason}")))
+            }
+            Err(_) => Err(DaemonError::Setup(
+                "control thread ended before its I/O was ready".into(),
+            )),
+        }
     }
 
     pub fn counters(&self) -> &LoopCounters {
         &self.counters
     }
 
+    /// Whether the thread is still ticking (false after a panic).
+    pub fn is_running(&self) -> bool {
+        !self.join.is_finished()
+    }
+
     /// Stops after the current tick and hands the flight stack back.
-    pub fn stop(self) -> std::thread::Result<crate::flight_stack::FlightStack> {
-        self.stop.store(true, std::sync::atomic::Ordering::Relaxed);
+    pub fn stop(self) -> std::thread::Result<FlightStack> {
+        self.stop.store(true, Ordering::Relaxed);
         self.join.join()
     }
 }

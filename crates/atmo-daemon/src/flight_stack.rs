@@ -56,6 +56,9 @@ pub struct StepInputs {
     pub ground_contact: bool,
     /// NED z of the ground plane under the robot, m.
     pub ground_z: f64,
+    /// A required driver stopped talking (the I/O layer's liveness check;
+    /// always false in simulation): fly the failsafe, do not take off.
+    pub driver_lost: bool,
 }
 
 /// Solver outcome, flattened for logs.
@@ -405,6 +408,7 @@ impl FlightStack {
             estimate_fresh,
             mpc_failed: mpc_failed_ticks > self.mpc.settings().failure.grace_ticks
                 || (self.mode.is_airborne_mode() && !pilot.mpc_enabled),
+            driver_lost: inputs.driver_lost,
             tilt,
             time_in_mode: now.saturating_sub(self.mode_since_ns) as f64 * 1e-9,
         };

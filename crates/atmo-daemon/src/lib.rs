@@ -7,6 +7,8 @@
 //! - [`observer`]: disturbance observer that makes the MPC offset-free.
 //! - [`control_loop`]: the 150 Hz control thread with absolute deadlines and
 //!   per-tick timing.
+//! - [`onboard`]: the onboard binary's I/O (ROS 2, iceoryx2 driver ports,
+//!   MCAP log) around the control thread, and `config/daemon.toml`.
 //! - [`telemetry`]: the tick's status as the `atmo_msgs/MpcStatus` message.
 //! - [`settings`], read from `config/flight.toml`.
 
@@ -15,6 +17,7 @@ pub mod error;
 pub mod flight_stack;
 pub mod modes;
 pub mod observer;
+pub mod onboard;
 pub mod settings;
 pub mod telemetry;
 

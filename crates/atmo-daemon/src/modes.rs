@@ -84,6 +84,11 @@ impl Mode {
         }
     }
 
+    /// The mode of a [`Self::code`].
+    pub fn from_code(code: u8) -> Option<Self> {
+        Self::ALL.iter().copied().find(|m| m.code() == code)
+    }
+
     /// Whether the MPC flies the thrusters in this mode.
     pub fn is_airborne_mode(self) -> bool {
         matches!(
@@ -110,6 +115,9 @@ pub struct Conditions {
     pub estimate_fresh: bool,
     /// The MPC has failed for longer than its grace period.
     pub mpc_failed: bool,
+    /// A required driver (thrusters, tilt, wheels, contact sensor) stopped
+    /// talking: what is commanded may not happen.
+    pub driver_lost: bool,
     /// Measured tilt, rad.
     pub tilt: f64,
     /// Seconds since the current mode was entered.
@@ -185,8 +193,8 @@ pub const TRANSITIONS: &[Transition] = &[
     Transition {
         from: FLYING,
         to: Mode::Failsafe,
-        guard: |c, _| !c.estimate_fresh || c.mpc_failed,
-        reason: "stale estimate or MPC failed past its grace",
+        guard: |c, _| !c.estimate_fresh || c.mpc_failed || c.driver_lost,
+        reason: "stale estimate, MPC failed past its grace, or a driver lost",
     },
     Transition {
         from: &[Mode::Failsafe],
@@ -200,6 +208,7 @@ pub const TRANSITIONS: &[Transition] = &[
         guard: |c, t| {
             c.estimate_fresh
                 && !c.mpc_failed
+                && !c.driver_lost
                 && c.time_in_mode >= t.failsafe_recovery_time
                 && c.tilt <= t.failsafe_recovery_tilt
         },
@@ -214,8 +223,8 @@ pub const TRANSITIONS: &[Transition] = &[
     Transition {
         from: &[Mode::Drive],
         to: Mode::Takeoff,
-        guard: |c, t| c.throttle >= t.takeoff_throttle,
-        reason: "throttle up on the ground",
+        guard: |c, t| c.throttle >= t.takeoff_throttle && !c.driver_lost,
+        reason: "throttle up on the ground, every driver alive",
     },
     Transition {
         from: &[Mode::Takeoff],

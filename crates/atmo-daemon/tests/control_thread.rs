@@ -38,6 +38,7 @@ fn ticks_on_its_own_thread_and_drops_instead_of_blocking() {
             pilot: PilotInput::default(),
             ground_contact: false,
             ground_z: 0.0,
+            driver_lost: false,
         })
         .unwrap();
     // Let it run without reading: the channel fills and reports are dropped.

@@ -75,6 +75,7 @@ impl Loop {
             pilot: self.pilot,
             ground_contact: false,
             ground_z: 0.0,
+            driver_lost: false,
         }
     }
 

@@ -26,6 +26,7 @@ fn flying() -> Conditions {
         descent_commanded: false,
         estimate_fresh: true,
         mpc_failed: false,
+        driver_lost: false,
         tilt: 0.0,
         time_in_mode: 10.0,
     }
@@ -126,6 +127,17 @@ fn flying_modes_to_failsafe_on_stale_estimate_or_mpc_failure() {
             Mode::Failsafe,
             "{mode:?}"
         );
+        assert_eq!(
+            step(
+                mode,
+                Conditions {
+                    driver_lost: true,
+                    ..flying()
+                }
+            ),
+            Mode::Failsafe,
+            "{mode:?}"
+        );
     }
     // Driving needs neither.
     assert_eq!(
@@ -198,6 +210,16 @@ fn failsafe_to_flight_only_when_healthy_tilted_back_and_after_the_recovery_time(
         ),
         Mode::Failsafe
     );
+    assert_eq!(
+        step(
+            Mode::Failsafe,
+            Conditions {
+                driver_lost: true,
+                ..flying()
+            }
+        ),
+        Mode::Failsafe
+    );
 }
 
 #[test]
@@ -217,6 +239,18 @@ fn drive_to_takeoff_at_half_throttle() {
             Mode::Drive,
             Conditions {
                 throttle: 0.49,
+                ..on_ground()
+            }
+        ),
+        Mode::Drive
+    );
+    // No take-off with a dead driver.
+    assert_eq!(
+        step(
+            Mode::Drive,
+            Conditions {
+                throttle: 0.9,
+                driver_lost: true,
                 ..on_ground()
             }
         ),

@@ -96,6 +96,7 @@ fn flight_stack_step_does_not_allocate_after_start_up() {
             pilot,
             ground_contact: false,
             ground_z: 0.0,
+            driver_lost: false,
         };
         // The first ticks warm the MPC up (start-up); count from tick 20 on.
         let before = ALLOCATIONS.load(Ordering::SeqCst);

@@ -1,0 +1,230 @@
+//! `atmo-daemon`: the onboard binary.
+
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+use anyhow::{Context, Result, bail};
+use atmo_core::RobotConfig;
+use atmo_daemon::control_loop::ControlThread;
+use atmo_daemon::onboard::{DaemonConfig, OnboardIo, OnboardSettings, OnboardShared};
+use atmo_daemon::{FlightSettings, FlightStack, Mode};
+use atmo_io::mcap_log::McapLogger;
+use atmo_io::ros2::{Ros2Node, Ros2StartOptions};
+use clap::{Parser, Subcommand};
+
+/// ATMO onboard daemon: the flight stack (mode machine, RTI MPC, drive
+/// controller, failsafes) at its control rate, talking ROS 2 to the robot
+/// (estimate, pilot and drive commands in; status, diagnostics, optional
+/// PX4 offboard out), iceoryx2 shared memory to its drivers (thrusters,
+/// tilt, wheels, encoder, ground contact, heartbeats), and logging every
+/// tick to MCAP.
+#[derive(Parser)]
+#[command(version, about, long_about = None)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Fly: run until SIGINT or SIGTERM, then stop the control thread, finish
+    /// the MCAP log (a valid file, every record accepted so far) and exit 0.
+    /// ROS_DOMAIN_ID selects the DDS domain; RUST_LOG the log level.
+    Run {
+        /// Daemon config (TOML): robot, flight and MPC files, ground height,
+        /// input timeouts, [log], [ros2] topics, [drivers] ports.
+        #[arg(long, default_value = "config/daemon.toml")]
+        config: PathBuf,
+        /// MCAP log file (overrides [log] path).
+        #[arg(long)]
+        log: Option<PathBuf>,
+        /// Stop by itself after this many seconds (tests, bench runs).
+        #[arg(long)]
+        duration: Option<f64>,
+    },
+    /// Load and validate every config file the daemon would use, print what
+    /// it would run with, and exit (0: valid).
+    Check {
+        #[arg(long, default_value = "config/daemon.toml")]
+        config: PathBuf,
+    },
+}
+
+fn main() {
+    tracing_subscriber::fmt()
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_default_env()
+                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info")),
+        )
+        .with_writer(std::io::stderr)
+        .init();
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Run {
+            config,
+            log,
+            duration,
+        } => run(&config, log, duration),
+        Command::Check { config } => check(&config),
+    };
+    if let Err(e) = result {
+        eprintln!("atmo-daemon: {e:#}");
+        std::process::exit(2);
+    }
+}
+
+/// Everything loaded and validated before anything starts.
+struct Loaded {
+    config: DaemonConfig,
+    robot: RobotConfig,
+    flight: FlightSettings,
+    mpc: atmo_mpc::MpcSettings,
+}
+
+fn load(path: &std::path::Path) -> Result<Loaded> {
+    let config = DaemonConfig::load(path)?;
+    let robot = RobotConfig::load(&config.robot)?;
+    let flight = FlightSettings::load(&config.flight)?;
+    let mpc = atmo_mpc::MpcFile::load(&config.mpc)?
+        .settings(&flight.mpc_preset)
+        .with_context(|| {
+            format!(
+                "{}: preset of {}",
+                config.mpc.display(),
+                config.flight.display()
+            )
+        })?;
+    Ok(Loaded {
+        config,
+        robot,
+        flight,
+        mpc,
+    })
+}
+
+fn check(path: &std::path::Path) -> Result<()> {
+    let l = load(path)?;
+    FlightStack::new(&l.robot, l.mpc.clone(), l.flight.clone())?;
+    println!("{}: valid", path.display());
+    println!("  robot  {}", l.config.robot.display());
+    println!(
+        "  flight {} ({} Hz, MPC preset `{}`)",
+        l.config.flight.display(),
+        l.flight.control_loop.rate_hz,
+        l.flight.mpc_preset
+    );
+    println!("  mpc    {}", l.config.mpc.display());
+    println!("  log    {}", l.config.log.path.display());
+    let t = &l.config.ros2.topics;
+    println!(
+        "  ros2   status {}, estimate {} ({}), pilot {}, drive {}",
+        t.status.name, t.estimate.name, t.estimate.type_name, t.pilot.name, t.drive_command.name
+    );
+    println!(
+        "  drivers prefix {}, liveness {} ms",
+        l.config.drivers.prefix, l.config.drivers.liveness_timeout_ms
+    );
+    Ok(())
+}
+
+fn run(path: &std::path::Path, log_path: Option<PathBuf>, duration: Option<f64>) -> Result<()> {
+    let l = load(path)?;
+    let stack = FlightStack::new(&l.robot, l.mpc, l.flight.clone())?;
+    let period = Duration::from_secs_f64(stack.period());
+
+    // SIGINT/SIGTERM only set a flag: the main thread shuts down in order.
+    let terminate = Arc::new(AtomicBool::new(false));
+    for signal in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
+        signal_hook::flag::register(signal, Arc::clone(&terminate))
+            .with_context(|| format!("installing the handler of signal {signal}"))?;
+    }
+
+    let log_path = log_path.unwrap_or_else(|| l.config.log.path.clone());
+    if let Some(dir) = log_path.parent().filter(|d| !d.as_os_str().is_empty()) {
+        std::fs::create_dir_all(dir)
+            .with_context(|| format!("creating the log folder {}", dir.display()))?;
+    }
+    let (log, log_thread) = McapLogger::spawn(&log_path, l.config.log.options())
+        .with_context(|| format!("opening the log {}", log_path.display()))?;
+    let status_channel = log.channel(&l.config.ros2.topics.status.name)?;
+    let (ros_out, ros_in, ros_thread) =
+        Ros2Node::start(&l.config.ros2, Ros2StartOptions::default()).context("ROS 2 node")?;
+
+    let shared = Arc::new(OnboardShared::default());
+    let settings = OnboardSettings::new(&l.config, l.flight.failsafe.estimate_timeout);
+    let drivers = l.config.drivers.clone();
+    let (thread_shared, thread_log, thread_ros_out) =
+        (Arc::clone(&shared), log.clone(), ros_out.clone());
+    let control = ControlThread::spawn_with(stack, period, move |_| {
+        OnboardIo::open(
+            &drivers,
+            ros_in,
+            thread_ros_out,
+            thread_log,
+            status_channel,
+            settings,
+            thread_shared,
+        )
+    })
+    .context("starting the control thread")?;
+    tracing::info!(
+        config = %path.display(),
+        log = %log_path.display(),
+        rate_hz = l.flight.control_loop.rate_hz,
+        "atmo-daemon running"
+    );
+
+    let started = Instant::now();
+    let mut reported_mode = Mode::Disarmed.code();
+    let mut reported_deaths = 0;
+    let mut panicked = false;
+    while !terminate.load(Ordering::Relaxed) {
+        if !control.is_running() {
+            panicked = true;
+            break;
+        }
+        if duration.is_some_and(|d| started.elapsed().as_secs_f64() >= d) {
+            break;
+        }
+        std::thread::sleep(Duration::from_millis(20));
+        let mode = shared.mode.load(Ordering::Relaxed);
+        if mode != reported_mode {
+            reported_mode = mode;
+            tracing::info!(mode = Mode::from_code(mode).map_or("?", Mode::name), "mode");
+        }
+        let deaths = shared.driver_deaths.load(Ordering::Relaxed);
+        if deaths != reported_deaths {
+            reported_deaths = deaths;
+            tracing::warn!(
+                alive_bits = shared.drivers_alive.load(Ordering::Relaxed),
+                deaths,
+                "a driver stopped talking"
+            );
+        }
+    }
+
+    // Shut down in order: no tick after this, then the log, then ROS 2.
+    let ticks = control.counters().ticks.load(Ordering::Relaxed);
+    let stack = control.stop();
+    log.finish();
+    let written = log_thread.join().context("finishing the log")?;
+    ros_thread.stop().context("stopping the ROS 2 node")?;
+    tracing::info!(
+        ticks,
+        log = %log_path.display(),
+        records = written.written,
+        dropped = written.dropped,
+        pilot_stale_ticks = shared.pilot_stale_ticks.load(Ordering::Relaxed),
+        port_send_errors = shared.port_send_errors.load(Ordering::Relaxed),
+        "atmo-daemon stopped"
+    );
+    if panicked || stack.is_err() {
+        bail!(
+            "the control thread panicked; the log up to then is in {}",
+            log_path.display()
+        );
+    }
+    Ok(())
+}

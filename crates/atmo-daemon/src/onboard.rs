@@ -1,0 +1,448 @@
+//! The onboard daemon: the flight stack on the control thread, wired to
+//! the robot.
+//!
+//! ```text
+//!  ROS 2 thread ──estimate, pilot, drive──▶ ┌──────────────────┐ ──thrust, tilt rate, wheels──▶ iceoryx2
+//!  (atmo-io Ros2Node, bounded channels)     │  control thread  │ ◀──encoder, contact, heartbeats── drivers
+//!                     ◀──MpcStatus────────  │  150 Hz, [`OnboardIo`] │ ──MpcStatus──▶ MCAP logger thread
+//!                                           └──────────────────┘
+//! ```
+//!
+//! Everything the control thread touches is non-blocking and
+//! allocation-free after start-up: ROS 2 inputs are drained from bounded
+//! channels, outputs go through `try_*` calls that drop and count when a
+//! queue is full, and the driver ports are zero-copy iceoryx2 services
+//! opened on the control thread itself (they are not `Send`).
+//!
+//! Input semantics:
+//! - The estimate's age is measured from when the ROS 2 thread accepted it
+//!   (message stamps come from another clock, ROS time; the node checks
+//!   they increase). An estimate older than the flight settings'
+//!   `failsafe.estimate_timeout` puts the stack in its failsafe.
+//! - The pilot input holds its switches when the pilot stream goes quiet for
+//!   `pilot_timeout_ms` (disarming a flying robot because a radio dropped
+//!   would drop it) but its velocity, yaw-rate and throttle commands go to
+//!   zero: the robot holds its position.
+//! - A drive command (`geometry_msgs/Twist`) newer than the pilot input and
+//!   younger than `drive_timeout_ms` sets the velocity and yaw rate while the
+//!   stack drives (forward speed along the current heading).
+//! - A required driver not heard from within the driver ports' liveness
+//!   timeout sets `driver_lost`: failsafe in the air, no take-off.
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, AtomicU8, AtomicU64, Ordering};
+use std::time::{Duration, Instant};
+
+use atmo_core::config::{Checker, parse_toml, read_config_file};
+use atmo_core::model::idx;
+use atmo_io::drivers::{DriverHealth, DriverPortsConfig, FlightPorts, monotonic_ns};
+use atmo_io::mcap_log::{Channel, Compression, LoggerHandle, LoggerOptions};
+use atmo_io::msg::{ActuatorMotors, IoHealth, MpcStatus, OffboardControlMode};
+use atmo_io::ros2::{Ros2Config, Ros2Inputs, Ros2Publisher};
+use serde::Deserialize;
+
+use crate::control_loop::{TickIo, TickTiming};
+use crate::error::{DaemonError, Result};
+use crate::flight_stack::{Estimate, PilotInput, StepInputs, StepOutputs};
+use crate::modes::Mode;
+
+/// `config/daemon.toml`: what the onboard binary loads. Paths are relative
+/// to the folder of the file that names them.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DaemonConfig {
+    /// Robot parameters (config/atmo.toml).
+    pub robot: PathBuf,
+    /// Flight settings (config/flight.toml).
+    pub flight: PathBuf,
+    /// MPC settings (config/mpc.toml); the preset is the flight settings'.
+    pub mpc: PathBuf,
+    /// NED z of the (flat) ground under the robot, m.
+    #[serde(default)]
+    pub ground_z: f64,
+    /// Pilot stream silence after which its commands go to zero, ms.
+    #[serde(default = "default_input_timeout_ms")]
+    pub pilot_timeout_ms: u64,
+    /// Age after which a drive command is ignored, ms.
+    #[serde(default = "default_input_timeout_ms")]
+    pub drive_timeout_ms: u64,
+    /// Also send the thruster commands to PX4 (ActuatorMotors +
+    /// OffboardControlMode on ROS 2), as the original ATMO did.
+    #[serde(default)]
+    pub px4_offboard: bool,
+    #[serde(default)]
+    pub log: LogConfig,
+    #[serde(default)]
+    pub ros2: Ros2Config,
+    #[serde(default)]
+    pub drivers: DriverPortsConfig,
+}
+
+fn default_input_timeout_ms() -> u64 {
+    500
+}
+
+/// `[log]`: the MCAP flight log.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct LogConfig {
+    /// Log file (relative to the working directory); `--log` overrides it.
+    pub path: PathBuf,
+    /// Records queued before the logger drops (and counts).
+    pub queue_capacity: usize,
+    /// Longest time between two flushes, ms (at most 1000: a killed daemon
+    /// loses at most this much).
+    pub flush_period_ms: u64,
+    /// `zstd`, `lz4` or `none`.
+    pub compression: String,
+}
+
+impl Default for LogConfig {
+    fn default() -> Self {
+        Self {
+            path: PathBuf::from("flight.mcap"),
+            queue_capacity: 4096,
+            flush_period_ms: 500,
+            compression: "zstd".into(),
+        }
+    }
+}
+
+impl LogConfig {
+    /// The logger's options (validated values).
+    pub fn options(&self) -> LoggerOptions {
+        LoggerOptions {
+            queue_capacity: self.queue_capacity,
+            flush_period: Duration::from_millis(self.flush_period_ms),
+            compression: match self.compression.as_str() {
+                "lz4" => Compression::Lz4,
+                "none" => Compression::None,
+                _ => Compression::Zstd,
+            },
+            ..LoggerOptions::default()
+        }
+    }
+}
+
+impl DaemonConfig {
+    /// Loads and validates `path`; the robot, flight and MPC paths are
+    /// resolved against its folder.
+    pub fn load(path: impl AsRef<Path>) -> Result<Self> {
+        let path = path.as_ref();
+        let text = read_config_file(path)?;
+        let mut config = Self::from_toml_str(&text, path)?;
+        let dir = path.parent().unwrap_or(Path::new("."));
+        for file in [&mut config.robot, &mut config.flight, &mut config.mpc] {
+            if file.is_relative() {
+                *file = dir.join(&*file);
+            }
+        }
+        Ok(config)
+    }
+
+    /// Parses and validates; `file` names the origin in errors.
+    pub fn from_toml_str(text: &str, file: impl Into<PathBuf>) -> Result<Self> {
+        let file = file.into();
+        let config: Self = parse_toml(text, &file)?;
+        config.validate(&file)?;
+        Ok(config)
+    }
+
+    /// Checks the values; errors name `file` and the key.
+    pub fn validate(&self, file: &Path) -> Result<()> {
+        let c = Checker::new(file);
+        if !self.ground_z.is_finite() {
+            return Err(c
+                .fail("ground_z", "a finite height, m", self.ground_z)
+                .into());
+        }
+        for (key, value) in [
+            ("pilot_timeout_ms", self.pilot_timeout_ms),
+            ("drive_timeout_ms", self.drive_timeout_ms),
+        ] {
+            if !(10..=10_000).contains(&value) {
+                return Err(c.fail(key, "10 to 10000 ms", value).into());
+            }
+        }
+        if !(1..=1 << 20).contains(&self.log.queue_capacity) {
+            return Err(c
+                .fail(
+                    "log.queue_capacity",
+                    "1 to 1048576",
+                    self.log.queue_capacity,
+                )
+                .into());
+        }
+        if !(10..=1000).contains(&self.log.flush_period_ms) {
+            return Err(c
+                .fail(
+                    "log.flush_period_ms",
+                    "10 to 1000 ms (a killed daemon loses at most this much)",
+                    self.log.flush_period_ms,
+                )
+                .into());
+        }
+        if !["zstd", "lz4", "none"].contains(&self.log.compression.as_str()) {
+            return Err(c
+                .fail(
+                    "log.compression",
+                    "`zstd`, `lz4` or `none`",
+                    &self.log.compression,
+                )
+                .into());
+        }
+        if self.log.path.as_os_str().is_empty() {
+            return Err(c.fail("log.path", "a file path", "\"\"").into());
+        }
+        self.ros2
+            .validate(file)
+            .map_err(|e| DaemonError::Setup(format!("[ros2]: {e}")))?;
+        self.drivers
+            .validate(file)
+            .map_err(|e| DaemonError::Setup(format!("[drivers]: {e}")))?;
+        Ok(())
+    }
+}
+
+/// What the control thread shares with the rest of the daemon (atomics:
+/// read by the main thread for diagnostics and the exit report).
+#[derive(Debug, Default)]
+pub struct OnboardShared {
+    /// Current mode ([`Mode::code`]).
+    pub mode: AtomicU8,
+    /// Drivers alive (bit i: [`atmo_io::drivers::DriverId`] i).
+    pub drivers_alive: AtomicU8,
+    /// Alive -> dead transitions, all drivers.
+    pub driver_deaths: AtomicU64,
+    /// Ticks run with the pilot stream silent.
+    pub pilot_stale_ticks: AtomicU64,
+    /// Ticks with no estimate fresh enough to fly on (age > timeout).
+    pub estimates_stale_ticks: AtomicU64,
+    /// Driver-port sends refused.
+    pub port_send_errors: AtomicU64,
+    /// Status records the logger dropped (queue full).
+    pub log_dropped: AtomicU64,
+    /// Set once the first tick has run.
+    pub started: AtomicBool,
+}
+
+/// Settings the tick uses (from [`DaemonConfig`]).
+#[derive(Debug, Clone, Copy)]
+pub struct OnboardSettings {
+    pub ground_z: f64,
+    pub pilot_timeout: Duration,
+    pub drive_timeout: Duration,
+    pub px4_offboard: bool,
+    /// The flight stack's estimate timeout, s (for the stale counter).
+    pub estimate_timeout: f64,
+}
+
+impl OnboardSettings {
+    pub fn new(config: &DaemonConfig, estimate_timeout: f64) -> Self {
+        Self {
+            ground_z: config.ground_z,
+            pilot_timeout: Duration::from_millis(config.pilot_timeout_ms),
+            drive_timeout: Duration::from_millis(config.drive_timeout_ms),
+            px4_offboard: config.px4_offboard,
+            estimate_timeout,
+        }
+    }
+}
+
+/// The control thread's I/O on the robot: ROS 2 in and out, driver ports,
+/// MCAP log. Built on the control thread ([`OnboardIo::open`]).
+pub struct OnboardIo {
+    ports: FlightPorts,
+    ros_in: Ros2Inputs,
+    ros_out: Ros2Publisher,
+    log: LoggerHandle,
+    status_channel: Channel<MpcStatus>,
+    settings: OnboardSettings,
+    shared: Arc<OnboardShared>,
+    started: Instant,
+    estimate: Option<Estimate>,
+    pilot: PilotInput,
+    pilot_received: Option<Instant>,
+    drive: Option<atmo_io::ros2::DriveCommand>,
+    tilt_counts: Option<f64>,
+    contact: bool,
+    health: Option<DriverHealth>,
+    mode: Mode,
+    tick: u64,
+}
+
+impl OnboardIo {
+    /// Opens the driver ports (cleaning what a crashed run left) on the
+    /// calling thread, which must be the control thread.
+    pub fn open(
+        drivers: &DriverPortsConfig,
+        ros_in: Ros2Inputs,
+        ros_out: Ros2Publisher,
+        log: LoggerHandle,
+        status_channel: Channel<MpcStatus>,
+        settings: OnboardSettings,
+        shared: Arc<OnboardShared>,
+    ) -> atmo_io::Result<Self> {
+        Ok(Self {
+            ports: FlightPorts::open(drivers)?,
+            ros_in,
+            ros_out,
+            log,
+            status_channel,
+            settings,
+            shared,
+            started: Instant::now(),
+            estimate: None,
+            pilot: PilotInput::default(),
+            pilot_received: None,
+            drive: None,
+            tilt_counts: None,
+            contact: false,
+            health: None,
+            mode: Mode::Disarmed,
+            tick: 0,
+        })
+    }
+
+    /// The pilot input this tick: held switches, zeroed commands when the
+    /// stream is silent, a fresh drive command while driving.
+    fn pilot_now(&self, yaw: f64) -> PilotInput {
+        let mut pilot = self.pilot;
+        let stale = self
+            .pilot_received
+            .is_none_or(|at| at.elapsed() > self.settings.pilot_timeout);
+        if stale {
+            pilot.velocity = [0.0; 3];
+            pilot.yaw_rate = 0.0;
+            pilot.throttle = 0.0;
+        }
+        if let Some(drive) = self.drive
+            && self.mode == Mode::Drive
+            && drive.received.elapsed() <= self.settings.drive_timeout
+            && self.pilot_received.is_none_or(|at| drive.received > at)
+        {
+            pilot.velocity = [drive.forward * yaw.cos(), drive.forward * yaw.sin(), 0.0];
+            pilot.yaw_rate = drive.yaw_rate;
+        }
+        pilot
+    }
+
+    fn io_health(&self) -> IoHealth {
+        let ros = self.ros_out.counters();
+        let ports = self.ports.counters();
+        IoHealth {
+            malformed: ros.malformed,
+            invalid: ros.invalid,
+            stamp_backwards: ros.stamp_backwards,
+            inputs_dropped: ros.inputs_dropped,
+            publish_dropped: ros.publish_dropped,
+            log_dropped: self.log.dropped(),
+            drivers_alive: self.health.map_or([false; 4], |h| h.alive),
+            driver_deaths: ports.deaths,
+        }
+    }
+}
+
+impl TickIo for OnboardIo {
+    fn gather(&mut self, deadline_ns: u64) -> Option<StepInputs> {
+        while let Some(e) = self.ros_in.latest_estimate() {
+            // Age from acceptance (see the module doc), on the tick's clock.
+            let age = u64::try_from(e.received.elapsed().as_nanos()).unwrap_or(u64::MAX);
+            self.estimate = Some(Estimate {
+                stamp_ns: deadline_ns.saturating_sub(age),
+                state: e.state,
+            });
+        }
+        while let Some(p) = self.ros_in.latest_pilot() {
+            let m = p.input;
+            self.pilot = PilotInput {
+                velocity: m.velocity,
+                yaw_rate: m.yaw_rate,
+                throttle: m.throttle,
+                arm: m.arm,
+                offboard: m.offboard,
+                mpc_enabled: m.mpc_enabled,
+            };
+            self.pilot_received = Some(p.received);
+        }
+        while let Some(d) = self.ros_in.latest_drive() {
+            self.drive = Some(d);
+        }
+        let drivers = self.ports.poll(monotonic_ns());
+        if let Some(encoder) = drivers.tilt_encoder {
+            self.tilt_counts = Some(encoder.counts as f64);
+        }
+        if let Some(contact) = drivers.ground_contact {
+            self.contact = contact.contact != 0;
+        }
+        self.health = Some(drivers.health);
+        let yaw = self.estimate.map_or(0.0, |e| e.state[idx::YAW]);
+        if self
+            .pilot_received
+            .is_none_or(|at| at.elapsed() > self.settings.pilot_timeout)
+        {
+            self.shared
+                .pilot_stale_ticks
+                .fetch_add(1, Ordering::Relaxed);
+        }
+        let fresh = self.estimate.is_some_and(|e| {
+            deadline_ns.saturating_sub(e.stamp_ns) as f64 * 1e-9 <= self.settings.estimate_timeout
+        });
+        if !fresh {
+            self.shared
+                .estimates_stale_ticks
+                .fetch_add(1, Ordering::Relaxed);
+        }
+        Some(StepInputs {
+            now_ns: deadline_ns,
+            estimate: self.estimate,
+            tilt_counts: self.tilt_counts,
+            pilot: self.pilot_now(yaw),
+            ground_contact: self.contact,
+            ground_z: self.settings.ground_z,
+            driver_lost: !drivers.health.all_required_alive(),
+        })
+    }
+
+    fn emit(&mut self, inputs: &StepInputs, outputs: &StepOutputs, timing: &TickTiming) {
+        let mut sent = self.ports.send_thrust(outputs.thrust);
+        sent &= self.ports.send_tilt_velocity(outputs.tilt_velocity);
+        sent &= self
+            .ports
+            .send_wheel_rates([outputs.wheel_rates.left, outputs.wheel_rates.right]);
+        sent &= self.ports.notify_drivers();
+        if !sent {
+            self.shared.port_send_errors.fetch_add(1, Ordering::Relaxed);
+        }
+        if self.settings.px4_offboard {
+            let us = u64::try_from(self.started.elapsed().as_micros()).unwrap_or(u64::MAX);
+            self.ros_out
+                .try_publish_offboard(&OffboardControlMode::direct_actuator(us));
+            self.ros_out
+                .try_publish_motors(&ActuatorMotors::from_thrust(us, outputs.thrust));
+        }
+        let mut status = crate::telemetry::status_message(self.tick, inputs, outputs, timing);
+        status.io = self.io_health();
+        // Both drop and count when full; neither blocks.
+        self.ros_out.try_publish_status(&status);
+        self.log
+            .try_log(self.status_channel, inputs.now_ns, &status);
+        self.mode = outputs.status.mode;
+        self.tick += 1;
+        let alive = status
+            .io
+            .drivers_alive
+            .iter()
+            .enumerate()
+            .fold(0u8, |bits, (i, a)| bits | (u8::from(*a) << i));
+        let s = &self.shared;
+        s.mode.store(self.mode.code(), Ordering::Relaxed);
+        s.drivers_alive.store(alive, Ordering::Relaxed);
+        s.driver_deaths
+            .store(status.io.driver_deaths.iter().sum(), Ordering::Relaxed);
+        s.log_dropped
+            .store(status.io.log_dropped, Ordering::Relaxed);
+        s.started.store(true, Ordering::Relaxed);
+    }
+}
