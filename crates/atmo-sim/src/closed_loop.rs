@@ -126,7 +126,8 @@ fn ground_z_below(plant: &Plant, p: &Vector3<f64>) -> f64 {
     p.z + plane.height(p) / -plane.normal.z
 }
 
-fn pilot_input(scenario: &Scenario, t: f64) -> PilotInput {
+/// The scenario's pilot inputs at `t`.
+pub fn pilot_input(scenario: &Scenario, t: f64) -> PilotInput {
     scenario
         .pilot_at(t)
         .map_or(PilotInput::default(), |p| PilotInput {
@@ -137,6 +138,124 @@ fn pilot_input(scenario: &Scenario, t: f64) -> PilotInput {
             offboard: p.offboard,
             mpc_enabled: p.mpc,
         })
+}
+
+/// The landing's bookkeeping, shared by the in-process runner ([`fly`])
+/// and the SITL plant server (`atmo-sim serve`): what the controller did
+/// each tick, and what the plant did each step.
+#[derive(Debug, Clone, Default)]
+pub struct LandingTracker {
+    modes: Vec<Mode>,
+    has_flown: bool,
+    max_mean_thrust: f64,
+    mpc_failures: u64,
+    rejected: [u64; 4],
+    feedback_times: Vec<f64>,
+    /// Time, tilt and vertical speed at the first wheel contact after flying.
+    touchdown: Option<(f64, f64, f64)>,
+    last_ground_xy: Option<Vector3<f64>>,
+    drive_distance: f64,
+}
+
+impl LandingTracker {
+    /// Room for `expected_ticks` feedback times (no reallocation in the loop).
+    pub fn new(expected_ticks: usize) -> Self {
+        Self {
+            feedback_times: Vec::with_capacity(expected_ticks),
+            ..Self::default()
+        }
+    }
+
+    /// One control tick: its mode, thrust commands, MPC feedback time
+    /// (`None` if the MPC did not run) and the controller's counters.
+    pub fn on_control_tick(
+        &mut self,
+        mode: Mode,
+        thrust: &[f64; 4],
+        feedback_time: Option<f64>,
+        mpc_failures_total: u64,
+        rejected: [u64; 4],
+    ) {
+        if self.modes.last() != Some(&mode) {
+            self.modes.push(mode);
+        }
+        self.has_flown |= matches!(mode, Mode::Flight | Mode::Morphing | Mode::Transition);
+        if mode == Mode::Transition {
+            let mean = thrust.iter().sum::<f64>() / 4.0;
+            self.max_mean_thrust = self.max_mean_thrust.max(mean);
+        }
+        if let Some(t) = feedback_time {
+            self.feedback_times.push(t);
+        }
+        self.mpc_failures = mpc_failures_total;
+        self.rejected = rejected;
+    }
+
+    /// After one plant step; `was_grounded` is the contact signal before it.
+    pub fn after_plant_step(&mut self, plant: &Plant, was_grounded: bool) {
+        let state = plant.state();
+        // The landing is the first wheel contact after flying (a scenario may
+        // start on the ground, and then take off).
+        if self.touchdown.is_none() && self.has_flown && !was_grounded && plant.contact_signal() {
+            self.touchdown = Some((plant.time(), plant.tilt(), state[idx::VZ]));
+        }
+        if self.touchdown.is_some() {
+            let xy = Vector3::new(state[idx::X], state[idx::Y], 0.0);
+            if let Some(last) = self.last_ground_xy {
+                self.drive_distance += (xy - last).norm();
+            }
+            self.last_ground_xy = Some(xy);
+        }
+    }
+
+    /// The summary of the run so far.
+    pub fn summary(&self, scenario: &Scenario, plant: &Plant, wall_time_s: f64) -> Summary {
+        let mut feedback_times = self.feedback_times.clone();
+        feedback_times.sort_by(f64::total_cmp);
+        let crash = plant.crash().copied();
+        let touchdown = self.touchdown;
+        Summary {
+            scenario: scenario.file.name.clone(),
+            seed: scenario.file.seed,
+            touchdown_tilt_deg: touchdown.map(|(_, tilt, _)| tilt.to_degrees()),
+            impact_speed_mps: touchdown.map(|(_, _, vz)| vz),
+            touchdown_time_s: touchdown.map(|(t, _, _)| t),
+            max_mean_thrust: self.max_mean_thrust,
+            crashed: crash.is_some(),
+            crash_reason: crash.map(|e| format!("{:?} at t = {:.3} s", e.kind, e.time)),
+            drive_distance_m: self.drive_distance,
+            mode_sequence: self.modes.iter().map(|m| m.name().to_string()).collect(),
+            mpc_failures: self.mpc_failures,
+            rejected_inputs: self.rejected,
+            sim_time_s: plant.time(),
+            wall_time_s,
+            feedback_time_median_s: feedback_times
+                .get(feedback_times.len() / 2)
+                .copied()
+                .unwrap_or(0.0),
+            feedback_time_max_s: feedback_times.last().copied().unwrap_or(0.0),
+        }
+    }
+}
+
+/// The flight stack's inputs from the plant at its current time: the
+/// latest motion-capture estimate (stamped with the instant it describes),
+/// tilt encoder, contact signal, ground height under the robot.
+pub fn sensed_inputs(plant: &Plant, pilot: PilotInput) -> StepInputs {
+    let state = plant.state();
+    let p = Vector3::new(state[idx::X], state[idx::Y], state[idx::Z]);
+    StepInputs {
+        now_ns: (plant.time() * 1e9).round() as u64,
+        estimate: plant.estimate().map(|e| Estimate {
+            stamp_ns: (e.measured_at.max(0.0) * 1e9).round() as u64,
+            state: e.state,
+        }),
+        tilt_counts: plant.encoder_counts().ok(),
+        pilot,
+        ground_contact: plant.contact_signal(),
+        ground_z: ground_z_below(plant, &p),
+        driver_lost: false,
+    }
 }
 
 /// Flies `scenario` in closed loop; `on_tick` sees every tick (for logs).
@@ -158,35 +277,12 @@ pub fn fly(
     let mut next_tick = 0.0;
     let mut tick: u64 = 0;
     let mut command = Command::idle();
-    let mut modes: Vec<Mode> = Vec::new();
-    let mut max_mean_thrust: f64 = 0.0;
-    let mut feedback_times: Vec<f64> = Vec::with_capacity((duration / period) as usize + 2);
-    let mut mpc_failures = 0;
-    let mut rejected = [0; 4];
-    let mut touchdown: Option<(f64, f64, f64)> = None; // time, tilt, vz
-    let mut last_ground_xy: Option<Vector3<f64>> = None;
-    let mut drive_distance = 0.0;
-    let mut has_flown = false;
+    let mut tracker = LandingTracker::new((duration / period) as usize + 2);
 
     while plant.time() < duration - 1e-9 {
         let t = plant.time();
         if t + 1e-9 >= next_tick {
-            let state = plant.state();
-            let p = Vector3::new(state[idx::X], state[idx::Y], state[idx::Z]);
-            let ground_z = ground_z_below(&plant, &p);
-            let now_ns = (t * 1e9).round() as u64;
-            let estimate = plant.estimate().map(|e| Estimate {
-                stamp_ns: (e.measured_at.max(0.0) * 1e9).round() as u64,
-                state: e.state,
-            });
-            let inputs = StepInputs {
-                now_ns,
-                estimate,
-                tilt_counts: plant.encoder_counts().ok(),
-                pilot: pilot_input(scenario, t),
-                ground_contact: plant.contact_signal(),
-                ground_z,
-            };
+            let inputs = sensed_inputs(&plant, pilot_input(scenario, t));
             let outputs = stack.step(&inputs);
             command = Command {
                 rotors: atmo_core::model::Input::from(outputs.thrust),
@@ -194,31 +290,26 @@ pub fn fly(
                 wheel_rates: outputs.wheel_rates,
             };
             let s = &outputs.status;
-            if modes.last() != Some(&s.mode) {
-                modes.push(s.mode);
-            }
-            has_flown |= matches!(s.mode, Mode::Flight | Mode::Morphing | Mode::Transition);
-            if s.mode == Mode::Transition {
-                let mean = outputs.thrust.iter().sum::<f64>() / 4.0;
-                max_mean_thrust = max_mean_thrust.max(mean);
-            }
-            if s.solver != atmo_daemon::SolverState::Idle {
-                feedback_times.push(s.feedback_time);
-            }
-            mpc_failures = s.mpc_failures_total;
-            rejected = [
-                s.rejected.estimate,
-                s.rejected.tilt,
-                s.rejected.pilot,
-                s.rejected.ground,
-            ];
+            tracker.on_control_tick(
+                s.mode,
+                &outputs.thrust,
+                (s.solver != atmo_daemon::SolverState::Idle).then_some(s.feedback_time),
+                s.mpc_failures_total,
+                [
+                    s.rejected.estimate,
+                    s.rejected.tilt,
+                    s.rejected.pilot,
+                    s.rejected.ground,
+                ],
+            );
+            let truth = plant.state();
             on_tick(&TickRecord {
                 time: t,
                 inputs,
                 outputs,
-                truth: state,
+                truth,
                 truth_tilt: plant.tilt(),
-                truth_height: ground_z - state[idx::Z],
+                truth_height: inputs.ground_z - truth[idx::Z],
             });
             stack.prepare_next();
             tick += 1;
@@ -228,47 +319,12 @@ pub fn fly(
         plant.set_external_wrench(force, torque)?;
         let was_grounded = plant.contact_signal();
         plant.step(&command)?;
-        let state = plant.state();
-        // The landing is the first wheel contact after flying (a scenario may
-        // start on the ground, and then take off).
-        if touchdown.is_none() && has_flown && !was_grounded && plant.contact_signal() {
-            touchdown = Some((plant.time(), plant.tilt(), state[idx::VZ]));
-        }
-        if touchdown.is_some() {
-            let xy = Vector3::new(state[idx::X], state[idx::Y], 0.0);
-            if let Some(last) = last_ground_xy {
-                drive_distance += (xy - last).norm();
-            }
-            last_ground_xy = Some(xy);
-        }
+        tracker.after_plant_step(&plant, was_grounded);
         if plant.crash().is_some() {
             break;
         }
     }
-
-    feedback_times.sort_by(f64::total_cmp);
-    let crash = plant.crash().copied();
-    Ok(Summary {
-        scenario: scenario.file.name.clone(),
-        seed: scenario.file.seed,
-        touchdown_tilt_deg: touchdown.map(|(_, tilt, _)| tilt.to_degrees()),
-        impact_speed_mps: touchdown.map(|(_, _, vz)| vz),
-        touchdown_time_s: touchdown.map(|(t, _, _)| t),
-        max_mean_thrust,
-        crashed: crash.is_some(),
-        crash_reason: crash.map(|e| format!("{:?} at t = {:.3} s", e.kind, e.time)),
-        drive_distance_m: drive_distance,
-        mode_sequence: modes.iter().map(|m| m.name().to_string()).collect(),
-        mpc_failures,
-        rejected_inputs: rejected,
-        sim_time_s: plant.time(),
-        wall_time_s: wall.elapsed().as_secs_f64(),
-        feedback_time_median_s: feedback_times
-            .get(feedback_times.len() / 2)
-            .copied()
-            .unwrap_or(0.0),
-        feedback_time_max_s: feedback_times.last().copied().unwrap_or(0.0),
-    })
+    Ok(tracker.summary(scenario, &plant, wall.elapsed().as_secs_f64()))
 }
 
 /// The per-tick series of the paper's Fig. 5A.

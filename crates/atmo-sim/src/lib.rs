@@ -72,6 +72,7 @@ pub mod plant;
 mod rigid;
 pub mod scenario;
 pub mod sensors;
+pub mod sitl;
 
 pub use config::{EffectsConfig, PlantConfig, TerrainConfig};
 pub use error::{Result, SimError};

@@ -114,6 +114,36 @@ enum Command {
         #[arg(long)]
         quiet: bool,
     },
+    /// Software in the loop: run the plant in real time on the robot's
+    /// transports, for the unmodified daemon (`atmo-daemon run`) to fly.
+    /// Plays every driver on the iceoryx2 driver ports (takes thruster,
+    /// tilt-velocity and wheel-rate commands; publishes the tilt encoder,
+    /// ground contact and heartbeats) and the motion-capture system and
+    /// pilot on ROS 2 (nav_msgs/Odometry, atmo_msgs/PilotInput from the
+    /// scenario). Topics, services and the iceoryx2 prefix are read from
+    /// the daemon's config file so both sides agree; ROS_DOMAIN_ID must match
+    /// too. The plant waits, frozen at its initial state, until the daemon
+    /// arms; then it runs the scenario's duration and writes
+    /// OUT/summary.json (the landing judged on the plant's truth, and the
+    /// server's counters). Exit status 0 when the scenario's success
+    /// criteria are met.
+    Serve {
+        /// Scenario file (see config/scenarios/).
+        #[arg(default_value = "config/scenarios/wheel_landing.toml")]
+        scenario: PathBuf,
+        /// The daemon's config ([ros2] topics, [drivers] ports).
+        #[arg(long, default_value = "config/daemon.toml")]
+        config: PathBuf,
+        /// Output folder.
+        #[arg(long, default_value = "out/sitl")]
+        out: PathBuf,
+        /// Longest wait for the daemon to arm, s.
+        #[arg(long, default_value_t = 60.0)]
+        start_timeout: f64,
+        /// No progress bar.
+        #[arg(long)]
+        quiet: bool,
+    },
 }
 
 fn main() -> Result<()> {
@@ -126,6 +156,13 @@ fn main() -> Result<()> {
             seed,
             jobs,
         } => fly::run(&scenario, &out, runs, seed, jobs),
+        Command::Serve {
+            scenario,
+            config,
+            out,
+            start_timeout,
+            quiet,
+        } => serve(&scenario, &config, &out, start_timeout, quiet),
         Command::Explain {
             recording,
             robot,
@@ -150,6 +187,57 @@ fn main() -> Result<()> {
             Ok(())
         }
     }
+}
+
+fn serve(
+    scenario_path: &std::path::Path,
+    config: &std::path::Path,
+    out: &std::path::Path,
+    start_timeout: f64,
+    quiet: bool,
+) -> Result<()> {
+    use atmo_sim::sitl::{ServeOptions, serve};
+    let scenario = atmo_sim::Scenario::load(scenario_path)?;
+    let daemon = atmo_daemon::onboard::DaemonConfig::load(config)?;
+    let mut options = ServeOptions::new(daemon.ros2, daemon.drivers);
+    options.start_timeout = std::time::Duration::from_secs_f64(start_timeout.max(0.0));
+    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    let bar = if quiet {
+        indicatif::ProgressBar::hidden()
+    } else {
+        indicatif::ProgressBar::new((scenario.file.duration * 1000.0) as u64)
+    };
+    bar.set_style(
+        indicatif::ProgressStyle::with_template(
+            "{spinner} sim {pos:>6}/{len} ms [{bar:30}] daemon: {msg}",
+        )?
+        .progress_chars("=> "),
+    );
+    bar.set_message("waiting for the daemon to arm");
+    let mut progress = |t: f64, mode: Option<atmo_daemon::Mode>| {
+        bar.set_position((t * 1000.0) as u64);
+        bar.set_message(mode.map_or("no status yet", atmo_daemon::Mode::name));
+    };
+    let (summary, counters) = serve(&scenario, &options, &mut progress)?;
+    bar.finish_and_clear();
+    let ok = summary.succeeded(&scenario.file.success);
+    let json = serde_json::json!({
+        "summary": summary,
+        "succeeded": ok,
+        "server": counters,
+    });
+    let path = out.join("summary.json");
+    std::fs::write(&path, serde_json::to_string_pretty(&json)? + "\n")
+        .with_context(|| format!("writing {}", path.display()))?;
+    println!("{}", serde_json::to_string_pretty(&json)?);
+    if !ok {
+        anyhow::bail!(
+            "the flight did not meet the success criteria of {} (see {})",
+            scenario_path.display(),
+            path.display()
+        );
+    }
+    Ok(())
 }
 
 fn physics(robot: &PathBuf) -> Result<()> {

@@ -1,0 +1,318 @@
+//! Software in the loop, two processes: the unmodified `atmo-daemon`
+//! binary flies the wheel landing against `atmo-sim serve` over the real
+//! transports (ROS 2 on loopback in a domain of its own, iceoryx2 under a
+//! prefix of its own), is stopped with SIGTERM, and the landing is checked
+//! from the daemon's MCAP log (and the server's truth in summary.json).
+//!
+//! `cargo test --workspace` (the README's test command) builds both
+//! binaries; `CARGO_BIN_EXE_` names only this package's, so the daemon is
+//! found next to it.
+
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, ExitStatus, Stdio};
+use std::time::{Duration, Instant};
+
+use atmo_io::mcap_log::read_topic;
+use atmo_io::msg::MpcStatus;
+
+fn repo() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
+}
+
+fn daemon_binary() -> PathBuf {
+    let sim = PathBuf::from(env!("CARGO_BIN_EXE_atmo-sim"));
+    let daemon = sim.with_file_name(format!("atmo-daemon{}", std::env::consts::EXE_SUFFIX));
+    assert!(
+        daemon.exists(),
+        "{} is not built: run the tests with `cargo test --workspace`, which builds it",
+        daemon.display()
+    );
+    daemon
+}
+
+/// A child process killed when dropped (a failing test leaves nothing behind).
+struct Process {
+    name: &'static str,
+    child: Child,
+    stderr: PathBuf,
+}
+
+impl Process {
+    fn spawn(name: &'static str, mut command: Command, dir: &Path) -> Self {
+        let stderr = dir.join(format!("{name}.stderr"));
+        let child = command
+            .stdout(std::fs::File::create(dir.join(format!("{name}.stdout"))).unwrap())
+            .stderr(std::fs::File::create(&stderr).unwrap())
+            .stdin(Stdio::null())
+            .spawn()
+            .unwrap_or_else(|e| panic!("starting {name}: {e}"));
+        Self {
+            name,
+            child,
+            stderr,
+        }
+    }
+
+    fn wait(&mut self, timeout: Duration) -> ExitStatus {
+        let start = Instant::now();
+        loop {
+            if let Some(status) = self.child.try_wait().unwrap() {
+                return status;
+            }
+            if start.elapsed() > timeout {
+                let _ = self.child.kill();
+                panic!(
+                    "{} did not finish within {timeout:?}; stderr:\n{}",
+                    self.name,
+                    std::fs::read_to_string(&self.stderr).unwrap_or_default()
+                );
+            }
+            std::thread::sleep(Duration::from_millis(50));
+        }
+    }
+
+    fn signal(&self, signal: &str) {
+        let status = Command::new("kill")
+            .args([format!("-{signal}"), self.child.id().to_string()])
+            .status()
+            .expect("running kill");
+        assert!(status.success(), "kill -{signal} {}", self.name);
+    }
+
+    fn stderr(&self) -> String {
+        std::fs::read_to_string(&self.stderr).unwrap_or_default()
+    }
+}
+
+impl Drop for Process {
+    fn drop(&mut self) {
+        if matches!(self.child.try_wait(), Ok(None)) {
+            let _ = self.child.kill();
+            let _ = self.child.wait();
+        }
+    }
+}
+
+/// A daemon config for this run: the shipped one with loopback-only DDS,
+/// an iceoryx2 prefix of its own and absolute config paths.
+fn daemon_config(dir: &Path, tag: &str) -> PathBuf {
+    let shipped = std::fs::read_to_string(repo().join("config/daemon.toml")).unwrap();
+    let config = repo().join("config").canonicalize().unwrap();
+    let text = shipped
+        .replace(
+            "robot = \"atmo.toml\"",
+            &format!("robot = \"{}\"", config.join("atmo.toml").display()),
+        )
+        .replace(
+            "flight = \"flight.toml\"",
+            &format!("flight = \"{}\"", config.join("flight.toml").display()),
+        )
+        .replace(
+            "mpc = \"mpc.toml\"",
+            &format!("mpc = \"{}\"", config.join("mpc.toml").display()),
+        )
+        .replace("loopback_only = false", "loopback_only = true")
+        .replace(
+            "iceoryx_prefix = \"\"",
+            &format!("iceoryx_prefix = \"{tag}_\""),
+        );
+    assert_ne!(text, shipped);
+    let path = dir.join("daemon.toml");
+    std::fs::write(&path, text).unwrap();
+    path
+}
+
+fn run_dir(name: &str) -> PathBuf {
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+fn domain() -> String {
+    // Away from 0 and from the other test binaries' domains (100..200).
+    (200 + std::process::id() % 30).to_string()
+}
+
+/// The tests run real time against the wall clock: one at a time.
+fn serial() -> std::sync::MutexGuard<'static, ()> {
+    static LOCK: std::sync::Mutex<()> = std::sync::Mutex::new(());
+    LOCK.lock()
+        .unwrap_or_else(std::sync::PoisonError::into_inner)
+}
+
+fn spawn_pair(dir: &Path, config: &Path, log: &Path, domain: &str) -> (Process, Process) {
+    let mut daemon = Command::new(daemon_binary());
+    daemon
+        .args(["run", "--config"])
+        .arg(config)
+        .arg("--log")
+        .arg(log)
+        .env("ROS_DOMAIN_ID", domain)
+        .env("RUST_LOG", "info,rustdds=off");
+    let daemon = Process::spawn("atmo-daemon", daemon, dir);
+    let mut server = Command::new(env!("CARGO_BIN_EXE_atmo-sim"));
+    server
+        .arg("serve")
+        .arg(repo().join("config/scenarios/wheel_landing.toml"))
+        .arg("--config")
+        .arg(config)
+        .arg("--out")
+        .arg(dir.join("sitl"))
+        .args(["--quiet", "--start-timeout", "60"])
+        .env("ROS_DOMAIN_ID", domain);
+    let server = Process::spawn("atmo-sim serve", server, dir);
+    (daemon, server)
+}
+
+fn modes_of(status: &[(u64, MpcStatus)]) -> Vec<&'static str> {
+    let mut modes: Vec<&str> = Vec::new();
+    for (_, s) in status {
+        let name = s.mode.name();
+        if modes.last() != Some(&name) {
+            modes.push(name);
+        }
+    }
+    modes
+}
+
+#[test]
+fn the_daemon_binary_lands_on_the_wheels_against_the_plant_server() {
+    let _serial = serial();
+    let dir = run_dir("sitl");
+    let tag = format!("atmo_sitl_{}", std::process::id());
+    let config = daemon_config(&dir, &tag);
+    let log = dir.join("flight.mcap");
+    let domain = domain();
+
+    let (mut daemon, mut server) = spawn_pair(&dir, &config, &log, &domain);
+
+    let served = server.wait(Duration::from_secs(150));
+    daemon.signal("TERM");
+    let stopped = daemon.wait(Duration::from_secs(20));
+    assert!(
+        stopped.success(),
+        "the daemon must exit 0 on SIGTERM; stderr:\n{}",
+        daemon.stderr()
+    );
+    let summary: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(dir.join("sitl/summary.json")).unwrap_or_else(|e| {
+            panic!("no summary.json ({e}); server stderr:\n{}", server.stderr())
+        }),
+    )
+    .unwrap();
+    assert!(
+        served.success(),
+        "the server judged the landing a failure: {summary:#}\nserver stderr:\n{}\ndaemon stderr:\n{}",
+        server.stderr(),
+        daemon.stderr()
+    );
+
+    // The daemon's log, finished on SIGTERM: readable as it is.
+    let status: Vec<(u64, MpcStatus)> = read_topic(&log, "/atmo/status").expect("daemon log");
+    assert!(status.len() > 150 * 10, "{} status records", status.len());
+    let modes = modes_of(&status);
+    let flown: Vec<&str> = modes
+        .iter()
+        .copied()
+        .skip_while(|m| *m == "disarmed")
+        .collect();
+    assert_eq!(
+        flown,
+        ["flight", "morphing", "transition", "touchdown", "drive"],
+        "mode sequence {modes:?}"
+    );
+    let touchdown = status
+        .iter()
+        .find(|(_, s)| s.mode.name() == "touchdown")
+        .map(|(_, s)| s)
+        .unwrap();
+    assert!(
+        touchdown.varphi.to_degrees() >= 60.0,
+        "touchdown at {:.1} deg (encoder)",
+        touchdown.varphi.to_degrees()
+    );
+    assert!(touchdown.ground_contact);
+    // Every driver alive from arming to the end; nothing lost on the way.
+    let armed = status
+        .iter()
+        .skip_while(|(_, s)| s.mode.name() == "disarmed");
+    for (_, s) in armed {
+        assert_eq!(s.io.drivers_alive, [true; 4], "tick {}", s.tick);
+        assert_eq!(s.io.driver_deaths, [0; 4], "tick {}", s.tick);
+    }
+    let last = &status.last().unwrap().1;
+    assert_eq!(last.io.log_dropped, 0);
+    assert_eq!(last.mpc_failures_total, 0, "MPC failures");
+
+    // The plant's truth agrees.
+    let truth = &summary["summary"];
+    assert_eq!(truth["crashed"], false, "{summary:#}");
+    assert!(
+        truth["touchdown_tilt_deg"].as_f64().unwrap() >= 60.0,
+        "{summary:#}"
+    );
+    assert!(
+        truth["impact_speed_mps"].as_f64().unwrap() <= 0.5,
+        "{summary:#}"
+    );
+    assert!(
+        truth["drive_distance_m"].as_f64().unwrap() >= 1.0,
+        "{summary:#}"
+    );
+}
+
+/// Mid-flight, the plant server (every driver and the motion capture) is
+/// killed: the daemon must notice the drivers die and fly its failsafe.
+/// Then the daemon itself is killed (SIGKILL, no clean-up): its log is
+/// recovered up to at most the last second (the logger flushes every 0.5 s).
+#[test]
+fn drivers_killed_mid_flight_failsafe_then_daemon_killed_log_recovered() {
+    let _serial = serial();
+    let dir = run_dir("sitl-kill");
+    let tag = format!("atmo_sitl_kill_{}", std::process::id());
+    let config = daemon_config(&dir, &tag);
+    let log = dir.join("flight.mcap");
+    let (mut daemon, mut server) = spawn_pair(&dir, &config, &log, &domain());
+
+    // In flight by then (arming takes a fraction of a second; morphing
+    // starts about 2 s into the descent).
+    std::thread::sleep(Duration::from_secs(4));
+    server.signal("KILL");
+    server.wait(Duration::from_secs(5));
+    std::thread::sleep(Duration::from_secs(2));
+    daemon.signal("KILL");
+    daemon.wait(Duration::from_secs(5));
+
+    let recovered = dir.join("recovered.mcap");
+    let report = atmo_io::mcap_log::recover(&log, &recovered).expect("recover the killed log");
+    let status: Vec<(u64, MpcStatus)> = read_topic(&recovered, "/atmo/status").unwrap();
+    assert!(report.messages >= status.len() as u64);
+    let modes = modes_of(&status);
+    assert!(
+        modes.contains(&"flight") && modes.last() == Some(&"failsafe"),
+        "modes {modes:?}; daemon stderr:\n{}",
+        daemon.stderr()
+    );
+    let (failsafe_at, first) = status
+        .iter()
+        .find(|(_, s)| s.mode.name() == "failsafe")
+        .unwrap();
+    assert!(
+        first.io.driver_deaths.iter().sum::<u64>() > 0 || first.estimate_age > 0.05,
+        "failsafe for a reason: deaths {:?}, estimate age {}",
+        first.io.driver_deaths,
+        first.estimate_age
+    );
+    let last = &status.last().unwrap().1;
+    assert_eq!(last.io.drivers_alive, [false; 4], "every driver seen dead");
+    assert!(last.io.driver_deaths.iter().all(|d| *d >= 1));
+    // The daemon was killed about 1.9 s after the failsafe began: a log that
+    // loses at most the last second reaches at least 0.8 s past it.
+    let last_at = status.last().unwrap().0;
+    let kept = (last_at - failsafe_at) as f64 * 1e-9;
+    assert!(
+        kept >= 0.8,
+        "the recovered log ends {kept:.2} s after the failsafe began (killed ~1.9 s after)"
+    );
+}
