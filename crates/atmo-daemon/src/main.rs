@@ -31,7 +31,8 @@ struct Cli {
 enum Command {
     /// Fly: run until SIGINT or SIGTERM, then stop the control thread, finish
     /// the MCAP log (a valid file, every record accepted so far) and exit 0.
-    /// ROS_DOMAIN_ID selects the DDS domain; RUST_LOG the log level.
+    /// ROS_DOMAIN_ID selects the DDS domain; RUST_LOG the log level
+    /// (default `info,rustdds=off`; `rustdds=warn` shows the DDS layer).
     Run {
         /// Daemon config (TOML): robot, flight and MPC files, ground height,
         /// input timeouts, [log], [ros2] topics, [drivers] ports.
@@ -56,7 +57,8 @@ fn main() {
     tracing_subscriber::fmt()
         .with_env_filter(
             tracing_subscriber::EnvFilter::try_from_default_env()
-                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info")),
+                // RustDDS logs its own shutdown at WARN/ERROR: quiet unless asked.
+                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info,rustdds=off")),
         )
         .with_writer(std::io::stderr)
         .init();
