@@ -203,6 +203,7 @@ pub fn clarabel_settings(s: &SolverSettings) -> DefaultSettings<f64> {
         tol_feas: s.tol_feas,
         equilibrate_enable: s.equilibrate,
         iterative_refinement_enable: s.iterative_refinement,
+        max_step_fraction: s.max_step_fraction,
         ..DefaultSettings::default()
     }
 }

@@ -91,6 +91,9 @@ pub struct SolverSettings {
     pub equilibrate: bool,
     /// Clarabel's iterative refinement of each KKT solve.
     pub iterative_refinement: bool,
+    /// Fraction of the step to the boundary of the cone an interior-point
+    /// iteration takes (Clarabel's default 0.99).
+    pub max_step_fraction: f64,
 }
 
 #[derive(Debug, Clone, Copy, Deserialize, PartialEq)]
@@ -192,6 +195,7 @@ impl MpcFile {
         c.within("solver.tol_gap_abs", s.tol_gap_abs, 1e-12, 1e-2)?;
         c.within("solver.tol_gap_rel", s.tol_gap_rel, 1e-12, 1e-2)?;
         c.within("solver.tol_feas", s.tol_feas, 1e-12, 1e-2)?;
+        c.within("solver.max_step_fraction", s.max_step_fraction, 0.5, 0.9999)?;
         if self.failure.grace_ticks > 10_000 {
             return Err(c
                 .fail(
@@ -272,6 +276,12 @@ mod tests {
         let bad_formulation =
             SHIPPED.replace("formulation = \"condensed\"", "formulation = \"dense\"");
         assert!(MpcFile::from_toml_str(&bad_formulation, "mpc.toml").is_err());
+        // A full step to the cone boundary would leave the interior.
+        let full_step = SHIPPED.replace("max_step_fraction = 0.999", "max_step_fraction = 1.0");
+        let err = MpcFile::from_toml_str(&full_step, "mpc.toml")
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("solver.max_step_fraction"), "{err}");
     }
 
     #[test]
