@@ -9,7 +9,7 @@ use atmo_sim::config::{EffectsConfig, MotorLagConfig, PlantConfig, SensorsConfig
 use atmo_sim::explain::output::write_all;
 use atmo_sim::explain::recording::{REQUIRED_COLUMNS, Recording};
 use atmo_sim::explain::synth::{Flight, Profile, record};
-use atmo_sim::explain::{ExplainError, Options, explain};
+use atmo_sim::explain::{ExplainError, HIGH_CONFIDENCE, Options, explain};
 
 fn temp_dir(name: &str) -> PathBuf {
     let dir = std::env::temp_dir().join(format!("atmo_explain_{}_{name}", std::process::id()));
@@ -259,8 +259,21 @@ fn mcap_logs_are_read_and_truncated_ones_are_clear_errors() {
         assert!((a.varphi - b.varphi).abs() < 1e-12);
         assert!((a.ground_z - b.ground_z).abs() < 1e-9);
     }
+    // Read from the log, the concealed lag is what the tool names: the top
+    // effect, and nothing else claimed with high confidence (the issue's
+    // criterion; on this short 24 s cruise an inertia error of about 5 %
+    // can enter at low confidence, 0.3-0.6, depending on the seed).
     let ex = explain(&back, &robot, &Options::default()).unwrap();
-    assert_eq!(ex.selected(), vec!["motor_lag"]);
+    assert_eq!(ex.effects[0].name, "motor_lag");
+    assert!(ex.effects[0].selected);
+    for e in &ex.effects[1..] {
+        assert!(
+            !(e.selected && e.confidence >= HIGH_CONFIDENCE),
+            "{} claimed with high confidence: {}",
+            e.name,
+            ex.verdict
+        );
+    }
 
     // Cut short (a killed writer without recovery): a clear error, no panic.
     let bytes = std::fs::read(&path).unwrap();

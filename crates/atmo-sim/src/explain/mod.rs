@@ -461,7 +461,7 @@ fn rms_table(
 /// Statistics of every column with the ground-effect smoothness prior.
 fn stats_of(
     columns: &effects::Columns,
-    weights: &[f64; 6],
+    weights: &[f64],
     seg_of: &[Option<usize>],
     nseg: usize,
 ) -> Stats {
@@ -484,6 +484,71 @@ fn stats_of(
     stats
 }
 
+/// Least rows in a (height, tilt) cell for its own variance estimate.
+const MIN_CELL_ROWS: usize = 50;
+
+/// Weights per residual entry for the second selection pass (feasible
+/// generalized least squares): 1 / noise floor of the channel, divided by
+/// the RMS (in noise floors) that the pass-1 fit leaves in the row's
+/// (height, tilt) cell when that exceeds 1.
+///
+/// Why: near the ground the rotor thrust is unsteady (the paper measures
+/// strong fluctuation), so the residual there is noisier than the sensor
+/// floor. In closed loop the controller answers those random torques, so
+/// any regressor built from the flown commands correlates with them; left
+/// at full weight they would let, for example, an inertia error "explain"
+/// part of the noise. Down-weighting noisy cells (never up-weighting) keeps
+/// the selection about the systematic part.
+fn entry_weights(
+    prep: &Prepared,
+    channel_weights: &[f64; 6],
+    columns: &effects::Columns,
+    idx: &[usize],
+    theta: &DVector<f64>,
+    fit_rows: &[usize],
+) -> Vec<f64> {
+    let cell = |k: usize| {
+        let e = &prep.env[k];
+        let h = locate::HEIGHT_EDGES
+            .windows(2)
+            .position(|w| e.height >= w[0] && e.height < w[1]);
+        let v = locate::VARPHI_EDGES
+            .windows(2)
+            .position(|w| e.varphi.to_degrees() >= w[0] && e.varphi.to_degrees() < w[1]);
+        h.zip(v)
+            .map(|(h, v)| h * (locate::VARPHI_EDGES.len() - 1) + v)
+    };
+    let cells = (locate::HEIGHT_EDGES.len() - 1) * (locate::VARPHI_EDGES.len() - 1);
+    let mut sq = vec![[0.0; 6]; cells];
+    let mut rows = vec![0usize; cells];
+    for &k in fit_rows {
+        let Some(c) = cell(k) else { continue };
+        rows[c] += 1;
+        for ch in 0..6 {
+            let i = 6 * k + ch;
+            let fitted: f64 = idx
+                .iter()
+                .enumerate()
+                .map(|(a, &j)| theta[a] * columns.data[j][i])
+                .sum();
+            let r = (columns.resid[i] - fitted) * channel_weights[ch];
+            sq[c][ch] += r * r;
+        }
+    }
+    let mut weights: Vec<f64> = (0..6 * prep.n).map(|i| channel_weights[i % 6]).collect();
+    for &k in fit_rows {
+        let Some(c) = cell(k) else { continue };
+        if rows[c] < MIN_CELL_ROWS {
+            continue;
+        }
+        for ch in 0..6 {
+            let rms = (sq[c][ch] / rows[c] as f64).sqrt();
+            weights[6 * k + ch] /= rms.max(1.0);
+        }
+    }
+    weights
+}
+
 /// Runs the whole analysis.
 pub fn explain(
     rec: &Recording,
@@ -498,7 +563,8 @@ pub fn explain(
     let progress = Progress::new(opts.progress);
     progress.step("residuals");
     let prep = Prepared::new(rec, robot)?;
-    let weights = prep.floor.map(|f| 1.0 / f);
+    let channel_weights = prep.floor.map(|f| 1.0 / f);
+    let mut weights: Vec<f64> = (0..6 * prep.n).map(|i| channel_weights[i % 6]).collect();
     let (seg_of, nseg) = select::segments(&prep);
     let fit_rows: Vec<usize> = prep.fit_rows().collect();
     lap("residuals", &mut timings);
@@ -527,7 +593,7 @@ pub fn explain(
             let Some(s) = seg_of[k] else { continue };
             for c in 0..6 {
                 let i = 6 * k + c;
-                let w2 = weights[c] * weights[c];
+                let w2 = weights[i] * weights[i];
                 let l = col[i];
                 if l == 0.0 {
                     continue;
@@ -601,6 +667,7 @@ pub fn explain(
                     .sum::<f64>();
             }
         }
+        weights = entry_weights(&prep, &channel_weights, &columns, &idx, &theta, &fit_rows);
         drop(columns);
         columns = build_columns(&prep, rec, &knobs, &accel);
         stats = stats_of(&columns, &weights, &seg_of, nseg);

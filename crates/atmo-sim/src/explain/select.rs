@@ -4,7 +4,8 @@
 //! jackknife uncertainties.
 //!
 //! Residuals and regressors are weighted by the channel noise floor, so one
-//! unit of squared error is one noise-floor variance. An effect enters the
+//! unit of squared error is one noise-floor variance (and, in the second
+//! pass, by the local excess variance: see `explain::entry_weights`). An effect enters the
 //! model when adding it lowers the held-out squared error by at least
 //! [`MIN_GAIN`] noise-floor variances per residual entry, and stays only if
 //! removing it again would raise the held-out error by as much.
@@ -63,11 +64,12 @@ pub fn fold_of(seg: usize) -> usize {
 }
 
 impl Stats {
-    /// Accumulates the statistics of `cols` against `y` with channel weights.
+    /// Accumulates the statistics of `cols` against `y` with a weight per
+    /// residual entry (`6 k + channel`, 1 / standard deviation).
     pub fn build(
         cols: &[&[f64]],
         y: &[f64],
-        weights: &[f64; 6],
+        weights: &[f64],
         seg_of: &[Option<usize>],
         nseg: usize,
     ) -> Self {
@@ -82,8 +84,8 @@ impl Stats {
             let gs = &mut g[s];
             let bs = &mut b[s];
             for c in 0..6 {
-                let w = weights[c];
                 let i = 6 * k + c;
+                let w = weights[i];
                 let yv = y[i] * w;
                 let mut any = false;
                 for (j, col) in cols.iter().enumerate() {

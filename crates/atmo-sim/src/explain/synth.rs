@@ -1,33 +1,37 @@
 //! Synthetic recordings: atmo-sim's plant (with whatever effects its config
-//! switches on) flown in closed loop by a small scripted controller, logged
-//! the way a real flight is: one row per motion-capture sample (noise,
-//! latency, stamped with the instant it describes), with the rotor commands
-//! and tilt in effect at that instant.
+//! switches on) flown in closed loop by the flight stack's controller,
+//! logged the way a real flight is: one row per motion-capture sample
+//! (noise, latency, stamped with the instant it describes), with the rotor
+//! commands and tilt in effect at that instant.
 //!
-//! The controller knows only the nominal model: position PD with
-//! acceleration feed-forward through a reference pre-filter, geometric
-//! attitude PD, and the nominal mass matrix and actuation to turn the
-//! desired accelerations into the four rotor commands. A small PRBS dither
-//! on the commands (system-identification excitation, 0.02 by default) can
-//! be added. Used by the concealed-data tests, the benchmark and
+//! The controller is atmo-mpc's RTI MPC with the shipped `default` preset,
+//! which knows only the nominal model. It tracks a scripted reference (a
+//! system-identification flight: sweeps at altitude, low passes at fixed
+//! tilts) through a critically damped pre-filter, with the reference
+//! previewed over its horizon and the tilt ramped at the mechanism's speed
+//! towards the scripted tilt. A PRBS dither on the rotor commands
+//! (system-identification excitation, 0.03 by default, switched every
+//! third tick) can be added, as a test pilot's injected doublets would be.
+//! Used by the concealed-data tests, the benchmark and
 //! `atmo-sim explain --demo`.
 
 use atmo_core::RobotConfig;
 use atmo_core::control::WheelRates;
 use atmo_core::model::{Input, Model, State, idx};
-use nalgebra::{Matrix3, Matrix4, Vector3, Vector4};
+use atmo_mpc::{Mpc, MpcSettings};
+use nalgebra::{Vector3, Vector4};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
 use super::recording::{Recording, Sample};
 use crate::config::{PlantConfig, TerrainConfig};
-use crate::error::Result;
+use crate::error::{Result, SimError};
 use crate::plant::{Command, InitialState, Plant};
 
 /// What the scripted flight does.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Profile {
-    /// 12 s of lateral and vertical sweeps at 1.5 m (up to about 2 m/s),
+    /// 12 s of lateral and vertical sweeps at 1.5 m (up to about 3 m/s),
     /// then low passes (rotor hubs from about 0.85 m down to 0.22 m and
     /// back, twice per tilt) at 0, 40, 50 and 55 deg, repeated until the
     /// duration is reached.
@@ -59,7 +63,7 @@ impl Flight {
             profile,
             duration,
             seed,
-            dither: 0.02,
+            dither: 0.03,
             control_rate: 150.0,
         }
     }
@@ -75,7 +79,7 @@ fn hub_offset(model: &Model, varphi: f64) -> f64 {
 fn raw_reference(profile: Profile, model: &Model, t: f64) -> (Vector3<f64>, f64, f64) {
     let tau = std::f64::consts::TAU;
     let cruise = |t: f64| {
-        let x = 2.0 * (1.0 - (tau * 2.0 / 12.0 * t).cos());
+        let x = 3.0 * (1.0 - (tau * 2.0 / 12.0 * t).cos());
         let y = 1.5 * (1.0 - (tau / 12.0 * t).cos());
         let z = -1.5 - 0.3 * (tau * 3.0 / 12.0 * t).sin();
         Vector3::new(x, y, z)
@@ -118,9 +122,46 @@ fn raw_reference(profile: Profile, model: &Model, t: f64) -> (Vector3<f64>, f64,
     }
 }
 
-/// Vee of a skew matrix.
-fn vee(m: &Matrix3<f64>) -> Vector3<f64> {
-    Vector3::new(m[(2, 1)], m[(0, 2)], m[(1, 0)])
+/// The reference after a critically damped pre-filter (3 rad/s per axis),
+/// one entry per control tick from t = 0: position, velocity, yaw, tilt.
+/// Precomputed so that the controller sees it over its whole horizon.
+struct FilteredReference {
+    period: f64,
+    points: Vec<(Vector3<f64>, Vector3<f64>, f64, f64)>,
+}
+
+impl FilteredReference {
+    fn new(profile: Profile, model: &Model, period: f64, until: f64) -> Self {
+        let wf = 3.0;
+        let (mut rp, _, _) = raw_reference(profile, model, 0.0);
+        let mut rv = Vector3::zeros();
+        let ticks = (until / period).ceil() as usize + 1;
+        let mut points = Vec::with_capacity(ticks);
+        for i in 0..ticks {
+            let (raw, yaw, tilt) = raw_reference(profile, model, i as f64 * period);
+            points.push((rp, rv, yaw, tilt));
+            let ra = (raw - rp) * (wf * wf) - rv * (2.0 * wf);
+            rv += ra * period;
+            rp += rv * period;
+        }
+        Self { period, points }
+    }
+
+    /// The state reference at time `t` (attitude level at the reference
+    /// yaw, rates zero) and the tilt reference.
+    fn at(&self, t: f64) -> (State, f64) {
+        let i = ((t / self.period).round().max(0.0) as usize).min(self.points.len() - 1);
+        let (p, v, yaw, tilt) = self.points[i];
+        let mut x = State::zeros();
+        x[idx::X] = p.x;
+        x[idx::Y] = p.y;
+        x[idx::Z] = p.z;
+        x[idx::YAW] = yaw;
+        x[idx::VX] = v.x;
+        x[idx::VY] = v.y;
+        x[idx::VZ] = v.z;
+        (x, tilt)
+    }
 }
 
 /// Flies `flight` against a plant built from `robot` and `plant_cfg` on
@@ -146,14 +187,23 @@ pub fn record(robot: &RobotConfig, plant_cfg: &PlantConfig, flight: &Flight) -> 
         &initial,
         flight.seed,
     )?;
+    let setup =
+        |e: atmo_mpc::MpcError| SimError::Setup(format!("synthetic flight controller: {e}"));
+    // Offline: no wall-clock limit on a solve, so that a recording does not
+    // depend on how busy the machine is.
+    let mut settings = MpcSettings::atmo("default").map_err(setup)?;
+    settings.solver.time_limit = 10.0;
+    let mut mpc = Mpc::new(model.clone(), settings).map_err(setup)?;
+    mpc.reset(&x0).map_err(setup)?;
     let mut rng = ChaCha8Rng::seed_from_u64(flight.seed ^ 0x5eed);
     let dt = plant.dt();
     let period = 1.0 / flight.control_rate;
     let steps = (flight.duration / dt).round() as usize;
-    // Reference pre-filter (critically damped, 3 rad/s) per axis.
-    let wf = 3.0;
-    let mut rp = p0;
-    let mut rv = Vector3::zeros();
+    let horizon = mpc.stage_dt() * mpc.steps() as f64;
+    let reference =
+        FilteredReference::new(flight.profile, &model, period, flight.duration + horizon);
+    let mut x_ref = vec![State::zeros(); mpc.steps() + 1];
+    let tilt_rate_max = robot.limits.tilt_rate_max;
     let mut u = initial.thrust;
     let mut dither = Vector4::zeros();
     let mut next_tick = 0.0;
@@ -166,72 +216,39 @@ pub fn record(robot: &RobotConfig, plant_cfg: &PlantConfig, flight: &Flight) -> 
     let mut samples = Vec::with_capacity((flight.duration * 200.0) as usize);
     let mut last_seq = None;
     let mut tilt_rate = 0.0;
-    let mut body = body0;
-    let mut body_tilt = tilt0;
     for _ in 0..steps {
         let t = plant.time();
         if t + 1e-9 >= next_tick {
             tick += 1;
             next_tick = tick as f64 * period;
-            let (raw, yaw_ref, tilt_ref) = raw_reference(flight.profile, &model, t);
-            let ra = (raw - rp) * (wf * wf) - rv * (2.0 * wf);
-            rv += ra * period;
-            rp += rv * period;
             let Some(est) = plant.estimate().copied() else {
                 continue;
             };
-            let x = est.state;
+            let (_, tilt_ref) = reference.at(t);
+            for (k, r) in x_ref.iter_mut().enumerate() {
+                *r = reference.at(t + k as f64 * mpc.stage_dt()).0;
+            }
             let tilt = plant.tilt();
-            if (tilt - body_tilt).abs() > 0.002 {
-                body = model.at_tilt(tilt);
-                body_tilt = tilt;
+            tilt_rate = ((tilt_ref - tilt) * 3.0).clamp(-tilt_rate_max, tilt_rate_max);
+            let (lo, hi) = if tilt_rate >= 0.0 {
+                (tilt, tilt_ref.max(tilt))
+            } else {
+                (tilt_ref.min(tilt), tilt)
+            };
+            mpc.set_reference(&x_ref).map_err(setup)?;
+            mpc.set_tilt_ramp(tilt, tilt_rate, lo, hi).map_err(setup)?;
+            mpc.prepare().map_err(setup)?;
+            let out = mpc.feedback(&est.state).map_err(setup)?;
+            if tick % 3 == 0 && flight.dither > 0.0 {
+                dither = Vector4::from_fn(|_, _| {
+                    if rng.random::<bool>() {
+                        flight.dither
+                    } else {
+                        -flight.dither
+                    }
+                });
             }
-            tilt_rate = (tilt_ref - tilt) * 3.0;
-            let p = Vector3::new(x[idx::X], x[idx::Y], x[idx::Z]);
-            let v = Vector3::new(x[idx::VX], x[idx::VY], x[idx::VZ]);
-            let w = Vector3::new(x[idx::WX], x[idx::WY], x[idx::WZ]);
-            let r = atmo_core::model::rotation(x[idx::YAW], x[idx::PITCH], x[idx::ROLL]);
-            let g = model.gravity;
-            let a_d = ra + (rp - p) * 4.0 + (rv - v) * 4.0;
-            let mut f = a_d - Vector3::new(0.0, 0.0, g);
-            // Keep the thrust direction within 35 deg of vertical.
-            let horiz = (f.x * f.x + f.y * f.y).sqrt();
-            let max_h = -f.z * 0.7;
-            if horiz > max_h && horiz > 0.0 {
-                f.x *= max_h / horiz;
-                f.y *= max_h / horiz;
-            }
-            let b3 = -f / f.norm();
-            let b1c = Vector3::new(yaw_ref.cos(), yaw_ref.sin(), 0.0);
-            let b2 = b3.cross(&b1c).normalize();
-            let b1 = b2.cross(&b3);
-            let rd = Matrix3::from_columns(&[b1, b2, b3]);
-            let e_r = vee(&(rd.transpose() * r - r.transpose() * rd)) * 0.5;
-            let wd = -e_r * 150.0 - w * 20.0;
-            let a_b = r.transpose() * (a_d);
-            let g_b = r.transpose() * Vector3::new(0.0, 0.0, g);
-            let c = body.first_moment;
-            let lin = a_b * body.mass - c.cross(&wd) - g_b * body.mass + w.cross(&w.cross(&c));
-            let ang =
-                body.inertia * wd + c.cross(&a_b) - c.cross(&g_b) + w.cross(&(body.inertia * w));
-            let mut a4 = Matrix4::zeros();
-            a4.set_row(0, &body.thrust_force.row(2));
-            for k in 0..3 {
-                a4.set_row(k + 1, &body.thrust_torque.row(k));
-            }
-            let rhs = Vector4::new(lin.z, ang.x, ang.y, ang.z);
-            if let Some(sol) = a4.lu().solve(&rhs) {
-                if tick % 3 == 0 && flight.dither > 0.0 {
-                    dither = Vector4::from_fn(|_, _| {
-                        if rng.random::<bool>() {
-                            flight.dither
-                        } else {
-                            -flight.dither
-                        }
-                    });
-                }
-                u = (sol + dither).map(|v| v.clamp(0.0, 1.0));
-            }
+            u = (out.u + dither).map(|v| v.clamp(0.0, 1.0));
         }
         let cmd = Command {
             rotors: u,
