@@ -72,13 +72,26 @@ fn serial() -> std::sync::MutexGuard<'static, ()> {
         .unwrap_or_else(std::sync::PoisonError::into_inner)
 }
 
-/// A child process killed when dropped (also when a test fails).
-struct Killed(Child);
+/// What a child driver prints once every port is open.
+const READY: &str = "ATMO_DRIVER_READY";
+
+/// A child process killed when dropped (also when a test fails); its
+/// standard output is drained by a thread that reports [`READY`].
+struct Killed(Child, std::sync::mpsc::Receiver<()>);
 
 impl Killed {
     fn kill(&mut self) {
         let _ = self.0.kill();
         let _ = self.0.wait();
+    }
+
+    /// Waits until the child has opened all its ports (not merely started
+    /// creating files: a kill in the middle of creating them leaves a
+    /// half-made node, which is a different test).
+    fn wait_ready(&self, timeout: Duration) {
+        self.1
+            .recv_timeout(timeout)
+            .expect("the child driver never reported its ports open");
     }
 }
 
@@ -93,15 +106,26 @@ fn spawn_driver(prefix: &str, name: &str) -> Killed {
 }
 
 fn spawn_driver_with(prefix: &str, name: &str, mode: &str) -> Killed {
-    Killed(
-        Command::new(std::env::current_exe().unwrap())
-            .args(["--exact", "child_driver", "--nocapture"])
-            .env("ATMO_DRIVER_CHILD_PREFIX", prefix)
-            .env("ATMO_DRIVER_CHILD_NAME", name)
-            .env("ATMO_DRIVER_CHILD_MODE", mode)
-            .spawn()
-            .unwrap(),
-    )
+    use std::io::BufRead as _;
+    let mut child = Command::new(std::env::current_exe().unwrap())
+        .args(["--exact", "child_driver", "--nocapture"])
+        .env("ATMO_DRIVER_CHILD_PREFIX", prefix)
+        .env("ATMO_DRIVER_CHILD_NAME", name)
+        .env("ATMO_DRIVER_CHILD_MODE", mode)
+        .stdout(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let stdout = child.stdout.take().unwrap();
+    let (ready, ready_rx) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        for line in std::io::BufReader::new(stdout).lines() {
+            let Ok(line) = line else { break };
+            if line.contains(READY) {
+                let _ = ready.send(());
+            }
+        }
+    });
+    Killed(child, ready_rx)
 }
 
 /// Child half: a driver process playing every driver. Echoes the last
@@ -124,6 +148,7 @@ fn child_driver() {
     let spin = mode == "spin";
     let wait = mode == "wait";
     let mut driver = DriverEndpoint::open(&config, &name).unwrap();
+    println!("{READY}");
     let mut last_sequence = -1i64;
     let start = monotonic_ns();
     let mut next_beat = start;
@@ -350,15 +375,10 @@ fn stale_resources_of_a_crashed_run_are_cleaned_at_start_up() {
     let config = config("st");
     // A driver that dies holding its ports.
     let mut child = spawn_driver(&config.iceoryx_prefix, "crashing_driver");
-    let start = monotonic_ns();
-    while files_with(&config.iceoryx_prefix) == 0 {
-        assert!(
-            monotonic_ns() - start < 5_000_000_000,
-            "child never opened its ports"
-        );
-        std::thread::sleep(Duration::from_millis(20));
-    }
-    std::thread::sleep(Duration::from_millis(300));
+    // Waiting for its files and then 300 ms was not enough on a loaded CI
+    // machine: the kill could land while the node was still being built.
+    child.wait_ready(Duration::from_secs(20));
+    std::thread::sleep(Duration::from_millis(50));
     child.kill();
     let left = files_with(&config.iceoryx_prefix);
     assert!(left > 0, "a killed process leaves its files");
