@@ -7,7 +7,7 @@ use atmo_core::RobotConfig;
 use atmo_sim::config::{EffectsConfig, MotorLagConfig, PlantConfig, SensorsConfig};
 use atmo_sim::explain::recording::Recording;
 use atmo_sim::explain::synth::{Flight, Profile, record};
-use atmo_sim::explain::{Explanation, HIGH_CONFIDENCE, Options, explain};
+use atmo_sim::explain::{Explanation, Options, explain};
 
 fn quadrotor() -> RobotConfig {
     RobotConfig::load(concat!(
@@ -46,14 +46,8 @@ fn the_model_is_the_robot_files_a_quadrotor_with_a_concealed_motor_lag() {
     assert!(ex.mismatch_found);
     assert_eq!(ex.effects[0].name, "motor_lag", "{}", ex.verdict);
     assert!(ex.effects[0].selected);
-    for e in &ex.effects[1..] {
-        assert!(
-            !(e.selected && e.confidence >= HIGH_CONFIDENCE),
-            "{} claimed with high confidence: {}",
-            e.name,
-            ex.verdict
-        );
-    }
+    let others = ex.confidently_claimed_besides(&["motor_lag"]);
+    assert!(others.is_empty(), "{others:?} claimed: {}", ex.verdict);
     let tau = ex.parameter("motor_lag", "time_constant").unwrap();
     assert!((tau - 0.03).abs() <= 0.15 * 0.03, "time constant {tau}");
     let (b, a) = (

@@ -1154,4 +1154,15 @@ impl Explanation {
             .map(|e| e.name.as_str())
             .collect()
     }
+
+    /// Effects other than `expected` that are selected with high confidence
+    /// (>= [`HIGH_CONFIDENCE`]), in rank order.
+    pub fn confidently_claimed_besides(&self, expected: &[&str]) -> Vec<&str> {
+        self.effects
+            .iter()
+            .filter(|e| e.selected && e.confidence >= HIGH_CONFIDENCE)
+            .map(|e| e.name.as_str())
+            .filter(|n| !expected.contains(n))
+            .collect()
+    }
 }
