@@ -174,6 +174,73 @@ fn bump(a: &AtomicU64) {
     a.fetch_add(1, Ordering::Relaxed);
 }
 
+/// Queues `message` for the node thread without blocking; a full queue
+/// (or a stopped node) drops it and counts `dropped`.
+fn try_queue<O>(tx: &SyncSender<O>, message: O, dropped: &AtomicU64) -> bool {
+    match tx.try_send(message) {
+        Ok(()) => true,
+        Err(TrySendError::Full(_) | TrySendError::Disconnected(_)) => {
+            bump(dropped);
+            false
+        }
+    }
+}
+
+/// Node thread: waits up to 1 ms for an outgoing message, then publishes
+/// every queued one.
+fn publish_queued<O>(out_rx: &Receiver<O>, mut publish: impl FnMut(O)) {
+    match out_rx.recv_timeout(Duration::from_millis(1)) {
+        Ok(message) => {
+            publish(message);
+            while let Ok(message) = out_rx.try_recv() {
+                publish(message);
+            }
+        }
+        Err(RecvTimeoutError::Timeout) => {}
+        // Every publisher handle dropped: keep serving the inputs.
+        Err(RecvTimeoutError::Disconnected) => std::thread::sleep(Duration::from_millis(1)),
+    }
+}
+
+/// Counts one publish: `Some(ok)` from a publisher, `None` for a disabled
+/// topic.
+fn count_publish(result: Option<bool>, published: &AtomicU64, errors: &AtomicU64) {
+    match result {
+        Some(true) => bump(published),
+        Some(false) => bump(errors),
+        None => {} // topic disabled
+    }
+}
+
+/// Node thread: takes up to [`TAKE_BURST`] samples from `sub`. A payload
+/// that does not decode counts `malformed`; a decoded one counts
+/// `received` and goes through `accept` (which counts its own rejections
+/// and returns `None` for them) into `tx`, where a full queue counts
+/// `dropped`.
+fn take_burst<M: 'static + DeserializeOwned, T>(
+    sub: &Subscription<M>,
+    malformed: &AtomicU64,
+    received: &AtomicU64,
+    dropped: &AtomicU64,
+    tx: &SyncSender<T>,
+    mut accept: impl FnMut(M) -> Option<T>,
+) {
+    for _ in 0..TAKE_BURST {
+        match sub.take() {
+            Ok(None) => return,
+            Err(_) => bump(malformed),
+            Ok(Some((message, _))) => {
+                bump(received);
+                if let Some(item) = accept(message)
+                    && tx.try_send(item).is_err()
+                {
+                    bump(dropped);
+                }
+            }
+        }
+    }
+}
+
 #[allow(clippy::large_enum_variant)] // inline on purpose: no allocation on the control thread
 enum Outgoing {
     Status(MpcStatus),
@@ -191,13 +258,7 @@ pub struct Ros2Publisher {
 
 impl Ros2Publisher {
     fn send(&self, message: Outgoing) -> bool {
-        match self.tx.try_send(message) {
-            Ok(()) => true,
-            Err(TrySendError::Full(_) | TrySendError::Disconnected(_)) => {
-                bump(&self.counters.publish_dropped);
-                false
-            }
-        }
+        try_queue(&self.tx, message, &self.counters.publish_dropped)
     }
 
     /// Queues one status for the status topic; false if dropped (counted).
@@ -559,17 +620,7 @@ impl NodeThread {
         let period = Duration::from_millis(self.config.diagnostics_period_ms);
         let mut next_diagnostics = Instant::now() + period;
         while !self.stop.load(Ordering::Relaxed) {
-            match self.out_rx.recv_timeout(Duration::from_millis(1)) {
-                Ok(message) => {
-                    self.publish(message);
-                    while let Ok(message) = self.out_rx.try_recv() {
-                        self.publish(message);
-                    }
-                }
-                Err(RecvTimeoutError::Timeout) => {}
-                // Every publisher handle dropped: keep serving the inputs.
-                Err(RecvTimeoutError::Disconnected) => std::thread::sleep(Duration::from_millis(1)),
-            }
+            publish_queued(&self.out_rx, |m| self.publish(m));
             self.take_estimates();
             self.take_drive();
             self.take_pilot();
@@ -580,7 +631,7 @@ impl NodeThread {
         }
     }
 
-    fn publish(&mut self, message: Outgoing) {
+    fn publish(&self, message: Outgoing) {
         let result = match message {
             Outgoing::Status(m) => self.status.as_ref().map(|p| p.publish(m).is_ok()),
             Outgoing::Motors(m) => self.motors.as_ref().map(|p| p.publish(m).is_ok()),
@@ -593,11 +644,11 @@ impl NodeThread {
                 self.diagnostics.as_ref().map(|p| p.publish(*m).is_ok())
             }
         };
-        match result {
-            Some(true) => bump(&self.counters.published),
-            Some(false) => bump(&self.counters.publish_errors),
-            None => {} // topic disabled
-        }
+        count_publish(
+            result,
+            &self.counters.published,
+            &self.counters.publish_errors,
+        );
     }
 
     fn own_diagnostics(&self) -> DiagnosticStatus {
@@ -702,54 +753,50 @@ impl NodeThread {
         }
     }
 
-    fn take_drive(&mut self) {
+    fn take_drive(&self) {
         let Some(sub) = &self.drive else { return };
-        for _ in 0..TAKE_BURST {
-            match sub.take() {
-                Ok(None) => return,
-                Err(_) => bump(&self.counters.malformed),
-                Ok(Some((twist, _))) => {
-                    bump(&self.counters.drive_received);
-                    let (forward, yaw_rate) = (twist.linear.x, -twist.angular.z);
-                    if !forward.is_finite() || !yaw_rate.is_finite() {
-                        bump(&self.counters.drive_rejected);
-                        continue;
-                    }
-                    let command = DriveCommand {
-                        forward,
-                        yaw_rate,
-                        received: Instant::now(),
-                    };
-                    if self.drive_tx.try_send(command).is_err() {
-                        bump(&self.counters.inputs_dropped);
-                    }
+        let c = &self.counters;
+        take_burst(
+            sub,
+            &c.malformed,
+            &c.drive_received,
+            &c.inputs_dropped,
+            &self.drive_tx,
+            |twist: Twist| {
+                let (forward, yaw_rate) = (twist.linear.x, -twist.angular.z);
+                if !forward.is_finite() || !yaw_rate.is_finite() {
+                    bump(&c.drive_rejected);
+                    return None;
                 }
-            }
-        }
+                Some(DriveCommand {
+                    forward,
+                    yaw_rate,
+                    received: Instant::now(),
+                })
+            },
+        );
     }
 
-    fn take_pilot(&mut self) {
+    fn take_pilot(&self) {
         let Some(sub) = &self.pilot else { return };
-        for _ in 0..TAKE_BURST {
-            match sub.take() {
-                Ok(None) => return,
-                Err(_) => bump(&self.counters.malformed),
-                Ok(Some((input, _))) => {
-                    bump(&self.counters.pilot_received);
-                    if !pilot_is_valid(&input) {
-                        bump(&self.counters.pilot_rejected);
-                        continue;
-                    }
-                    let command = PilotCommand {
-                        input,
-                        received: Instant::now(),
-                    };
-                    if self.pilot_tx.try_send(command).is_err() {
-                        bump(&self.counters.inputs_dropped);
-                    }
+        let c = &self.counters;
+        take_burst(
+            sub,
+            &c.malformed,
+            &c.pilot_received,
+            &c.inputs_dropped,
+            &self.pilot_tx,
+            |input: PilotInput| {
+                if !pilot_is_valid(&input) {
+                    bump(&c.pilot_rejected);
+                    return None;
                 }
-            }
-        }
+                Some(PilotCommand {
+                    input,
+                    received: Instant::now(),
+                })
+            },
+        );
     }
 }
 

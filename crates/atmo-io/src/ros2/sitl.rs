@@ -29,15 +29,14 @@
 
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
-use std::sync::mpsc::{Receiver, RecvTimeoutError, SyncSender, TrySendError, sync_channel};
-use std::time::Duration;
+use std::sync::mpsc::{Receiver, SyncSender, sync_channel};
 
 use atmo_core::model::State;
 use ros2_client::{Context, Node, Publisher, Subscription};
 
 use super::{
-    Ros2Config, Ros2StartOptions, Ros2Thread, TAKE_BURST, bump, dds_node, domain_id, publisher,
-    spawn_node_thread, subscription,
+    Ros2Config, Ros2StartOptions, Ros2Thread, count_publish, dds_node, domain_id, publish_queued,
+    publisher, spawn_node_thread, subscription, take_burst, try_queue,
 };
 use crate::error::Result;
 use crate::msg::frames::{state_to_odometry, state_to_vehicle_odometry};
@@ -99,13 +98,7 @@ pub struct SitlPublisher {
 
 impl SitlPublisher {
     fn send(&self, message: Outgoing) -> bool {
-        match self.tx.try_send(message) {
-            Ok(()) => true,
-            Err(TrySendError::Full(_) | TrySendError::Disconnected(_)) => {
-                bump(&self.counters.publish_dropped);
-                false
-            }
-        }
+        try_queue(&self.tx, message, &self.counters.publish_dropped)
     }
 
     /// Queues the plant's state (NED/FRD 12-state) for `topics.estimate`,
@@ -252,17 +245,7 @@ impl SitlThread {
 
     fn run(self) {
         while !self.stop.load(Ordering::Relaxed) {
-            match self.out_rx.recv_timeout(Duration::from_millis(1)) {
-                Ok(message) => {
-                    self.publish(message);
-                    while let Ok(message) = self.out_rx.try_recv() {
-                        self.publish(message);
-                    }
-                }
-                Err(RecvTimeoutError::Timeout) => {}
-                // Every publisher handle dropped: keep serving the status.
-                Err(RecvTimeoutError::Disconnected) => std::thread::sleep(Duration::from_millis(1)),
-            }
+            publish_queued(&self.out_rx, |m| self.publish(m));
             self.take_status();
         }
     }
@@ -281,26 +264,23 @@ impl SitlThread {
             },
             Outgoing::Pilot(m) => self.pilot.as_ref().map(|p| p.publish(m).is_ok()),
         };
-        match result {
-            Some(true) => bump(&self.counters.published),
-            Some(false) => bump(&self.counters.publish_errors),
-            None => {} // topic disabled
-        }
+        count_publish(
+            result,
+            &self.counters.published,
+            &self.counters.publish_errors,
+        );
     }
 
     fn take_status(&self) {
         let Some(sub) = &self.status else { return };
-        for _ in 0..TAKE_BURST {
-            match sub.take() {
-                Ok(None) => return,
-                Err(_) => bump(&self.counters.malformed),
-                Ok(Some((status, _))) => {
-                    bump(&self.counters.status_received);
-                    if self.status_tx.try_send(status).is_err() {
-                        bump(&self.counters.inputs_dropped);
-                    }
-                }
-            }
-        }
+        let c = &self.counters;
+        take_burst(
+            sub,
+            &c.malformed,
+            &c.status_received,
+            &c.inputs_dropped,
+            &self.status_tx,
+            Some,
+        );
     }
 }
