@@ -46,6 +46,7 @@ use crate::control_loop::{TickIo, TickTiming};
 use crate::error::{DaemonError, Result};
 use crate::flight_stack::{Estimate, PilotInput, StepInputs, StepOutputs};
 use crate::modes::Mode;
+use crate::telemetry::pilot_from_message;
 
 /// `config/daemon.toml`: what the onboard binary loads. Paths are relative
 /// to the folder of the file that names them.
@@ -355,15 +356,7 @@ impl TickIo for OnboardIo {
             });
         }
         while let Some(p) = self.ros_in.latest_pilot() {
-            let m = p.input;
-            self.pilot = PilotInput {
-                velocity: m.velocity,
-                yaw_rate: m.yaw_rate,
-                throttle: m.throttle,
-                arm: m.arm,
-                offboard: m.offboard,
-                mpc_enabled: m.mpc_enabled,
-            };
+            self.pilot = pilot_from_message(&p.input);
             self.pilot_received = Some(p.received);
         }
         while let Some(d) = self.ros_in.latest_drive() {

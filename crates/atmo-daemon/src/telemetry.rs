@@ -8,7 +8,32 @@ use atmo_io::msg::{
 };
 
 use crate::control_loop::TickTiming;
-use crate::flight_stack::{StepInputs, StepOutputs};
+use crate::flight_stack::{PilotInput, StepInputs, StepOutputs};
+
+/// The pilot input as the `atmo_msgs/PilotInput` message (same fields, same
+/// frames: NED velocity, FRD yaw rate).
+pub fn pilot_message(p: &PilotInput) -> PilotMsg {
+    PilotMsg {
+        velocity: p.velocity,
+        yaw_rate: p.yaw_rate,
+        throttle: p.throttle,
+        arm: p.arm,
+        offboard: p.offboard,
+        mpc_enabled: p.mpc_enabled,
+    }
+}
+
+/// The `atmo_msgs/PilotInput` message as the flight stack's pilot input.
+pub fn pilot_from_message(m: &PilotMsg) -> PilotInput {
+    PilotInput {
+        velocity: m.velocity,
+        yaw_rate: m.yaw_rate,
+        throttle: m.throttle,
+        arm: m.arm,
+        offboard: m.offboard,
+        mpc_enabled: m.mpc_enabled,
+    }
+}
 
 /// `MpcStatus` for one tick.
 pub fn status_message(
@@ -47,14 +72,7 @@ pub fn status_message(
         },
         feedback_time: s.feedback_time,
         preparation_time: s.preparation_time,
-        pilot: PilotMsg {
-            velocity: p.velocity,
-            yaw_rate: p.yaw_rate,
-            throttle: p.throttle,
-            arm: p.arm,
-            offboard: p.offboard,
-            mpc_enabled: p.mpc_enabled,
-        },
+        pilot: pilot_message(p),
         timing: TimingMsg {
             tick: timing.tick,
             deadline_ns: timing.deadline_ns,

@@ -21,3 +21,11 @@ pub mod msg;
 pub mod ros2;
 
 pub use error::{IoError, Result};
+
+/// Wall-clock time in ns since the Unix epoch (ROS 2 header stamps, MCAP
+/// metadata); 0 if the clock reads before 1970.
+pub fn wall_clock_ns() -> u64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map_or(0, |d| u64::try_from(d.as_nanos()).unwrap_or(u64::MAX))
+}

@@ -6,7 +6,7 @@
 mod support;
 
 use std::process::Command;
-use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
+use std::time::{Duration, Instant};
 
 use atmo_io::mcap_log::{
     AnyMessage, Compression, LOGGER_TOPIC, LoggerOptions, McapLogger, read_log, read_topic, recover,
@@ -227,13 +227,6 @@ fn bad_options_and_paths_are_errors() {
     assert!(read_log("/nonexistent-dir/x.mcap").is_err());
 }
 
-fn wall_ns() -> u64 {
-    SystemTime::now()
-        .duration_since(UNIX_EPOCH)
-        .unwrap()
-        .as_nanos() as u64
-}
-
 /// Child half of the kill test: logs 150 Hz status stamped with the wall
 /// clock until it is killed. Runs only when the parent sets the variable.
 #[test]
@@ -246,7 +239,7 @@ fn child_logs_until_killed() {
     let mocap_ch = log.channel("/atmo/mocap/odom").unwrap();
     let mut k = 0;
     loop {
-        let now = wall_ns();
+        let now = atmo_io::wall_clock_ns();
         log.try_log(ch, now, &status(k));
         if k % 3 == 0 {
             log.try_log(mocap_ch, now, &mocap(k));
@@ -268,7 +261,7 @@ fn a_killed_writer_loses_at_most_the_last_flush_period() {
         .spawn()
         .unwrap();
     std::thread::sleep(Duration::from_millis(2500));
-    let killed_at = wall_ns();
+    let killed_at = atmo_io::wall_clock_ns();
     child.kill().unwrap(); // SIGKILL: no destructor, no finish
     child.wait().unwrap();
 

@@ -16,13 +16,15 @@
 //! [`LandingTracker`] as the in-process runner), with the daemon's modes
 //! and counters read from its status topic.
 
-use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
+use std::time::{Duration, Instant};
 
 use atmo_core::model::Input;
 use atmo_daemon::Mode;
+use atmo_daemon::telemetry::pilot_message;
 use atmo_io::drivers::{DriverEndpoint, DriverId, DriverPortsConfig};
 use atmo_io::msg::{MpcStatus, PilotInput as PilotMsg};
 use atmo_io::ros2::{Ros2Config, Ros2StartOptions, SitlNode};
+use atmo_io::wall_clock_ns;
 
 use crate::closed_loop::{LandingTracker, Summary, pilot_input};
 use crate::error::{Result, SimError};
@@ -72,22 +74,8 @@ pub struct ServeCounters {
 /// Progress callback: (plant time, daemon mode if known).
 pub type Progress<'a> = &'a mut dyn FnMut(f64, Option<Mode>);
 
-fn wall_ns() -> u64 {
-    SystemTime::now()
-        .duration_since(UNIX_EPOCH)
-        .map_or(0, |d| u64::try_from(d.as_nanos()).unwrap_or(u64::MAX))
-}
-
 fn pilot_msg(scenario: &Scenario, t: f64) -> PilotMsg {
-    let p = pilot_input(scenario, t);
-    PilotMsg {
-        velocity: p.velocity,
-        yaw_rate: p.yaw_rate,
-        throttle: p.throttle,
-        arm: p.arm,
-        offboard: p.offboard,
-        mpc_enabled: p.mpc_enabled,
-    }
+    pilot_message(&pilot_input(scenario, t))
 }
 
 #[allow(clippy::needless_pass_by_value)] // used as `map_err(ros_err)`
@@ -231,12 +219,12 @@ pub fn serve(
             )));
         }
         let now = Instant::now();
-        links.publish(&plant, &initial_pilot, |_| wall_ns());
+        links.publish(&plant, &initial_pilot, |_| wall_clock_ns());
         if republish.due(now) {
             // The plant publishes only as it steps: repeat the initial state.
             let ok = links
                 .ros_out
-                .try_publish_estimate(&plant.state(), wall_ns());
+                .try_publish_estimate(&plant.state(), wall_clock_ns());
             links.count(ok);
         }
         let _ = links.drivers.receive();
@@ -247,7 +235,7 @@ pub fn serve(
         u64::try_from(waiting.elapsed().as_millis()).unwrap_or(u64::MAX);
 
     let start = Instant::now();
-    let start_wall_ns = wall_ns();
+    let start_wall_ns = wall_clock_ns();
     let stamp = move |t: f64| start_wall_ns + (t.max(0.0) * 1e9).round() as u64;
     // Sized for 150 Hz status; more only reallocates.
     let mut tracker = LandingTracker::new((scenario.file.duration * 150.0) as usize + 2);

@@ -9,7 +9,7 @@ use std::sync::atomic::{AtomicBool, AtomicU16, AtomicU64, Ordering};
 use std::sync::mpsc::{Receiver, RecvTimeoutError, SyncSender, TrySendError, sync_channel};
 use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
-use std::time::{Duration, Instant, SystemTime, UNIX_EPOCH};
+use std::time::{Duration, Instant};
 
 use super::{MESSAGE_ENCODING, PROFILE, SCHEMA_ENCODING};
 use crate::error::{IoError, Result};
@@ -397,12 +397,6 @@ struct WriterLoop {
     buffer: Vec<u8>,
 }
 
-fn wall_ns() -> u64 {
-    SystemTime::now()
-        .duration_since(UNIX_EPOCH)
-        .map_or(0, |d| u64::try_from(d.as_nanos()).unwrap_or(u64::MAX))
-}
-
 impl WriterLoop {
     fn mcap_err(&self, source: mcap::McapError) -> IoError {
         IoError::Mcap {
@@ -530,7 +524,7 @@ impl WriterLoop {
         };
         let health = DiagnosticArray {
             header: Header {
-                stamp: Time::from_ns(wall_ns()),
+                stamp: Time::from_ns(crate::wall_clock_ns()),
                 frame_id: String::new(),
             },
             status: vec![DiagnosticStatus {

@@ -639,7 +639,7 @@ impl NodeThread {
             Outgoing::Diagnostics(mut m) => {
                 m.status.push(self.own_diagnostics());
                 if m.header.stamp == Time::default() {
-                    m.header.stamp = Time::from_ns(wall_ns());
+                    m.header.stamp = Time::from_ns(crate::wall_clock_ns());
                 }
                 self.diagnostics.as_ref().map(|p| p.publish(*m).is_ok())
             }
@@ -798,10 +798,4 @@ impl NodeThread {
             },
         );
     }
-}
-
-fn wall_ns() -> u64 {
-    std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map_or(0, |d| u64::try_from(d.as_nanos()).unwrap_or(u64::MAX))
 }
