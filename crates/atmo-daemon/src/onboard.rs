@@ -307,12 +307,9 @@ impl OnboardIo {
     }
 
     /// The pilot input this tick: held switches, zeroed commands when the
-    /// stream is silent, a fresh drive command while driving.
-    fn pilot_now(&self, yaw: f64) -> PilotInput {
+    /// stream is silent (`stale`), a fresh drive command while driving.
+    fn pilot_now(&self, yaw: f64, stale: bool) -> PilotInput {
         let mut pilot = self.pilot;
-        let stale = self
-            .pilot_received
-            .is_none_or(|at| at.elapsed() > self.settings.pilot_timeout);
         if stale {
             pilot.velocity = [0.0; 3];
             pilot.yaw_rate = 0.0;
@@ -371,10 +368,10 @@ impl TickIo for OnboardIo {
         }
         self.health = Some(drivers.health);
         let yaw = self.estimate.map_or(0.0, |e| e.state[idx::YAW]);
-        if self
+        let pilot_stale = self
             .pilot_received
-            .is_none_or(|at| at.elapsed() > self.settings.pilot_timeout)
-        {
+            .is_none_or(|at| at.elapsed() > self.settings.pilot_timeout);
+        if pilot_stale {
             self.shared
                 .pilot_stale_ticks
                 .fetch_add(1, Ordering::Relaxed);
@@ -391,7 +388,7 @@ impl TickIo for OnboardIo {
             now_ns: deadline_ns,
             estimate: self.estimate,
             tilt_counts: self.tilt_counts,
-            pilot: self.pilot_now(yaw),
+            pilot: self.pilot_now(yaw, pilot_stale),
             ground_contact: self.contact,
             ground_z: self.settings.ground_z,
             driver_lost: !drivers.health.all_required_alive(),
