@@ -222,6 +222,8 @@ pub struct Plant {
     reach: f64,
     /// m, farther from B than any base-box corner.
     corner_reach: f64,
+    /// Cosine of the tip-over angle (the body z axis against the normal).
+    tip_over_cos: f64,
     // Noise held over a step.
     ge_noise: [GaussMarkov; 4],
     ge_rng: ChaCha8Rng,
@@ -427,6 +429,10 @@ impl Plant {
         // 5 cm: no point covers that in one step below 50 m/s.
         let (reach, corner_reach) = (reach + 0.05, corner_reach + 0.05);
 
+        let tip_over_cos = contact
+            .as_ref()
+            .map_or(-1.0, |(_, _, c)| c.tip_over_deg.to_radians().cos());
+
         let mut ext = Ext::zeros();
         ext.fixed_rows_mut::<12>(0).copy_from(&initial.state);
         ext.fixed_rows_mut::<4>(THRUST).copy_from(&initial.thrust);
@@ -457,6 +463,7 @@ impl Plant {
             corners,
             reach,
             corner_reach,
+            tip_over_cos,
             ge_noise,
             ge_rng,
             wind_now: Vector3::zeros(),
@@ -815,7 +822,7 @@ impl Plant {
                 }
             }
             // Crash reports.
-            let (crash_speed, tip_deg) = (cfg.crash_speed, cfg.tip_over_deg);
+            let crash_speed = cfg.crash_speed;
             for j in 0..N_CONTACTS {
                 let was = self.contacts[j].touching;
                 let now = &report[j];
@@ -837,8 +844,10 @@ impl Plant {
             }
             if !self.tipped && report.iter().any(|c| c.touching) {
                 let body_down = rot.column(2).into_owned();
-                let angle = (-body_down.dot(&n)).clamp(-1.0, 1.0).acos().to_degrees();
-                if angle > tip_deg {
+                let cos_angle = (-body_down.dot(&n)).clamp(-1.0, 1.0);
+                // Compare cosines (acos only when it tips: once per run).
+                if cos_angle < self.tip_over_cos {
+                    let angle = cos_angle.acos().to_degrees();
                     self.tipped = true;
                     new_events[N_CONTACTS] =
                         Some(EventKind::Crash(CrashKind::TipOver { angle_deg: angle }));
@@ -895,6 +904,15 @@ impl Plant {
         }
     }
 
+    /// `max_k down_b . c_k` over the base-box corners (body frame): the
+    /// support function of the axis-aligned box, one term per axis.
+    fn box_support(&self, down_b: &Vector3<f64>) -> f64 {
+        let (lo, hi) = (&self.corners[0], &self.corners[7]);
+        (0..3)
+            .map(|i| (down_b[i] * lo[i]).max(down_b[i] * hi[i]))
+            .sum()
+    }
+
     /// Where each contact point is after a step: touching or not, its speed
     /// towards the ground and its normal force (the contact law's normal
     /// part; wheel spin moves the rim point along the ground, not into it).
@@ -909,13 +927,14 @@ impl Plant {
         let w = Vector3::new(ext[idx::WX], ext[idx::WY], ext[idx::WZ]);
         let n = self.plane.normal;
         let down_b = -(r.transpose() * n);
+        let height = self.plane.height(&p);
         for (j, info) in report.iter_mut().enumerate() {
             let point = if j < N_WHEELS {
                 self.wheel_point(j, &down_b).0
             } else {
                 self.corners[j - N_WHEELS]
             };
-            let depth = -self.plane.height(&(p + r * point));
+            let depth = down_b.dot(&point) - height;
             let v_n = (v + r * w.cross(&point)).dot(&n);
             info.approach_speed = -v_n;
             if depth > 0.0 {
@@ -946,10 +965,12 @@ impl Plant {
         let w = Vector3::new(ext[idx::WX], ext[idx::WY], ext[idx::WZ]);
         let height = self.plane.height(&p);
         let clear = height > self.reach;
-        let corners_clear = height > self.corner_reach;
         let rt = r.transpose();
         let n = self.plane.normal;
         let down_b = -(rt * n);
+        // A point c (body frame) is `height - down_b . c` above the ground;
+        // no corner touches while the box's support along down_b is below B.
+        let corners_clear = height > self.corner_reach || self.box_support(&down_b) <= height;
         let mut force = Vector3::zeros();
         let mut torque = Vector3::zeros();
         let mut wheel_torque = [0.0; 2];
@@ -970,8 +991,7 @@ impl Plant {
                     None,
                 )
             };
-            let world = p + r * point;
-            let depth = -self.plane.height(&world);
+            let depth = down_b.dot(&point) - height;
             if depth <= 0.0 {
                 continue;
             }
@@ -1064,6 +1084,10 @@ impl Plant {
 
             if let Some(ge) = &self.ground_effect {
                 for i in 0..4 {
+                    // No thrust, no gain to apply (the common case on the ground).
+                    if u_eff[i] == 0.0 {
+                        continue;
+                    }
                     let hub = p + r * body.rotor_position[i];
                     let h = self.plane.height(&hub);
                     u_eff[i] *= 1.0 + ge.sample(&self.ge_slice, h, self.ge_noise[i].value);
@@ -1080,6 +1104,9 @@ impl Plant {
                 );
                 let mut torque = Vector3::zeros();
                 for i in 0..4 {
+                    if t[i] <= 0.0 {
+                        continue; // rotor drag scales with thrust
+                    }
                     let n = &body.rotor_axis[i];
                     let vi = v_air + w.cross(&body.rotor_position[i]);
                     let fi = -(vi - n * vi.dot(n)) * (drag.rotor_drag * t[i].max(0.0));
