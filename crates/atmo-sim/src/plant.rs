@@ -928,6 +928,7 @@ impl Plant {
         let n = self.plane.normal;
         let down_b = -(r.transpose() * n);
         let height = self.plane.height(&p);
+        let v_n_b = v.dot(&n);
         for (j, info) in report.iter_mut().enumerate() {
             let point = if j < N_WHEELS {
                 self.wheel_point(j, &down_b).0
@@ -935,7 +936,8 @@ impl Plant {
                 self.corners[j - N_WHEELS]
             };
             let depth = down_b.dot(&point) - height;
-            let v_n = (v + r * w.cross(&point)).dot(&n);
+            // (v + R (w x c)) . n, with R^T n = -down_b.
+            let v_n = v_n_b - down_b.dot(&w.cross(&point));
             info.approach_speed = -v_n;
             if depth > 0.0 {
                 info.touching = true;
