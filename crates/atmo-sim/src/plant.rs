@@ -981,6 +981,11 @@ impl Plant {
             if clear || (j >= N_WHEELS && corners_clear) {
                 break;
             }
+            // A rim point is at most the radius below its hub: a wheel whose
+            // hub is higher than that cannot touch (no square root needed).
+            if j < N_WHEELS && down_b.dot(&body.rotor_position[j]) + self.wheel_radius <= height {
+                continue;
+            }
             let (point, spin_axis, rim, lateral_b) = if j < N_WHEELS {
                 let (pt, lateral_b) = self.wheel_point(j, &down_b);
                 let c = &body.rotor_position[j];
