@@ -56,6 +56,25 @@ const SPRING: usize = 21;
 pub const N_EXT: usize = SPRING + 3 * N_CONTACTS;
 type Ext = SVector<f64, N_EXT>;
 
+/// Which contact points a step has to consider (see `Plant::reachable`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Reach {
+    Nothing,
+    Wheels,
+    Everything,
+}
+
+impl Reach {
+    /// How many leading entries of the continuous state can change.
+    fn state_len(self) -> usize {
+        match self {
+            Self::Nothing => SPRING,
+            Self::Wheels => SPRING + 3 * N_WHEELS,
+            Self::Everything => N_EXT,
+        }
+    }
+}
+
 /// Which side each rotor's wheel is on (0 = left, 1 = right), PX4 quad-x:
 /// rotors 1 and 4 on the right arm, 2 and 3 on the left.
 const WHEEL_SIDE: [usize; 4] = [1, 0, 0, 1];
@@ -632,7 +651,7 @@ impl Plant {
     /// ground-effect and wind noise as held for the current step).
     pub fn body_derivative(&self, command: &Command) -> Result<State> {
         let cmd = self.sanitize(command)?;
-        let d = self.derivative(&self.ext, &cmd);
+        let d = self.derivative(&self.ext, &cmd, self.reachable());
         Ok(d.fixed_rows::<12>(0).into_owned())
     }
 
@@ -699,13 +718,34 @@ impl Plant {
             self.wind_now = w.at(mid_time);
         }
 
+        // RK4 over the states that can change in this step: the contact
+        // springs of points that cannot reach the ground are zero (reset
+        // when a contact opens) and their derivatives are zero, so they are
+        // left out, exactly (same operations, element by element, on the rest).
+        let reach = self.reachable();
+        let n = reach.state_len();
         let x = self.ext;
-        let k1 = self.derivative(&x, &cmd);
-        let k2 = self.derivative(&(x + k1 * (0.5 * dt)), &cmd);
-        let k3 = self.derivative(&(x + k2 * (0.5 * dt)), &cmd);
-        let k4 = self.derivative(&(x + k3 * dt), &cmd);
-        let next = x + (k1 + k2 * 2.0 + k3 * 2.0 + k4) * (dt / 6.0);
-        if !next.iter().all(|v| v.is_finite()) {
+        let half = 0.5 * dt;
+        let k1 = self.derivative(&x, &cmd, reach);
+        let mut stage = x;
+        for i in 0..n {
+            stage[i] = x[i] + k1[i] * half;
+        }
+        let k2 = self.derivative(&stage, &cmd, reach);
+        for i in 0..n {
+            stage[i] = x[i] + k2[i] * half;
+        }
+        let k3 = self.derivative(&stage, &cmd, reach);
+        for i in 0..n {
+            stage[i] = x[i] + k3[i] * dt;
+        }
+        let k4 = self.derivative(&stage, &cmd, reach);
+        let mut next = x;
+        let sixth = dt / 6.0;
+        for i in 0..n {
+            next[i] = x[i] + (k1[i] + k2[i] * 2.0 + k3[i] * 2.0 + k4[i]) * sixth;
+        }
+        if !next.iter().take(n).all(|v| v.is_finite()) {
             return Err(SimError::Diverged {
                 time: self.time() + dt,
             });
@@ -904,6 +944,27 @@ impl Plant {
         }
     }
 
+    /// Which contact points can touch the ground during the coming step,
+    /// from where B is now: `reach` and `corner_reach` carry a 5 cm margin
+    /// that no point covers in one step below 50 m/s.
+    fn reachable(&self) -> Reach {
+        if self.contact.is_none() {
+            return Reach::Nothing;
+        }
+        let height = self.plane.height(&Vector3::new(
+            self.ext[idx::X],
+            self.ext[idx::Y],
+            self.ext[idx::Z],
+        ));
+        if height > self.reach {
+            Reach::Nothing
+        } else if height > self.corner_reach {
+            Reach::Wheels
+        } else {
+            Reach::Everything
+        }
+    }
+
     /// `max_k down_b . c_k` over the base-box corners (body frame): the
     /// support function of the axis-aligned box, one term per axis.
     fn box_support(&self, down_b: &Vector3<f64>) -> f64 {
@@ -956,6 +1017,7 @@ impl Plant {
         ext: &Ext,
         r: &Matrix3<f64>,
         cmd: &Command,
+        reach: Reach,
         d: &mut Ext,
     ) -> Vector6<f64> {
         let Some((law, drive, _)) = &self.contact else {
@@ -966,13 +1028,13 @@ impl Plant {
         let v = Vector3::new(ext[idx::VX], ext[idx::VY], ext[idx::VZ]);
         let w = Vector3::new(ext[idx::WX], ext[idx::WY], ext[idx::WZ]);
         let height = self.plane.height(&p);
-        let clear = height > self.reach;
+        let clear = reach == Reach::Nothing;
         let rt = r.transpose();
         let n = self.plane.normal;
         let down_b = -(rt * n);
         // A point c (body frame) is `height - down_b . c` above the ground;
         // no corner touches while the box's support along down_b is below B.
-        let corners_clear = height > self.corner_reach || self.box_support(&down_b) <= height;
+        let corners_clear = reach != Reach::Everything || self.box_support(&down_b) <= height;
         let mut force = Vector3::zeros();
         let mut torque = Vector3::zeros();
         let mut wheel_torque = [0.0; 2];
@@ -1044,7 +1106,7 @@ impl Plant {
     }
 
     /// The derivative of the continuous state.
-    fn derivative(&self, ext: &Ext, cmd: &Command) -> Ext {
+    fn derivative(&self, ext: &Ext, cmd: &Command, reach: Reach) -> Ext {
         let body = &self.body;
         let x = body_state(ext);
         let att = Attitude::of(&x);
@@ -1124,7 +1186,7 @@ impl Plant {
             }
 
             if self.contact.is_some() {
-                extra += self.contact_terms(ext, &r, cmd, &mut d);
+                extra += self.contact_terms(ext, &r, cmd, reach, &mut d);
             }
         }
 
