@@ -57,28 +57,21 @@ fn micros_per_1000_steps(p: &Plant, cmd: &Command) -> f64 {
         .fold(f64::INFINITY, f64::min)
 }
 
-/// The criterion bench's four cases, best of 30 instead of a median (on a
-/// shared machine the fastest run is the least disturbed one).
-fn print_bench_cases(all: &EffectsConfig, drive: &Command, hover: &Command) {
-    let full = PlantConfig {
-        effects: all.clone(),
-        ..PlantConfig::ideal()
-    };
+/// The bench's morphing case, best of 30: at 0.6 m and 0.3 rad, tilting up
+/// at (pi/2)/4 rad/s for 0.5 s, then back down, rotors at trim.
+fn morphing_micros(full: &PlantConfig) -> f64 {
     let robot = RobotConfig::atmo();
-    let mut low = {
-        let mut x = State::zeros();
-        x[idx::Z] = -0.6;
-        let tilt = 0.3;
-        let initial = InitialState {
-            state: x,
-            tilt,
-            thrust: Model::new(&robot).at_tilt(tilt).hover_trim(),
-        };
-        Plant::new(&robot, &full, &TerrainConfig::flat(0.0), &initial, 1).expect("valid")
+    let mut x = State::zeros();
+    x[idx::Z] = -0.6;
+    let tilt = 0.3;
+    let initial = InitialState {
+        state: x,
+        tilt,
+        thrust: Model::new(&robot).at_tilt(tilt).hover_trim(),
     };
-    let trim_low = Command::rotors(Model::new(&robot).at_tilt(0.3).hover_trim());
-    // Morphing: up at (pi/2)/4 rad/s for 0.5 s, then back down.
-    let morphing = (0..30)
+    let low = Plant::new(&robot, full, &TerrainConfig::flat(0.0), &initial, 1).expect("valid");
+    let trim_low = Command::rotors(Model::new(&robot).at_tilt(tilt).hover_trim());
+    (0..30)
         .map(|_| {
             let mut q = low.clone();
             let start = Instant::now();
@@ -89,8 +82,17 @@ fn print_bench_cases(all: &EffectsConfig, drive: &Command, hover: &Command) {
             }
             start.elapsed().as_secs_f64() * 1e6
         })
-        .fold(f64::INFINITY, f64::min);
-    low.step(&trim_low).expect("finite");
+        .fold(f64::INFINITY, f64::min)
+}
+
+/// The criterion bench's four cases, best of 30 instead of a median (on a
+/// shared machine the fastest run is the least disturbed one).
+fn print_bench_cases(all: &EffectsConfig, drive: &Command, hover: &Command) {
+    let full = PlantConfig {
+        effects: all.clone(),
+        ..PlantConfig::ideal()
+    };
+    let morphing = morphing_micros(&full);
     println!("| case | us per 1000 steps, best of 30 |");
     println!("| --- | --- |");
     println!(
@@ -124,14 +126,24 @@ fn main() {
         ..EffectsConfig::default()
     };
     let time_drive = |e: EffectsConfig| micros_per_1000_steps(&plant(&config(e), true), &drive);
-    if std::env::args().nth(1).as_deref() == Some("hover") {
-        let full = PlantConfig {
-            effects: all.clone(),
-            ..PlantConfig::ideal()
-        };
-        let t = micros_per_1000_steps(&plant(&full, false), &hover);
-        println!("| hover | {t:.0} |");
-        return;
+    // One case alone, for a profiler.
+    let full = config(all.clone());
+    match std::env::args().nth(1).as_deref() {
+        Some("hover") => {
+            let t = micros_per_1000_steps(&plant(&full, false), &hover);
+            println!("| hover | {t:.0} |");
+            return;
+        }
+        Some("morphing") => {
+            println!("| morphing | {:.0} |", morphing_micros(&full));
+            return;
+        }
+        Some("driving") => {
+            let t = micros_per_1000_steps(&plant(&full, true), &drive);
+            println!("| driving | {t:.0} |");
+            return;
+        }
+        _ => {}
     }
     if std::env::args().nth(1).as_deref() == Some("cases") {
         print_bench_cases(&all, &drive, &hover);
