@@ -26,6 +26,8 @@
 //! contact force. The body receives the contact wrench less its spin-axis
 //! part (that part turns the wheel) and the motor reaction `-tau_m e`.
 
+use std::sync::Arc;
+
 use atmo_core::control::WheelRates;
 use atmo_core::model::{Input, Model, State, TiltedBody, idx};
 use atmo_core::{Linkage, RobotConfig};
@@ -256,8 +258,9 @@ pub struct Plant {
     body: TiltedBody,
     /// Whether `body` is interpolated (the tilt was moving).
     body_interpolated: bool,
-    /// Exact bodies at the ends of the grid cell the moving tilt is in.
-    grid: Option<(usize, TiltedBody, TiltedBody)>,
+    /// Exact bodies every `TILT_GRID` from 0 to `tilt_max` (the last one at
+    /// `tilt_max`), shared by clones.
+    tilt_grid: Arc<[TiltedBody]>,
     ge_slice: TiltSlice,
     command: Command,
     mocap: Mocap,
@@ -369,11 +372,14 @@ impl Plant {
         let sensors: Option<SensorsConfig> = fx.sensors.clone().filter(|e| e.enabled);
         let contact_cfg = fx.ground_contact.clone().filter(|e| e.enabled);
 
-        // The perturbed mass properties must stay physical at every tilt.
-        let steps = 90;
-        for k in 0..=steps {
-            let tilt = tilt_max * f64::from(k) / f64::from(steps);
-            if effective_body(&model, tilt, mass_error, com_offset).is_none() {
+        // Every exact body the moving tilt is interpolated between, built
+        // once; this also checks that the perturbed mass properties stay
+        // physical at every tilt.
+        let cells = (tilt_max / TILT_GRID).ceil().max(1.0) as usize;
+        let mut tilt_grid = Vec::with_capacity(cells + 1);
+        for k in 0..=cells {
+            let tilt = (k as f64 * TILT_GRID).min(tilt_max);
+            let Some(body) = effective_body(&model, tilt, mass_error, com_offset) else {
                 let key = if mass_error.is_some() {
                     "effects.mass_error.inertia_scale"
                 } else {
@@ -383,10 +389,11 @@ impl Plant {
                     .fail(
                         key,
                         "mass properties with a positive-definite mass matrix at every tilt",
-                        format!("not at {:.1} deg", tilt.to_degrees()),
+                        format!("not at {:.2} deg", tilt.to_degrees()),
                     )
                     .into());
-            }
+            };
+            tilt_grid.push(body);
         }
         let c = &initial.state;
         checker.finite("initial.state", c.as_slice())?;
@@ -493,7 +500,7 @@ impl Plant {
             ge_slice,
             body,
             body_interpolated: false,
-            grid: None,
+            tilt_grid: tilt_grid.into(),
             command: Command::rotors(initial.thrust),
             mocap: Mocap::new(sensors, dt, seed),
             contacts: [ContactInfo::default(); N_CONTACTS],
@@ -759,44 +766,19 @@ impl Plant {
 
     /// Sets the composite body for a step whose mid-step tilt is `mid`:
     /// exact (atmo-core's `at_tilt` with the mass errors) while the tilt
-    /// stands still; while it moves, interpolated between exact bodies on a
-    /// 0.25 deg grid, so that morphing does not rebuild and refactor the
-    /// body every step.
+    /// stands still; while it moves, interpolated between the exact bodies
+    /// of the 0.25 deg grid built at start-up, so that morphing does not
+    /// rebuild and refactor the body every step.
     fn update_body(&mut self, mid: f64, moving: bool) {
         if moving {
-            let cells = (self.tilt_max / TILT_GRID).ceil().max(1.0) as usize;
+            let cells = self.tilt_grid.len() - 1;
             let k = ((mid / TILT_GRID).floor().max(0.0) as usize).min(cells - 1);
+            let (lo, hi) = (&self.tilt_grid[k], &self.tilt_grid[k + 1]);
             let lo_tilt = k as f64 * TILT_GRID;
             let hi_tilt = ((k + 1) as f64 * TILT_GRID).min(self.tilt_max);
-            let cached = self.grid.as_ref().map(|g| g.0);
-            if cached != Some(k) {
-                let lo = match &self.grid {
-                    Some((c, _, hi)) if *c + 1 == k => Some(*hi),
-                    Some((c, lo, _)) if *c == k + 1 => {
-                        // Moving down: the old low end is the new high end.
-                        let hi = *lo;
-                        let lo =
-                            effective_body(&self.model, lo_tilt, self.mass_error, self.com_offset);
-                        if let Some(lo) = lo {
-                            self.grid = Some((k, lo, hi));
-                        }
-                        None
-                    }
-                    _ => effective_body(&self.model, lo_tilt, self.mass_error, self.com_offset),
-                };
-                if let Some(lo) = lo {
-                    if let Some(hi) =
-                        effective_body(&self.model, hi_tilt, self.mass_error, self.com_offset)
-                    {
-                        self.grid = Some((k, lo, hi));
-                    }
-                }
-            }
-            if let Some((_, lo, hi)) = &self.grid {
-                let w = ((mid - lo_tilt) / (hi_tilt - lo_tilt)).clamp(0.0, 1.0);
-                self.body = lerp_body(lo, hi, w, mid);
-                self.body_interpolated = true;
-            }
+            let w = ((mid - lo_tilt) / (hi_tilt - lo_tilt)).clamp(0.0, 1.0);
+            self.body = lerp_body(lo, hi, w, mid);
+            self.body_interpolated = true;
         } else if mid != self.body.varphi || self.body_interpolated {
             if let Some(b) = effective_body(&self.model, mid, self.mass_error, self.com_offset) {
                 self.body = b;
