@@ -217,10 +217,13 @@ pub struct Gain {
 }
 
 /// Cheeseman-Bennett: `T / T_inf - 1` for a rotor of radius `r` at distance
-/// `z` from the ground, with z held at or above `r / 2`.
+/// `z` from the ground, with z held at or above `r / 2`:
+/// `1 / (1 - (r / 4z)^2) - 1 = r^2 / (16 z^2 - r^2)`, the second form with one
+/// division instead of two dependent ones (it runs 16 times per plant step).
 pub fn cheeseman_bennett(r: f64, z: f64) -> f64 {
-    let q = r / (4.0 * z.max(0.5 * r));
-    1.0 / (1.0 - q * q) - 1.0
+    let z = z.max(0.5 * r);
+    let r2 = r * r;
+    r2 / (16.0 * z * z - r2)
 }
 
 /// Index i with `xs[i] <= x <= xs[i + 1]` and the weight of `xs[i + 1]`,
