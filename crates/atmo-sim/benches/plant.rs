@@ -62,12 +62,13 @@ fn bench(c: &mut Criterion) {
     let trim = Model::new(&robot).at_tilt(0.0).hover_trim();
 
     // In the air at 1.5 m (ground effect, drag, wind, sensors... all on;
-    // the contact points are checked and found clear every step).
+    // B is higher than any contact point reaches, so no contact is evaluated).
     let hover = plant(&full, 1.5, 0.0, false);
     run(c, "hover_1000_steps", &hover, |_| Command::rotors(trim));
 
     // Morphing near the ground: the tilt moves every step, so the composite
-    // body is rebuilt as it goes.
+    // body is interpolated on the tilt grid and the ground-effect slice
+    // recomputed every step.
     let low = plant(&full, 0.6, 0.3, false);
     let trim_low = Model::new(&robot).at_tilt(0.3).hover_trim();
     run(c, "morphing_1000_steps", &low, |k| {
