@@ -819,23 +819,27 @@ impl Plant {
         let mut new_events: [Option<EventKind>; N_CONTACTS + 1] = [None; N_CONTACTS + 1];
         if let Some((law, drive, cfg)) = &self.contact {
             let n = self.plane.normal;
-            for (j, info) in report.iter().enumerate() {
-                let s = if info.touching {
-                    let s = Vector3::new(
-                        self.ext[SPRING + 3 * j],
-                        self.ext[SPRING + 3 * j + 1],
-                        self.ext[SPRING + 3 * j + 2],
-                    );
-                    let lateral = if j < N_WHEELS {
-                        wheel_lateral(&(rot * self.body.rotor_axis[j]), &n)
+            // Out of reach nothing touches: the springs only need zeroing if
+            // something touched a step ago (they stay zero otherwise).
+            if near || self.contacts.iter().any(|c| c.touching) {
+                for (j, info) in report.iter().enumerate() {
+                    let s = if info.touching {
+                        let s = Vector3::new(
+                            self.ext[SPRING + 3 * j],
+                            self.ext[SPRING + 3 * j + 1],
+                            self.ext[SPRING + 3 * j + 2],
+                        );
+                        let lateral = if j < N_WHEELS {
+                            wheel_lateral(&(rot * self.body.rotor_axis[j]), &n)
+                        } else {
+                            None
+                        };
+                        law.limit_spring(&n, &s, info.normal_force, lateral.as_ref())
                     } else {
-                        None
+                        Vector3::zeros()
                     };
-                    law.limit_spring(&n, &s, info.normal_force, lateral.as_ref())
-                } else {
-                    Vector3::zeros()
-                };
-                self.ext.fixed_rows_mut::<3>(SPRING + 3 * j).copy_from(&s);
+                    self.ext.fixed_rows_mut::<3>(SPRING + 3 * j).copy_from(&s);
+                }
             }
             if drive.ki > 0.0 {
                 let limit = drive.torque_max / drive.ki;
@@ -843,24 +847,28 @@ impl Plant {
                     self.ext[WHEEL_INT + side] = self.ext[WHEEL_INT + side].clamp(-limit, limit);
                 }
             }
-            // Crash reports.
-            let crash_speed = cfg.crash_speed;
-            for j in 0..N_CONTACTS {
-                let was = self.contacts[j].touching;
-                let now = &report[j];
-                if now.touching && !was {
-                    // The speed just before contact: the first touching step
-                    // has already been slowed by the contact force.
-                    let speed = now.approach_speed.max(self.contacts[j].approach_speed);
-                    if j < N_WHEELS {
-                        if speed > crash_speed {
-                            new_events[j] =
-                                Some(EventKind::Crash(CrashKind::HardImpact { wheel: j, speed }));
+            // Crash reports (a touchdown needs a touching point: only when near).
+            if near {
+                let crash_speed = cfg.crash_speed;
+                for j in 0..N_CONTACTS {
+                    let was = self.contacts[j].touching;
+                    let now = &report[j];
+                    if now.touching && !was {
+                        // The speed just before contact: the first touching step
+                        // has already been slowed by the contact force.
+                        let speed = now.approach_speed.max(self.contacts[j].approach_speed);
+                        if j < N_WHEELS {
+                            if speed > crash_speed {
+                                new_events[j] = Some(EventKind::Crash(CrashKind::HardImpact {
+                                    wheel: j,
+                                    speed,
+                                }));
+                            }
+                        } else {
+                            new_events[j] = Some(EventKind::Crash(CrashKind::BodyContact {
+                                corner: j - N_WHEELS,
+                            }));
                         }
-                    } else {
-                        new_events[j] = Some(EventKind::Crash(CrashKind::BodyContact {
-                            corner: j - N_WHEELS,
-                        }));
                     }
                 }
             }
