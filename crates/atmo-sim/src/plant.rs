@@ -774,9 +774,7 @@ impl Plant {
             let cells = self.tilt_grid.len() - 1;
             let k = ((mid / TILT_GRID).floor().max(0.0) as usize).min(cells - 1);
             let (lo, hi) = (&self.tilt_grid[k], &self.tilt_grid[k + 1]);
-            let lo_tilt = k as f64 * TILT_GRID;
-            let hi_tilt = ((k + 1) as f64 * TILT_GRID).min(self.tilt_max);
-            let w = ((mid - lo_tilt) / (hi_tilt - lo_tilt)).clamp(0.0, 1.0);
+            let w = ((mid - lo.varphi) / (hi.varphi - lo.varphi)).clamp(0.0, 1.0);
             self.body = lerp_body(lo, hi, w, mid);
             self.body_interpolated = true;
         } else if mid != self.body.varphi || self.body_interpolated {
@@ -803,9 +801,8 @@ impl Plant {
     /// events, sensors.
     fn observe(&mut self) {
         let mut report = [ContactInfo::default(); N_CONTACTS];
-        let p = Vector3::new(self.ext[idx::X], self.ext[idx::Y], self.ext[idx::Z]);
         // Far above the ground nothing touches: skip the contact pass.
-        let near = self.contact.is_some() && self.plane.height(&p) <= self.reach;
+        let near = self.reachable() != Reach::Nothing;
         let rot = if near {
             let x = body_state(&self.ext);
             Attitude::of(&x).r
