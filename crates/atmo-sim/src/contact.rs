@@ -33,6 +33,10 @@
 //! parked on a slope does not creep, as it would with a regularized
 //! `mu F_n v / |v|` law.
 
+// Everything `Plant::step` calls per step is `inline(always)`: the step is
+// compiled twice (portable and AVX2), and only inlined code gets the AVX2 copy.
+#![allow(clippy::inline_always)]
+
 use nalgebra::Vector3;
 
 use crate::config::{GroundContactConfig, TerrainConfig};
@@ -59,6 +63,7 @@ impl Plane {
     }
 
     /// Signed distance of `p` (NED) above the plane, m.
+    #[inline(always)]
     pub fn height(&self, p: &Vector3<f64>) -> f64 {
         self.normal.dot(&(p - self.point))
     }
@@ -106,6 +111,7 @@ impl ContactLaw {
     /// friction limit for normal force `f_n`: a circle of radius `mu f_n`, or
     /// for a wheel with unit sideways direction `lateral` the ellipse with
     /// half-axes `mu f_n` (rolling) and `mu_lat f_n` (sideways).
+    #[inline(always)]
     fn limit(&self, f: Vector3<f64>, f_n: f64, lateral: Option<&Vector3<f64>>) -> Vector3<f64> {
         if f_n <= 0.0 {
             return Vector3::zeros();
@@ -136,6 +142,7 @@ impl ContactLaw {
 
     /// Normal force (N) of a point `depth` m into the ground moving at
     /// `v_n` m/s along the up-normal: spring-damper, never pulling.
+    #[inline(always)]
     pub fn normal_force(&self, depth: f64, v_n: f64) -> f64 {
         (self.stiffness * depth - self.damping * v_n).max(0.0)
     }
@@ -144,6 +151,7 @@ impl ContactLaw {
     /// with tangential spring `s`; `lateral` is a wheel's sideways direction
     /// in the ground plane (None for body points). Returns (force, normal
     /// force, `s_dot`).
+    #[inline(always)]
     pub fn force(
         &self,
         n: &Vector3<f64>,
@@ -160,6 +168,7 @@ impl ContactLaw {
     }
 
     /// Holds the tangential spring at the friction limit (sliding).
+    #[inline(always)]
     pub fn limit_spring(
         &self,
         n: &Vector3<f64>,
@@ -175,6 +184,7 @@ impl ContactLaw {
 
 /// A wheel's sideways direction in the ground plane: its axle projected on
 /// the plane (None when the wheel lies flat and has no rolling direction).
+#[inline(always)]
 pub fn wheel_lateral(axle: &Vector3<f64>, n: &Vector3<f64>) -> Option<Vector3<f64>> {
     let l = axle - n * axle.dot(n);
     let len = l.norm();

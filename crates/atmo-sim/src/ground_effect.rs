@@ -21,6 +21,10 @@
 //! (correlation time `correlation_time`), so the thrust of rotor i is
 //! `kT u_i (1 + mean(h_i, varphi) + std(h_i, varphi) n_i(t))`.
 
+// Everything `Plant::step` calls per step is `inline(always)`: the step is
+// compiled twice (portable and AVX2), and only inlined code gets the AVX2 copy.
+#![allow(clippy::inline_always)]
+
 use std::path::Path;
 
 use atmo_core::config::Checker;
@@ -228,6 +232,7 @@ pub fn cheeseman_bennett(r: f64, z: f64) -> f64 {
 
 /// Index i with `xs[i] <= x <= xs[i + 1]` and the weight of `xs[i + 1]`,
 /// with x clamped into the range.
+#[inline(always)]
 fn bracket(xs: &[f64], x: f64) -> (usize, f64) {
     let n = xs.len();
     if x <= xs[0] {
@@ -260,6 +265,7 @@ impl GroundEffect {
 
     /// Everything about tilt `varphi` (rad) that the surface needs, computed
     /// once per tilt so that evaluating over heights costs no trigonometry.
+    #[inline(always)]
     pub fn slice(&self, varphi: f64) -> TiltSlice {
         let (row, row_weight) = bracket(&self.tilts, varphi);
         let classical_weight = if varphi <= self.classical_below {
@@ -278,6 +284,7 @@ impl GroundEffect {
     }
 
     /// Bilinear table value at hub height `h` (m) in a tilt slice.
+    #[inline(always)]
     fn table(&self, h: f64, s: &TiltSlice) -> Gain {
         let (i, wt) = (s.row, s.row_weight);
         let (j, wh) = bracket(&self.heights, h);
@@ -294,6 +301,7 @@ impl GroundEffect {
 
     /// `T / T_inf - 1` (mean and standard deviation) at hub height `h` (m)
     /// in a tilt slice.
+    #[inline(always)]
     pub fn gain_in(&self, s: &TiltSlice, h: f64) -> Gain {
         let w = s.classical_weight;
         if w >= 1.0 {
@@ -319,6 +327,7 @@ impl GroundEffect {
     }
 
     /// The gain applied to a rotor: mean plus `n` standard deviations.
+    #[inline(always)]
     pub fn sample(&self, s: &TiltSlice, h: f64, n: f64) -> f64 {
         let g = self.gain_in(s, h);
         // Thrust never reverses, however far the noise reaches.

@@ -8,6 +8,10 @@
 //! plant test `with_every_effect_off_the_plant_is_atmo_core` checks that
 //! the result is atmo-core's bit for bit.
 
+// Everything `Plant::step` calls per step is `inline(always)`: the step is
+// compiled twice (portable and AVX2), and only inlined code gets the AVX2 copy.
+#![allow(clippy::inline_always)]
+
 use atmo_core::model::{Input, State, TiltedBody, idx};
 use nalgebra::{Matrix3, Vector3, Vector6};
 
@@ -23,6 +27,7 @@ pub(crate) struct Attitude {
 }
 
 impl Attitude {
+    #[inline(always)]
     pub fn of(x: &State) -> Self {
         let (sy, cy) = x[idx::YAW].sin_cos();
         let (sp, cp) = x[idx::PITCH].sin_cos();
@@ -43,6 +48,7 @@ impl Attitude {
 }
 
 /// `TiltedBody::accelerations`.
+#[inline(always)]
 pub(crate) fn accelerations(
     body: &TiltedBody,
     x: &State,
@@ -62,6 +68,7 @@ pub(crate) fn accelerations(
 }
 
 /// `TiltedBody::state_derivative`.
+#[inline(always)]
 pub(crate) fn state_derivative(x: &State, att: &Attitude, acc: &Vector6<f64>) -> State {
     let a = att.r * Vector3::new(acc[0], acc[1], acc[2]);
     let (sr, cr, sp, cp) = (att.sr, att.cr, att.sp, att.cp);
@@ -88,6 +95,7 @@ pub(crate) fn state_derivative(x: &State, att: &Attitude, acc: &Vector6<f64>) ->
 /// 0.25 deg grid the error against the exact body is below 1e-5 relative
 /// (second-order in the spacing), far below the model errors the plant
 /// simulates on purpose.
+#[inline(always)]
 pub(crate) fn lerp_body(a: &TiltedBody, b: &TiltedBody, w: f64, varphi: f64) -> TiltedBody {
     let v = 1.0 - w;
     TiltedBody {

@@ -578,7 +578,12 @@ impl Scenario {
     /// disturbances) for its duration, recording a sample every
     /// `record_period` s.
     pub fn run_open_loop(&self, record_period: f64) -> Result<Run> {
-        let mut plant = self.build_plant()?;
+        self.run_plant_open_loop(self.build_plant()?, record_period)
+    }
+
+    /// `run_open_loop` on a plant built by `build_plant` and then adjusted
+    /// (for example to run its portable step code).
+    pub fn run_plant_open_loop(&self, mut plant: Plant, record_period: f64) -> Result<Run> {
         // The nominal model: what a pilot's trim would be computed from.
         let model = Model::new(&self.robot);
         let steps = (self.file.duration / plant.dt()).round() as u64;

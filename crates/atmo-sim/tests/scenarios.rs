@@ -68,6 +68,29 @@ fn the_same_scenario_and_seed_give_a_bit_identical_trajectory() {
 }
 
 #[test]
+fn the_avx2_step_code_gives_the_portable_code_s_trajectory_bit_for_bit() {
+    for name in NAMES {
+        let sc = Scenario::load(path(name)).unwrap();
+        let fast = sc.run_open_loop(0.001).unwrap();
+        let mut plant = sc.build_plant().unwrap();
+        if !plant.uses_avx2() {
+            eprintln!("{name}: this CPU runs the portable code only");
+        }
+        plant.use_portable_code();
+        assert!(!plant.uses_avx2());
+        let portable = sc.run_plant_open_loop(plant, 0.001).unwrap();
+        // Every step of every state, tilt, thrust, wheel rate and event.
+        assert_eq!(fast, portable, "{name}");
+        // Debug prints every f64 exactly (and tells -0.0 from 0.0).
+        assert!(
+            format!("{fast:?}") == format!("{portable:?}"),
+            "{name}: differ in the sign of a zero"
+        );
+        assert!(fast.samples.len() > 1000, "{name}");
+    }
+}
+
+#[test]
 fn hover_trim_holds_position_in_the_ideal_plant() {
     let mut sc = Scenario::load(path("hover")).unwrap();
     sc.plant = PlantConfig::ideal();
