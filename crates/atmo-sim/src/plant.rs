@@ -81,6 +81,43 @@ impl Reach {
     }
 }
 
+/// The four wheels' body-frame geometry, `[component][wheel]` (rotor
+/// order), the layout the four-lane contact kernel reads.
+#[derive(Debug, Clone, Copy, Default)]
+struct WheelLanes {
+    hub: [[f64; 4]; 3],
+    axle: [[f64; 4]; 3],
+    /// Forward spin axis: the axle times `SPIN_SIGN`.
+    spin_axis: [[f64; 4]; 3],
+}
+
+impl WheelLanes {
+    #[inline(always)]
+    fn of(body: &TiltedBody) -> Self {
+        Self {
+            hub: std::array::from_fn(|k| std::array::from_fn(|j| body.rotor_position[j][k])),
+            axle: std::array::from_fn(|k| std::array::from_fn(|j| body.rotor_axis[j][k])),
+            spin_axis: std::array::from_fn(|k| {
+                std::array::from_fn(|j| body.rotor_axis[j][k] * SPIN_SIGN[j])
+            }),
+        }
+    }
+}
+
+/// The contact law's result at the four wheels, `[component][wheel]`
+/// (body frame); only wheels with `touching` count.
+#[derive(Debug, Clone, Copy, Default)]
+struct WheelForces {
+    touching: [bool; 4],
+    force: [[f64; 4]; 3],
+    /// Torque about B without the spin-axis part.
+    torque: [[f64; 4]; 3],
+    /// Torque about the spin axis (turns the wheel).
+    axial: [f64; 4],
+    /// Tangential spring rate (world frame).
+    spring_rate: [[f64; 4]; 3],
+}
+
 /// Which side each rotor's wheel is on (0 = left, 1 = right), PX4 quad-x:
 /// rotors 1 and 4 on the right arm, 2 and 3 on the left.
 const WHEEL_SIDE: [usize; 4] = [1, 0, 0, 1];
@@ -1090,64 +1127,59 @@ impl Plant {
         let v = Vector3::new(ext[idx::VX], ext[idx::VY], ext[idx::VZ]);
         let w = Vector3::new(ext[idx::WX], ext[idx::WY], ext[idx::WZ]);
         let height = self.plane.height(&p);
-        let clear = reach == Reach::Nothing;
         let rt = r.transpose();
         let n = self.plane.normal;
         let down_b = -(rt * n);
-        // A point c (body frame) is `height - down_b . c` above the ground;
-        // no corner touches while the box's support along down_b is below B.
-        let corners_clear = reach != Reach::Everything || self.box_support(&down_b) <= height;
         let mut force = Vector3::zeros();
         let mut torque = Vector3::zeros();
         let mut wheel_torque = [0.0; 2];
         let spin = [ext[WHEEL], ext[WHEEL + 1]];
-        for j in 0..N_CONTACTS {
-            if clear || (j >= N_WHEELS && corners_clear) {
-                break;
+        // A rim point is at most the radius below its hub: while every hub
+        // is higher than that, no wheel touches (the usual case in flight).
+        let wheel_may_touch = reach != Reach::Nothing
+            && body
+                .rotor_position
+                .iter()
+                .any(|c| down_b.dot(c) + self.wheel_radius > height);
+        if wheel_may_touch {
+            let wheels = self.wheel_forces(ext, r, &down_b, height, &w, &v, law);
+            for j in 0..N_WHEELS {
+                if !wheels.touching[j] {
+                    continue;
+                }
+                for k in 0..3 {
+                    d[SPRING + 3 * j + k] = wheels.spring_rate[k][j];
+                }
+                force += Vector3::new(wheels.force[0][j], wheels.force[1][j], wheels.force[2][j]);
+                torque += Vector3::new(
+                    wheels.torque[0][j],
+                    wheels.torque[1][j],
+                    wheels.torque[2][j],
+                );
+                wheel_torque[WHEEL_SIDE[j]] += wheels.axial[j];
             }
-            // A rim point is at most the radius below its hub: a wheel whose
-            // hub is higher than that cannot touch (no square root needed).
-            if j < N_WHEELS && down_b.dot(&body.rotor_position[j]) + self.wheel_radius <= height {
-                continue;
+        }
+        // The base-box corners: none touches while the box's support along
+        // down_b is below B (a point c is `height - down_b . c` above ground).
+        if reach == Reach::Everything && self.box_support(&down_b) > height {
+            for (k, point) in self.corners.iter().enumerate() {
+                let j = N_WHEELS + k;
+                let depth = down_b.dot(point) - height;
+                if depth <= 0.0 {
+                    continue;
+                }
+                let v_point = v + r * w.cross(point);
+                let s = Vector3::new(
+                    ext[SPRING + 3 * j],
+                    ext[SPRING + 3 * j + 1],
+                    ext[SPRING + 3 * j + 2],
+                );
+                let (f_world, _, s_dot) = law.force(&n, depth, &v_point, &s, None);
+                d.fixed_rows_mut::<3>(SPRING + 3 * j).copy_from(&s_dot);
+                let f_b = rt * f_world;
+                force += f_b;
+                torque += point.cross(&f_b);
             }
-            let (point, spin_axis, rim, lateral_b) = if j < N_WHEELS {
-                let (pt, lateral_b) = self.wheel_point(j, &down_b);
-                let c = &body.rotor_position[j];
-                (pt, body.rotor_axis[j] * SPIN_SIGN[j], pt - c, lateral_b)
-            } else {
-                (
-                    self.corners[j - N_WHEELS],
-                    Vector3::zeros(),
-                    Vector3::zeros(),
-                    None,
-                )
-            };
-            let depth = down_b.dot(&point) - height;
-            if depth <= 0.0 {
-                continue;
-            }
-            let mut v_local = w.cross(&point);
-            if j < N_WHEELS {
-                v_local += spin_axis.cross(&rim) * spin[WHEEL_SIDE[j]];
-            }
-            let v_point = v + r * v_local;
-            let s = Vector3::new(
-                ext[SPRING + 3 * j],
-                ext[SPRING + 3 * j + 1],
-                ext[SPRING + 3 * j + 2],
-            );
-            let lateral = lateral_b.map(|l| r * l);
-            let (f_world, _, s_dot) = law.force(&n, depth, &v_point, &s, lateral.as_ref());
-            d.fixed_rows_mut::<3>(SPRING + 3 * j).copy_from(&s_dot);
-            let f_b = rt * f_world;
-            force += f_b;
-            let mut tq = point.cross(&f_b);
-            if j < N_WHEELS {
-                let axial = spin_axis.dot(&rim.cross(&f_b));
-                tq -= spin_axis * axial;
-                wheel_torque[WHEEL_SIDE[j]] += axial;
-            }
-            torque += tq;
         }
         // Wheel drives: PI speed control with a torque limit; the
         // motor reaction acts on the body about the side's spin axis.
@@ -1165,6 +1197,123 @@ impl Plant {
             torque -= side_axis[side] * tau;
         }
         Vector6::new(force.x, force.y, force.z, torque.x, torque.y, torque.z)
+    }
+
+    /// The contact law at the four wheels at once: one loop over the wheels
+    /// with straight-line arithmetic and selects (no branches), which the
+    /// compiler turns into 4-wide vector code (2-wide in the portable copy).
+    /// The law is `ContactLaw::force` at each wheel's lowest rim point
+    /// (`wheel_point`); the rim point moves with the body and with the
+    /// wheel's spin.
+    #[inline(always)]
+    #[allow(clippy::too_many_arguments, clippy::similar_names)]
+    fn wheel_forces(
+        &self,
+        ext: &Ext,
+        r: &Matrix3<f64>,
+        down: &Vector3<f64>,
+        height: f64,
+        w: &Vector3<f64>,
+        v: &Vector3<f64>,
+        law: &ContactLaw,
+    ) -> WheelForces {
+        let g = WheelLanes::of(&self.body);
+        let radius = self.wheel_radius;
+        let n = &self.plane.normal;
+        let spin_side = [ext[WHEEL], ext[WHEEL + 1]];
+        let spin: [f64; 4] = std::array::from_fn(|j| spin_side[WHEEL_SIDE[j]]);
+        let spring: [[f64; 4]; 3] =
+            std::array::from_fn(|k| std::array::from_fn(|j| ext[SPRING + 3 * j + k]));
+        let mut out = WheelForces::default();
+        for j in 0..N_WHEELS {
+            let c = [g.hub[0][j], g.hub[1][j], g.hub[2][j]];
+            let a = [g.axle[0][j], g.axle[1][j], g.axle[2][j]];
+            let e = [g.spin_axis[0][j], g.spin_axis[1][j], g.spin_axis[2][j]];
+            // Lowest rim point and sideways direction (see `wheel_point`).
+            let ad = a[0] * down.x + a[1] * down.y + a[2] * down.z;
+            let len_sq = 1.0 - ad * ad;
+            let upright = len_sq > 1e-12;
+            let inv = 1.0 / len_sq.max(1e-12).sqrt();
+            let reach = if upright { radius * inv } else { 0.0 };
+            let rim = [
+                (down.x - a[0] * ad) * reach,
+                (down.y - a[1] * ad) * reach,
+                (down.z - a[2] * ad) * reach,
+            ];
+            let pt = [c[0] + rim[0], c[1] + rim[1], c[2] + rim[2]];
+            let lat_b = [
+                (a[0] - down.x * ad) * inv,
+                (a[1] - down.y * ad) * inv,
+                (a[2] - down.z * ad) * inv,
+            ];
+            let depth = down.x * pt[0] + down.y * pt[1] + down.z * pt[2] - height;
+            // Velocity of the rim point: body motion plus wheel spin (body frame).
+            let vl = [
+                w.y * pt[2] - w.z * pt[1] + (e[1] * rim[2] - e[2] * rim[1]) * spin[j],
+                w.z * pt[0] - w.x * pt[2] + (e[2] * rim[0] - e[0] * rim[2]) * spin[j],
+                w.x * pt[1] - w.y * pt[0] + (e[0] * rim[1] - e[1] * rim[0]) * spin[j],
+            ];
+            let vp: [f64; 3] = std::array::from_fn(|i| {
+                v[i] + r[(i, 0)] * vl[0] + r[(i, 1)] * vl[1] + r[(i, 2)] * vl[2]
+            });
+            let lat: [f64; 3] = std::array::from_fn(|i| {
+                r[(i, 0)] * lat_b[0] + r[(i, 1)] * lat_b[1] + r[(i, 2)] * lat_b[2]
+            });
+            // Normal spring-damper, tangential spring-damper (world frame).
+            let v_n = vp[0] * n.x + vp[1] * n.y + vp[2] * n.z;
+            let f_n = (law.stiffness * depth - law.damping * v_n).max(0.0);
+            let v_t = [vp[0] - n.x * v_n, vp[1] - n.y * v_n, vp[2] - n.z * v_n];
+            let f_t: [f64; 3] = std::array::from_fn(|i| {
+                -(spring[i][j] * law.tangential_stiffness) - v_t[i] * law.tangential_damping
+            });
+            // Coulomb cap: an ellipse (rolling / sideways), a circle when flat.
+            let cap = law.friction * f_n;
+            let cap_lat = law.lateral_friction * f_n;
+            let (c2, l2) = (cap * cap, cap_lat * cap_lat);
+            let f_sq = f_t[0] * f_t[0] + f_t[1] * f_t[1] + f_t[2] * f_t[2];
+            let f_lat = f_t[0] * lat[0] + f_t[1] * lat[1] + f_t[2] * lat[2];
+            let f_lat_sq = f_lat * f_lat;
+            let f_roll_sq = (f_sq - f_lat_sq).max(0.0);
+            let (inside, ratio_sq) = if upright {
+                (
+                    f_roll_sq * l2 + f_lat_sq * c2 <= c2 * l2,
+                    f_roll_sq / c2 + f_lat_sq / l2,
+                )
+            } else {
+                (f_sq <= c2, f_sq / c2)
+            };
+            let shrink = if inside { 1.0 } else { ratio_sq.sqrt() };
+            let open = f_n <= 0.0;
+            let f_w: [f64; 3] =
+                std::array::from_fn(|i| n[i] * f_n + if open { 0.0 } else { f_t[i] / shrink });
+            // Into the body frame; torque about B less the spin-axis part,
+            // which turns the wheel instead.
+            let f_b: [f64; 3] = std::array::from_fn(|i| {
+                r[(0, i)] * f_w[0] + r[(1, i)] * f_w[1] + r[(2, i)] * f_w[2]
+            });
+            let rim_x_f = [
+                rim[1] * f_b[2] - rim[2] * f_b[1],
+                rim[2] * f_b[0] - rim[0] * f_b[2],
+                rim[0] * f_b[1] - rim[1] * f_b[0],
+            ];
+            let axial = e[0] * rim_x_f[0] + e[1] * rim_x_f[1] + e[2] * rim_x_f[2];
+            let tq = [
+                pt[1] * f_b[2] - pt[2] * f_b[1] - e[0] * axial,
+                pt[2] * f_b[0] - pt[0] * f_b[2] - e[1] * axial,
+                pt[0] * f_b[1] - pt[1] * f_b[0] - e[2] * axial,
+            ];
+            // A rim point is at most the radius below its hub.
+            let hub_low = down.x * c[0] + down.y * c[1] + down.z * c[2] + radius > height;
+            let touching = hub_low && depth > 0.0;
+            out.touching[j] = touching;
+            for i in 0..3 {
+                out.force[i][j] = f_b[i];
+                out.torque[i][j] = tq[i];
+                out.spring_rate[i][j] = v_t[i];
+            }
+            out.axial[j] = axial;
+        }
+        out
     }
 
     /// The derivative of the continuous state.
@@ -1257,5 +1406,120 @@ impl Plant {
         d.fixed_rows_mut::<12>(0)
             .copy_from(&state_derivative(&x, &att, &acc));
         d
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::{Rng, SeedableRng};
+
+    /// The four-lane wheel kernel against the scalar law it restates
+    /// (`wheel_point` and `ContactLaw::force`, one wheel at a time), at
+    /// random poses, velocities, spins and springs on flat and sloped
+    /// ground, with the wheels upright (90 deg), tilted (45 deg) and flat
+    /// (0 deg), sticking and sliding.
+    #[test]
+    fn the_wheel_kernel_is_the_scalar_contact_law() {
+        let robot = RobotConfig::atmo();
+        let mut rng = ChaCha8Rng::seed_from_u64(7);
+        let (mut touching, mut sliding, mut flat) = (0, 0, 0);
+        for (tilt_deg, slope_deg) in [(90.0, 0.0), (90.0, 20.0), (45.0, 10.0), (0.0, 0.0)] {
+            let tilt = f64::to_radians(tilt_deg);
+            let terrain = TerrainConfig {
+                height: 0.0,
+                slope_deg,
+                slope_azimuth_deg: 30.0,
+            };
+            let initial = InitialState::at(State::zeros(), tilt);
+            let plant = Plant::new(&robot, &PlantConfig::full(), &terrain, &initial, 1).unwrap();
+            let Some((law, _, _)) = plant.contact else {
+                panic!("the full plant has ground contact");
+            };
+            // Level at 0 deg, the wheels lie flat: the hub is the lowest point.
+            let lying_flat = tilt_deg == 0.0;
+            let rest =
+                plant.body.rotor_position[0].z + if lying_flat { 0.0 } else { robot.wheels.radius };
+            for _ in 0..200 {
+                let mut ext = Ext::zeros();
+                ext[idx::X] = rng.random_range(-1.0..1.0);
+                ext[idx::Y] = rng.random_range(-1.0..1.0);
+                let ground_z = -plant
+                    .plane
+                    .height(&Vector3::new(ext[idx::X], ext[idx::Y], 0.0))
+                    / plant.plane.normal.z.abs();
+                ext[idx::Z] = ground_z - rest + rng.random_range(-0.02..0.03);
+                if !lying_flat {
+                    for i in [idx::YAW, idx::PITCH, idx::ROLL] {
+                        ext[i] = rng.random_range(-0.4..0.4);
+                    }
+                }
+                for i in [idx::VX, idx::VY, idx::VZ, idx::WX, idx::WY, idx::WZ] {
+                    ext[i] = rng.random_range(-1.5..1.5);
+                }
+                ext[WHEEL] = rng.random_range(-20.0..20.0);
+                ext[WHEEL + 1] = rng.random_range(-20.0..20.0);
+                let spring_scale = if rng.random_bool(0.5) { 1e-4 } else { 0.05 };
+                for j in 0..3 * N_WHEELS {
+                    ext[SPRING + j] = rng.random_range(-spring_scale..spring_scale);
+                }
+                let x = body_state(&ext);
+                let r = Attitude::of(&x).r;
+                let rt = r.transpose();
+                let n = plant.plane.normal;
+                let down_b = -(rt * n);
+                let p = Vector3::new(x[idx::X], x[idx::Y], x[idx::Z]);
+                let v = Vector3::new(x[idx::VX], x[idx::VY], x[idx::VZ]);
+                let w = Vector3::new(x[idx::WX], x[idx::WY], x[idx::WZ]);
+                let height = plant.plane.height(&p);
+                let lanes = plant.wheel_forces(&ext, &r, &down_b, height, &w, &v, &law);
+                for j in 0..N_WHEELS {
+                    let c = plant.body.rotor_position[j];
+                    let (pt, lateral_b) = plant.wheel_point(j, &down_b);
+                    let depth = down_b.dot(&pt) - height;
+                    assert_eq!(lanes.touching[j], depth > 0.0, "wheel {j} depth {depth}");
+                    if depth <= 0.0 {
+                        continue;
+                    }
+                    touching += 1;
+                    flat += usize::from(lateral_b.is_none());
+                    let spin_axis = plant.body.rotor_axis[j] * SPIN_SIGN[j];
+                    let rim = pt - c;
+                    let spin = ext[WHEEL + WHEEL_SIDE[j]];
+                    let v_point = v + r * (w.cross(&pt) + spin_axis.cross(&rim) * spin);
+                    let s = Vector3::new(
+                        ext[SPRING + 3 * j],
+                        ext[SPRING + 3 * j + 1],
+                        ext[SPRING + 3 * j + 2],
+                    );
+                    let lateral = lateral_b.map(|l| r * l);
+                    let (f_world, f_n, s_dot) =
+                        law.force(&n, depth, &v_point, &s, lateral.as_ref());
+                    let f_t = f_world - n * f_n;
+                    let unlimited =
+                        -(s * law.tangential_stiffness) - s_dot * law.tangential_damping;
+                    sliding += usize::from((f_t - unlimited).norm() > 1e-9 * unlimited.norm());
+                    let f_b = rt * f_world;
+                    let axial = spin_axis.dot(&rim.cross(&f_b));
+                    let tq = pt.cross(&f_b) - spin_axis * axial;
+                    let close = |a: f64, b: f64, what: &str| {
+                        assert!(
+                            (a - b).abs() <= 1e-12 * (1.0 + b.abs()),
+                            "{tilt_deg} deg, wheel {j}, {what}: kernel {a}, law {b}"
+                        );
+                    };
+                    for i in 0..3 {
+                        close(lanes.force[i][j], f_b[i], "force");
+                        close(lanes.torque[i][j], tq[i], "torque");
+                        close(lanes.spring_rate[i][j], s_dot[i], "spring rate");
+                    }
+                    close(lanes.axial[j], axial, "axial torque");
+                }
+            }
+        }
+        // Every branch of the law was compared, many times.
+        assert!(touching > 500, "{touching} touching wheels");
+        assert!(sliding > 50, "{sliding} sliding wheels");
+        assert!(flat > 50, "{flat} flat wheels");
     }
 }
