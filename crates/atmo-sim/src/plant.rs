@@ -828,19 +828,21 @@ impl Plant {
         // left out, exactly (same operations, element by element, on the rest).
         let reach = self.reachable();
         let n = reach.state_len();
-        let x = self.ext;
         // One call site for the four stages (the derivative is inlined, once):
         // stage s+1 is evaluated at x + k_s h_s, and the weighted sum
-        // k1 + 2 k2 + 2 k3 + k4 is accumulated in that order.
+        // k1 + 2 k2 + 2 k3 + k4 is accumulated in that order. Only the first
+        // n entries are touched: no copies of the whole state.
+        let x = &self.ext;
         let half = 0.5 * dt;
         let stage_step = [half, half, dt];
         let weight = [1.0, 2.0, 2.0, 1.0];
-        let mut stage = x;
-        let mut sum = x;
+        let mut stage = *x;
+        let mut k = Ext::zeros();
+        let mut sum = [0.0; N_EXT];
         for s in 0..4 {
-            let k = self.derivative(&stage, &cmd, reach);
+            self.derivative_into(&stage, &cmd, reach, &mut k);
             if s == 0 {
-                sum = k;
+                sum[..n].copy_from_slice(&k.as_slice()[..n]);
             } else {
                 for i in 0..n {
                     sum[i] += k[i] * weight[s];
@@ -852,17 +854,16 @@ impl Plant {
                 }
             }
         }
-        let mut next = x;
         let sixth = dt / 6.0;
         for i in 0..n {
-            next[i] = x[i] + sum[i] * sixth;
+            stage[i] = x[i] + sum[i] * sixth;
         }
-        if !next.iter().take(n).all(|v| v.is_finite()) {
+        if !stage.iter().take(n).all(|v| v.is_finite()) {
             return Err(SimError::Diverged {
                 time: self.time() + dt,
             });
         }
-        self.ext = next;
+        self.ext.as_mut_slice()[..n].copy_from_slice(&stage.as_slice()[..n]);
         self.tilt = new_tilt;
         self.steps += 1;
         self.observe();
@@ -1317,12 +1318,21 @@ impl Plant {
     }
 
     /// The derivative of the continuous state.
-    #[inline(always)]
     fn derivative(&self, ext: &Ext, cmd: &Command, reach: Reach) -> Ext {
+        let mut d = Ext::zeros();
+        self.derivative_into(ext, cmd, reach, &mut d);
+        d
+    }
+
+    /// The derivative of the continuous state, written into the first
+    /// `reach.state_len()` entries of `d` (the only ones that can be
+    /// nonzero; the rest is left as it is).
+    #[inline(always)]
+    fn derivative_into(&self, ext: &Ext, cmd: &Command, reach: Reach, d: &mut Ext) {
         let body = &self.body;
         let x = body_state(ext);
         let att = Attitude::of(&x);
-        let mut d = Ext::zeros();
+        d.as_mut_slice()[..reach.state_len()].fill(0.0);
 
         // Rotor thrust: motor lag and curve, battery, ground effect.
         let mut t = cmd.rotors;
@@ -1398,14 +1408,13 @@ impl Plant {
             }
 
             if self.contact.is_some() {
-                extra += self.contact_terms(ext, &r, cmd, reach, &mut d);
+                extra += self.contact_terms(ext, &r, cmd, reach, d);
             }
         }
 
         let acc = accelerations(body, &x, &att, &u_eff, &extra);
         d.fixed_rows_mut::<12>(0)
             .copy_from(&state_derivative(&x, &att, &acc));
-        d
     }
 }
 
