@@ -12,7 +12,7 @@
 // compiled twice (portable and AVX2), and only inlined code gets the AVX2 copy.
 #![allow(clippy::inline_always)]
 
-use atmo_core::model::{Input, State, TiltedBody, idx};
+use atmo_core::model::{Input, State, TiltedBody, idx, sin_cos};
 use nalgebra::{Matrix3, Vector3, Vector6};
 
 /// Sines, cosines and rotation of one attitude.
@@ -29,9 +29,9 @@ pub(crate) struct Attitude {
 impl Attitude {
     #[inline(always)]
     pub fn of(x: &State) -> Self {
-        let (sy, cy) = x[idx::YAW].sin_cos();
-        let (sp, cp) = x[idx::PITCH].sin_cos();
-        let (sr, cr) = x[idx::ROLL].sin_cos();
+        let (sy, cy) = sin_cos(x[idx::YAW]);
+        let (sp, cp) = sin_cos(x[idx::PITCH]);
+        let (sr, cr) = sin_cos(x[idx::ROLL]);
         let r = Matrix3::new(
             cy * cp,
             cy * sp * sr - sy * cr,
