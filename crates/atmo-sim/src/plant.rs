@@ -889,6 +889,8 @@ impl Plant {
                 self.body = b;
                 self.body_interpolated = false;
             }
+        } else {
+            return; // the same body: the ground-effect slice stands too
         }
         if let Some(ge) = &self.ground_effect {
             self.ge_slice = ge.slice(self.body.varphi);
