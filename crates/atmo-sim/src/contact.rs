@@ -116,28 +116,36 @@ impl ContactLaw {
         if f_n <= 0.0 {
             return Vector3::zeros();
         }
+        let l = lateral.map_or([0.0; 3], |l| [l.x, l.y, l.z]);
+        f / self.limit_divisor(&[f.x, f.y, f.z], f_n, &l, lateral.is_some())
+    }
+
+    /// The divisor that brings a tangential vector `f` into the friction
+    /// limit for normal force `f_n > 0`: 1 inside it (sticking, the usual
+    /// case), else the square root of `f`'s squared size relative to the
+    /// limit. `elliptic` selects the wheel's ellipse with unit sideways
+    /// direction `lateral`, else the circle. Branch-free apart from the
+    /// selects, so that the four-wheel loops that call it vectorize.
+    #[inline(always)]
+    pub fn limit_divisor(&self, f: &[f64; 3], f_n: f64, lateral: &[f64; 3], elliptic: bool) -> f64 {
         let cap = self.friction * f_n;
-        let f_sq = f.norm_squared();
-        // Inside the limit (sticking, the usual case): no square root, no division.
-        let ratio_sq = match lateral {
-            None => {
-                if f_sq <= cap * cap {
-                    return f;
-                }
-                f_sq / (cap * cap)
-            }
-            Some(l) => {
-                let cap_lat = self.lateral_friction * f_n;
-                let f_lat_sq = f.dot(l).powi(2);
-                let f_roll_sq = (f_sq - f_lat_sq).max(0.0);
-                let (c2, l2) = (cap * cap, cap_lat * cap_lat);
-                if f_roll_sq * l2 + f_lat_sq * c2 <= c2 * l2 {
-                    return f;
-                }
-                f_roll_sq / c2 + f_lat_sq / l2
-            }
+        let cap_lat = self.lateral_friction * f_n;
+        let (c2, l2) = (cap * cap, cap_lat * cap_lat);
+        let f_sq = f[0] * f[0] + f[1] * f[1] + f[2] * f[2];
+        let f_lat = f[0] * lateral[0] + f[1] * lateral[1] + f[2] * lateral[2];
+        let f_lat_sq = f_lat * f_lat;
+        let f_roll_sq = (f_sq - f_lat_sq).max(0.0);
+        // f_roll^2 / c^2 + f_lat^2 / l^2 (ellipse) or f^2 / c^2 (circle) <= 1.
+        let (size, limit) = if elliptic {
+            (f_roll_sq * l2 + f_lat_sq * c2, c2 * l2)
+        } else {
+            (f_sq, c2)
         };
-        f / ratio_sq.sqrt()
+        if size <= limit {
+            1.0
+        } else {
+            (size / limit).sqrt()
+        }
     }
 
     /// Normal force (N) of a point `depth` m into the ground moving at
