@@ -7,7 +7,10 @@
 //! - `cargo run --release -p atmo-sim --example effect_cost`: the table above;
 //! - `... -- cases`: the bench's four cases, best of 30 instead of a median
 //!   (on a shared machine the fastest run is the least disturbed one);
-//! - `... -- hover|morphing|driving|ideal`: one case alone, for a profiler.
+//! - `... -- hover|morphing|driving|ideal`: one case alone, for a profiler;
+//! - `... -- cases portable` (or a case name and `portable`): the same with
+//!   the portable copy of the step code, for an A/B against the AVX2 copy
+//!   this CPU picks (`Plant::uses_avx2`).
 
 #[path = "../benches/support/cases.rs"]
 mod cases;
@@ -36,7 +39,15 @@ fn best_of_30(p: &Plant, command: &dyn Fn(u64) -> Command) -> f64 {
 fn main() {
     let arg = std::env::args().nth(1);
     if let Some(arg) = arg.as_deref() {
-        let chosen: Vec<_> = cases()
+        let portable = match std::env::args().nth(2).as_deref() {
+            None => false,
+            Some("portable") => true,
+            Some(other) => {
+                eprintln!("unknown second argument `{other}`: expected portable or nothing");
+                std::process::exit(2);
+            }
+        };
+        let mut chosen: Vec<_> = cases()
             .into_iter()
             .filter(|c| arg == "cases" || arg == c.name)
             .collect();
@@ -46,7 +57,17 @@ fn main() {
             );
             std::process::exit(2);
         }
-        println!("| case | us per 1000 steps, best of 30 |");
+        let code = if portable {
+            for case in &mut chosen {
+                case.plant.use_portable_code();
+            }
+            "portable"
+        } else if chosen[0].plant.uses_avx2() {
+            "AVX2"
+        } else {
+            "portable (no AVX2 on this CPU)"
+        };
+        println!("| case | us per 1000 steps, best of 30, {code} step code |");
         println!("| --- | --- |");
         for case in &chosen {
             println!(
