@@ -30,6 +30,7 @@
 // compiled twice (portable and AVX2), and only inlined code gets the AVX2 copy.
 #![allow(clippy::inline_always)]
 
+use std::borrow::Cow;
 use std::sync::Arc;
 
 use atmo_core::control::WheelRates;
@@ -141,7 +142,9 @@ fn rim(g: &WheelLanes, j: usize, down: &Vector3<f64>, radius: f64) -> Rim {
 /// The post-step pass at the four wheels, `[component][wheel]`.
 #[derive(Debug, Clone, Copy, Default)]
 struct WheelReport {
-    info: [ContactInfo; 4],
+    touching: [bool; 4],
+    normal_force: [f64; 4],
+    approach_speed: [f64; 4],
     /// Tangential spring held at the friction limit (zero when open).
     spring: [[f64; 4]; 3],
 }
@@ -339,6 +342,9 @@ pub struct Plant {
     ext: Ext,
     tilt: f64,
     body: TiltedBody,
+    /// `body`'s wheels laid out for the four-lane loops, made on the first
+    /// step near the ground after the body changes (None: not made yet).
+    wheel_lanes: Option<WheelLanes>,
     /// Whether `body` is interpolated (the tilt was moving).
     body_interpolated: bool,
     /// Exact bodies every `TILT_GRID` from 0 to `tilt_max` (the last one at
@@ -598,6 +604,7 @@ impl Plant {
             tilt,
             ge_slice,
             body,
+            wheel_lanes: None,
             body_interpolated: false,
             tilt_grid: tilt_grid.into(),
             command: Command::rotors(initial.thrust),
@@ -870,6 +877,9 @@ impl Plant {
         // left out, exactly (same operations, element by element, on the rest).
         let reach = self.reachable();
         let n = reach.state_len();
+        if reach != Reach::Nothing && self.wheel_lanes.is_none() {
+            self.wheel_lanes = Some(WheelLanes::of(&self.body));
+        }
         // One call site for the four stages (the derivative is inlined, once):
         // stage s+1 is evaluated at x + k_s h_s, and the weighted sum
         // k1 + 2 k2 + 2 k3 + k4 is accumulated in that order. Only the first
@@ -932,8 +942,9 @@ impl Plant {
                 self.body_interpolated = false;
             }
         } else {
-            return; // the same body: the ground-effect slice stands too
+            return; // the same body: the ground-effect slice and wheel lanes stand too
         }
+        self.wheel_lanes = None;
         if let Some(ge) = &self.ground_effect {
             self.ge_slice = ge.slice(self.body.varphi);
         }
@@ -962,6 +973,9 @@ impl Plant {
             Matrix3::identity()
         };
         let mut wheel_springs = [[0.0; 4]; 3];
+        if near && self.wheel_lanes.is_none() {
+            self.wheel_lanes = Some(WheelLanes::of(&self.body));
+        }
         if near {
             (report, wheel_springs) = self.contact_report(&rot);
         }
@@ -1063,6 +1077,15 @@ impl Plant {
         }
     }
 
+    /// The current body's wheel lanes; made here only if no step has made
+    /// them since the body changed (`body_derivative` before any step).
+    #[inline(always)]
+    fn wheel_lanes(&self) -> Cow<'_, WheelLanes> {
+        self.wheel_lanes
+            .as_ref()
+            .map_or_else(|| Cow::Owned(WheelLanes::of(&self.body)), Cow::Borrowed)
+    }
+
     /// Which contact points can touch the ground during the coming step,
     /// from where B is now: `reach` and `corner_reach` carry a 5 cm margin
     /// that no point covers in one step below 50 m/s.
@@ -1114,15 +1137,27 @@ impl Plant {
         let height = self.plane.height(&p);
         let v_n_b = v.dot(&n);
         let wheels = self.wheel_report(r, &down_b, height, v_n_b, &w, law);
-        report[..N_WHEELS].copy_from_slice(&wheels.info);
-        for (point, info) in self.corners.iter().zip(&mut report[N_WHEELS..]) {
-            let depth = down_b.dot(point) - height;
+        for (j, info) in report[..N_WHEELS].iter_mut().enumerate() {
+            *info = ContactInfo {
+                normal_force: wheels.normal_force[j],
+                approach_speed: wheels.approach_speed[j],
+                touching: wheels.touching[j],
+            };
+        }
+        // The corners in plain arrays first (a loop that vectorizes), then
+        // into the report.
+        let mut depth = [0.0; 8];
+        let mut v_n = [0.0; 8];
+        for (k, c) in self.corners.iter().enumerate() {
+            depth[k] = down_b.dot(c) - height;
             // (v + R (w x c)) . n, with R^T n = -down_b.
-            let v_n = v_n_b - down_b.dot(&w.cross(point));
-            info.approach_speed = -v_n;
-            if depth > 0.0 {
+            v_n[k] = v_n_b - down_b.dot(&w.cross(c));
+        }
+        for (k, info) in report[N_WHEELS..].iter_mut().enumerate() {
+            info.approach_speed = -v_n[k];
+            if depth[k] > 0.0 {
                 info.touching = true;
-                info.normal_force = law.normal_force(depth, v_n);
+                info.normal_force = law.normal_force(depth[k], v_n[k]);
             }
         }
         (report, wheels.spring)
@@ -1141,7 +1176,7 @@ impl Plant {
         w: &Vector3<f64>,
         law: &ContactLaw,
     ) -> WheelReport {
-        let g = &WheelLanes::of(&self.body);
+        let g = &*self.wheel_lanes();
         let n = &self.plane.normal;
         let kt = law.tangential_stiffness;
         let mut out = WheelReport::default();
@@ -1178,11 +1213,9 @@ impl Plant {
             for i in 0..3 {
                 out.spring[i][j] = f[i] * scale;
             }
-            out.info[j] = ContactInfo {
-                normal_force: f_n,
-                approach_speed: -v_n,
-                touching,
-            };
+            out.touching[j] = touching;
+            out.normal_force[j] = f_n;
+            out.approach_speed[j] = -v_n;
         }
         out
     }
@@ -1297,7 +1330,7 @@ impl Plant {
         v: &Vector3<f64>,
         law: &ContactLaw,
     ) -> WheelForces {
-        let g = &WheelLanes::of(&self.body);
+        let g = &*self.wheel_lanes();
         let radius = self.wheel_radius;
         let n = &self.plane.normal;
         let spin_side = [ext[WHEEL], ext[WHEEL + 1]];
@@ -1556,21 +1589,20 @@ mod tests {
                     assert_eq!(lanes.touching[j], depth > 0.0, "wheel {j} depth {depth}");
                     // The post-step report (no spin: it moves the point along the ground).
                     let v_n = (v + r * w.cross(&pt)).dot(&n);
-                    let info = &report.info[j];
-                    assert_eq!(info.touching, depth > 0.0);
-                    close(info.approach_speed, -v_n, j, "approach speed");
+                    assert_eq!(report.touching[j], depth > 0.0);
+                    close(report.approach_speed[j], -v_n, j, "approach speed");
                     let s = Vector3::new(
                         ext[SPRING + 3 * j],
                         ext[SPRING + 3 * j + 1],
                         ext[SPRING + 3 * j + 2],
                     );
                     if depth <= 0.0 {
-                        assert_eq!(info.normal_force, 0.0);
+                        assert_eq!(report.normal_force[j], 0.0);
                         assert!((0..3).all(|i| report.spring[i][j] == 0.0));
                         continue;
                     }
                     let f_n = law.normal_force(depth, v_n);
-                    close(info.normal_force, f_n, j, "report normal force");
+                    close(report.normal_force[j], f_n, j, "report normal force");
                     let held = law.limit_spring(&n, &s, f_n, lateral.as_ref());
                     for i in 0..3 {
                         close(report.spring[i][j], held[i], j, "held spring");
