@@ -1148,10 +1148,12 @@ impl Plant {
         // into the report.
         let mut depth = [0.0; 8];
         let mut v_n = [0.0; 8];
+        // (v + R (w x c)) . n = v . n - down_b . (w x c) = v . n - c . (down_b x w),
+        // with R^T n = -down_b.
+        let down_x_w = down_b.cross(&w);
         for (k, c) in self.corners.iter().enumerate() {
             depth[k] = down_b.dot(c) - height;
-            // (v + R (w x c)) . n, with R^T n = -down_b.
-            v_n[k] = v_n_b - down_b.dot(&w.cross(c));
+            v_n[k] = v_n_b - c.dot(&down_x_w);
         }
         for (k, info) in report[N_WHEELS..].iter_mut().enumerate() {
             info.approach_speed = -v_n[k];
