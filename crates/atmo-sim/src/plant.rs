@@ -295,7 +295,8 @@ impl Wind {
 pub struct ContactInfo {
     /// N (0 when open).
     pub normal_force: f64,
-    /// m/s, speed towards the ground.
+    /// m/s, speed towards the ground (0 for a base-box corner while the
+    /// corners are out of the ground's reach).
     pub approach_speed: f64,
     pub touching: bool,
 }
@@ -970,7 +971,8 @@ impl Plant {
     fn observe(&mut self) {
         let mut report = [ContactInfo::default(); N_CONTACTS];
         // Far above the ground nothing touches: skip the contact pass.
-        let near = self.reachable() != Reach::Nothing;
+        let reach = self.reachable();
+        let near = reach != Reach::Nothing;
         let rot = if near {
             let x = body_state(&self.ext);
             Attitude::of(&x).r
@@ -982,7 +984,7 @@ impl Plant {
             self.wheel_lanes = Some(WheelLanes::of(&self.body));
         }
         if near {
-            (report, wheel_springs) = self.contact_report(&rot);
+            (report, wheel_springs) = self.contact_report(&rot, reach == Reach::Everything);
         }
         let time = self.time();
         let mut new_events: [Option<EventKind>; N_CONTACTS + 1] = [None; N_CONTACTS + 1];
@@ -1126,9 +1128,14 @@ impl Plant {
     /// Where each contact point is after a step: touching or not, its speed
     /// towards the ground and its normal force (the contact law's normal
     /// part; wheel spin moves the rim point along the ground, not into it);
-    /// and the wheels' tangential springs held at the friction limit.
+    /// and the wheels' tangential springs held at the friction limit. The
+    /// corners are left out (not touching) unless `corners_in_reach`.
     #[inline(always)]
-    fn contact_report(&self, r: &Matrix3<f64>) -> ([ContactInfo; N_CONTACTS], [[f64; 4]; 3]) {
+    fn contact_report(
+        &self,
+        r: &Matrix3<f64>,
+        corners_in_reach: bool,
+    ) -> ([ContactInfo; N_CONTACTS], [[f64; 4]; 3]) {
         let mut report = [ContactInfo::default(); N_CONTACTS];
         let Some((law, _, _)) = &self.contact else {
             return (report, [[0.0; 4]; 3]);
@@ -1148,6 +1155,9 @@ impl Plant {
                 approach_speed: wheels.approach_speed[j],
                 touching: wheels.touching[j],
             };
+        }
+        if !corners_in_reach {
+            return (report, wheels.spring);
         }
         // The corners in plain arrays first (a loop that vectorizes), then
         // into the report.
