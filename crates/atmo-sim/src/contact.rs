@@ -33,10 +33,6 @@
 //! parked on a slope does not creep, as it would with a regularized
 //! `mu F_n v / |v|` law.
 
-// Everything `Plant::step` calls per step is `inline(always)`: the step is
-// compiled twice (portable and AVX2), and only inlined code gets the AVX2 copy.
-#![allow(clippy::inline_always)]
-
 use nalgebra::Vector3;
 
 use crate::config::{GroundContactConfig, TerrainConfig};

@@ -21,10 +21,6 @@
 //! (correlation time `correlation_time`), so the thrust of rotor i is
 //! `kT u_i (1 + mean(h_i, varphi) + std(h_i, varphi) n_i(t))`.
 
-// Everything `Plant::step` calls per step is `inline(always)`: the step is
-// compiled twice (portable and AVX2), and only inlined code gets the AVX2 copy.
-#![allow(clippy::inline_always)]
-
 use std::path::Path;
 
 use atmo_core::config::Checker;

@@ -59,6 +59,11 @@
 //! pilot inputs and references over time for a flight stack, and scripted
 //! actuator commands for open-loop runs.
 
+// Everything `Plant::step` calls per step is `inline(always)` (plant,
+// contact, ground_effect, rigid): the step is compiled twice, portable and
+// AVX2, and only code inlined into it gets the AVX2 copy.
+#![allow(clippy::inline_always)]
+
 pub mod closed_loop;
 pub mod config;
 pub mod contact;

@@ -26,10 +26,6 @@
 //! contact force. The body receives the contact wrench less its spin-axis
 //! part (that part turns the wheel) and the motor reaction `-tau_m e`.
 
-// Everything `Plant::step` calls per step is `inline(always)`: the step is
-// compiled twice (portable and AVX2), and only inlined code gets the AVX2 copy.
-#![allow(clippy::inline_always)]
-
 use std::borrow::Cow;
 use std::sync::Arc;
 
@@ -878,9 +874,7 @@ impl Plant {
         // left out, exactly (same operations, element by element, on the rest).
         let reach = self.reachable();
         let n = reach.state_len();
-        if reach != Reach::Nothing && self.wheel_lanes.is_none() {
-            self.wheel_lanes = Some(WheelLanes::of(&self.body));
-        }
+        self.prepare_wheel_lanes(reach);
         // One call site for the four stages (the derivative is inlined, once):
         // stage s+1 is evaluated at x + k_s h_s, and the weighted sum
         // k1 + 2 k2 + 2 k3 + k4 is accumulated in that order. Only the first
@@ -980,9 +974,7 @@ impl Plant {
             Matrix3::identity()
         };
         let mut wheel_springs = [[0.0; 4]; 3];
-        if near && self.wheel_lanes.is_none() {
-            self.wheel_lanes = Some(WheelLanes::of(&self.body));
-        }
+        self.prepare_wheel_lanes(reach);
         if near {
             (report, wheel_springs) = self.contact_report(&rot, reach == Reach::Everything);
         }
@@ -1084,8 +1076,17 @@ impl Plant {
         }
     }
 
-    /// The current body's wheel lanes; made here only if no step has made
-    /// them since the body changed (`body_derivative` before any step).
+    /// Makes the current body's wheel lanes if a wheel may reach the ground
+    /// and they are not made yet (the body changed since).
+    #[inline(always)]
+    fn prepare_wheel_lanes(&mut self, reach: Reach) {
+        if reach != Reach::Nothing && self.wheel_lanes.is_none() {
+            self.wheel_lanes = Some(WheelLanes::of(&self.body));
+        }
+    }
+
+    /// The current body's wheel lanes; made here only if they were not
+    /// prepared (`body_derivative` right after the body changed).
     #[inline(always)]
     fn wheel_lanes(&self) -> Cow<'_, WheelLanes> {
         self.wheel_lanes
@@ -1379,7 +1380,7 @@ impl Plant {
             });
             // Normal spring-damper, tangential spring-damper (world frame).
             let v_n = vp[0] * n.x + vp[1] * n.y + vp[2] * n.z;
-            let f_n = (law.stiffness * depth - law.damping * v_n).max(0.0);
+            let f_n = law.normal_force(depth, v_n);
             let v_t = [vp[0] - n.x * v_n, vp[1] - n.y * v_n, vp[2] - n.z * v_n];
             let f_t: [f64; 3] = std::array::from_fn(|i| {
                 -(spring[i][j] * law.tangential_stiffness) - v_t[i] * law.tangential_damping

@@ -8,10 +8,6 @@
 //! plant test `with_every_effect_off_the_plant_is_atmo_core` checks that
 //! the result is atmo-core's bit for bit.
 
-// Everything `Plant::step` calls per step is `inline(always)`: the step is
-// compiled twice (portable and AVX2), and only inlined code gets the AVX2 copy.
-#![allow(clippy::inline_always)]
-
 use atmo_core::model::{Input, State, TiltedBody, idx, sin_cos};
 use nalgebra::{Matrix3, Vector3, Vector6};
 
