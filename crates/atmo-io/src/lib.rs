@@ -14,10 +14,12 @@
 //! Conventions: NED world, FRD body, Euler ZYX, the 12-state order of
 //! `atmo_core::model::idx`; time in u64 nanoseconds.
 
+#[cfg(feature = "drivers")]
 pub mod drivers;
 pub mod error;
 pub mod mcap_log;
 pub mod msg;
+#[cfg(feature = "ros2")]
 pub mod ros2;
 
 pub use error::{IoError, Result};

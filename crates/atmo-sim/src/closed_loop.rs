@@ -21,8 +21,8 @@ use nalgebra::Vector3;
 use serde::Serialize;
 
 use crate::error::{Result, SimError};
-use crate::plant::{Command, Plant};
 use crate::scenario::{Scenario, SuccessConfig};
+use atmo_plant::plant::{Command, Plant};
 
 /// One control tick as the runner saw it (what is logged and plotted).
 #[derive(Debug, Clone, Copy)]

@@ -1,6 +1,7 @@
 //! The one error type of atmo-sim.
 
 use atmo_core::CoreError;
+use atmo_plant::PlantError;
 
 /// Everything atmo-sim can refuse.
 ///
@@ -13,19 +14,26 @@ pub enum SimError {
     /// A configuration or robot-model error from atmo-core.
     #[error(transparent)]
     Core(#[from] CoreError),
-    /// A command given to the plant is NaN or infinite.
-    #[error("plant command `{name}` is not finite: {value}")]
-    NonFiniteCommand { name: &'static str, value: f64 },
-    /// The integration produced a non-finite state (the step is too large
-    /// for the configured stiffnesses, or the inputs drove it there).
-    #[error("the plant state became non-finite at t = {time} s")]
-    Diverged { time: f64 },
+    /// The plant refused a command or diverged.
+    #[error(transparent)]
+    Plant(PlantError),
     /// The flight stack or its MPC could not be built.
     #[error("closed loop: {0}")]
     Setup(String),
     /// Writing an output (figure, summary, log) failed.
     #[error("output: {0}")]
     Output(String),
+}
+
+impl From<PlantError> for SimError {
+    /// A plant config error stays a config error (`SimError::Core`), so
+    /// plant and scenario files report alike.
+    fn from(e: PlantError) -> Self {
+        match e {
+            PlantError::Core(core) => Self::Core(core),
+            other => Self::Plant(other),
+        }
+    }
 }
 
 /// Result alias for atmo-sim.

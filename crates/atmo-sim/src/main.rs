@@ -173,7 +173,7 @@ fn main() -> Result<()> {
             seed,
             quiet,
         } => {
-            let args = atmo_sim::explain::cli::Args {
+            let args = atmo_explain::cli::Args {
                 recording,
                 robot,
                 out,
@@ -183,7 +183,7 @@ fn main() -> Result<()> {
                 seed,
                 progress: !quiet,
             };
-            print!("{}", atmo_sim::explain::cli::run(&args)?);
+            print!("{}", atmo_explain::cli::run(&args)?);
             Ok(())
         }
     }

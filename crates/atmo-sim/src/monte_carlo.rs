@@ -16,9 +16,9 @@ use rand_chacha::ChaCha8Rng;
 use serde::Serialize;
 
 use crate::closed_loop::{ControllerConfig, Summary, fly};
-use crate::config::{GustConfig, MassErrorConfig};
 use crate::error::Result;
 use crate::scenario::{Scenario, SuccessConfig};
+use atmo_plant::config::{GustConfig, MassErrorConfig};
 
 /// Order statistics of one quantity over the runs that have it.
 #[derive(Debug, Clone, Serialize, PartialEq)]

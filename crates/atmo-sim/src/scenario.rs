@@ -32,10 +32,10 @@ use atmo_core::{CoreError, RobotConfig};
 use nalgebra::Vector3;
 use serde::Deserialize;
 
-use crate::config::{EffectsConfig, PlantConfig, TerrainConfig};
-use crate::contact::{Plane, rim_lowest_point};
 use crate::error::Result;
-use crate::plant::{Command, Event, InitialState, Plant};
+use atmo_plant::config::{EffectsConfig, PlantConfig, TerrainConfig};
+use atmo_plant::contact::{Plane, rim_lowest_point};
+use atmo_plant::plant::{Command, Event, InitialState, Plant};
 
 /// Largest pilot velocity command (m/s).
 pub const MAX_PILOT_SPEED: f64 = 1.0;
@@ -172,7 +172,7 @@ pub struct ScenarioFile {
 pub struct SuccessConfig {
     /// true: a wheel landing (touchdown tilt, impact speed, drive on);
     /// false: a flight that must not touch the ground.
-    #[serde(default = "crate::config::default_true")]
+    #[serde(default = "atmo_plant::config::default_true")]
     pub landing: bool,
     #[serde(default = "SuccessConfig::default_tilt")]
     pub min_touchdown_tilt_deg: f64,
@@ -509,13 +509,13 @@ impl Scenario {
 
     /// Builds the plant at the initial condition with the scenario's seed.
     pub fn build_plant(&self) -> Result<Plant> {
-        Plant::new(
+        Ok(Plant::new(
             &self.robot,
             &self.plant,
             &self.file.terrain,
             &self.initial_state()?,
             self.file.seed,
-        )
+        )?)
     }
 
     /// The pilot input in force at `t`.

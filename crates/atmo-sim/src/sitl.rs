@@ -28,8 +28,8 @@ use atmo_io::wall_clock_ns;
 
 use crate::closed_loop::{LandingTracker, Summary, pilot_input};
 use crate::error::{Result, SimError};
-use crate::plant::Command;
 use crate::scenario::Scenario;
+use atmo_plant::plant::Command;
 
 /// How the server runs.
 #[derive(Debug, Clone)]
@@ -131,7 +131,12 @@ impl Links {
 
     /// Sensor streams and heartbeats that are due; `stamp_ns` maps plant
     /// time to the estimate's ROS stamp.
-    fn publish(&mut self, plant: &crate::Plant, pilot: &PilotMsg, stamp_ns: impl Fn(f64) -> u64) {
+    fn publish(
+        &mut self,
+        plant: &atmo_plant::Plant,
+        pilot: &PilotMsg,
+        stamp_ns: impl Fn(f64) -> u64,
+    ) {
         let now = Instant::now();
         if let Some(e) = plant.estimate()
             && self.last_estimate != Some(e.sequence)

@@ -1,7 +1,7 @@
 //! Bad plant and scenario files are refused with errors naming the file and key.
 
 use atmo_core::CoreError;
-use atmo_sim::config::PlantConfig;
+use atmo_plant::config::PlantConfig;
 use atmo_sim::{Scenario, SimError};
 
 const PLANT: &str = include_str!("../../../config/plant.toml");
@@ -106,8 +106,8 @@ fn a_ragged_ground_effect_table_is_an_error() {
 
 #[test]
 fn unphysical_mass_errors_are_refused_by_the_plant() {
-    use atmo_sim::config::{EffectsConfig, MassErrorConfig, TerrainConfig};
-    use atmo_sim::plant::{InitialState, Plant};
+    use atmo_plant::config::{EffectsConfig, MassErrorConfig, TerrainConfig};
+    use atmo_plant::plant::{InitialState, Plant};
     let mut cfg = PlantConfig::ideal();
     cfg.effects = EffectsConfig {
         mass_error: Some(MassErrorConfig {

@@ -1,9 +1,9 @@
 //! The shipped scenarios load, validate and run open-loop, deterministically.
 
 use atmo_core::model::idx;
+use atmo_plant::config::PlantConfig;
+use atmo_plant::plant::EventKind;
 use atmo_sim::Scenario;
-use atmo_sim::config::PlantConfig;
-use atmo_sim::plant::EventKind;
 
 const NAMES: [&str; 5] = [
     "hover",

@@ -1,0 +1,485 @@
+//! From a recording to accelerations: the Savitzky-Golay differentiator,
+//! the composite body along the recording, the measured and nominal
+//! accelerations, the residual, the envelope and the noise floor.
+//!
+//! Both sides of the residual go through the same linear operator `S`:
+//! measured world velocity and body rates are differentiated with a
+//! Savitzky-Golay filter (local quadratic fit, window about 0.1 s chosen
+//! from the data rate); model accelerations and effect regressors are
+//! first integrated along the recording (trapezoid) and then differentiated
+//! with the same filter. So a model that is right gives a residual of pure
+//! noise, however fast the commands change, and every linear effect stays
+//! linear after filtering.
+
+use atmo_core::RobotConfig;
+use atmo_core::model::{Input, Model, TiltedBody, idx, rotation};
+use nalgebra::{Matrix3, Matrix6x4, Vector3, Vector6};
+
+use crate::ExplainError;
+use crate::recording::Recording;
+
+/// Channels of the residual: body-frame linear acceleration of B and
+/// angular acceleration.
+pub const CHANNELS: [&str; 6] = ["a_x", "a_y", "a_z", "wdot_x", "wdot_y", "wdot_z"];
+/// Units of the channels.
+pub const CHANNEL_UNITS: [&str; 6] = ["m/s^2", "m/s^2", "m/s^2", "rad/s^2", "rad/s^2", "rad/s^2"];
+
+/// Composite bodies on a tilt grid, interpolated in between (as the plant does).
+#[derive(Debug, Clone)]
+pub struct BodyTable {
+    step: f64,
+    bodies: Vec<TiltedBody>,
+}
+
+impl BodyTable {
+    pub fn new(model: &Model, tilt_max: f64) -> Self {
+        let step = 0.25_f64.to_radians();
+        let n = (tilt_max / step).ceil() as usize + 2;
+        let bodies = (0..n).map(|k| model.at_tilt(k as f64 * step)).collect();
+        Self { step, bodies }
+    }
+
+    /// The body at `varphi` (exact on the grid, linear in between).
+    pub fn at(&self, varphi: f64) -> TiltedBody {
+        let s = (varphi.max(0.0) / self.step).min((self.bodies.len() - 2) as f64);
+        let k = s.floor() as usize;
+        let w = s - k as f64;
+        let (a, b) = (&self.bodies[k], &self.bodies[k + 1]);
+        if w == 0.0 {
+            return *a;
+        }
+        let v = 1.0 - w;
+        TiltedBody {
+            varphi,
+            gravity: a.gravity,
+            mass: a.mass * v + b.mass * w,
+            first_moment: a.first_moment * v + b.first_moment * w,
+            inertia: a.inertia * v + b.inertia * w,
+            mass_matrix: a.mass_matrix * v + b.mass_matrix * w,
+            mass_matrix_inv: a.mass_matrix_inv * v + b.mass_matrix_inv * w,
+            thrust_force: a.thrust_force * v + b.thrust_force * w,
+            thrust_torque: a.thrust_torque * v + b.thrust_torque * w,
+            rotor_position: std::array::from_fn(|i| {
+                a.rotor_position[i] * v + b.rotor_position[i] * w
+            }),
+            rotor_axis: std::array::from_fn(|i| a.rotor_axis[i] * v + b.rotor_axis[i] * w),
+            disturbance: a.disturbance * v + b.disturbance * w,
+        }
+    }
+}
+
+/// Where the robot is in its flight envelope at one sample.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Envelope {
+    /// m, mean rotor hub height above the ground plane.
+    pub height: f64,
+    /// rad.
+    pub varphi: f64,
+    /// m/s.
+    pub speed: f64,
+    /// Mean normalized rotor command.
+    pub thrust: f64,
+    /// s since the first sample.
+    pub time: f64,
+    /// 1/s, mean absolute rate of change of the rotor commands (smoothed).
+    pub command_rate: f64,
+}
+
+/// The recording ready for fitting.
+#[derive(Debug, Clone)]
+pub struct Prepared {
+    pub n: usize,
+    pub t: Vec<f64>,
+    pub dt: f64,
+    /// Half window of the Savitzky-Golay filter (samples).
+    pub half: usize,
+    /// Derivative filter taps (per second), index `i + half` for offset i.
+    pub taps: Vec<f64>,
+    /// Contiguous usable runs `[start, end)`.
+    pub runs: Vec<(usize, usize)>,
+    /// Row is inside a run, away from its ends by the half window.
+    pub fit: Vec<bool>,
+    pub rot: Vec<Matrix3<f64>>,
+    /// Measured (filtered) body-frame accelerations, 6 per row.
+    pub meas: Vec<f64>,
+    /// Nominal model accelerations through the same filter, 6 per row.
+    pub nominal: Vec<f64>,
+    /// Residual `meas - nominal`, 6 per row.
+    pub resid: Vec<f64>,
+    /// Noise floor of each channel (standard deviation of the filtered noise).
+    pub floor: [f64; 6],
+    pub env: Vec<Envelope>,
+    /// Rows dropped because the wheels were at the ground.
+    pub contact_rows: usize,
+    /// Gaps in time (more than twice the median step) that split runs.
+    pub gaps: usize,
+    pub table: BodyTable,
+    pub wheel_radius: f64,
+    /// Per row: `M^-1 [A_F; A_T]`, the generalized acceleration per unit
+    /// rotor command.
+    pub act: Vec<Matrix6x4<f64>>,
+}
+
+/// Savitzky-Golay first-derivative taps of a local quadratic (= local
+/// linear) fit over `2 half + 1` samples spaced `dt`.
+pub fn sg_derivative_taps(half: usize, dt: f64) -> Vec<f64> {
+    let m = half as f64;
+    let denom = m * (m + 1.0) * (2.0 * m + 1.0) / 3.0 * dt;
+    (0..=2 * half).map(|j| (j as f64 - m) / denom).collect()
+}
+
+/// Savitzky-Golay smoothing taps of a local quadratic fit.
+pub fn sg_smoothing_taps(half: usize) -> Vec<f64> {
+    let m = half as f64;
+    let n = 2.0 * m + 1.0;
+    let denom = n * (4.0 * m * m + 4.0 * m - 3.0);
+    (0..=2 * half)
+        .map(|j| {
+            let i = j as f64 - m;
+            3.0 * (3.0 * m * m + 3.0 * m - 1.0 - 5.0 * i * i) / denom
+        })
+        .collect()
+}
+
+/// The window half-width for a data rate: about 0.1 s, at least 2 samples.
+pub fn half_window(dt: f64) -> usize {
+    ((0.05 / dt).round() as usize).max(2)
+}
+
+fn skew(r: &Vector3<f64>) -> Matrix3<f64> {
+    Matrix3::new(0.0, -r.z, r.y, r.z, 0.0, -r.x, -r.y, r.x, 0.0)
+}
+
+impl Prepared {
+    /// Applies `S` to per-row body-frame generalized accelerations `g`
+    /// (6 per row): rotate the linear part to the world frame, integrate
+    /// along each run, differentiate with the filter, rotate back. Rows
+    /// outside `fit` get 0.
+    pub fn smooth(&self, g: &[f64], out: &mut [f64]) {
+        out.fill(0.0);
+        let h = self.half;
+        let mut integ: Vec<[f64; 6]> = Vec::new();
+        for &(s, e) in &self.runs {
+            if e - s < 2 * h + 1 {
+                continue;
+            }
+            integ.clear();
+            let mut acc = [0.0; 6];
+            let mut prev = [0.0; 6];
+            for k in s..e {
+                let lin = self.rot[k] * Vector3::new(g[6 * k], g[6 * k + 1], g[6 * k + 2]);
+                let cur = [
+                    lin.x,
+                    lin.y,
+                    lin.z,
+                    g[6 * k + 3],
+                    g[6 * k + 4],
+                    g[6 * k + 5],
+                ];
+                if k > s {
+                    let dt = self.t[k] - self.t[k - 1];
+                    for c in 0..6 {
+                        acc[c] += 0.5 * dt * (prev[c] + cur[c]);
+                    }
+                }
+                prev = cur;
+                integ.push(acc);
+            }
+            self.differentiate_into(&integ, s, out);
+        }
+    }
+
+    /// Differentiates per-row world/body quantities `series` of run
+    /// starting at `s` into `out` (linear part rotated to the body frame).
+    fn differentiate_into(&self, series: &[[f64; 6]], s: usize, out: &mut [f64]) {
+        let h = self.half;
+        let len = series.len();
+        for j in h..len - h {
+            let mut d = [0.0; 6];
+            for (q, tap) in self.taps.iter().enumerate() {
+                let v = &series[j + q - h];
+                for c in 0..6 {
+                    d[c] += tap * v[c];
+                }
+            }
+            let k = s + j;
+            let lin = self.rot[k].transpose() * Vector3::new(d[0], d[1], d[2]);
+            out[6 * k..6 * k + 6].copy_from_slice(&[lin.x, lin.y, lin.z, d[3], d[4], d[5]]);
+        }
+    }
+
+    /// Builds everything from a recording and the robot model.
+    pub fn new(rec: &Recording, robot: &RobotConfig) -> Result<Self, ExplainError> {
+        let samples = &rec.samples;
+        let n = samples.len();
+        let dt = rec.median_dt();
+        if n < 50 || dt <= 0.0 {
+            return Err(ExplainError::Input {
+                file: rec.source.clone(),
+                message: format!(
+                    "too short to analyse: {n} usable rows (at least 50, about 1 s, are needed)"
+                ),
+            });
+        }
+        let half = half_window(dt);
+        let taps = sg_derivative_taps(half, dt);
+        let model = Model::new(robot);
+        let table = BodyTable::new(&model, robot.limits.tilt_max().max(0.1));
+        let wheel_radius = robot.wheels.radius;
+        let t: Vec<f64> = samples.iter().map(|s| s.t).collect();
+        let rot: Vec<Matrix3<f64>> = samples
+            .iter()
+            .map(|s| rotation(s.x[idx::YAW], s.x[idx::PITCH], s.x[idx::ROLL]))
+            .collect();
+
+        // Envelope and contact.
+        let mut env = Vec::with_capacity(n);
+        let mut usable = vec![true; n];
+        let mut contact_rows = 0;
+        let t0 = t[0];
+        for (k, s) in samples.iter().enumerate() {
+            let body = table.at(s.varphi);
+            let p = Vector3::new(s.x[idx::X], s.x[idx::Y], s.x[idx::Z]);
+            let r = &rot[k];
+            let mut hsum = 0.0;
+            let mut lowest = f64::INFINITY;
+            for i in 0..4 {
+                let hub = p + r * body.rotor_position[i];
+                let h = s.ground_z - hub.z;
+                hsum += h;
+                let axis = r * body.rotor_axis[i];
+                let reach = (1.0 - axis.z * axis.z).max(0.0).sqrt() * wheel_radius;
+                lowest = lowest.min(h - reach);
+            }
+            if lowest < 0.03 {
+                usable[k] = false;
+                contact_rows += 1;
+            }
+            let v = Vector3::new(s.x[idx::VX], s.x[idx::VY], s.x[idx::VZ]);
+            let du = if k > 0 {
+                let d = t[k] - t[k - 1];
+                (s.u - samples[k - 1].u).abs().sum() / 4.0 / d.max(1e-6)
+            } else {
+                0.0
+            };
+            env.push(Envelope {
+                height: hsum / 4.0,
+                varphi: s.varphi,
+                speed: v.norm(),
+                thrust: s.u.sum() / 4.0,
+                time: s.t - t0,
+                command_rate: du,
+            });
+        }
+        // Smooth the command rate over the window (it is noisy per sample).
+        let raw: Vec<f64> = env.iter().map(|e| e.command_rate).collect();
+        let mut acc = 0.0;
+        let mut prefix = vec![0.0; n + 1];
+        for k in 0..n {
+            acc += raw[k];
+            prefix[k + 1] = acc;
+        }
+        for k in 0..n {
+            let a = k.saturating_sub(half);
+            let b = (k + half + 1).min(n);
+            env[k].command_rate = (prefix[b] - prefix[a]) / (b - a) as f64;
+        }
+
+        // Runs: split at gaps and at excluded rows.
+        let mut runs = Vec::new();
+        let mut gaps = 0;
+        let mut start: Option<usize> = None;
+        for k in 0..n {
+            let gap = k > 0 && t[k] - t[k - 1] > 2.0 * dt;
+            if gap {
+                gaps += 1;
+            }
+            if let Some(s0) = start {
+                if gap || !usable[k] {
+                    runs.push((s0, k));
+                    start = None;
+                }
+            }
+            if start.is_none() && usable[k] {
+                start = Some(k);
+            }
+        }
+        if let Some(s0) = start {
+            runs.push((s0, n));
+        }
+        let mut fit = vec![false; n];
+        for &(s, e) in &runs {
+            if e - s > 2 * half {
+                for f in &mut fit[s + half..e - half] {
+                    *f = true;
+                }
+            }
+        }
+        let n_fit = fit.iter().filter(|f| **f).count();
+        if n_fit < 20 {
+            return Err(ExplainError::Input {
+                file: rec.source.clone(),
+                message: format!(
+                    "no airborne stretch long enough to analyse ({contact_rows} of {n} rows are \
+                     at the ground, {gaps} time gaps)"
+                ),
+            });
+        }
+
+        let mut prep = Self {
+            n,
+            t,
+            dt,
+            half,
+            taps,
+            runs,
+            fit,
+            rot,
+            meas: vec![0.0; 6 * n],
+            nominal: vec![0.0; 6 * n],
+            resid: vec![0.0; 6 * n],
+            floor: [0.0; 6],
+            env,
+            contact_rows,
+            gaps,
+            table,
+            wheel_radius,
+            act: Vec::with_capacity(n),
+        };
+
+        // Measured: differentiate world velocity and body rates.
+        let mut meas = vec![0.0; 6 * n];
+        for &(s, e) in &prep.runs {
+            if e - s < 2 * half + 1 {
+                continue;
+            }
+            let series: Vec<[f64; 6]> = (s..e)
+                .map(|k| {
+                    let x = &samples[k].x;
+                    [
+                        x[idx::VX],
+                        x[idx::VY],
+                        x[idx::VZ],
+                        x[idx::WX],
+                        x[idx::WY],
+                        x[idx::WZ],
+                    ]
+                })
+                .collect();
+            prep.differentiate_into(&series, s, &mut meas);
+        }
+        // Nominal model.
+        let mut raw = vec![0.0; 6 * n];
+        for (k, s) in samples.iter().enumerate() {
+            let body = prep.table.at(s.varphi);
+            let mut a = Matrix6x4::zeros();
+            a.fixed_view_mut::<3, 4>(0, 0).copy_from(&body.thrust_force);
+            a.fixed_view_mut::<3, 4>(3, 0)
+                .copy_from(&body.thrust_torque);
+            prep.act.push(body.mass_matrix_inv * a);
+            let a = body.accelerations(&s.x, &s.u, &Vector6::zeros());
+            raw[6 * k..6 * k + 6].copy_from_slice(a.as_slice());
+        }
+        let mut nominal = vec![0.0; 6 * n];
+        prep.smooth(&raw, &mut nominal);
+        let resid: Vec<f64> = meas.iter().zip(&nominal).map(|(a, b)| a - b).collect();
+
+        // Noise floor: white-noise level of the measured velocity and rates
+        // (second differences, robust scale), through the filter's gain.
+        let gain = prep.taps.iter().map(|h| h * h).sum::<f64>().sqrt();
+        let mut floor = [0.0; 6];
+        let cols = [idx::VX, idx::VY, idx::VZ, idx::WX, idx::WY, idx::WZ];
+        let mut sig = [0.0; 6];
+        for (c, &col) in cols.iter().enumerate() {
+            let mut d2: Vec<f64> = Vec::with_capacity(n);
+            for &(s, e) in &prep.runs {
+                for k in s + 1..e.saturating_sub(1) {
+                    d2.push(
+                        (samples[k + 1].x[col] - 2.0 * samples[k].x[col] + samples[k - 1].x[col])
+                            .abs(),
+                    );
+                }
+            }
+            if d2.is_empty() {
+                continue;
+            }
+            let mid = d2.len() / 2;
+            let (_, med, _) = d2.select_nth_unstable_by(mid, f64::total_cmp);
+            sig[c] = 1.4826 * *med / 6.0_f64.sqrt();
+        }
+        // Command timing: the commands change between samples at instants
+        // the recording does not give; the trapezoid's error per interval
+        // is about |B du| h / sqrt(12), and it accumulates through the
+        // integration (variance through the tail sums of the taps).
+        let tails: f64 = (0..prep.taps.len())
+            .map(|j| prep.taps[j..].iter().sum::<f64>().powi(2))
+            .sum();
+        let mut cmd_var = [0.0; 6];
+        let mut rows = 0usize;
+        for k in 1..n {
+            if !prep.fit[k] {
+                continue;
+            }
+            let h = prep.t[k] - prep.t[k - 1];
+            let body = prep.table.at(samples[k].varphi);
+            let mut a = nalgebra::Matrix6x4::zeros();
+            a.fixed_view_mut::<3, 4>(0, 0).copy_from(&body.thrust_force);
+            a.fixed_view_mut::<3, 4>(3, 0)
+                .copy_from(&body.thrust_torque);
+            let du = samples[k].u - samples[k - 1].u;
+            let e = body.mass_matrix_inv * (a * du) * h;
+            for c in 0..6 {
+                cmd_var[c] += e[c] * e[c] / 12.0;
+            }
+            rows += 1;
+        }
+        let rows = rows.max(1) as f64;
+        // Linear channels are rotated world channels: pool the three.
+        let lin = ((sig[0] * sig[0] + sig[1] * sig[1] + sig[2] * sig[2]) / 3.0).sqrt();
+        for c in 0..3 {
+            floor[c] = ((lin * gain).powi(2) + cmd_var[c] / rows * tails)
+                .sqrt()
+                .max(1e-6);
+            floor[c + 3] = ((sig[c + 3] * gain).powi(2) + cmd_var[c + 3] / rows * tails)
+                .sqrt()
+                .max(1e-6);
+        }
+        prep.meas = meas;
+        prep.nominal = nominal;
+        prep.resid = resid;
+        prep.floor = floor;
+        Ok(prep)
+    }
+
+    /// Indices of the rows used for fitting.
+    pub fn fit_rows(&self) -> impl Iterator<Item = usize> + '_ {
+        (0..self.n).filter(|&k| self.fit[k])
+    }
+}
+
+/// Cross-product matrix `[r]x`.
+pub(crate) fn cross_matrix(r: &Vector3<f64>) -> Matrix3<f64> {
+    skew(r)
+}
+
+/// First-order lag of the rotor commands with time constant `tau` (s),
+/// exact for commands that move linearly between samples (the same
+/// first-order hold the trapezoid integration of the model assumes);
+/// `tau <= 0` returns the commands.
+pub fn lagged_commands(t: &[f64], u: &[Input], tau: f64) -> Vec<Input> {
+    if tau <= 0.0 {
+        return u.to_vec();
+    }
+    let mut out = Vec::with_capacity(u.len());
+    let mut state = u.first().copied().unwrap_or_else(Input::zeros);
+    for k in 0..u.len() {
+        if k > 0 {
+            let h = (t[k] - t[k - 1]).max(1e-9);
+            let a = 1.0 - (-h / tau).exp();
+            let b = 1.0 - tau * a / h;
+            state = state * (1.0 - a) + u[k - 1] * a + (u[k] - u[k - 1]) * b;
+        }
+        out.push(state);
+    }
+    out
+}

@@ -1,0 +1,538 @@
+//! Outputs: `report.md`, `fitted_effects.toml`, `explain.json` and PNG
+//! plots (residual heat maps before and after, time series of recording vs
+//! model before and after, effect scores).
+
+use std::fmt::Write as _;
+use std::path::Path;
+
+use plotters::prelude::*;
+use serde_json::json;
+
+use crate::data::{CHANNEL_UNITS, CHANNELS};
+use crate::locate::{HEIGHT_EDGES, Location, VARPHI_EDGES};
+use crate::{ExplainError, Explanation, HIGH_CONFIDENCE};
+
+fn out_err(e: impl std::fmt::Display) -> ExplainError {
+    ExplainError::Output(e.to_string())
+}
+
+/// The JSON document (`explain.json`).
+pub fn json(ex: &Explanation) -> serde_json::Value {
+    let effects: Vec<serde_json::Value> = ex
+        .effects
+        .iter()
+        .map(|e| {
+            json!({
+                "name": e.name,
+                "physics": e.physics,
+                "selected": e.selected,
+                "confidence": e.confidence,
+                "high_confidence": e.selected && e.confidence >= HIGH_CONFIDENCE,
+                "heldout_gain": e.heldout_gain,
+                "parameters": e.parameters,
+                "indistinguishable_from": e.indistinguishable_from,
+            })
+        })
+        .collect();
+    let rms = |t: &crate::RmsTable| {
+        json!({
+            "per_channel": CHANNELS.iter().zip(t.per_channel).map(|(c, v)| (c.to_string(), json!(v))).collect::<serde_json::Map<String, serde_json::Value>>(),
+            "located_region_per_channel": CHANNELS.iter().zip(t.located_per_channel).map(|(c, v)| (c.to_string(), json!(v))).collect::<serde_json::Map<String, serde_json::Value>>(),
+            "located_region_normalized": t.located_normalized,
+            "located_region_rows": t.located_rows,
+        })
+    };
+    json!({
+        "source": ex.source,
+        "rows": ex.rows,
+        "rows_used": ex.rows_used,
+        "rate_hz": ex.rate_hz,
+        "duration_s": ex.duration_s,
+        "window_samples": ex.window_samples,
+        "ignored_columns": ex.ignored_columns,
+        "skipped_nonfinite_rows": ex.skipped_nonfinite,
+        "skipped_time_rows": ex.skipped_time,
+        "ground_contact_rows": ex.contact_rows,
+        "noise_floor": CHANNELS.iter().zip(ex.noise_floor).map(|(c, v)| (c.to_string(), json!(v))).collect::<serde_json::Map<String, serde_json::Value>>(),
+        "mismatch_found": ex.mismatch_found,
+        "verdict": ex.verdict,
+        "located": ex.located,
+        "located_channels": ex.located_channels,
+        "effects": effects,
+        "indistinguishable": ex.indistinguishable,
+        "selection_steps": ex.selection_steps,
+        "heldout_rms_before": rms(&ex.heldout_rms_before),
+        "heldout_rms_after": rms(&ex.heldout_rms_after),
+        "multistep_before": ex.multistep_before,
+        "multistep_after": ex.multistep_after,
+        "ground_effect_gain_grid": ex.ground_effect_gain_grid,
+        "motor_lag_profile": ex.motor_lag_profile.iter().map(|(t, c)| json!({"time_constant_s": t, "heldout_error": c})).collect::<Vec<_>>(),
+        "timings_s": ex.timings_s,
+        "notes": ex.notes,
+    })
+}
+
+/// The human-readable report.
+pub fn report_md(ex: &Explanation) -> String {
+    let mut s = String::new();
+    let _ = writeln!(s, "# Discrepancy report\n");
+    let _ = writeln!(
+        s,
+        "Recording: `{}`, {} rows ({} used) over {:.1} s at {:.0} Hz; Savitzky-Golay window {} samples.\n",
+        ex.source, ex.rows, ex.rows_used, ex.duration_s, ex.rate_hz, ex.window_samples
+    );
+    if !ex.ignored_columns.is_empty() {
+        let _ = writeln!(s, "Ignored columns: {}.\n", ex.ignored_columns.join(", "));
+    }
+    if ex.skipped_nonfinite + ex.skipped_time > 0 {
+        let _ = writeln!(
+            s,
+            "Skipped rows: {} non-finite or missing values, {} not advancing in time.\n",
+            ex.skipped_nonfinite, ex.skipped_time
+        );
+    }
+    if ex.contact_rows > 0 {
+        let _ = writeln!(
+            s,
+            "{} rows with the wheels at the ground were left out (ground contact is not a candidate effect).\n",
+            ex.contact_rows
+        );
+    }
+    let _ = writeln!(s, "## Verdict\n\n**{}**\n", ex.verdict);
+    for n in &ex.notes {
+        let _ = writeln!(s, "Note: {n}.\n");
+    }
+    let _ = writeln!(
+        s,
+        "## 1. Residuals\n\nNoise floor per channel (filtered sensor noise and command timing):\n"
+    );
+    let _ = writeln!(
+        s,
+        "| channel | floor | held-out RMS before | after | in located region before | after |"
+    );
+    let _ = writeln!(s, "| --- | --- | --- | --- | --- | --- |");
+    for c in 0..6 {
+        let _ = writeln!(
+            s,
+            "| {} ({}) | {:.4} | {:.4} | {:.4} | {:.4} | {:.4} |",
+            CHANNELS[c],
+            CHANNEL_UNITS[c],
+            ex.noise_floor[c],
+            ex.heldout_rms_before.per_channel[c],
+            ex.heldout_rms_after.per_channel[c],
+            ex.heldout_rms_before.located_per_channel[c],
+            ex.heldout_rms_after.located_per_channel[c]
+        );
+    }
+    let b = &ex.heldout_rms_before;
+    let a = &ex.heldout_rms_after;
+    let red = if b.located_normalized > 0.0 {
+        100.0 * (1.0 - a.located_normalized / b.located_normalized)
+    } else {
+        0.0
+    };
+    let _ = writeln!(
+        s,
+        "\nIn the located region ({} rows, channels {}): RMS {:.2} -> {:.2} noise floors ({red:.0} % lower, held-out).\n",
+        b.located_rows,
+        if ex.located_channels.is_empty() {
+            "none".into()
+        } else {
+            ex.located_channels.join(", ")
+        },
+        b.located_normalized,
+        a.located_normalized
+    );
+    let mb = &ex.multistep_before;
+    let ma = &ex.multistep_after;
+    let _ = writeln!(
+        s,
+        "Multi-step prediction ({:.2} s horizon, {} starts, plant replayed with the recorded commands; after = held-out fitted effects):\n",
+        mb.horizon_s, mb.starts
+    );
+    let _ = writeln!(
+        s,
+        "| error at horizon | before | after |\n| --- | --- | --- |"
+    );
+    let _ = writeln!(
+        s,
+        "| position (m) x, y, z | {:.4}, {:.4}, {:.4} | {:.4}, {:.4}, {:.4} |",
+        mb.position[0],
+        mb.position[1],
+        mb.position[2],
+        ma.position[0],
+        ma.position[1],
+        ma.position[2]
+    );
+    let _ = writeln!(
+        s,
+        "| attitude (rad) yaw, pitch, roll | {:.4}, {:.4}, {:.4} | {:.4}, {:.4}, {:.4} |",
+        mb.attitude[0],
+        mb.attitude[1],
+        mb.attitude[2],
+        ma.attitude[0],
+        ma.attitude[1],
+        ma.attitude[2]
+    );
+    let _ = writeln!(
+        s,
+        "| velocity (m/s) x, y, z | {:.4}, {:.4}, {:.4} | {:.4}, {:.4}, {:.4} |",
+        mb.velocity[0],
+        mb.velocity[1],
+        mb.velocity[2],
+        ma.velocity[0],
+        ma.velocity[1],
+        ma.velocity[2]
+    );
+    let _ = writeln!(
+        s,
+        "| body rates (rad/s) x, y, z | {:.4}, {:.4}, {:.4} | {:.4}, {:.4}, {:.4} |\n",
+        mb.rate[0], mb.rate[1], mb.rate[2], ma.rate[0], ma.rate[1], ma.rate[2]
+    );
+    let _ = writeln!(s, "![time series](timeseries.png)\n");
+    let _ = writeln!(s, "## 2. Where\n");
+    if ex.located.is_empty() {
+        let _ = writeln!(
+            s,
+            "No channel and region carries residual beyond the noise floor.\n"
+        );
+    } else {
+        let _ = writeln!(
+            s,
+            "Bins whose residual is beyond the noise floor (bias or excess variance, family-wise level 0.1 %):\n"
+        );
+        let _ = writeln!(
+            s,
+            "| channel | region | rows | mean | RMS | RMS / floor | p |\n| --- | --- | --- | --- | --- | --- | --- |"
+        );
+        let mut located = ex.located.clone();
+        located.sort_by(|a, b| b.rms_ratio.total_cmp(&a.rms_ratio));
+        for l in located.iter().take(40) {
+            let _ = writeln!(
+                s,
+                "| {} | {} | {} | {:.4} | {:.4} | {:.2} | {:.1e} |",
+                l.channel, l.region, l.samples, l.mean, l.rms, l.rms_ratio, l.p_value
+            );
+        }
+        if located.len() > 40 {
+            let _ = writeln!(s, "\n({} more in explain.json)", located.len() - 40);
+        }
+    }
+    let _ = writeln!(
+        s,
+        "\n![heat map before](heatmap_before.png) ![heat map after](heatmap_after.png)\n"
+    );
+    let _ = writeln!(s, "## 3. Which physics\n");
+    let _ = writeln!(
+        s,
+        "Forward-backward selection on held-out segments; confidence = inclusion frequency over {} random halves of the segments; high confidence >= {HIGH_CONFIDENCE}.\n",
+        crate::select::STABILITY_RUNS
+    );
+    let _ = writeln!(
+        s,
+        "| effect | verdict | confidence | held-out gain | parameters |\n| --- | --- | --- | --- | --- |"
+    );
+    for e in &ex.effects {
+        let params: Vec<String> = e
+            .parameters
+            .iter()
+            .take(if e.name == "ground_effect" { 0 } else { 8 })
+            .map(|p| match p.std {
+                Some(sd) => format!("{} = {:.4} +- {:.4} {}", p.name, p.value, sd, p.unit),
+                None => format!("{} = {:.4} {}", p.name, p.value, p.unit),
+            })
+            .collect();
+        let params = if e.name == "ground_effect" {
+            "gain grid below".to_string()
+        } else {
+            params.join("; ")
+        };
+        let verdict = if e.selected { "selected" } else { "rejected" };
+        let _ = writeln!(
+            s,
+            "| {} ({}) | {}{} | {:.2} | {:.4} | {} |",
+            e.name,
+            e.physics,
+            verdict,
+            if e.indistinguishable_from.is_empty() {
+                String::new()
+            } else {
+                format!(
+                    "; cannot be told apart from {}",
+                    e.indistinguishable_from.join(", ")
+                )
+            },
+            e.confidence,
+            e.heldout_gain,
+            params
+        );
+    }
+    if ex
+        .effects
+        .iter()
+        .any(|e| e.name == "ground_effect" && e.selected)
+    {
+        let _ = writeln!(
+            s,
+            "\nGround-effect gain T/T_inf - 1 (fitted, +- jackknife sd; * = no data there):\n"
+        );
+        let _ = writeln!(
+            s,
+            "| hub height | 0 deg | 40 deg | 50 deg | 60 deg | 70 deg |\n| --- | --- | --- | --- | --- | --- |"
+        );
+        for h in crate::GRID_HEIGHTS {
+            let _ = write!(s, "| {h:.2} m |");
+            for v in crate::GRID_TILTS_DEG {
+                if let Some(g) = ex
+                    .ground_effect_gain_grid
+                    .iter()
+                    .find(|g| g.height_m == h && g.varphi_deg == v)
+                {
+                    let _ = write!(
+                        s,
+                        " {:.3} +- {:.3}{} |",
+                        g.gain,
+                        g.std,
+                        if g.covered { "" } else { " *" }
+                    );
+                }
+            }
+            let _ = writeln!(s);
+        }
+    }
+    let _ = writeln!(s, "\n![effect scores](effects.png)\n");
+    let _ = writeln!(
+        s,
+        "## 4. The model with the fitted effects\n\n[fitted_effects.toml](fitted_effects.toml) (a plant file):\n\n```toml\n{}```",
+        ex.fitted_effects_toml
+    );
+    s
+}
+
+fn heat_png(
+    path: &Path,
+    loc: &Location,
+    title: &str,
+    floor: &[f64; 6],
+) -> Result<(), ExplainError> {
+    let root = BitMapBackend::new(path, (760, 520)).into_drawing_area();
+    root.fill(&WHITE).map_err(out_err)?;
+    let nh = HEIGHT_EDGES.len() - 1;
+    let nv = VARPHI_EDGES.len() - 1;
+    let mut chart = ChartBuilder::on(&root)
+        .caption(title, ("sans-serif", 20))
+        .margin(10)
+        .x_label_area_size(40)
+        .y_label_area_size(60)
+        .build_cartesian_2d(0..nv, 0..nh)
+        .map_err(out_err)?;
+    let vlabels = ["<15", "15-35", "35-45", "45-55", "55-65", ">65"];
+    let hlabels = [
+        "<0.25",
+        "0.25-0.35",
+        "0.35-0.45",
+        "0.45-0.6",
+        "0.6-0.8",
+        "0.8-1.2",
+        "1.2-2",
+        ">2",
+    ];
+    chart
+        .configure_mesh()
+        .disable_mesh()
+        .x_desc("tilt varphi (deg)")
+        .y_desc("hub height (m)")
+        .x_labels(nv)
+        .y_labels(nh)
+        .x_label_formatter(&|v| vlabels.get(*v).copied().unwrap_or("").to_string())
+        .y_label_formatter(&|h| hlabels.get(*h).copied().unwrap_or("").to_string())
+        .draw()
+        .map_err(out_err)?;
+    for h in 0..nh {
+        for v in 0..nv {
+            let cell = &loc.heat[h][v];
+            if cell[0].samples == 0 {
+                continue;
+            }
+            // RMS over the channels in noise floors.
+            let r = ((0..6)
+                .map(|c| (cell[c].rms / floor[c]).powi(2))
+                .sum::<f64>()
+                / 6.0)
+                .sqrt();
+            let x = ((r - 1.0) / 4.0).clamp(0.0, 1.0);
+            let color = ViridisRGB::get_color(x);
+            chart
+                .draw_series(std::iter::once(Rectangle::new(
+                    [(v, h), (v + 1, h + 1)],
+                    color.filled(),
+                )))
+                .map_err(out_err)?;
+            let flagged = cell.iter().any(|c| c.flagged);
+            chart
+                .draw_series(std::iter::once(Text::new(
+                    format!("{r:.1}{}", if flagged { "*" } else { "" }),
+                    (v, h + 1),
+                    ("sans-serif", 16)
+                        .into_font()
+                        .color(&if x > 0.6 { BLACK } else { WHITE }),
+                )))
+                .map_err(out_err)?;
+        }
+    }
+    root.present().map_err(out_err)?;
+    Ok(())
+}
+
+fn series_png(path: &Path, ex: &Explanation) -> Result<(), ExplainError> {
+    let Some(series) = &ex.series else {
+        return Ok(());
+    };
+    let (ch, t, meas, nom, fit) = (
+        &series.channel,
+        &series.t,
+        &series.recording,
+        &series.nominal,
+        &series.fitted,
+    );
+    if t.is_empty() {
+        return Ok(());
+    }
+    let root = BitMapBackend::new(path, (1100, 500)).into_drawing_area();
+    root.fill(&WHITE).map_err(out_err)?;
+    let lo = meas
+        .iter()
+        .chain(nom)
+        .chain(fit)
+        .copied()
+        .fold(f64::INFINITY, f64::min);
+    let hi = meas
+        .iter()
+        .chain(nom)
+        .chain(fit)
+        .copied()
+        .fold(f64::NEG_INFINITY, f64::max);
+    let pad = 0.05 * (hi - lo).max(1e-6);
+    let mut chart = ChartBuilder::on(&root)
+        .caption(
+            format!(
+                "{} ({}): recording vs model",
+                CHANNELS[*ch], CHANNEL_UNITS[*ch]
+            ),
+            ("sans-serif", 20),
+        )
+        .margin(10)
+        .x_label_area_size(35)
+        .y_label_area_size(60)
+        .build_cartesian_2d(t[0]..t[t.len() - 1], lo - pad..hi + pad)
+        .map_err(out_err)?;
+    chart
+        .configure_mesh()
+        .x_desc("t (s)")
+        .draw()
+        .map_err(out_err)?;
+    let pts = |v: &Vec<f64>| t.iter().copied().zip(v.iter().copied()).collect::<Vec<_>>();
+    chart
+        .draw_series(LineSeries::new(pts(meas), BLACK.stroke_width(1)))
+        .map_err(out_err)?
+        .label("recording")
+        .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLACK));
+    chart
+        .draw_series(LineSeries::new(pts(nom), RED.stroke_width(1)))
+        .map_err(out_err)?
+        .label("nominal model (before)")
+        .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], RED));
+    chart
+        .draw_series(LineSeries::new(pts(fit), BLUE.stroke_width(1)))
+        .map_err(out_err)?
+        .label("with fitted effects (after, held-out)")
+        .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], BLUE));
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.8))
+        .border_style(BLACK)
+        .draw()
+        .map_err(out_err)?;
+    root.present().map_err(out_err)?;
+    Ok(())
+}
+
+fn effects_png(path: &Path, ex: &Explanation) -> Result<(), ExplainError> {
+    let root = BitMapBackend::new(path, (800, 420)).into_drawing_area();
+    root.fill(&WHITE).map_err(out_err)?;
+    let n = ex.effects.len();
+    let mut chart = ChartBuilder::on(&root)
+        .caption(
+            "effect scores: confidence (inclusion frequency)",
+            ("sans-serif", 20),
+        )
+        .margin(10)
+        .x_label_area_size(30)
+        .y_label_area_size(110)
+        .build_cartesian_2d(0.0..1.0, 0..n)
+        .map_err(out_err)?;
+    let names: Vec<String> = ex.effects.iter().map(|e| e.name.clone()).collect();
+    chart
+        .configure_mesh()
+        .disable_y_mesh()
+        .y_labels(n)
+        .y_label_formatter(&|i| {
+            names
+                .get(n.saturating_sub(1 + *i))
+                .cloned()
+                .unwrap_or_default()
+        })
+        .draw()
+        .map_err(out_err)?;
+    for (i, e) in ex.effects.iter().enumerate() {
+        let y = n - 1 - i;
+        let color = if e.selected {
+            GREEN
+        } else {
+            RGBColor(160, 160, 160)
+        };
+        chart
+            .draw_series(std::iter::once(Rectangle::new(
+                [(0.0, y), (e.confidence.max(0.005), y + 1)],
+                color.filled(),
+            )))
+            .map_err(out_err)?;
+    }
+    root.present().map_err(out_err)?;
+    Ok(())
+}
+
+/// Writes every output into `dir` (created if needed).
+pub fn write_all(ex: &Explanation, dir: &Path) -> Result<(), ExplainError> {
+    std::fs::create_dir_all(dir)
+        .map_err(|e| ExplainError::Output(format!("creating {}: {e}", dir.display())))?;
+    let write = |name: &str, text: &str| {
+        std::fs::write(dir.join(name), text)
+            .map_err(|e| ExplainError::Output(format!("writing {}: {e}", dir.join(name).display())))
+    };
+    write("fitted_effects.toml", &ex.fitted_effects_toml)?;
+    write(
+        "explain.json",
+        &(serde_json::to_string_pretty(&json(ex)).map_err(out_err)? + "\n"),
+    )?;
+    write("report.md", &report_md(ex))?;
+    if let Some(loc) = &ex.location_before {
+        heat_png(
+            &dir.join("heatmap_before.png"),
+            loc,
+            "residual RMS / noise floor, nominal model (* = located)",
+            &ex.noise_floor,
+        )?;
+    }
+    if let Some(loc) = &ex.location_after {
+        heat_png(
+            &dir.join("heatmap_after.png"),
+            loc,
+            "residual RMS / noise floor, with fitted effects (held-out)",
+            &ex.noise_floor,
+        )?;
+    }
+    series_png(&dir.join("timeseries.png"), ex)?;
+    effects_png(&dir.join("effects.png"), ex)?;
+    Ok(())
+}

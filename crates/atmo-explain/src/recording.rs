@@ -1,0 +1,331 @@
+//! Recordings: the rows the discrepancy finder reads, and the CSV reader.
+//!
+//! CSV format (docs/recording_format.md): a header row, then one row per
+//! sample, comma-separated, SI units, NED world / FRD body / Euler ZYX.
+//! Required columns: `t, x, y, z, yaw, pitch, roll, vx, vy, vz, wx, wy, wz,
+//! u1, u2, u3, u4, varphi`. Optional: `ground_z` (NED z of the ground plane
+//! under the robot, 0 when absent) and `battery_v`. Unknown columns are
+//! ignored and listed; rows with a non-finite value, or whose time does not
+//! increase, are skipped and counted.
+
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+use atmo_core::model::{Input, State};
+
+use crate::ExplainError;
+
+/// Required columns, in state order then inputs then tilt.
+pub const REQUIRED_COLUMNS: [&str; 18] = [
+    "t", "x", "y", "z", "yaw", "pitch", "roll", "vx", "vy", "vz", "wx", "wy", "wz", "u1", "u2",
+    "u3", "u4", "varphi",
+];
+/// Topic of the flight stack's tick status in its MCAP logs.
+pub const STATUS_TOPIC: &str = "/atmo/status";
+/// Optional columns the tool uses.
+pub const OPTIONAL_COLUMNS: [&str; 2] = ["ground_z", "battery_v"];
+
+/// One sample of a recording.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Sample {
+    /// s.
+    pub t: f64,
+    /// Rigid-body state (atmo-core order).
+    pub x: State,
+    /// Normalized rotor commands in effect at `t`.
+    pub u: Input,
+    /// rad.
+    pub varphi: f64,
+    /// NED z of the ground plane under the robot (m).
+    pub ground_z: f64,
+    /// V, if recorded.
+    pub battery_v: Option<f64>,
+}
+
+/// A recording and what reading it found.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Recording {
+    pub source: PathBuf,
+    pub samples: Vec<Sample>,
+    /// Columns present but not used.
+    pub ignored_columns: Vec<String>,
+    /// Rows skipped because a value was missing, unparsable or not finite.
+    pub skipped_nonfinite: usize,
+    /// Rows skipped because their time did not increase.
+    pub skipped_time: usize,
+}
+
+impl Recording {
+    /// From samples in memory (tests, generators).
+    pub fn from_samples(source: impl Into<PathBuf>, samples: Vec<Sample>) -> Self {
+        Self {
+            source: source.into(),
+            samples,
+            ..Self::default()
+        }
+    }
+
+    /// Reads a recording; the format is chosen by the extension (`.mcap`:
+    /// the flight stack's log, anything else: CSV).
+    pub fn load(path: impl AsRef<Path>) -> Result<Self, ExplainError> {
+        let path = path.as_ref();
+        let ext = path
+            .extension()
+            .and_then(|e| e.to_str())
+            .unwrap_or("")
+            .to_ascii_lowercase();
+        if ext == "mcap" {
+            return Self::from_mcap(path);
+        }
+        let bytes = std::fs::read(path).map_err(|e| ExplainError::Input {
+            file: path.to_path_buf(),
+            message: format!("cannot read the file: {e}"),
+        })?;
+        let text = String::from_utf8(bytes).map_err(|e| ExplainError::Input {
+            file: path.to_path_buf(),
+            message: format!(
+                "not a text (UTF-8) CSV file: invalid byte at offset {}",
+                e.utf8_error().valid_up_to()
+            ),
+        })?;
+        Self::from_csv_str(&text, path)
+    }
+
+    /// Reads the flight stack's MCAP log: topic [`STATUS_TOPIC`]
+    /// (`atmo_msgs/MpcStatus`, one per tick). A row per distinct estimate:
+    /// `t` = tick stamp - estimate age (the instant the estimate describes),
+    /// the estimated state, the rotor commands of the last tick at or before
+    /// that instant, the tilt interpolated between ticks, and the ground
+    /// from the logged height (`ground_z = z + height`).
+    pub fn from_mcap(path: &Path) -> Result<Self, ExplainError> {
+        let fail = |message: String| ExplainError::Input {
+            file: path.to_path_buf(),
+            message,
+        };
+        let msgs = atmo_io::mcap_log::read_topic::<atmo_io::msg::MpcStatus>(path, STATUS_TOPIC)
+            .map_err(|e| {
+                fail(format!(
+                    "cannot read the MCAP log ({e}); a log cut short by a killed writer can be \
+                     repaired with atmo_io::mcap_log::recover"
+                ))
+            })?;
+        if msgs.is_empty() {
+            return Err(fail(format!(
+                "the MCAP log has no messages on {STATUS_TOPIC} (atmo_msgs/MpcStatus)"
+            )));
+        }
+        let ticks: Vec<(f64, &atmo_io::msg::MpcStatus)> = msgs
+            .iter()
+            .map(|(_, m)| (m.stamp_ns as f64 * 1e-9, m))
+            .collect();
+        let mut rec = Recording {
+            source: path.to_path_buf(),
+            ..Recording::default()
+        };
+        let mut last_t = f64::NEG_INFINITY;
+        let mut j = 0;
+        for (stamp, m) in &ticks {
+            if m.estimate_age < 0.0 {
+                continue; // no estimate yet
+            }
+            let t = stamp - m.estimate_age;
+            if (t - last_t).abs() < 1e-9 {
+                continue; // the same estimate, seen by another tick
+            }
+            let finite = m.state.iter().all(|v| v.is_finite())
+                && m.height.is_finite()
+                && m.varphi.is_finite()
+                && t.is_finite();
+            if !finite {
+                rec.skipped_nonfinite += 1;
+                continue;
+            }
+            if t < last_t {
+                rec.skipped_time += 1;
+                continue;
+            }
+            // Last tick at or before t: its commands were in effect.
+            while j + 1 < ticks.len() && ticks[j + 1].0 <= t + 1e-9 {
+                j += 1;
+            }
+            let (t0, m0) = ticks[j];
+            if t0 > t + 1e-9 {
+                continue; // before the first tick's commands
+            }
+            let u = m0.thrust;
+            if !u.iter().all(|v| v.is_finite()) {
+                rec.skipped_nonfinite += 1;
+                continue;
+            }
+            let varphi = match ticks.get(j + 1) {
+                Some((t1, m1)) if *t1 > t0 => {
+                    m0.varphi + (m1.varphi - m0.varphi) * (t - t0) / (t1 - t0)
+                }
+                _ => m0.varphi,
+            };
+            last_t = t;
+            let x = State::from_column_slice(&m.state);
+            rec.samples.push(Sample {
+                t,
+                x,
+                u: Input::from_column_slice(&u),
+                varphi,
+                ground_z: x[2] + m.height,
+                battery_v: None,
+            });
+        }
+        if rec.samples.is_empty() {
+            return Err(fail(format!(
+                "no usable rows on {STATUS_TOPIC}: {} non-finite, {} out of order",
+                rec.skipped_nonfinite, rec.skipped_time
+            )));
+        }
+        Ok(rec)
+    }
+
+    /// Parses CSV text; `file` names the origin in errors.
+    pub fn from_csv_str(text: &str, file: impl Into<PathBuf>) -> Result<Self, ExplainError> {
+        let file = file.into();
+        let fail = |message: String| ExplainError::Input {
+            file: file.clone(),
+            message,
+        };
+        let mut lines = text
+            .lines()
+            .enumerate()
+            .filter(|(_, l)| !l.trim().is_empty() && !l.trim_start().starts_with('#'));
+        let Some((_, header)) = lines.next() else {
+            return Err(fail(
+                "the file is empty: expected a header row naming the columns \
+                 (t, x, y, z, yaw, pitch, roll, vx, vy, vz, wx, wy, wz, u1..u4, varphi)"
+                    .into(),
+            ));
+        };
+        let names: Vec<String> = header
+            .trim_start_matches('\u{feff}')
+            .split(',')
+            .map(|s| s.trim().trim_matches('"').to_string())
+            .collect();
+        let find = |name: &str| names.iter().position(|n| n == name);
+        let missing: Vec<&str> = REQUIRED_COLUMNS
+            .iter()
+            .copied()
+            .filter(|c| find(c).is_none())
+            .collect();
+        if !missing.is_empty() {
+            return Err(fail(format!(
+                "missing required column{} {} (header has: {})",
+                if missing.len() > 1 { "s" } else { "" },
+                missing
+                    .iter()
+                    .map(|m| format!("`{m}`"))
+                    .collect::<Vec<_>>()
+                    .join(", "),
+                names.join(", ")
+            )));
+        }
+        for (i, n) in names.iter().enumerate() {
+            if names[..i].contains(n) {
+                return Err(fail(format!("column `{n}` appears twice in the header")));
+            }
+        }
+        let required: Vec<usize> = REQUIRED_COLUMNS
+            .iter()
+            .map(|c| find(c).unwrap_or(0))
+            .collect();
+        let ground = find("ground_z");
+        let battery = find("battery_v");
+        let ignored_columns: Vec<String> = names
+            .iter()
+            .filter(|n| {
+                !REQUIRED_COLUMNS.contains(&n.as_str()) && !OPTIONAL_COLUMNS.contains(&n.as_str())
+            })
+            .cloned()
+            .collect();
+
+        let mut rec = Recording {
+            source: file.clone(),
+            ignored_columns,
+            ..Recording::default()
+        };
+        let mut fields: Vec<&str> = Vec::with_capacity(names.len());
+        let mut values = [0.0; 18];
+        let mut last_t = f64::NEG_INFINITY;
+        for (_, line) in lines {
+            fields.clear();
+            fields.extend(line.split(','));
+            let parse = |i: usize| -> Option<f64> {
+                fields
+                    .get(i)
+                    .and_then(|s| s.trim().parse::<f64>().ok())
+                    .filter(|v| v.is_finite())
+            };
+            let mut ok = true;
+            for (k, &col) in required.iter().enumerate() {
+                if let Some(v) = parse(col) {
+                    values[k] = v;
+                } else {
+                    ok = false;
+                    break;
+                }
+            }
+            let ground_z = match ground {
+                Some(g) => parse(g),
+                None => Some(0.0),
+            };
+            let (true, Some(ground_z)) = (ok, ground_z) else {
+                rec.skipped_nonfinite += 1;
+                continue;
+            };
+            if values[0] <= last_t {
+                rec.skipped_time += 1;
+                continue;
+            }
+            last_t = values[0];
+            rec.samples.push(Sample {
+                t: values[0],
+                x: State::from_column_slice(&values[1..13]),
+                u: Input::from_column_slice(&values[13..17]),
+                varphi: values[17],
+                ground_z,
+                battery_v: battery.and_then(parse),
+            });
+        }
+        if rec.samples.is_empty() {
+            return Err(fail(format!(
+                "no usable rows: the header is there but {} row(s) had non-finite or missing \
+                 values and {} did not advance in time",
+                rec.skipped_nonfinite, rec.skipped_time
+            )));
+        }
+        Ok(rec)
+    }
+
+    /// Writes the recording as CSV (the format [`Recording::from_csv_str`] reads).
+    pub fn to_csv(&self) -> String {
+        let mut out = String::with_capacity(self.samples.len() * 200);
+        out.push_str(&REQUIRED_COLUMNS.join(","));
+        out.push_str(",ground_z\n");
+        for s in &self.samples {
+            let _ = write!(out, "{:.6}", s.t);
+            for v in s.x.iter() {
+                let _ = write!(out, ",{v:.9}");
+            }
+            for v in s.u.iter() {
+                let _ = write!(out, ",{v:.9}");
+            }
+            let _ = writeln!(out, ",{:.9},{:.6}", s.varphi, s.ground_z);
+        }
+        out
+    }
+
+    /// Median time step (s).
+    pub fn median_dt(&self) -> f64 {
+        let mut d: Vec<f64> = self.samples.windows(2).map(|w| w[1].t - w[0].t).collect();
+        if d.is_empty() {
+            return 0.0;
+        }
+        d.sort_by(f64::total_cmp);
+        d[d.len() / 2]
+    }
+}

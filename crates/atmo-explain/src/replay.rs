@@ -1,0 +1,181 @@
+//! Multi-step prediction: the plant (atmo-sim's, with a plant file's
+//! effects) started from the recorded state and driven by the recorded
+//! commands and tilt for a short horizon, against what was recorded.
+
+use atmo_core::RobotConfig;
+use atmo_core::control::WheelRates;
+use atmo_core::model::{Input, State, idx};
+
+use crate::data::{Prepared, lagged_commands, sg_smoothing_taps};
+use crate::recording::Recording;
+use atmo_plant::config::{PlantConfig, TerrainConfig};
+use atmo_plant::plant::{Command, InitialState, Plant};
+
+/// Prediction errors at the end of the horizon, RMS over the starts.
+#[derive(Debug, Clone, Copy, Default, serde::Serialize)]
+pub struct ReplayError {
+    pub starts: usize,
+    pub horizon_s: f64,
+    /// m, per axis x, y, z (NED).
+    pub position: [f64; 3],
+    /// rad, yaw, pitch, roll.
+    pub attitude: [f64; 3],
+    /// m/s.
+    pub velocity: [f64; 3],
+    /// rad/s.
+    pub rate: [f64; 3],
+}
+
+impl ReplayError {
+    /// Norm of the position error (m).
+    pub fn position_norm(&self) -> f64 {
+        self.position.iter().map(|v| v * v).sum::<f64>().sqrt()
+    }
+    /// Norm of the velocity error (m/s).
+    pub fn velocity_norm(&self) -> f64 {
+        self.velocity.iter().map(|v| v * v).sum::<f64>().sqrt()
+    }
+}
+
+fn wrap(a: f64) -> f64 {
+    let mut a = a % std::f64::consts::TAU;
+    if a > std::f64::consts::PI {
+        a -= std::f64::consts::TAU;
+    } else if a < -std::f64::consts::PI {
+        a += std::f64::consts::TAU;
+    }
+    a
+}
+
+/// The recorded state at row `k`, smoothed over the filter window
+/// (angles unwrapped around row k).
+pub fn smoothed_state(rec: &Recording, prep: &Prepared, k: usize) -> State {
+    let h = prep.half;
+    if k < h || k + h >= rec.samples.len() {
+        return rec.samples[k].x;
+    }
+    let taps = sg_smoothing_taps(h);
+    let center = rec.samples[k].x;
+    let mut out = State::zeros();
+    for (j, w) in taps.iter().enumerate() {
+        let x = &rec.samples[k + j - h].x;
+        for i in 0..12 {
+            let d = if (idx::YAW..=idx::ROLL).contains(&i) {
+                wrap(x[i] - center[i])
+            } else {
+                x[i] - center[i]
+            };
+            out[i] += w * d;
+        }
+    }
+    center + out
+}
+
+/// Start rows: fit rows whose next `horizon` seconds stay in one run,
+/// spaced at least `spacing` s.
+pub fn start_rows(prep: &Prepared, horizon: f64, spacing: f64) -> Vec<(usize, usize)> {
+    let mut out = Vec::new();
+    for &(s, e) in &prep.runs {
+        let mut next_t = f64::NEG_INFINITY;
+        for k in s..e {
+            if !prep.fit[k] || prep.t[k] < next_t {
+                continue;
+            }
+            let end_t = prep.t[k] + horizon;
+            let Some(j) = (k..e).find(|&j| prep.t[j] >= end_t - 1e-9) else {
+                break;
+            };
+            out.push((k, j));
+            next_t = prep.t[k] + spacing;
+        }
+    }
+    out
+}
+
+/// Runs the plant of `config` from each start for the horizon and returns
+/// the RMS error at the end; `config_for(k)` picks the plant file for the
+/// start row k (held-out fits).
+pub fn replay(
+    rec: &Recording,
+    prep: &Prepared,
+    robot: &RobotConfig,
+    starts: &[(usize, usize)],
+    config_for: &dyn Fn(usize) -> PlantConfig,
+    lag_tau: &dyn Fn(usize) -> f64,
+) -> ReplayError {
+    let mut sq = [[0.0; 3]; 4];
+    let mut count = 0usize;
+    let u: Vec<Input> = rec.samples.iter().map(|s| s.u).collect();
+    let mut horizon_sum = 0.0;
+    for &(k, j) in starts {
+        let cfg = config_for(k);
+        let tau = lag_tau(k);
+        let s = &rec.samples[k];
+        let thrust = if tau > 0.0 {
+            let from = k.saturating_sub(((5.0 * tau) / prep.dt) as usize + 2);
+            lagged_commands(&prep.t[from..=k], &u[from..=k], tau)[k - from]
+        } else {
+            s.u
+        };
+        let initial = InitialState {
+            state: smoothed_state(rec, prep, k),
+            tilt: s.varphi.max(0.0),
+            thrust: thrust.map(|v| v.clamp(0.0, 1.0)),
+        };
+        let terrain = TerrainConfig::flat(-s.ground_z);
+        let Ok(mut plant) = Plant::new(robot, &cfg, &terrain, &initial, 1) else {
+            continue;
+        };
+        let t_end = prep.t[j];
+        let mut row = k;
+        let mut ok = true;
+        while plant.time() + prep.t[k] < t_end - 1e-9 {
+            let now = prep.t[k] + plant.time();
+            while row + 1 < j && prep.t[row + 1] <= now + 1e-9 {
+                row += 1;
+            }
+            let next = (row + 1).min(rec.samples.len() - 1);
+            let dtr = (prep.t[next] - prep.t[row]).max(1e-6);
+            let tilt_rate = (rec.samples[next].varphi - rec.samples[row].varphi) / dtr;
+            let cmd = Command {
+                rotors: rec.samples[row].u,
+                tilt_rate,
+                wheel_rates: WheelRates {
+                    left: 0.0,
+                    right: 0.0,
+                },
+            };
+            if plant.step(&cmd).is_err() {
+                ok = false;
+                break;
+            }
+        }
+        if !ok {
+            continue;
+        }
+        let x = plant.state();
+        let y = &rec.samples[j].x;
+        for a in 0..3 {
+            let dp = x[idx::X + a] - y[idx::X + a];
+            let da = wrap(x[idx::YAW + a] - y[idx::YAW + a]);
+            let dv = x[idx::VX + a] - y[idx::VX + a];
+            let dw = x[idx::WX + a] - y[idx::WX + a];
+            sq[0][a] += dp * dp;
+            sq[1][a] += da * da;
+            sq[2][a] += dv * dv;
+            sq[3][a] += dw * dw;
+        }
+        horizon_sum += t_end - prep.t[k];
+        count += 1;
+    }
+    let n = count.max(1) as f64;
+    let r = |v: [f64; 3]| v.map(|s| (s / n).sqrt());
+    ReplayError {
+        starts: count,
+        horizon_s: horizon_sum / n,
+        position: r(sq[0]),
+        attitude: r(sq[1]),
+        velocity: r(sq[2]),
+        rate: r(sq[3]),
+    }
+}

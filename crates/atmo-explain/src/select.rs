@@ -1,0 +1,364 @@
+//! Normal equations per segment, cross-validation over whole held-out
+//! segments, forward-backward group selection, stability (inclusion
+//! frequency over random halves of the segments) and delete-a-fold
+//! jackknife uncertainties.
+//!
+//! Residuals and regressors are weighted by the channel noise floor, so one
+//! unit of squared error is one noise-floor variance (and, in the second
+//! pass, by the local excess variance: see `explain::entry_weights`). An effect enters the
+//! model when adding it lowers the held-out squared error by at least
+//! [`MIN_GAIN`] noise-floor variances per residual entry, and stays only if
+//! removing it again would raise the held-out error by as much.
+
+use nalgebra::{DMatrix, DVector};
+use rand::SeedableRng;
+use rand::seq::SliceRandom;
+use rand_chacha::ChaCha8Rng;
+
+use crate::data::Prepared;
+use crate::effects::{Effect, Layout};
+
+/// Least held-out improvement for an effect, in noise-floor variances per
+/// residual entry (2 %: a systematic RMS of about 0.14 of the noise floor
+/// over the whole recording, or more in a part of it).
+pub const MIN_GAIN: f64 = 0.02;
+/// Number of cross-validation folds (segments are dealt round-robin).
+pub const FOLDS: usize = 5;
+/// Subsamples for the inclusion frequency.
+pub const STABILITY_RUNS: usize = 24;
+
+/// Sufficient statistics of the weighted least-squares problem, per segment.
+#[derive(Debug, Clone)]
+pub struct Stats {
+    pub p: usize,
+    pub g: Vec<DMatrix<f64>>,
+    pub b: Vec<DVector<f64>>,
+    pub yy: Vec<f64>,
+    /// Residual entries (rows x 6) per segment.
+    pub entries: Vec<usize>,
+    /// Prior (penalty) matrix added to the normal equations of a fit.
+    pub prior: DMatrix<f64>,
+}
+
+/// Segments: contiguous stretches of about `max(2 s, T / 50)`; `seg_of[k]`
+/// for fit rows.
+pub fn segments(prep: &Prepared) -> (Vec<Option<usize>>, usize) {
+    let t0 = prep.t[0];
+    let total = prep.t[prep.n - 1] - t0;
+    let len = (total / 50.0).max(2.0);
+    let mut seg_of = vec![None; prep.n];
+    let mut nseg = 0;
+    for k in 0..prep.n {
+        if prep.fit[k] {
+            let s = ((prep.t[k] - t0) / len) as usize;
+            seg_of[k] = Some(s);
+            nseg = nseg.max(s + 1);
+        }
+    }
+    (seg_of, nseg.max(1))
+}
+
+/// Fold of a segment.
+pub fn fold_of(seg: usize) -> usize {
+    seg % FOLDS
+}
+
+impl Stats {
+    /// Accumulates the statistics of `cols` against `y` with a weight per
+    /// residual entry (`6 k + channel`, 1 / standard deviation).
+    pub fn build(
+        cols: &[&[f64]],
+        y: &[f64],
+        weights: &[f64],
+        seg_of: &[Option<usize>],
+        nseg: usize,
+    ) -> Self {
+        let p = cols.len();
+        let mut g = vec![DMatrix::zeros(p, p); nseg];
+        let mut b = vec![DVector::zeros(p); nseg];
+        let mut yy = vec![0.0; nseg];
+        let mut entries = vec![0; nseg];
+        let mut x = vec![0.0; p];
+        for (k, seg) in seg_of.iter().enumerate() {
+            let Some(s) = *seg else { continue };
+            let gs = &mut g[s];
+            let bs = &mut b[s];
+            for c in 0..6 {
+                let i = 6 * k + c;
+                let w = weights[i];
+                let yv = y[i] * w;
+                let mut any = false;
+                for (j, col) in cols.iter().enumerate() {
+                    x[j] = col[i] * w;
+                    any |= x[j] != 0.0;
+                }
+                yy[s] += yv * yv;
+                entries[s] += 1;
+                if !any {
+                    continue;
+                }
+                for j in 0..p {
+                    let xj = x[j];
+                    if xj == 0.0 {
+                        continue;
+                    }
+                    bs[j] += xj * yv;
+                    for l in j..p {
+                        gs[(j, l)] += xj * x[l];
+                    }
+                }
+            }
+        }
+        for gs in &mut g {
+            for j in 0..p {
+                for l in 0..j {
+                    gs[(j, l)] = gs[(l, j)];
+                }
+            }
+        }
+        Self {
+            p,
+            g,
+            b,
+            yy,
+            entries,
+            prior: DMatrix::zeros(p, p),
+        }
+    }
+
+    /// The statistics with `y` replaced by `y - col` (a term with its
+    /// coefficient fixed at 1), given the cross products of `col`.
+    #[must_use]
+    pub fn with_fixed_term(&self, cross: &[DVector<f64>], own: &[f64], own_y: &[f64]) -> Self {
+        let mut out = self.clone();
+        for s in 0..self.g.len() {
+            out.yy[s] = self.yy[s] - 2.0 * own_y[s] + own[s];
+            out.b[s] = &self.b[s] - &cross[s];
+        }
+        out
+    }
+
+    /// Number of segments.
+    pub fn nseg(&self) -> usize {
+        self.g.len()
+    }
+
+    /// Solves on the segments `use_seg` for the columns `idx` (ridge-stabilized).
+    pub fn solve(&self, idx: &[usize], use_seg: &dyn Fn(usize) -> bool) -> DVector<f64> {
+        let q = idx.len();
+        if q == 0 {
+            return DVector::zeros(0);
+        }
+        let mut g = DMatrix::zeros(q, q);
+        let mut b = DVector::zeros(q);
+        for s in 0..self.nseg() {
+            if !use_seg(s) {
+                continue;
+            }
+            for (a, &i) in idx.iter().enumerate() {
+                b[a] += self.b[s][i];
+                for (c, &j) in idx.iter().enumerate() {
+                    g[(a, c)] += self.g[s][(i, j)];
+                }
+            }
+        }
+        for (a, &i) in idx.iter().enumerate() {
+            for (c, &j) in idx.iter().enumerate() {
+                g[(a, c)] += self.prior[(i, j)];
+            }
+        }
+        let max_diag = (0..q).map(|a| g[(a, a)]).fold(0.0, f64::max).max(1e-300);
+        for a in 0..q {
+            g[(a, a)] += 1e-7 * max_diag + 1e-12;
+        }
+        match g.clone().cholesky() {
+            Some(ch) => ch.solve(&b),
+            None => g
+                .pseudo_inverse(1e-12)
+                .map_or_else(|_| DVector::zeros(q), |pi| pi * b),
+        }
+    }
+
+    /// Weighted squared error of `theta` (columns `idx`) on segment `s`.
+    pub fn sse(&self, idx: &[usize], theta: &DVector<f64>, s: usize) -> f64 {
+        let mut out = self.yy[s];
+        for (a, &i) in idx.iter().enumerate() {
+            out -= 2.0 * theta[a] * self.b[s][i];
+            for (c, &j) in idx.iter().enumerate() {
+                out += theta[a] * theta[c] * self.g[s][(i, j)];
+            }
+        }
+        out
+    }
+
+    /// Held-out squared error: each fold predicted by a fit on the others,
+    /// over the segments in `active`.
+    pub fn cv(&self, idx: &[usize], active: &[bool]) -> f64 {
+        let mut total = 0.0;
+        for f in 0..FOLDS {
+            let in_fold = |s: usize| active[s] && fold_of(s) == f;
+            if !(0..self.nseg()).any(in_fold) {
+                continue;
+            }
+            let theta = self.solve(idx, &|s| active[s] && fold_of(s) != f);
+            for s in (0..self.nseg()).filter(|&s| in_fold(s)) {
+                total += self.sse(idx, &theta, s);
+            }
+        }
+        total
+    }
+
+    /// Residual entries in the active segments.
+    pub fn entries_in(&self, active: &[bool]) -> usize {
+        (0..self.nseg())
+            .filter(|&s| active[s])
+            .map(|s| self.entries[s])
+            .sum()
+    }
+}
+
+fn columns_of(layout: &Layout, set: &[Effect]) -> Vec<usize> {
+    let mut idx = Vec::new();
+    for e in set {
+        idx.extend(layout.columns(*e));
+    }
+    idx
+}
+
+/// One step of the forward selection (for the report).
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct Step {
+    pub added: String,
+    /// Held-out error before and after, noise-floor variances per entry.
+    pub cv_before: f64,
+    pub cv_after: f64,
+}
+
+/// Forward-backward selection over the active segments.
+pub fn select(
+    stats: &Stats,
+    layout: &Layout,
+    candidates: &[Effect],
+    active: &[bool],
+) -> (Vec<Effect>, Vec<Step>) {
+    let entries = stats.entries_in(active).max(1) as f64;
+    let min_gain = MIN_GAIN * entries;
+    let mut chosen: Vec<Effect> = Vec::new();
+    let mut steps = Vec::new();
+    let mut current = stats.cv(&[], active);
+    loop {
+        let mut best: Option<(Effect, f64)> = None;
+        for &e in candidates {
+            if chosen.contains(&e) {
+                continue;
+            }
+            let mut set = chosen.clone();
+            set.push(e);
+            let cv = stats.cv(&columns_of(layout, &set), active);
+            if best.is_none_or(|(_, b)| cv < b) {
+                best = Some((e, cv));
+            }
+        }
+        let Some((e, cv)) = best else { break };
+        if current - cv < min_gain {
+            break;
+        }
+        steps.push(Step {
+            added: e.name().into(),
+            cv_before: current / entries,
+            cv_after: cv / entries,
+        });
+        chosen.push(e);
+        current = cv;
+        // Backward: drop any effect the others now make unnecessary.
+        loop {
+            let mut dropped = false;
+            for i in 0..chosen.len() {
+                if chosen.len() < 2 {
+                    break;
+                }
+                let mut set = chosen.clone();
+                set.remove(i);
+                let cv = stats.cv(&columns_of(layout, &set), active);
+                if cv - current < min_gain {
+                    chosen = set;
+                    current = cv;
+                    dropped = true;
+                    break;
+                }
+            }
+            if !dropped {
+                break;
+            }
+        }
+    }
+    (chosen, steps)
+}
+
+/// Inclusion frequency of each candidate over random halves of the segments.
+pub fn stability(
+    stats: &Stats,
+    layout: &Layout,
+    candidates: &[Effect],
+    seed: u64,
+) -> Vec<(Effect, f64)> {
+    let nseg = stats.nseg();
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let mut counts = vec![0usize; candidates.len()];
+    let mut order: Vec<usize> = (0..nseg).collect();
+    for _ in 0..STABILITY_RUNS {
+        order.shuffle(&mut rng);
+        let mut active = vec![false; nseg];
+        for &s in &order[..nseg.div_ceil(2)] {
+            active[s] = true;
+        }
+        let (chosen, _) = select(stats, layout, candidates, &active);
+        for (i, e) in candidates.iter().enumerate() {
+            if chosen.contains(e) {
+                counts[i] += 1;
+            }
+        }
+    }
+    candidates
+        .iter()
+        .zip(counts)
+        .map(|(e, c)| (*e, c as f64 / STABILITY_RUNS as f64))
+        .collect()
+}
+
+/// Coefficients on all data and their delete-a-fold jackknife standard
+/// deviations, for the columns of `set`.
+pub fn fit_with_uncertainty(
+    stats: &Stats,
+    layout: &Layout,
+    set: &[Effect],
+) -> (Vec<usize>, DVector<f64>, DVector<f64>) {
+    let idx = columns_of(layout, set);
+    let theta = stats.solve(&idx, &|_| true);
+    let mut fold_thetas = Vec::new();
+    for f in 0..FOLDS {
+        if !(0..stats.nseg()).any(|s| fold_of(s) == f) {
+            continue;
+        }
+        fold_thetas.push(stats.solve(&idx, &|s| fold_of(s) != f));
+    }
+    let k = fold_thetas.len() as f64;
+    let mut sd = DVector::zeros(idx.len());
+    if k > 1.0 {
+        let mean = fold_thetas
+            .iter()
+            .fold(DVector::zeros(idx.len()), |a, t| a + t)
+            / k;
+        for t in &fold_thetas {
+            let d = t - &mean;
+            sd += d.component_mul(&d);
+        }
+        sd = (sd * ((k - 1.0) / k)).map(f64::sqrt);
+    }
+    (idx, theta, sd)
+}
+
+/// Columns of a set of effects.
+pub fn columns_for(layout: &Layout, set: &[Effect]) -> Vec<usize> {
+    columns_of(layout, set)
+}

@@ -1,0 +1,69 @@
+//! Closing the loop once: the ground effect fitted from one flight, written
+//! as a plant file and loaded into the plant, makes a replayed landing
+//! approach (another flight) match its recording better.
+
+use atmo_core::RobotConfig;
+use atmo_explain::data::Prepared;
+use atmo_explain::output::write_all;
+use atmo_explain::replay::{replay, start_rows};
+use atmo_explain::synth::{Flight, Profile, record};
+use atmo_explain::{Options, explain};
+use atmo_plant::config::{EffectsConfig, PlantConfig, SensorsConfig};
+use atmo_plant::ground_effect::GroundEffectConfig;
+
+#[test]
+fn fitted_ground_effect_makes_a_replayed_landing_match_better() {
+    let robot = RobotConfig::atmo();
+    let mut truth = PlantConfig::ideal();
+    truth.arm_inertia_convention = robot.arm.inertia_convention;
+    truth.effects = EffectsConfig {
+        ground_effect: Some(GroundEffectConfig::default()),
+        sensors: Some(SensorsConfig::default()),
+        ..EffectsConfig::none()
+    };
+    // Calibration flight -> fitted_effects.toml.
+    let calibration = record(&robot, &truth, &Flight::new(Profile::Mixed, 48.0, 11)).unwrap();
+    let ex = explain(&calibration, &robot, &Options::default()).unwrap();
+    assert!(ex.selected().contains(&"ground_effect"), "{}", ex.verdict);
+    let dir = std::env::temp_dir().join(format!("atmo_explain_loop_{}", std::process::id()));
+    write_all(&ex, &dir).unwrap();
+    let fitted = PlantConfig::load(dir.join("fitted_effects.toml")).unwrap();
+    assert!(fitted.effects.ground_effect.is_some());
+
+    // Another flight: a landing approach down to 0.22 m hub height at 50-55 deg.
+    let landing = record(&robot, &truth, &Flight::new(Profile::Landing, 14.0, 12)).unwrap();
+    let prep = Prepared::new(&landing, &robot).unwrap();
+    let starts = start_rows(&prep, 1.0, 0.25);
+    assert!(starts.len() > 20);
+    let mut nominal = PlantConfig::ideal();
+    nominal.arm_inertia_convention = robot.arm.inertia_convention;
+    let before = replay(
+        &landing,
+        &prep,
+        &robot,
+        &starts,
+        &|_| nominal.clone(),
+        &|_| 0.0,
+    );
+    let after = replay(
+        &landing,
+        &prep,
+        &robot,
+        &starts,
+        &|_| fitted.clone(),
+        &|_| 0.0,
+    );
+    println!(
+        "replayed landing, {} starts, 1 s each: height error {:.4} -> {:.4} m, vertical speed error {:.4} -> {:.4} m/s",
+        before.starts, before.position[2], after.position[2], before.velocity[2], after.velocity[2]
+    );
+    assert_eq!(before.starts, after.starts);
+    assert!(
+        after.position[2] < 0.5 * before.position[2],
+        "height error {} -> {}",
+        before.position[2],
+        after.position[2]
+    );
+    assert!(after.velocity[2] < 0.5 * before.velocity[2]);
+    assert!(after.position_norm() < before.position_norm());
+}
