@@ -1,10 +1,19 @@
 #!/usr/bin/env bash
-# Installs what the build and tests need beyond the Rust toolchain.
+# Installs the system packages of the OPTIONAL extras. The README's commands
+# (`cargo test --workspace`, `cargo run --release -p atmo-sim -- fly`) need
+# none of this: only the Rust toolchain, gcc and Python 3.
+#
+# - cmake: the OSQP comparison of atmo-mpc's bench
+#   (`cargo bench -p atmo-mpc --bench rti --features osqp-compare`) builds
+#   OSQP's C sources with it.
+#
+# The Python peers bring their own tools in venvs under target/ (no system
+# packages): scripts/python-peers.sh (MCAP readers, Cyclone DDS) and
+# scripts/ros2-peer.sh (rclpy on Fast DDS, cmake and colcon from PyPI).
+#
 # Idempotent; safe to run on a developer machine and in CI.
 set -euo pipefail
 need=()
-# (system packages the tests need are added here as the project grows)
-# cmake: osqp-sys (atmo-mpc's dev-dependency for the QP solver comparison) builds OSQP with it.
 command -v cmake >/dev/null || need+=(cmake)
 if ((${#need[@]})); then
     if command -v apt-get >/dev/null; then

@@ -1,5 +1,6 @@
 //! RTI timing: one full tick, the feedback phase alone, and the same QPs
-//! solved by Clarabel and OSQP in both formulations.
+//! solved by Clarabel and (with `--features osqp-compare`, needs cmake) OSQP
+//! in both formulations.
 
 #[path = "support/scenarios.rs"]
 mod scenarios;
@@ -108,6 +109,7 @@ fn morphing_qp(formulation: Formulation) -> (QpSnapshot, Mpc) {
     (mpc.qp_snapshot(), mpc)
 }
 
+#[cfg(feature = "osqp-compare")]
 /// OSQP's `l <= A z <= u` from Clarabel's `A z + s = b`, `s` in {0}^m0 x R+.
 fn osqp_problem(qp: &QpSnapshot, eps: f64) -> osqp::Problem {
     let to_osqp = |m: &clarabel::algebra::CscMatrix<f64>| osqp::CscMatrix {
@@ -164,6 +166,7 @@ fn qp_solver_compare(c: &mut Criterion) {
                 black_box(clarabel.solution.iterations)
             });
         });
+        #[cfg(feature = "osqp-compare")]
         for eps in [1e-4, 1e-6] {
             let mut problem = osqp_problem(&qp, eps);
             let (iterations, deviation) = {

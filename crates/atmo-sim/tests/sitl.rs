@@ -5,11 +5,14 @@
 //! from the daemon's MCAP log (and the server's truth in summary.json).
 //!
 //! `cargo test --workspace` (the README's test command) builds both
-//! binaries; `CARGO_BIN_EXE_` names only this package's, so the daemon is
-//! found next to it.
+//! binaries. `CARGO_BIN_EXE_` names only this package's, so the daemon is
+//! looked for next to it; `cargo test -p atmo-sim` alone does not build it,
+//! so then the test builds it there itself (same cargo, profile and target
+//! directory).
 
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, ExitStatus, Stdio};
+use std::sync::OnceLock;
 use std::time::{Duration, Instant};
 
 use atmo_io::mcap_log::read_topic;
@@ -19,15 +22,55 @@ fn repo() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
 }
 
+/// The `atmo-daemon` binary next to this package's `atmo-sim`, built first
+/// if it is not there (once per test process).
 fn daemon_binary() -> PathBuf {
-    let sim = PathBuf::from(env!("CARGO_BIN_EXE_atmo-sim"));
-    let daemon = sim.with_file_name(format!("atmo-daemon{}", std::env::consts::EXE_SUFFIX));
-    assert!(
-        daemon.exists(),
-        "{} is not built: run the tests with `cargo test --workspace`, which builds it",
-        daemon.display()
+    static DAEMON: OnceLock<PathBuf> = OnceLock::new();
+    DAEMON
+        .get_or_init(|| {
+            let sim = PathBuf::from(env!("CARGO_BIN_EXE_atmo-sim"));
+            let daemon =
+                sim.with_file_name(format!("atmo-daemon{}", std::env::consts::EXE_SUFFIX));
+            if !daemon.exists() {
+                build_daemon(&sim);
+            }
+            assert!(
+                daemon.exists(),
+                "{} is still missing after building it; run `cargo build -p atmo-daemon`",
+                daemon.display()
+            );
+            daemon
+        })
+        .clone()
+}
+
+/// `cargo build -p atmo-daemon --bin atmo-daemon` into the target directory
+/// and profile `sim` (.../<target dir>/<profile>/atmo-sim) was built in.
+fn build_daemon(sim: &Path) {
+    let profile_dir = sim.parent().expect("atmo-sim's directory");
+    let target_dir = profile_dir.parent().expect("the target directory");
+    let profile = match profile_dir.file_name().and_then(|n| n.to_str()) {
+        Some("debug") => "dev",
+        Some(name) => name,
+        None => panic!("no profile in {}", sim.display()),
+    };
+    eprintln!(
+        "sitl: {} is not built (not a workspace build): building it",
+        profile_dir.join("atmo-daemon").display()
     );
-    daemon
+    let status = Command::new(env!("CARGO"))
+        .current_dir(repo())
+        .args(["build", "-p", "atmo-daemon", "--bin", "atmo-daemon", "--profile"])
+        .arg(profile)
+        .arg("--target-dir")
+        .arg(target_dir)
+        .status()
+        .unwrap_or_else(|e| panic!("running {} build: {e}", env!("CARGO")));
+    assert!(
+        status.success(),
+        "`cargo build -p atmo-daemon --profile {profile}` failed ({status}); \
+         build it yourself or run `cargo test --workspace`"
+    );
 }
 
 /// A child process killed when dropped (a failing test leaves nothing behind).
