@@ -14,10 +14,10 @@ use serde::Deserialize;
 use crate::error::Result;
 use crate::ground_effect::GroundEffectConfig;
 
-/// serde default of every `enabled` key: a present section is on.
-pub fn default_true() -> bool {
-    true
-}
+// Defined beside the config types' common serde defaults, not here, so
+// that ground_effect.rs (whose config type this file includes) does not
+// import from config.rs; re-exported for the scenario file's `enabled` keys.
+pub use crate::serde_defaults::default_true;
 fn default_dt() -> f64 {
     0.001
 }

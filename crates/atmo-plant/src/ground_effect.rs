@@ -47,7 +47,7 @@ pub const DEFAULT_STD: [[f64; 6]; 4] = [
     [0.080, 0.055, 0.030, 0.015, 0.005, 0.0], // mean - std = -15 % at 0.25 m
 ];
 
-use crate::config::default_true;
+use crate::serde_defaults::default_true;
 
 fn default_rotor_radius() -> f64 {
     0.11
@@ -216,10 +216,14 @@ pub struct Gain {
     pub std: f64,
 }
 
+// AVX2 rule: from here to the end of the file, step code (see plant::step):
+// every function says `#[inline(always)]` or `#[inline(never)]`.
+
 /// Cheeseman-Bennett: `T / T_inf - 1` for a rotor of radius `r` at distance
 /// `z` from the ground, with z held at or above `r / 2`:
 /// `1 / (1 - (r / 4z)^2) - 1 = r^2 / (16 z^2 - r^2)`, the second form with one
 /// division instead of two dependent ones (it runs 16 times per plant step).
+#[inline(always)]
 pub fn cheeseman_bennett(r: f64, z: f64) -> f64 {
     let z = z.max(0.5 * r);
     let r2 = r * r;
@@ -246,6 +250,7 @@ fn bracket(xs: &[f64], x: f64) -> (usize, f64) {
 
 impl GroundEffect {
     /// Builds the surface from a validated config.
+    #[inline(never)] // start-up
     pub fn new(config: &GroundEffectConfig) -> Self {
         Self {
             rotor_radius: config.rotor_radius,
@@ -318,6 +323,7 @@ impl GroundEffect {
 
     /// `T / T_inf - 1` (mean and standard deviation) for a rotor whose hub
     /// is `h` m above the ground at tilt `varphi` rad.
+    #[inline(never)] // not step code (tests, figures)
     pub fn gain(&self, h: f64, varphi: f64) -> Gain {
         self.gain_in(&self.slice(varphi), h)
     }
@@ -331,11 +337,13 @@ impl GroundEffect {
     }
 
     /// Validated config helper for tests and docs: the surface at the default table.
+    #[inline(never)] // start-up
     pub fn default_surface() -> Self {
         Self::new(&GroundEffectConfig::default())
     }
 
     /// Checks a config against `file` (for callers outside a plant file).
+    #[inline(never)] // start-up
     pub fn from_config(config: &GroundEffectConfig, file: &Path) -> Result<Self> {
         config.validate(&Checker::new(file), "effects.ground_effect")?;
         Ok(Self::new(config))

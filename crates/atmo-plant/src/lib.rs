@@ -53,19 +53,20 @@
 //! bit-identical trajectory.
 //!
 
-// Everything `Plant::step` calls per step is `inline(always)` (plant,
-// contact, ground_effect, rigid): the step is compiled twice, portable and
-// AVX2, and only code inlined into it gets the AVX2 copy.
+// Everything `Plant::step` calls per step is `inline(always)`: the step is
+// compiled twice, portable and AVX2, and only code inlined into it gets the
+// AVX2 copy (the rule, and the test that checks it: module `plant::step`).
 #![allow(clippy::inline_always)]
 
+mod body;
 pub mod config;
 pub mod contact;
 pub mod error;
 pub mod ground_effect;
 pub mod noise;
 pub mod plant;
-mod rigid;
 pub mod sensors;
+mod serde_defaults;
 
 pub use config::{EffectsConfig, PlantConfig, TerrainConfig};
 pub use error::{PlantError, Result};

@@ -15,6 +15,7 @@ pub mod stream {
 }
 
 /// The random stream `id` of `seed`.
+#[inline(never)] // start-up
 pub fn rng(seed: u64, id: u64) -> ChaCha8Rng {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     rng.set_stream(id);
@@ -22,6 +23,7 @@ pub fn rng(seed: u64, id: u64) -> ChaCha8Rng {
 }
 
 /// One standard normal draw.
+#[inline(always)]
 pub fn normal(rng: &mut ChaCha8Rng) -> f64 {
     StandardNormal.sample(rng)
 }
@@ -39,6 +41,7 @@ pub struct GaussMarkov {
 
 impl GaussMarkov {
     /// Starts from a stationary draw.
+    #[inline(never)] // start-up
     pub fn new(tau: f64, dt: f64, rng: &mut ChaCha8Rng) -> Self {
         let a = (-dt / tau).exp();
         Self {
@@ -49,6 +52,7 @@ impl GaussMarkov {
     }
 
     /// Advances one step and returns the new value.
+    #[inline(always)]
     pub fn advance(&mut self, rng: &mut ChaCha8Rng) -> f64 {
         self.value = self.a * self.value + self.b * normal(rng);
         self.value

@@ -40,6 +40,7 @@ pub(crate) struct Mocap {
 }
 
 impl Mocap {
+    #[inline(never)] // start-up
     pub fn new(config: Option<SensorsConfig>, dt: f64, seed: u64) -> Self {
         let delay_steps = config
             .as_ref()
@@ -59,6 +60,7 @@ impl Mocap {
 
     /// Records the true state after step number `step` (time `step * dt`)
     /// and publishes a sample if one is due.
+    #[inline(always)]
     pub fn record(&mut self, step: u64, x: &State) {
         let time = step as f64 * self.dt;
         let Some(cfg) = &self.config else {
@@ -100,6 +102,7 @@ impl Mocap {
     }
 
     /// Ground contact signal for a total wheel normal force (N).
+    #[inline(always)]
     pub fn contact_signal(&self, wheel_force: f64) -> bool {
         wheel_force > self.config.as_ref().map_or(0.0, |c| c.contact_threshold)
     }

@@ -1,5 +1,7 @@
-//! atmo-core's rigid-body equations with the attitude trigonometry computed
-//! once per evaluation, and the composite body between tilts.
+//! The plant's rigid body: atmo-core's rigid-body equations with the
+//! attitude trigonometry computed once per evaluation, the composite body
+//! between tilts (interpolation on the plant's tilt grid), and the body with
+//! the mass-property errors of the `mass_error` and `com_offset` effects.
 //!
 //! `TiltedBody::accelerations` and `TiltedBody::state_derivative` each take
 //! the sines and cosines of the Euler angles again (7 `sin_cos` per `f`);
@@ -8,8 +10,8 @@
 //! plant test `with_every_effect_off_the_plant_is_atmo_core` checks that
 //! the result is atmo-core's bit for bit.
 
-use atmo_core::model::{Input, State, TiltedBody, idx, sin_cos};
-use nalgebra::{Matrix3, Vector3, Vector6};
+use atmo_core::model::{Input, Model, State, TiltedBody, idx, sin_cos};
+use nalgebra::{Cholesky, Matrix3, U6, Vector3, Vector6};
 
 /// Sines, cosines and rotation of one attitude.
 #[derive(Debug, Clone, Copy)]
@@ -108,4 +110,50 @@ pub(crate) fn lerp_body(a: &TiltedBody, b: &TiltedBody, w: f64, varphi: f64) -> 
         rotor_axis: std::array::from_fn(|i| a.rotor_axis[i] * v + b.rotor_axis[i] * w),
         disturbance: a.disturbance * v + b.disturbance * w,
     }
+}
+
+#[inline(always)]
+fn skew(r: &Vector3<f64>) -> Matrix3<f64> {
+    Matrix3::new(0.0, -r.z, r.y, r.z, 0.0, -r.x, -r.y, r.x, 0.0)
+}
+
+/// The composite body at `tilt` with the mass-property errors applied:
+/// mass and first moment scaled by `ms`, inertia about B by `is`, then the
+/// whole mass distribution shifted by `d` (body frame):
+/// `c' = c + m d`, `I' = I + m (|d|^2 1 - d d^T) + 2 (c . d) 1 - c d^T - d c^T`.
+#[inline(never)] // out of line on purpose: see the AVX2 rule (plant::step)
+pub(crate) fn effective_body(
+    model: &Model,
+    tilt: f64,
+    mass_error: Option<(f64, f64)>,
+    com_offset: Option<Vector3<f64>>,
+) -> Option<TiltedBody> {
+    let mut b = model.at_tilt(tilt);
+    if mass_error.is_none() && com_offset.is_none() {
+        return Some(b);
+    }
+    if let Some((ms, is)) = mass_error {
+        b.mass *= ms;
+        b.first_moment *= ms;
+        b.inertia *= is;
+    }
+    if let Some(d) = com_offset {
+        let (m, c) = (b.mass, b.first_moment);
+        b.inertia += (Matrix3::identity() * d.norm_squared() - d * d.transpose()) * m
+            + Matrix3::identity() * (2.0 * c.dot(&d))
+            - c * d.transpose()
+            - d * c.transpose();
+        b.first_moment = c + d * m;
+    }
+    let mut mm = b.mass_matrix;
+    mm.fixed_view_mut::<3, 3>(0, 0).fill_with_identity();
+    mm.fixed_view_mut::<3, 3>(0, 0).scale_mut(b.mass);
+    mm.fixed_view_mut::<3, 3>(0, 3)
+        .copy_from(&(-skew(&b.first_moment)));
+    mm.fixed_view_mut::<3, 3>(3, 0)
+        .copy_from(&skew(&b.first_moment));
+    mm.fixed_view_mut::<3, 3>(3, 3).copy_from(&b.inertia);
+    b.mass_matrix = mm;
+    b.mass_matrix_inv = Cholesky::<f64, U6>::new(mm)?.inverse();
+    Some(b)
 }
