@@ -14,7 +14,7 @@ use cases::{STEPS, cases};
 use criterion::{BatchSize, Criterion, Throughput, criterion_group, criterion_main};
 
 fn bench(c: &mut Criterion) {
-    let mut group = c.benchmark_group("atmo_sim_plant");
+    let mut group = c.benchmark_group("atmo_plant");
     group.throughput(Throughput::Elements(STEPS));
     for case in cases() {
         group.bench_function(format!("{}_1000_steps", case.name), |b| {
@@ -22,7 +22,8 @@ fn bench(c: &mut Criterion) {
                 || case.plant.clone(),
                 |mut p| {
                     for k in 0..STEPS {
-                        p.step(black_box(&(case.command)(k))).unwrap();
+                        p.step(black_box(&(case.command)(k)))
+                            .expect("the bench case steps");
                     }
                     p
                 },

@@ -140,7 +140,7 @@ fn every_step_function_says_how_it_is_inlined() {
             }
         }
         // `use` statements, joined over their lines.
-        let text: String = lines.iter().map(|(_, l)| format!("{l}\n")).collect();
+        let text = lines.iter().map(|(_, l)| *l).collect::<Vec<_>>().join("\n");
         for statement in text.split(';').map(str::trim) {
             let Some(used) = statement.strip_prefix("use ") else {
                 continue;

@@ -30,7 +30,7 @@ fn plant(effects: EffectsConfig, x: State, tilt: f64) -> Plant {
         &InitialState::at(x, tilt),
         42,
     )
-    .unwrap()
+    .expect("a valid plant")
 }
 
 #[test]

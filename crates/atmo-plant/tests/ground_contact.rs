@@ -28,7 +28,7 @@ fn parked_with(terrain: &TerrainConfig, config: &atmo_plant::config::PlantConfig
     x[idx::X] = b.x;
     x[idx::Y] = b.y;
     x[idx::Z] = b.z;
-    Plant::new(&robot(), config, terrain, &InitialState::at(x, DRIVE), 7).unwrap()
+    Plant::new(&robot(), config, terrain, &InitialState::at(x, DRIVE), 7).expect("a valid plant")
 }
 
 struct Window {
@@ -42,7 +42,7 @@ fn window(plant: &mut Plant, seconds: f64) -> Window {
     let mut max_rate: f64 = 0.0;
     let n = (seconds / plant.dt()).round() as usize;
     for _ in 0..n {
-        plant.step(&Command::idle()).unwrap();
+        plant.step(&Command::idle()).expect("the plant steps");
         let x = plant.state();
         max_speed = max_speed.max(Vector3::new(x[idx::VX], x[idx::VY], x[idx::VZ]).norm());
         max_rate = max_rate.max(Vector3::new(x[idx::WX], x[idx::WY], x[idx::WZ]).norm());
@@ -150,8 +150,10 @@ fn drop_from(height: f64, tilt: f64) -> Plant {
         &InitialState::at(x, tilt),
         3,
     )
-    .unwrap();
-    plant.advance(&Command::idle(), 2.0).unwrap();
+    .expect("a valid plant");
+    plant
+        .advance(&Command::idle(), 2.0)
+        .expect("the plant steps");
     plant
 }
 
@@ -212,8 +214,10 @@ fn a_robot_landing_on_its_side_tips_over() {
         &InitialState::at(x, DRIVE),
         3,
     )
-    .unwrap();
-    plant.advance(&Command::idle(), 2.0).unwrap();
+    .expect("a valid plant");
+    plant
+        .advance(&Command::idle(), 2.0)
+        .expect("the plant steps");
     assert!(
         plant
             .events()

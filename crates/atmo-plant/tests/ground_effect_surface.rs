@@ -16,11 +16,11 @@ fn documented_cells() -> Vec<(f64, f64, f64, f64)> {
     let mut lines = DOC[start..end].lines().filter(|l| l.starts_with('|'));
     let header: Vec<f64> = lines
         .next()
-        .unwrap()
+        .expect("a header row")
         .split('|')
         .skip(2)
         .filter(|c| !c.trim().is_empty())
-        .map(|c| c.trim().parse().unwrap())
+        .map(|c| c.trim().parse().expect("a height in the header"))
         .collect();
     let mut cells = Vec::new();
     for line in lines.skip(1) {
@@ -29,14 +29,14 @@ fn documented_cells() -> Vec<(f64, f64, f64, f64)> {
             .map(str::trim)
             .filter(|c| !c.is_empty())
             .collect();
-        let tilt: f64 = cols[0].parse().unwrap();
+        let tilt: f64 = cols[0].parse().expect("a tilt in the first column");
         for (h, cell) in header.iter().zip(&cols[1..]) {
-            let (mean, std) = cell.split_once('±').unwrap();
+            let (mean, std) = cell.split_once('±').expect("a cell 'mean ± std'");
             cells.push((
                 tilt,
                 *h,
-                mean.trim().parse().unwrap(),
-                std.trim().parse().unwrap(),
+                mean.trim().parse().expect("a mean"),
+                std.trim().parse().expect("a standard deviation"),
             ));
         }
     }

@@ -582,9 +582,6 @@ impl Plant {
         Vector6::new(force.x, force.y, force.z, torque.x, torque.y, torque.z)
     }
 
-    /// The contact law at the four wheels at once: one loop over the wheels
-    /// with straight-line arithmetic and selects (no branches), which the
-
     /// The derivative of the continuous state.
     #[inline(never)] // for `body_derivative`, not the step
     fn derivative(&self, ext: &Ext, cmd: &Command, reach: Reach) -> Ext {
