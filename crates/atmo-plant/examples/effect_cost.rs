@@ -4,7 +4,7 @@
 //! microseconds per 1000 steps (1000 us = 1000x real time). Complements the
 //! criterion bench `plant`, whose cases it shares:
 //!
-//! - `cargo run --release -p atmo-sim --example effect_cost`: the table above;
+//! - `cargo run --release -p atmo-plant --example effect_cost`: the table above;
 //! - `... -- cases`: the bench's four cases, best of 30 instead of a median
 //!   (on a shared machine the fastest run is the least disturbed one);
 //! - `... -- hover|morphing|driving|ideal`: one case alone, for a profiler;

@@ -18,7 +18,7 @@
 //! The two copies give bit-identical results: Rust never fuses a multiply
 //! and an add on its own (FMA only through `mul_add`, which the plant does
 //! not call), and vectorizing the lane loops does not reorder any sum. The
-//! atmo-sim test `every_scenario_flies_the_same_with_the_portable_step`
+//! atmo-sim test `the_avx2_step_code_gives_the_portable_code_s_trajectory_bit_for_bit`
 //! flies each scenario with both copies and compares the trajectories.
 //!
 //! # One step
