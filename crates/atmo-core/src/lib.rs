@@ -4,7 +4,10 @@
 //! inward together by one angle varphi through a self-locking screw linkage:
 //! varphi = 0 is a quadrotor, pi/2 a car.
 //!
-//! - [`config`]: the robot file, strictly parsed and validated.
+//! - [`config_file`]: the loading layer of every config file of the project
+//!   ([`ConfigFile`]: strict TOML, errors with file, line and key; range checks).
+//! - [`config`]: the robot file's layout, as data; [`validate`]: its physical
+//!   checks (they build a linkage and a model).
 //! - [`linkage`]: screw displacement x, tilt varphi and encoder counts.
 //! - [`model`]: the 7-body dynamics `x_dot = f(x, u, varphi)` (composite rigid
 //!   body at fixed tilt, see the module docs for the equations), analytic
@@ -18,13 +21,16 @@
 //! allocates on the heap or does I/O (except reading a config file).
 
 pub mod config;
+pub mod config_file;
 pub mod control;
 pub mod error;
 pub mod limits;
 pub mod linkage;
 pub mod model;
+pub mod validate;
 
 pub use config::RobotConfig;
+pub use config_file::ConfigFile;
 pub use error::{CoreError, Result};
 pub use linkage::Linkage;
 pub use model::{Input, Model, NU, NX, State, TiltedBody};

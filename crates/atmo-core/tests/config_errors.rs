@@ -1,7 +1,7 @@
 //! Every kind of bad robot file is refused with an error that names the
 //! file, the key and what was expected.
 
-use atmo_core::{CoreError, RobotConfig};
+use atmo_core::{ConfigFile, CoreError, RobotConfig};
 
 const GOOD: &str = include_str!("../../../config/atmo.toml");
 const FILE: &str = "robots/bad.toml";

@@ -6,7 +6,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result, bail};
-use atmo_core::RobotConfig;
+use atmo_core::{ConfigFile, RobotConfig};
 use atmo_daemon::control_loop::ControlThread;
 use atmo_daemon::onboard::{DaemonConfig, OnboardIo, OnboardSettings, OnboardShared};
 use atmo_daemon::{FlightSettings, FlightStack, Mode};

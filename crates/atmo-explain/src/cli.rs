@@ -3,7 +3,7 @@
 
 use std::path::{Path, PathBuf};
 
-use atmo_core::RobotConfig;
+use atmo_core::{ConfigFile, RobotConfig};
 
 use crate::output::write_all;
 use crate::recording::Recording;

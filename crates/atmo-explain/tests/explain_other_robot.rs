@@ -3,7 +3,7 @@
 //! 1.24 kg airframe's parameters), flown by the MPC on its own model, with a
 //! motor lag concealed and with nothing concealed.
 
-use atmo_core::RobotConfig;
+use atmo_core::{ConfigFile, RobotConfig};
 use atmo_explain::recording::Recording;
 use atmo_explain::synth::{Flight, Profile, record};
 use atmo_explain::{Explanation, Options, explain};

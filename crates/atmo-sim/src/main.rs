@@ -6,7 +6,7 @@ use anyhow::{Context, Result};
 use atmo_core::limits::{
     critical_angle, max_tilt_for_reserve, thrust_to_weight, trim_saturation_angle,
 };
-use atmo_core::{Linkage, Model, RobotConfig};
+use atmo_core::{ConfigFile, Linkage, Model, RobotConfig};
 use clap::{Parser, Subcommand};
 
 mod fly;

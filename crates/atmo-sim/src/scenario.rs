@@ -28,7 +28,7 @@ use std::path::{Path, PathBuf};
 use atmo_core::config::{Checker, parse_toml, read_config_file};
 use atmo_core::control::WheelRates;
 use atmo_core::model::{Input, Model, State, idx, rotation};
-use atmo_core::{CoreError, RobotConfig};
+use atmo_core::{ConfigFile, CoreError, RobotConfig};
 use nalgebra::Vector3;
 use serde::Deserialize;
 

@@ -1,0 +1,277 @@
+//! The one loading layer of every config file of the project.
+//!
+//! A config type derives `Deserialize` (with `deny_unknown_fields`) and
+//! implements [`ConfigFile::validate`]; it then gets [`ConfigFile::load`] and
+//! [`ConfigFile::from_toml_str`]. Loading is strict: unknown keys, missing
+//! keys and wrong types are refused by serde with the file, the line and the
+//! full key path; every value is then checked against its range by a
+//! [`Checker`], whose errors name the file, the key, what was expected (with
+//! its unit) and what was found.
+//!
+//! Adding one parameter is one field (with its default, if any) and one
+//! check line, e.g. `c.range("horizon.duration", h.duration, 0.01..=10.0, "s")?`.
+
+use std::fmt::Display;
+use std::ops::RangeInclusive;
+use std::path::Path;
+
+use nalgebra::Matrix3;
+use serde::de::DeserializeOwned;
+
+use crate::error::{CoreError, Result};
+
+/// A TOML config file: strictly parsed, then validated.
+///
+/// Each crate keeps its own error type: `Error` only has to accept the
+/// [`CoreError`]s of reading and parsing (every crate's error has a
+/// `#[from] CoreError` variant).
+pub trait ConfigFile: DeserializeOwned {
+    /// The error type of the crate that owns the config.
+    type Error: From<CoreError>;
+
+    /// Checks every value against its range; errors name `file` and the key.
+    ///
+    /// # Errors
+    /// The first value out of range.
+    fn validate(&self, file: &Path) -> std::result::Result<(), Self::Error>;
+
+    /// Runs once after parsing and before [`ConfigFile::validate`], with the
+    /// file's path: resolve paths relative to it, or remember it. Default:
+    /// nothing.
+    fn locate(&mut self, _file: &Path) {}
+
+    /// Parses and validates `text`; `file` names the origin in errors.
+    ///
+    /// # Errors
+    /// Bad TOML, unknown, missing or mistyped keys (with file, line and key
+    /// path), and any value [`ConfigFile::validate`] refuses.
+    fn from_toml_str(text: &str, file: impl AsRef<Path>) -> std::result::Result<Self, Self::Error> {
+        let file = file.as_ref();
+        let mut config: Self = parse_toml(text, file)?;
+        config.locate(file);
+        config.validate(file)?;
+        Ok(config)
+    }
+
+    /// Reads, parses and validates the file at `path`.
+    ///
+    /// # Errors
+    /// As [`ConfigFile::from_toml_str`], and a file that cannot be read.
+    fn load(path: impl AsRef<Path>) -> std::result::Result<Self, Self::Error> {
+        let path = path.as_ref();
+        Self::from_toml_str(&read_config_file(path)?, path)
+    }
+}
+
+/// Parses a TOML document of type `T` strictly, with errors that name `file`,
+/// the line and the full key path.
+///
+/// # Errors
+/// [`CoreError::ConfigParse`].
+pub fn parse_toml<T: DeserializeOwned>(text: &str, file: &Path) -> Result<T> {
+    let deserializer = toml::Deserializer::new(text);
+    serde_path_to_error::deserialize(deserializer).map_err(|err| {
+        let key = err.path().to_string();
+        let inner = err.into_inner();
+        let line = inner.span().map_or(0, |span| {
+            text[..span.start.min(text.len())].matches('\n').count() + 1
+        });
+        CoreError::ConfigParse {
+            file: file.to_path_buf(),
+            line,
+            key: if key == "." { "(document)".into() } else { key },
+            message: inner.message().to_string(),
+        }
+    })
+}
+
+/// Reads a whole file for a config loader, naming it on failure.
+///
+/// # Errors
+/// [`CoreError::ConfigRead`].
+pub fn read_config_file(path: &Path) -> Result<String> {
+    std::fs::read_to_string(path).map_err(|source| CoreError::ConfigRead {
+        file: path.to_path_buf(),
+        source,
+    })
+}
+
+/// A number a [`Checker::range`] can bound: floats must also be finite.
+pub trait Bounded: PartialOrd + Display + Copy {
+    /// How the expected value is described: "a value" or "an integer".
+    const KIND: &'static str;
+    fn is_number(self) -> bool;
+}
+
+impl Bounded for f64 {
+    const KIND: &'static str = "a value";
+    fn is_number(self) -> bool {
+        self.is_finite()
+    }
+}
+
+macro_rules! bounded_integer {
+    ($($t:ty),*) => {$(
+        impl Bounded for $t {
+            const KIND: &'static str = "an integer";
+            fn is_number(self) -> bool {
+                true
+            }
+        }
+    )*};
+}
+bounded_integer!(u32, u64, usize, i64);
+
+/// Collects value checks for one file so that each failure names its key.
+pub struct Checker<'a> {
+    file: &'a Path,
+}
+
+impl<'a> Checker<'a> {
+    pub fn new(file: &'a Path) -> Self {
+        Self { file }
+    }
+
+    /// The error for `key`: expected `expected`, got `got`.
+    pub fn fail(
+        &self,
+        key: &str,
+        expected: impl Into<String>,
+        got: impl std::fmt::Display,
+    ) -> CoreError {
+        CoreError::ConfigValue {
+            file: self.file.to_path_buf(),
+            key: key.to_string(),
+            expected: expected.into(),
+            got: got.to_string(),
+        }
+    }
+
+    /// `value` must lie in `range` (and be finite); `unit` (`"kg"`, `"ms"`,
+    /// `""` for none) is named in the error.
+    ///
+    /// # Errors
+    /// [`CoreError::ConfigValue`] naming `key`.
+    pub fn range<T: Bounded>(
+        &self,
+        key: &str,
+        value: T,
+        range: RangeInclusive<T>,
+        unit: &str,
+    ) -> Result<()> {
+        if value.is_number() && range.contains(&value) {
+            return Ok(());
+        }
+        let unit = if unit.is_empty() {
+            String::new()
+        } else {
+            format!(" {unit}")
+        };
+        let (min, max) = range.into_inner();
+        Err(self.fail(key, format!("{} in [{min}, {max}]{unit}", T::KIND), value))
+    }
+
+    /// `value` must be finite and strictly positive.
+    ///
+    /// # Errors
+    /// [`CoreError::ConfigValue`] naming `key`.
+    pub fn positive(&self, key: &str, value: f64) -> Result<()> {
+        if value.is_finite() && value > 0.0 {
+            Ok(())
+        } else {
+            Err(self.fail(key, "a finite value > 0", value))
+        }
+    }
+
+    /// `value` must be finite and within `[min, max]`.
+    ///
+    /// # Errors
+    /// [`CoreError::ConfigValue`] naming `key`.
+    pub fn within(&self, key: &str, value: f64, min: f64, max: f64) -> Result<()> {
+        self.range(key, value, min..=max, "")
+    }
+
+    /// Every entry must be finite.
+    ///
+    /// # Errors
+    /// [`CoreError::ConfigValue`] naming `key`.
+    pub fn finite(&self, key: &str, values: &[f64]) -> Result<()> {
+        match values.iter().find(|v| !v.is_finite()) {
+            None => Ok(()),
+            Some(v) => Err(self.fail(key, "finite numbers", v)),
+        }
+    }
+
+    /// `value` must be one of `allowed`.
+    ///
+    /// # Errors
+    /// [`CoreError::ConfigValue`] naming `key` and listing `allowed`.
+    pub fn one_of(&self, key: &str, value: &str, allowed: &[&str]) -> Result<()> {
+        if allowed.contains(&value) {
+            Ok(())
+        } else {
+            let list: Vec<String> = allowed.iter().map(|a| format!("`{a}`")).collect();
+            Err(self.fail(key, format!("one of {}", list.join(", ")), value))
+        }
+    }
+
+    /// The tensor must be symmetric positive definite and satisfy the
+    /// triangle inequalities of a physical body (principal moments).
+    ///
+    /// # Errors
+    /// [`CoreError::ConfigValue`] naming `key`.
+    pub fn inertia(&self, key: &str, inertia: &Matrix3<f64>) -> Result<()> {
+        self.finite(key, inertia.as_slice())?;
+        let eig = inertia.symmetric_eigenvalues();
+        let (a, b, c) = (eig[0], eig[1], eig[2]);
+        if a <= 0.0 || b <= 0.0 || c <= 0.0 {
+            return Err(self.fail(
+                key,
+                "a positive-definite inertia tensor",
+                format!("principal moments ({a:.3e}, {b:.3e}, {c:.3e})"),
+            ));
+        }
+        let tol = 1e-12 * (a + b + c);
+        if a + b + tol < c || a + c + tol < b || b + c + tol < a {
+            return Err(self.fail(
+                key,
+                "principal moments that satisfy the triangle inequality",
+                format!("({a:.3e}, {b:.3e}, {c:.3e})"),
+            ));
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn range_names_key_bounds_unit_and_value() {
+        let c = Checker::new(Path::new("f.toml"));
+        assert!(c.range("a.b", 5_u64, 1..=10, "ms").is_ok());
+        let msg = c.range("a.b", 0_u64, 1..=10, "ms").unwrap_err().to_string();
+        assert_eq!(
+            msg,
+            "f.toml: key `a.b`: expected an integer in [1, 10] ms, got 0"
+        );
+        let msg = c
+            .range("x", f64::NAN, 0.0..=1.0, "")
+            .unwrap_err()
+            .to_string();
+        assert_eq!(msg, "f.toml: key `x`: expected a value in [0, 1], got NaN");
+        assert!(c.range("x", 1.0, 0.0..=1.0, "kg").is_ok());
+    }
+
+    #[test]
+    fn one_of_lists_the_choices() {
+        let c = Checker::new(Path::new("f.toml"));
+        assert!(c.one_of("k", "lz4", &["zstd", "lz4"]).is_ok());
+        let msg = c
+            .one_of("k", "gzip", &["zstd", "lz4"])
+            .unwrap_err()
+            .to_string();
+        assert!(msg.contains("one of `zstd`, `lz4`, got gzip"), "{msg}");
+    }
+}
