@@ -1,12 +1,12 @@
 //! MPC settings: the `config/mpc.toml` layout, its loading and validation.
 //!
 //! Parsing is strict (unknown or missing keys are errors naming file, line and
-//! key, via atmo-core's `parse_toml`); every value is then range-checked.
+//! key, via atmo-core's [`ConfigFile`]); every value is then range-checked.
 
 use std::collections::BTreeMap;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
-use atmo_core::config::{Checker, parse_toml, read_config_file};
+use atmo_core::config_file::{Checker, ConfigFile};
 use atmo_core::model::{Input, NU, NX, State};
 use serde::Deserialize;
 
@@ -127,39 +127,28 @@ impl MpcSettings {
     }
 }
 
-impl MpcFile {
-    /// Loads and validates an MPC settings file.
-    pub fn load(path: impl AsRef<Path>) -> Result<Self> {
-        let path = path.as_ref();
-        Self::from_toml_str(&read_config_file(path)?, path)
-    }
-
-    /// Parses and validates; `file` only names the origin in errors.
-    pub fn from_toml_str(text: &str, file: impl Into<PathBuf>) -> Result<Self> {
-        let file = file.into();
-        let parsed: Self = parse_toml(text, &file)?;
-        parsed.validate(&file)?;
-        Ok(parsed)
-    }
+impl ConfigFile for MpcFile {
+    type Error = MpcError;
 
     /// Checks every value against its range.
-    pub fn validate(&self, file: &Path) -> Result<()> {
+    fn validate(&self, file: &Path) -> Result<()> {
         let c = Checker::new(file);
         let h = &self.horizon;
-        c.within("horizon.duration", h.duration, 0.01, 10.0)?;
-        if !(1..=50).contains(&h.steps) {
-            return Err(c
-                .fail("horizon.steps", "an integer in [1, 50]", h.steps)
-                .into());
-        }
+        c.range("horizon.duration", h.duration, 0.01..=10.0, "s")?;
+        c.range("horizon.steps", h.steps, 1..=50, "intervals")?;
         let stage_dt = h.duration / h.steps as f64;
-        c.within("horizon.tick_period", h.tick_period, 1e-4, stage_dt)?;
+        c.range("horizon.tick_period", h.tick_period, 1e-4..=stage_dt, "s")?;
         if self.cost.alpha_refresh_ticks == 0 {
             return Err(c
                 .fail("cost.alpha_refresh_ticks", "an integer >= 1", 0)
                 .into());
         }
-        c.within("cost.terminal_scale", self.cost.terminal_scale, 0.0, 1e6)?;
+        c.range(
+            "cost.terminal_scale",
+            self.cost.terminal_scale,
+            0.0..=1e6,
+            "",
+        )?;
         if self.presets.is_empty() {
             return Err(c.fail("presets", "at least one cost preset", "none").into());
         }
@@ -186,28 +175,28 @@ impl MpcFile {
             }
         }
         let s = &self.solver;
-        if !(1..=1000).contains(&s.max_iter) {
-            return Err(c
-                .fail("solver.max_iter", "an integer in [1, 1000]", s.max_iter)
-                .into());
-        }
-        c.within("solver.time_limit", s.time_limit, 1e-5, 10.0)?;
-        c.within("solver.tol_gap_abs", s.tol_gap_abs, 1e-12, 1e-2)?;
-        c.within("solver.tol_gap_rel", s.tol_gap_rel, 1e-12, 1e-2)?;
-        c.within("solver.tol_feas", s.tol_feas, 1e-12, 1e-2)?;
-        c.within("solver.max_step_fraction", s.max_step_fraction, 0.5, 0.9999)?;
-        if self.failure.grace_ticks > 10_000 {
-            return Err(c
-                .fail(
-                    "failure.grace_ticks",
-                    "an integer in [0, 10000]",
-                    self.failure.grace_ticks,
-                )
-                .into());
-        }
+        c.range("solver.max_iter", s.max_iter, 1..=1000, "iterations")?;
+        c.range("solver.time_limit", s.time_limit, 1e-5..=10.0, "s")?;
+        c.range("solver.tol_gap_abs", s.tol_gap_abs, 1e-12..=1e-2, "")?;
+        c.range("solver.tol_gap_rel", s.tol_gap_rel, 1e-12..=1e-2, "")?;
+        c.range("solver.tol_feas", s.tol_feas, 1e-12..=1e-2, "")?;
+        c.range(
+            "solver.max_step_fraction",
+            s.max_step_fraction,
+            0.5..=0.9999,
+            "",
+        )?;
+        c.range(
+            "failure.grace_ticks",
+            self.failure.grace_ticks,
+            0..=10_000,
+            "ticks",
+        )?;
         Ok(())
     }
+}
 
+impl MpcFile {
     /// The settings with preset `name` chosen.
     pub fn settings(&self, name: &str) -> Result<MpcSettings> {
         let weights = *self
