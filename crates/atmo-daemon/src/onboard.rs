@@ -34,7 +34,7 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU8, AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 
-use atmo_core::config::{Checker, parse_toml, read_config_file};
+use atmo_core::config_file::{Checker, ConfigFile};
 use atmo_core::model::idx;
 use atmo_io::drivers::{DriverHealth, DriverPortsConfig, FlightPorts, monotonic_ns};
 use atmo_io::mcap_log::{Channel, Compression, LoggerHandle, LoggerOptions};
@@ -126,74 +126,44 @@ impl LogConfig {
     }
 }
 
-impl DaemonConfig {
-    /// Loads and validates `path`; the robot, flight and MPC paths are
-    /// resolved against its folder.
-    pub fn load(path: impl AsRef<Path>) -> Result<Self> {
-        let path = path.as_ref();
-        let text = read_config_file(path)?;
-        let mut config = Self::from_toml_str(&text, path)?;
-        let dir = path.parent().unwrap_or(Path::new("."));
-        for file in [&mut config.robot, &mut config.flight, &mut config.mpc] {
-            if file.is_relative() {
-                *file = dir.join(&*file);
+impl ConfigFile for DaemonConfig {
+    type Error = DaemonError;
+
+    /// The robot, flight and MPC paths are relative to the folder of `file`.
+    fn locate(&mut self, file: &Path) {
+        let dir = file.parent().unwrap_or(Path::new("."));
+        for path in [&mut self.robot, &mut self.flight, &mut self.mpc] {
+            if path.is_relative() {
+                *path = dir.join(&*path);
             }
         }
-        Ok(config)
-    }
-
-    /// Parses and validates; `file` names the origin in errors.
-    pub fn from_toml_str(text: &str, file: impl Into<PathBuf>) -> Result<Self> {
-        let file = file.into();
-        let config: Self = parse_toml(text, &file)?;
-        config.validate(&file)?;
-        Ok(config)
     }
 
     /// Checks the values; errors name `file` and the key.
-    pub fn validate(&self, file: &Path) -> Result<()> {
+    fn validate(&self, file: &Path) -> Result<()> {
         let c = Checker::new(file);
         if !self.ground_z.is_finite() {
             return Err(c
                 .fail("ground_z", "a finite height, m", self.ground_z)
                 .into());
         }
-        for (key, value) in [
-            ("pilot_timeout_ms", self.pilot_timeout_ms),
-            ("drive_timeout_ms", self.drive_timeout_ms),
-        ] {
-            if !(10..=10_000).contains(&value) {
-                return Err(c.fail(key, "10 to 10000 ms", value).into());
-            }
-        }
-        if !(1..=1 << 20).contains(&self.log.queue_capacity) {
-            return Err(c
-                .fail(
-                    "log.queue_capacity",
-                    "1 to 1048576",
-                    self.log.queue_capacity,
-                )
-                .into());
-        }
-        if !(10..=1000).contains(&self.log.flush_period_ms) {
-            return Err(c
-                .fail(
-                    "log.flush_period_ms",
-                    "10 to 1000 ms (a killed daemon loses at most this much)",
-                    self.log.flush_period_ms,
-                )
-                .into());
-        }
-        if !["zstd", "lz4", "none"].contains(&self.log.compression.as_str()) {
-            return Err(c
-                .fail(
-                    "log.compression",
-                    "`zstd`, `lz4` or `none`",
-                    &self.log.compression,
-                )
-                .into());
-        }
-        if self.log.path.as_os_str().is_empty() {
+        c.range("pilot_timeout_ms", self.pilot_timeout_ms, 10..=10_000, "ms")?;
+        c.range("drive_timeout_ms", self.drive_timeout_ms, 10..=10_000, "ms")?;
+        let log = &self.log;
+        c.range(
+            "log.queue_capacity",
+            log.queue_capacity,
+            1..=1 << 20,
+            "records",
+        )?;
+        // A killed daemon loses at most one flush period.
+        c.range("log.flush_period_ms", log.flush_period_ms, 10..=1000, "ms")?;
+        c.one_of(
+            "log.compression",
+            &log.compression,
+            &["zstd", "lz4", "none"],
+        )?;
+        if log.path.as_os_str().is_empty() {
             return Err(c.fail("log.path", "a file path", "\"\"").into());
         }
         self.ros2

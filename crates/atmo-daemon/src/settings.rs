@@ -1,11 +1,10 @@
 //! Flight-stack settings (`config/flight.toml`), strictly parsed and validated.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
-use atmo_core::config::{Checker, parse_toml, read_config_file};
+use atmo_core::CoreError;
+use atmo_core::config_file::{Checker, ConfigFile};
 use serde::Deserialize;
-
-use crate::error::Result;
 
 #[derive(Debug, Clone, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
@@ -86,36 +85,29 @@ impl FlightSettings {
         )
         .expect("the shipped config/flight.toml is valid (tested)")
     }
+}
 
-    pub fn load(path: impl AsRef<Path>) -> Result<Self> {
-        let path = path.as_ref();
-        Ok(Self::from_toml_str(&read_config_file(path)?, path)?)
-    }
+impl ConfigFile for FlightSettings {
+    type Error = CoreError;
 
-    pub fn from_toml_str(text: &str, file: impl Into<PathBuf>) -> atmo_core::Result<Self> {
-        let file = file.into();
-        let settings: Self = parse_toml(text, &file)?;
-        settings.validate(&file)?;
-        Ok(settings)
-    }
-
-    pub fn validate(&self, file: &Path) -> atmo_core::Result<()> {
+    fn validate(&self, file: &Path) -> Result<(), CoreError> {
         let c = Checker::new(file);
-        c.within("pilot.max_speed", self.pilot.max_speed, 0.0, 1.0)?;
-        c.within("pilot.max_yaw_rate", self.pilot.max_yaw_rate, 0.0, 5.0)?;
-        c.within(
+        let p = &self.pilot;
+        c.range("pilot.max_speed", p.max_speed, 0.0..=1.0, "m/s")?;
+        c.range("pilot.max_yaw_rate", p.max_yaw_rate, 0.0..=5.0, "rad/s")?;
+        c.range(
             "pilot.descent_threshold",
-            self.pilot.descent_threshold,
-            0.0,
-            self.pilot.max_speed,
+            p.descent_threshold,
+            0.0..=p.max_speed,
+            "m/s",
         )?;
         let m = &self.modes;
-        c.within("modes.takeoff_throttle", m.takeoff_throttle, 0.0, 1.0)?;
-        c.within(
+        c.range("modes.takeoff_throttle", m.takeoff_throttle, 0.0..=1.0, "")?;
+        c.range(
             "modes.takeoff_max_tilt_deg",
             m.takeoff_max_tilt_deg,
-            0.0,
-            90.0,
+            0.0..=90.0,
+            "deg",
         )?;
         c.positive("modes.takeoff_height", m.takeoff_height)?;
         if !(m.takeoff_target_height.is_finite() && m.takeoff_target_height > m.takeoff_height) {
@@ -128,37 +120,57 @@ impl FlightSettings {
                 m.takeoff_target_height,
             ));
         }
-        c.within("modes.morph_hysteresis", m.morph_hysteresis, 0.0, 5.0)?;
-        c.within(
+        c.range("modes.morph_hysteresis", m.morph_hysteresis, 0.0..=5.0, "m")?;
+        c.range(
             "modes.transition_descent_speed",
             m.transition_descent_speed,
-            0.01,
-            2.0,
+            0.01..=2.0,
+            "m/s",
         )?;
-        c.within(
+        c.range(
             "modes.transition_full_tilt_height",
             m.transition_full_tilt_height,
-            0.0,
-            2.0,
+            0.0..=2.0,
+            "m",
         )?;
-        c.within("modes.wheel_spinup_height", m.wheel_spinup_height, 0.0, 2.0)?;
-        c.within("modes.thrust_cut_time", m.thrust_cut_time, 0.0, 5.0)?;
+        c.range(
+            "modes.wheel_spinup_height",
+            m.wheel_spinup_height,
+            0.0..=2.0,
+            "m",
+        )?;
+        c.range("modes.thrust_cut_time", m.thrust_cut_time, 0.0..=5.0, "s")?;
         let f = &self.failsafe;
-        c.within("failsafe.estimate_timeout", f.estimate_timeout, 0.001, 1.0)?;
-        c.within("failsafe.recovery_time", f.recovery_time, 0.0, 60.0)?;
-        c.within("failsafe.recovery_tilt_deg", f.recovery_tilt_deg, 0.0, 90.0)?;
-        c.within(
+        c.range(
+            "failsafe.estimate_timeout",
+            f.estimate_timeout,
+            0.001..=1.0,
+            "s",
+        )?;
+        c.range("failsafe.recovery_time", f.recovery_time, 0.0..=60.0, "s")?;
+        c.range(
+            "failsafe.recovery_tilt_deg",
+            f.recovery_tilt_deg,
+            0.0..=90.0,
+            "deg",
+        )?;
+        c.range(
             "failsafe.open_loop_thrust_scale",
             f.open_loop_thrust_scale,
-            0.0,
-            1.5,
+            0.0..=1.5,
+            "",
         )?;
         let o = &self.observer;
-        c.within("observer.force_gain", o.force_gain, 0.0, 1.0)?;
-        c.within("observer.torque_gain", o.torque_gain, 0.0, 1.0)?;
-        c.within("observer.max_force", o.max_force, 0.0, 200.0)?;
-        c.within("observer.max_torque", o.max_torque, 0.0, 20.0)?;
-        c.within("loop.rate_hz", self.control_loop.rate_hz, 1.0, 2000.0)?;
+        c.range("observer.force_gain", o.force_gain, 0.0..=1.0, "")?;
+        c.range("observer.torque_gain", o.torque_gain, 0.0..=1.0, "")?;
+        c.range("observer.max_force", o.max_force, 0.0..=200.0, "N")?;
+        c.range("observer.max_torque", o.max_torque, 0.0..=20.0, "N m")?;
+        c.range(
+            "loop.rate_hz",
+            self.control_loop.rate_hz,
+            1.0..=2000.0,
+            "Hz",
+        )?;
         Ok(())
     }
 }
