@@ -9,6 +9,7 @@ use std::process::{Child, Command};
 
 use std::time::Duration;
 
+use atmo_core::ConfigFile;
 use atmo_io::drivers::{
     DriverEndpoint, DriverId, DriverPortsConfig, FlightPorts, GroundContact, PortHeader,
     ThrusterCommand, TiltEncoder, cleanup_stale, monotonic_ns,

@@ -9,6 +9,7 @@ mod support;
 use std::net::Ipv4Addr;
 use std::time::{Duration, Instant};
 
+use atmo_core::ConfigFile;
 use atmo_core::model::State;
 use atmo_io::msg::frames::{odometry_to_state, state_to_odometry};
 use atmo_io::msg::{DiagnosticArray, MpcStatus, Odometry, Time, Twist, Vector3, VehicleOdometry};

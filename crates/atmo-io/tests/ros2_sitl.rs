@@ -9,6 +9,7 @@ mod support;
 
 use std::time::{Duration, Instant};
 
+use atmo_core::ConfigFile;
 use atmo_core::model::State;
 use atmo_io::msg::{MpcStatus, PilotInput, RosMessage, VehicleOdometry};
 use atmo_io::ros2::{

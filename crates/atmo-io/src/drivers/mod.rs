@@ -35,6 +35,9 @@ pub use payloads::{
 };
 
 use std::fmt::Debug;
+use std::path::Path;
+
+use atmo_core::config_file::{Checker, ConfigFile};
 
 use iceoryx2::node::{Node, NodeBuilder, NodeState};
 use iceoryx2::port::listener::Listener;
@@ -115,19 +118,12 @@ impl Default for DriverPortsConfig {
     }
 }
 
-impl DriverPortsConfig {
-    /// Parses and validates a TOML document of these keys; `file` only
-    /// names the origin in errors.
-    pub fn from_toml_str(text: &str, file: impl Into<std::path::PathBuf>) -> Result<Self> {
-        let file = file.into();
-        let config: Self = atmo_core::config::parse_toml(text, &file)?;
-        config.validate(&file)?;
-        Ok(config)
-    }
+impl ConfigFile for DriverPortsConfig {
+    type Error = IoError;
 
     /// Checks the values; errors name `file` and the key.
-    pub fn validate(&self, file: &std::path::Path) -> Result<()> {
-        let c = atmo_core::config::Checker::new(file);
+    fn validate(&self, file: &Path) -> Result<()> {
+        let c = Checker::new(file);
         if self.prefix.is_empty()
             || !self
                 .prefix
@@ -142,15 +138,12 @@ impl DriverPortsConfig {
                 )
                 .into());
         }
-        if !(1..=10_000).contains(&self.liveness_timeout_ms) {
-            return Err(c
-                .fail(
-                    "liveness_timeout_ms",
-                    "1 to 10000",
-                    self.liveness_timeout_ms,
-                )
-                .into());
-        }
+        c.range(
+            "liveness_timeout_ms",
+            self.liveness_timeout_ms,
+            1..=10_000,
+            "ms",
+        )?;
         if !self
             .iceoryx_prefix
             .chars()
@@ -178,7 +171,9 @@ impl DriverPortsConfig {
         }
         Ok(())
     }
+}
 
+impl DriverPortsConfig {
     /// The iceoryx2 configuration of these ports.
     pub fn iceoryx_config(&self) -> Result<Config> {
         let mut config = Config::default();

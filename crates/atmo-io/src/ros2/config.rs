@@ -1,11 +1,11 @@
 //! Topic names and types of the ROS 2 node (TOML, strict).
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
-use atmo_core::config::{Checker, parse_toml, read_config_file};
+use atmo_core::config_file::{Checker, ConfigFile};
 use serde::Deserialize;
 
-use crate::error::Result;
+use crate::error::{IoError, Result};
 use crate::msg::{
     ActuatorMotors, DiagnosticArray, MpcStatus, Odometry, OffboardControlMode, PilotInput,
     RosMessage, Twist, VehicleOdometry,
@@ -121,23 +121,11 @@ pub(crate) fn valid_topic_name(name: &str) -> bool {
         .is_some_and(|rest| rest.split('/').all(valid_segment))
 }
 
-impl Ros2Config {
-    /// Loads and validates a file holding only these keys.
-    pub fn load(path: impl AsRef<Path>) -> Result<Self> {
-        let path = path.as_ref();
-        Self::from_toml_str(&read_config_file(path)?, path)
-    }
-
-    /// Parses and validates; `file` only names the origin in errors.
-    pub fn from_toml_str(text: &str, file: impl Into<PathBuf>) -> Result<Self> {
-        let file = file.into();
-        let config: Self = parse_toml(text, &file)?;
-        config.validate(&file)?;
-        Ok(config)
-    }
+impl ConfigFile for Ros2Config {
+    type Error = IoError;
 
     /// Checks names, types and ranges; errors name `file` and the key.
-    pub fn validate(&self, file: &Path) -> Result<()> {
+    fn validate(&self, file: &Path) -> Result<()> {
         let c = Checker::new(file);
         if !valid_segment(&self.node_name) {
             return Err(c
@@ -157,20 +145,13 @@ impl Ros2Config {
                 )
                 .into());
         }
-        if !(10..=60_000).contains(&self.diagnostics_period_ms) {
-            return Err(c
-                .fail(
-                    "diagnostics_period_ms",
-                    "10 to 60000",
-                    self.diagnostics_period_ms,
-                )
-                .into());
-        }
-        if !(1..=65_536).contains(&self.publish_queue) {
-            return Err(c
-                .fail("publish_queue", "1 to 65536", self.publish_queue)
-                .into());
-        }
+        c.range(
+            "diagnostics_period_ms",
+            self.diagnostics_period_ms,
+            10..=60_000,
+            "ms",
+        )?;
+        c.range("publish_queue", self.publish_queue, 1..=65_536, "slots")?;
         let t = &self.topics;
         let roles: [(&str, &TopicConfig, &[&str]); 7] = [
             ("topics.status", &t.status, &[MpcStatus::TYPE_NAME]),

@@ -37,6 +37,7 @@ use std::sync::mpsc::{Receiver, RecvTimeoutError, SyncSender, TrySendError, sync
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
+use atmo_core::ConfigFile;
 use atmo_core::model::State;
 use ros2_client::dds::rustdds::DomainParticipantBuilder;
 use ros2_client::{

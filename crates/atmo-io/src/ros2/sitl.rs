@@ -31,6 +31,7 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::mpsc::{Receiver, SyncSender, sync_channel};
 
+use atmo_core::ConfigFile;
 use atmo_core::model::State;
 use ros2_client::{Context, Node, Publisher, Subscription};
 
