@@ -11,7 +11,10 @@
 //!   MCAP log) around the control thread, and `config/daemon.toml`.
 //! - [`telemetry`]: the tick's status as the `atmo_msgs/MpcStatus` message.
 //! - [`settings`], read from `config/flight.toml`.
+//! - `cli` (feature `cli`): the command-line argument groups the binaries share.
 
+#[cfg(feature = "cli")]
+pub mod cli;
 pub mod control_loop;
 pub mod error;
 pub mod flight_stack;

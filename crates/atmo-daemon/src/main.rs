@@ -7,6 +7,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result, bail};
 use atmo_core::{ConfigFile, RobotConfig};
+use atmo_daemon::cli::DaemonConfigArg;
 use atmo_daemon::control_loop::ControlThread;
 use atmo_daemon::onboard::{DaemonConfig, OnboardIo, OnboardSettings, OnboardShared};
 use atmo_daemon::{FlightSettings, FlightStack, Mode};
@@ -34,10 +35,8 @@ enum Command {
     /// ROS_DOMAIN_ID selects the DDS domain; RUST_LOG the log level
     /// (default `info,rustdds=off`; `rustdds=warn` shows the DDS layer).
     Run {
-        /// Daemon config (TOML): robot, flight and MPC files, ground height,
-        /// input timeouts, [log], [ros2] topics, [drivers] ports.
-        #[arg(long, default_value = "config/daemon.toml")]
-        config: PathBuf,
+        #[command(flatten)]
+        config: DaemonConfigArg,
         /// MCAP log file (overrides [log] path).
         #[arg(long)]
         log: Option<PathBuf>,
@@ -48,8 +47,8 @@ enum Command {
     /// Load and validate every config file the daemon would use, print what
     /// it would run with, and exit (0: valid).
     Check {
-        #[arg(long, default_value = "config/daemon.toml")]
-        config: PathBuf,
+        #[command(flatten)]
+        config: DaemonConfigArg,
     },
 }
 
@@ -85,8 +84,8 @@ struct Loaded {
     mpc: atmo_mpc::MpcSettings,
 }
 
-fn load(path: &std::path::Path) -> Result<Loaded> {
-    let config = DaemonConfig::load(path)?;
+fn load(arg: &DaemonConfigArg) -> Result<Loaded> {
+    let config = arg.load()?;
     let robot = RobotConfig::load(&config.robot)?;
     let flight = FlightSettings::load(&config.flight)?;
     let mpc = atmo_mpc::MpcFile::load(&config.mpc)?
@@ -106,8 +105,9 @@ fn load(path: &std::path::Path) -> Result<Loaded> {
     })
 }
 
-fn check(path: &std::path::Path) -> Result<()> {
-    let l = load(path)?;
+fn check(arg: &DaemonConfigArg) -> Result<()> {
+    let l = load(arg)?;
+    let path = &arg.path;
     FlightStack::new(&l.robot, l.mpc.clone(), l.flight.clone())?;
     println!("{}: valid", path.display());
     println!("  robot  {}", l.config.robot.display());
@@ -131,8 +131,9 @@ fn check(path: &std::path::Path) -> Result<()> {
     Ok(())
 }
 
-fn run(path: &std::path::Path, log_path: Option<PathBuf>, duration: Option<f64>) -> Result<()> {
-    let l = load(path)?;
+fn run(arg: &DaemonConfigArg, log_path: Option<PathBuf>, duration: Option<f64>) -> Result<()> {
+    let l = load(arg)?;
+    let path = &arg.path;
     let stack = FlightStack::new(&l.robot, l.mpc, l.flight.clone())?;
     let period = Duration::from_secs_f64(stack.period());
 

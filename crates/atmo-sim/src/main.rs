@@ -7,6 +7,7 @@ use atmo_core::limits::{
     critical_angle, max_tilt_for_reserve, thrust_to_weight, trim_saturation_angle,
 };
 use atmo_core::{ConfigFile, Linkage, Model, RobotConfig};
+use atmo_daemon::cli::DaemonConfigArg;
 use clap::{Parser, Subcommand};
 
 mod fly;
@@ -40,9 +41,8 @@ enum Command {
     /// the success criteria: no crash, touchdown tilt >= 60 deg, impact speed
     /// <= 0.5 m/s, >= 1 m driven after touchdown.
     Fly {
-        /// Scenario file (see config/scenarios/).
-        #[arg(default_value = "config/scenarios/wheel_landing.toml")]
-        scenario: PathBuf,
+        #[command(flatten)]
+        scenario: ScenarioArg,
         /// Output folder; results go to OUT/<scenario name>/.
         #[arg(long, default_value = "out")]
         out: PathBuf,
@@ -128,12 +128,12 @@ enum Command {
     /// server's counters). Exit status 0 when the scenario's success
     /// criteria are met.
     Serve {
-        /// Scenario file (see config/scenarios/).
-        #[arg(default_value = "config/scenarios/wheel_landing.toml")]
-        scenario: PathBuf,
-        /// The daemon's config ([ros2] topics, [drivers] ports).
-        #[arg(long, default_value = "config/daemon.toml")]
-        config: PathBuf,
+        #[command(flatten)]
+        scenario: ScenarioArg,
+        /// The daemon's config: its [ros2] topics and [drivers] ports are
+        /// the ones served.
+        #[command(flatten)]
+        config: DaemonConfigArg,
         /// Output folder.
         #[arg(long, default_value = "out/sitl")]
         out: PathBuf,
@@ -146,6 +146,17 @@ enum Command {
     },
 }
 
+/// The scenario to fly (positional).
+#[derive(clap::Args)]
+struct ScenarioArg {
+    /// Scenario file (see config/scenarios/).
+    #[arg(
+        value_name = "SCENARIO",
+        default_value = "config/scenarios/wheel_landing.toml"
+    )]
+    path: PathBuf,
+}
+
 fn main() -> Result<()> {
     match Cli::parse().command {
         Command::Physics { robot } => physics(&robot),
@@ -155,14 +166,14 @@ fn main() -> Result<()> {
             runs,
             seed,
             jobs,
-        } => fly::run(&scenario, &out, runs, seed, jobs),
+        } => fly::run(&scenario.path, &out, runs, seed, jobs),
         Command::Serve {
             scenario,
             config,
             out,
             start_timeout,
             quiet,
-        } => serve(&scenario, &config, &out, start_timeout, quiet),
+        } => serve(&scenario.path, &config, &out, start_timeout, quiet),
         Command::Explain {
             recording,
             robot,
@@ -191,14 +202,14 @@ fn main() -> Result<()> {
 
 fn serve(
     scenario_path: &std::path::Path,
-    config: &std::path::Path,
+    config: &DaemonConfigArg,
     out: &std::path::Path,
     start_timeout: f64,
     quiet: bool,
 ) -> Result<()> {
     use atmo_sim::sitl::{ServeOptions, serve};
     let scenario = atmo_sim::Scenario::load(scenario_path)?;
-    let daemon = atmo_daemon::onboard::DaemonConfig::load(config)?;
+    let daemon = config.load()?;
     let mut options = ServeOptions::new(daemon.ros2, daemon.drivers);
     options.start_timeout = std::time::Duration::from_secs_f64(start_timeout.max(0.0));
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
