@@ -7,9 +7,6 @@
 use nalgebra::Matrix3;
 use serde::Deserialize;
 
-// The generic loading layer, re-exported where it used to live.
-pub use crate::config_file::{Checker, ConfigFile, parse_toml, read_config_file};
-
 /// The whole robot file (`config/atmo.toml`).
 #[derive(Debug, Clone, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]

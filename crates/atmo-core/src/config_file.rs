@@ -96,6 +96,12 @@ pub fn read_config_file(path: &Path) -> Result<String> {
     })
 }
 
+/// Serde default of a switch that is on unless the file says otherwise
+/// (`#[serde(default = "atmo_core::config_file::default_true")]`).
+pub fn default_true() -> bool {
+    true
+}
+
 /// A number a [`Checker::range`] can bound: floats must also be finite.
 pub trait Bounded: PartialOrd + Display + Copy {
     /// How the expected value is described: "a value" or "an integer".

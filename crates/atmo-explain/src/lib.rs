@@ -42,8 +42,8 @@ pub mod synth;
 use std::fmt::Write as _;
 use std::path::PathBuf;
 
-use atmo_core::RobotConfig;
 use atmo_core::config::ArmInertiaConvention;
+use atmo_core::{ConfigFile, RobotConfig};
 use nalgebra::DVector;
 use serde::Serialize;
 

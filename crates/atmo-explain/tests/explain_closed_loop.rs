@@ -2,7 +2,7 @@
 //! as a plant file and loaded into the plant, makes a replayed landing
 //! approach (another flight) match its recording better.
 
-use atmo_core::RobotConfig;
+use atmo_core::{ConfigFile, RobotConfig};
 use atmo_explain::data::Prepared;
 use atmo_explain::output::write_all;
 use atmo_explain::replay::{replay, start_rows};

@@ -5,7 +5,7 @@
 //! default) with effects switched on that the tool
 //! is not told about; the tool gets only the nominal robot model.
 
-use atmo_core::RobotConfig;
+use atmo_core::{ConfigFile, RobotConfig};
 use atmo_explain::synth::{Flight, Profile, record};
 use atmo_explain::{Explanation, Options, explain};
 use atmo_plant::config::{

@@ -2,7 +2,7 @@
 //! inertia both 5 % heavier act on the rigid body exactly like a thrust
 //! coefficient 1 / 1.05 times the model's.
 
-use atmo_core::RobotConfig;
+use atmo_core::{ConfigFile, RobotConfig};
 use atmo_explain::synth::{Flight, Profile, record};
 use atmo_explain::{Options, explain};
 use atmo_plant::config::{EffectsConfig, MassErrorConfig, PlantConfig, SensorsConfig};

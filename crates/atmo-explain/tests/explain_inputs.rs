@@ -4,7 +4,7 @@
 
 use std::path::PathBuf;
 
-use atmo_core::RobotConfig;
+use atmo_core::{ConfigFile, RobotConfig};
 use atmo_explain::output::write_all;
 use atmo_explain::recording::{REQUIRED_COLUMNS, Recording};
 use atmo_explain::synth::{Flight, Profile, record};

@@ -8,16 +8,13 @@
 
 use std::path::{Path, PathBuf};
 
-use atmo_core::config::{ArmInertiaConvention, Checker, parse_toml, read_config_file};
+use atmo_core::config::ArmInertiaConvention;
+// The serde default of every `enabled` key: a present section is on.
+use atmo_core::config_file::{Checker, ConfigFile, default_true};
 use serde::Deserialize;
 
-use crate::error::Result;
+use crate::error::{PlantError, Result};
 use crate::ground_effect::GroundEffectConfig;
-
-// Defined beside the config types' common serde defaults, not here, so
-// that ground_effect.rs (whose config type this file includes) does not
-// import from config.rs; re-exported for the scenario file's `enabled` keys.
-pub use crate::serde_defaults::default_true;
 fn default_dt() -> f64 {
     0.001
 }
@@ -769,26 +766,20 @@ impl PlantConfig {
             source: PathBuf::from("(built-in full plant)"),
         }
     }
+}
 
-    /// Loads and validates a plant file.
-    pub fn load(path: impl AsRef<Path>) -> Result<Self> {
-        let path = path.as_ref();
-        Self::from_toml_str(&read_config_file(path)?, path)
+impl ConfigFile for PlantConfig {
+    type Error = PlantError;
+
+    /// Remembers the file: the plant names it in errors it finds later.
+    fn locate(&mut self, file: &Path) {
+        self.source = file.to_path_buf();
     }
 
-    /// Parses and validates a plant config; `file` names the origin in errors.
-    pub fn from_toml_str(text: &str, file: impl Into<PathBuf>) -> Result<Self> {
-        let file = file.into();
-        let mut config: Self = parse_toml(text, &file)?;
-        config.source = file;
-        config.validate()?;
-        Ok(config)
-    }
-
-    /// Range checks (errors name `self.source`).
-    pub fn validate(&self) -> Result<()> {
-        let c = Checker::new(&self.source);
-        c.within("dt", self.dt, 1e-6, 0.001)?;
+    /// Range checks; errors name `file` and the key.
+    fn validate(&self, file: &Path) -> Result<()> {
+        let c = Checker::new(file);
+        c.range("dt", self.dt, 1e-6..=0.001, "s")?;
         self.effects.validate(&c, "effects")
     }
 }

@@ -23,7 +23,7 @@
 
 use std::path::Path;
 
-use atmo_core::config::Checker;
+use atmo_core::config_file::{Checker, default_true};
 use serde::Deserialize;
 
 use crate::error::Result;
@@ -46,8 +46,6 @@ pub const DEFAULT_STD: [[f64; 6]; 4] = [
     [0.025, 0.018, 0.010, 0.005, 0.003, 0.0],
     [0.080, 0.055, 0.030, 0.015, 0.005, 0.0], // mean - std = -15 % at 0.25 m
 ];
-
-use crate::serde_defaults::default_true;
 
 fn default_rotor_radius() -> f64 {
     0.11

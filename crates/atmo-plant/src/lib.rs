@@ -66,7 +66,6 @@ pub mod ground_effect;
 pub mod noise;
 pub mod plant;
 pub mod sensors;
-mod serde_defaults;
 
 pub use config::{EffectsConfig, PlantConfig, TerrainConfig};
 pub use error::{PlantError, Result};

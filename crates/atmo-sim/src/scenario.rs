@@ -25,7 +25,7 @@
 
 use std::path::{Path, PathBuf};
 
-use atmo_core::config::{Checker, parse_toml, read_config_file};
+use atmo_core::config_file::{Checker, parse_toml, read_config_file};
 use atmo_core::control::WheelRates;
 use atmo_core::model::{Input, Model, State, idx, rotation};
 use atmo_core::{ConfigFile, CoreError, RobotConfig};
@@ -172,7 +172,7 @@ pub struct ScenarioFile {
 pub struct SuccessConfig {
     /// true: a wheel landing (touchdown tilt, impact speed, drive on);
     /// false: a flight that must not touch the ground.
-    #[serde(default = "atmo_plant::config::default_true")]
+    #[serde(default = "atmo_core::config_file::default_true")]
     pub landing: bool,
     #[serde(default = "SuccessConfig::default_tilt")]
     pub min_touchdown_tilt_deg: f64,
@@ -418,7 +418,7 @@ impl Scenario {
             source: path.clone(),
             ..base
         };
-        plant.validate()?;
+        plant.validate(&path)?;
         Ok(Self {
             file,
             path,

@@ -1,6 +1,6 @@
 //! Bad plant and scenario files are refused with errors naming the file and key.
 
-use atmo_core::CoreError;
+use atmo_core::{ConfigFile, CoreError};
 use atmo_plant::config::PlantConfig;
 use atmo_sim::{Scenario, SimError};
 

@@ -36,12 +36,8 @@ pub struct TopicConfig {
     pub name: String,
     #[serde(rename = "type")]
     pub type_name: String,
-    #[serde(default = "yes")]
+    #[serde(default = "atmo_core::config_file::default_true")]
     pub enabled: bool,
-}
-
-fn yes() -> bool {
-    true
 }
 
 /// The node's topics (see the README's table).

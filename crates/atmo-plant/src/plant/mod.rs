@@ -31,7 +31,7 @@ mod step;
 
 use std::sync::Arc;
 
-use atmo_core::config::Checker;
+use atmo_core::config_file::{Checker, ConfigFile};
 use atmo_core::control::WheelRates;
 use atmo_core::model::{Input, Model, State, TiltedBody};
 use atmo_core::{Linkage, RobotConfig};
@@ -245,8 +245,8 @@ impl Plant {
         initial: &InitialState,
         seed: u64,
     ) -> Result<Self> {
-        config.validate()?;
-        let checker = atmo_core::config::Checker::new(&config.source);
+        config.validate(&config.source)?;
+        let checker = Checker::new(&config.source);
         terrain.validate(&checker, "terrain")?;
         let fx = &config.effects;
         let mut truth = robot.clone();
