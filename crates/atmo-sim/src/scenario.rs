@@ -25,14 +25,14 @@
 
 use std::path::{Path, PathBuf};
 
-use atmo_core::config_file::{Checker, parse_toml, read_config_file};
+use atmo_core::config_file::{Checker, read_config_file};
 use atmo_core::control::WheelRates;
 use atmo_core::model::{Input, Model, State, idx, rotation};
 use atmo_core::{ConfigFile, CoreError, RobotConfig};
 use nalgebra::Vector3;
 use serde::Deserialize;
 
-use crate::error::Result;
+use crate::error::{Result, SimError};
 use atmo_plant::config::{EffectsConfig, PlantConfig, TerrainConfig};
 use atmo_plant::contact::{Plane, rim_lowest_point};
 use atmo_plant::plant::{Command, Event, InitialState, Plant};
@@ -261,9 +261,19 @@ fn check_times<'a>(
     Ok(())
 }
 
+impl ConfigFile for ScenarioFile {
+    type Error = SimError;
+
+    /// Range checks with tilts up to 90 deg; [`Scenario`] checks them again
+    /// against the robot's `limits.tilt_max_deg` once it has the robot.
+    fn validate(&self, file: &Path) -> Result<()> {
+        self.validate_with_tilt_max(file, 90.0)
+    }
+}
+
 impl ScenarioFile {
-    /// Range checks; errors name `file` and the key.
-    pub fn validate(&self, file: &Path, tilt_max_deg: f64) -> Result<()> {
+    /// Range checks, tilts up to `tilt_max_deg`; errors name `file` and the key.
+    pub fn validate_with_tilt_max(&self, file: &Path, tilt_max_deg: f64) -> Result<()> {
         let c = Checker::new(file);
         if self.name.trim().is_empty() {
             return Err(c.fail("name", "a non-empty name", "\"\"").into());
@@ -402,7 +412,7 @@ impl Scenario {
     /// base of its relative `robot` and `plant` paths.
     pub fn from_toml_str(text: &str, path: impl Into<PathBuf>) -> Result<Self> {
         let path = path.into();
-        let file: ScenarioFile = parse_toml(text, &path)?;
+        let file = ScenarioFile::from_toml_str(text, &path)?;
         let dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
         let robot = match &file.robot {
             Some(rel) => RobotConfig::load(dir.join(rel))?,
@@ -412,7 +422,7 @@ impl Scenario {
             Some(rel) => PlantConfig::load(dir.join(rel))?,
             None => PlantConfig::full(),
         };
-        file.validate(&path, robot.limits.tilt_max_deg)?;
+        file.validate_with_tilt_max(&path, robot.limits.tilt_max_deg)?;
         let plant = PlantConfig {
             effects: base.effects.overridden_by(&file.effects),
             source: path.clone(),
