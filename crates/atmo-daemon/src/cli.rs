@@ -20,7 +20,7 @@ pub struct DaemonConfigArg {
         value_name = "FILE",
         default_value = "config/daemon.toml"
     )]
-    pub path: PathBuf,
+    pub config: PathBuf,
 }
 
 impl DaemonConfigArg {
@@ -29,6 +29,6 @@ impl DaemonConfigArg {
     /// # Errors
     /// A file that cannot be read, parsed or validated, named with the key.
     pub fn load(&self) -> Result<DaemonConfig> {
-        DaemonConfig::load(&self.path)
+        DaemonConfig::load(&self.config)
     }
 }

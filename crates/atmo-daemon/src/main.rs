@@ -107,7 +107,7 @@ fn load(arg: &DaemonConfigArg) -> Result<Loaded> {
 
 fn check(arg: &DaemonConfigArg) -> Result<()> {
     let l = load(arg)?;
-    let path = &arg.path;
+    let path = &arg.config;
     FlightStack::new(&l.robot, l.mpc.clone(), l.flight.clone())?;
     println!("{}: valid", path.display());
     println!("  robot  {}", l.config.robot.display());
@@ -133,7 +133,7 @@ fn check(arg: &DaemonConfigArg) -> Result<()> {
 
 fn run(arg: &DaemonConfigArg, log_path: Option<PathBuf>, duration: Option<f64>) -> Result<()> {
     let l = load(arg)?;
-    let path = &arg.path;
+    let path = &arg.config;
     let stack = FlightStack::new(&l.robot, l.mpc, l.flight.clone())?;
     let period = Duration::from_secs_f64(stack.period());
 
@@ -230,4 +230,14 @@ fn run(arg: &DaemonConfigArg, log_path: Option<PathBuf>, duration: Option<f64>) 
         );
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    /// clap's own consistency checks (unique argument ids, defaults that parse).
+    #[test]
+    fn the_command_line_is_consistent() {
+        use clap::CommandFactory as _;
+        super::Cli::command().debug_assert();
+    }
 }

@@ -154,7 +154,7 @@ struct ScenarioArg {
         value_name = "SCENARIO",
         default_value = "config/scenarios/wheel_landing.toml"
     )]
-    path: PathBuf,
+    scenario: PathBuf,
 }
 
 fn main() -> Result<()> {
@@ -166,14 +166,14 @@ fn main() -> Result<()> {
             runs,
             seed,
             jobs,
-        } => fly::run(&scenario.path, &out, runs, seed, jobs),
+        } => fly::run(&scenario.scenario, &out, runs, seed, jobs),
         Command::Serve {
             scenario,
             config,
             out,
             start_timeout,
             quiet,
-        } => serve(&scenario.path, &config, &out, start_timeout, quiet),
+        } => serve(&scenario.scenario, &config, &out, start_timeout, quiet),
         Command::Explain {
             recording,
             robot,
@@ -296,4 +296,14 @@ fn physics(robot: &PathBuf) -> Result<()> {
         cfg.limits.tilt_max_deg
     );
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    /// clap's own consistency checks (unique argument ids, defaults that parse).
+    #[test]
+    fn the_command_line_is_consistent() {
+        use clap::CommandFactory as _;
+        super::Cli::command().debug_assert();
+    }
 }

@@ -93,3 +93,13 @@ fn print_topics(messages: &[LoggedMessage]) {
         );
     }
 }
+
+#[cfg(test)]
+mod tests {
+    /// clap's own consistency checks (unique argument ids, defaults that parse).
+    #[test]
+    fn the_command_line_is_consistent() {
+        use clap::CommandFactory as _;
+        super::Cli::command().debug_assert();
+    }
+}
