@@ -22,7 +22,13 @@ pub fn locate_mismatch(res: &Residuals) -> Mismatch {
     let prep = &res.prep;
     let location = locate::locate(prep, &prep.resid, &res.fit_rows);
     let region = location.region_mask(prep);
-    let rms = rms_table(prep, &prep.resid, &res.fit_rows, &region, &location.channels);
+    let rms = rms_table(
+        prep,
+        &prep.resid,
+        &res.fit_rows,
+        &region,
+        &location.channels,
+    );
     Mismatch {
         location,
         region,

@@ -196,7 +196,11 @@ fn effect_parameters(fit: &Fit, e: Effect, selected: bool) -> Vec<Parameter> {
 pub fn gain_grid(res: &Residuals, fit: &Fit) -> Vec<GridPoint> {
     let prep = &res.prep;
     let ge_fold: Vec<Option<GroundEffect>> = (0..select::FOLDS)
-        .map(|f| fit.fold_physical(f).ge_config().map(|c| GroundEffect::new(&c)))
+        .map(|f| {
+            fit.fold_physical(f)
+                .ge_config()
+                .map(|c| GroundEffect::new(&c))
+        })
         .collect();
     let ge_all = fit.physical.ge_config().map(|c| GroundEffect::new(&c));
     let min_rows = (0.5 / prep.dt).ceil() as usize;
@@ -320,7 +324,9 @@ pub fn plot_series(res: &Residuals, mismatch: &Mismatch, after: &[f64]) -> Serie
         series.t.push(prep.t[k]);
         series.recording.push(prep.meas[6 * k + ch]);
         series.nominal.push(prep.nominal[6 * k + ch]);
-        series.fitted.push(prep.meas[6 * k + ch] - after[6 * k + ch]);
+        series
+            .fitted
+            .push(prep.meas[6 * k + ch] - after[6 * k + ch]);
     }
     series
 }
@@ -328,9 +334,7 @@ pub fn plot_series(res: &Residuals, mismatch: &Mismatch, after: &[f64]) -> Serie
 /// Warnings about how far the results can be trusted.
 pub fn notes(res: &Residuals, fit: &Fit) -> Vec<String> {
     let mut notes = Vec::new();
-    let used_segments = (0..res.nseg)
-        .filter(|&s| fit.stats.entries[s] > 0)
-        .count();
+    let used_segments = (0..res.nseg).filter(|&s| fit.stats.entries[s] > 0).count();
     if used_segments < 10 {
         notes.push(format!(
             "only {used_segments} segments of airborne data (about {:.0} s): held-out \
@@ -384,7 +388,12 @@ pub fn report(f: &Findings) -> Explanation {
         multistep_before: val.multistep_before,
         multistep_after: val.multistep_after,
         ground_effect_gain_grid: gain_grid(res, fit),
-        motor_lag_profile: f.lag.points.iter().map(|(t, c)| (*t, c / entries)).collect(),
+        motor_lag_profile: f
+            .lag
+            .points
+            .iter()
+            .map(|(t, c)| (*t, c / entries))
+            .collect(),
         fitted_effects_toml: val.toml.clone(),
         location_before: Some(before.clone()),
         location_after: Some(val.location.clone()),

@@ -38,10 +38,7 @@ impl BaseRegressors {
         let columns = build_columns(prep, rec, &Knobs::default(), &prep.nominal);
         let lag_c = columns.layout.columns(Effect::MotorLag).start;
         let others: Vec<usize> = (0..columns.layout.total).filter(|&c| c != lag_c).collect();
-        let cols: Vec<&[f64]> = others
-            .iter()
-            .map(|&c| columns.data[c].as_slice())
-            .collect();
+        let cols: Vec<&[f64]> = others.iter().map(|&c| columns.data[c].as_slice()).collect();
         let stats = Stats::build(&cols, &columns.resid, &weights, &res.seg_of, res.nseg);
         Self {
             columns,
@@ -316,4 +313,3 @@ fn entry_weights(
     }
     weights
 }
-

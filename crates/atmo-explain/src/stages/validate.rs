@@ -58,14 +58,10 @@ pub fn validate(
     let starts = replay::start_rows(prep, HORIZON, spacing);
     let mut nominal_cfg = PlantConfig::ideal();
     nominal_cfg.arm_inertia_convention = robot.arm.inertia_convention;
-    let multistep_before = replay::replay(
-        rec,
-        prep,
-        robot,
-        &starts,
-        &|_| nominal_cfg.clone(),
-        &|_| 0.0,
-    );
+    let multistep_before =
+        replay::replay(rec, prep, robot, &starts, &|_| nominal_cfg.clone(), &|_| {
+            0.0
+        });
     let lag_on = fit.chosen.contains(&Effect::MotorLag);
     let tau = fit.knobs.tau;
     let multistep_after = replay::replay(
@@ -73,9 +69,7 @@ pub fn validate(
         prep,
         robot,
         &starts,
-        &|k| {
-            res.seg_of[k].map_or_else(|| fitted_cfg.clone(), |s| fold_cfgs[fold_of(s)].clone())
-        },
+        &|k| res.seg_of[k].map_or_else(|| fitted_cfg.clone(), |s| fold_cfgs[fold_of(s)].clone()),
         &|_| if lag_on { tau } else { 0.0 },
     );
     Ok(Validation {
