@@ -14,6 +14,11 @@
 //! queue is full, and the driver ports are zero-copy iceoryx2 services
 //! opened on the control thread itself (they are not `Send`).
 //!
+//! Clocks: the stack runs on its own monotonic clock (from 0 at start;
+//! `MpcStatus.clock_ns`, `estimate_age`), and stamps its status with ROS
+//! time, the wall clock read when the tick gathers its inputs
+//! (`MpcStatus.header.stamp`). `/clock` (`use_sim_time`) is not followed.
+//!
 //! Input semantics:
 //! - The estimate's age is measured from when the ROS 2 thread accepted it
 //!   (message stamps come from another clock, ROS time; the node checks
@@ -271,6 +276,10 @@ pub struct OnboardIo {
     health: Option<DriverHealth>,
     mode: Mode,
     tick: u64,
+    /// ROS time (the wall clock) when this tick's inputs were gathered: the
+    /// status's header stamp (ROS tools show real dates, and a peer can
+    /// compare it with its own clock).
+    tick_ros_ns: u64,
 }
 
 impl OnboardIo {
@@ -303,6 +312,7 @@ impl OnboardIo {
             health: None,
             mode: Mode::Disarmed,
             tick: 0,
+            tick_ros_ns: 0,
         })
     }
 
@@ -344,6 +354,7 @@ impl OnboardIo {
 
 impl TickIo for OnboardIo {
     fn gather(&mut self, deadline_ns: u64) -> Option<StepInputs> {
+        self.tick_ros_ns = atmo_io::wall_clock_ns();
         while let Some(e) = self.ros_in.latest_estimate() {
             // Age from acceptance (see the module doc), on the tick's clock.
             let age = u64::try_from(e.received.elapsed().as_nanos()).unwrap_or(u64::MAX);
@@ -414,6 +425,7 @@ impl TickIo for OnboardIo {
         }
         let mut status = crate::telemetry::status_message(self.tick, inputs, outputs, timing);
         status.io = self.io_health();
+        status.ros_stamp_ns = self.tick_ros_ns;
         // Both drop and count when full; neither blocks.
         self.ros_out.try_publish_status(&status);
         self.log
