@@ -15,7 +15,8 @@ Checks, each printed PASS/FAIL with its numbers, then `N passed, M failed`
 - header stamps are within 0.1 s of this machine's wall clock;
 - the RIHS01 type hashes the daemon computes equal rclpy's;
 - after SIGTERM the daemon exits 0, logs no RustDDS removal errors, and no
-  endpoint of it is left in the graph 2 s later.
+  endpoint of it is left in the graph 2 s later (a known failure today, see
+  KNOWN_FAILURES; ATMO_PEER_MEASURE_GHOSTS=1 measures how long they stay).
 """
 
 import argparse
