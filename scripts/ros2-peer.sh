@@ -5,6 +5,8 @@
 #   scripts/ros2-peer.sh setup             # venv + atmo_msgs, prints the env file
 #   scripts/ros2-peer.sh test [DAEMON]     # setup, then tests/python/rclpy_peer.py
 #                                          # against DAEMON (default target/debug/atmo-daemon)
+#   scripts/ros2-peer.sh sitl [DAEMON [SIM]]  # the SITL wheel landing, the motion
+#                                          # capture played by rclpy (tests/python/rclpy_sitl.py)
 #
 # Everything lives under target/ros2-peer (not in git) and is rebuilt only when
 # tests/python/ros2-requirements.txt or ros2/atmo_msgs change. The env file sets
@@ -96,8 +98,16 @@ test)
     source "$env_file"
     exec "$py" tests/python/rclpy_peer.py --daemon "$daemon" --config config/daemon.toml
     ;;
+sitl)
+    env_file=$(setup | tail -n1)
+    daemon=${2:-${CARGO_TARGET_DIR:-target}/debug/atmo-daemon}
+    sim=${3:-${CARGO_TARGET_DIR:-target}/debug/atmo-sim}
+    # shellcheck disable=SC1090
+    source "$env_file"
+    exec "$py" tests/python/rclpy_sitl.py --daemon "$daemon" --sim "$sim"
+    ;;
 *)
-    echo "usage: $0 [setup | test [DAEMON]]" >&2
+    echo "usage: $0 [setup | test [DAEMON] | sitl [DAEMON [ATMO_SIM]]]" >&2
     exit 2
     ;;
 esac

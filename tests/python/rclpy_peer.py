@@ -264,6 +264,11 @@ def run_checks(c, node, spin_for, got, daemon, started, stderr_path,
     window = time.time() - t_window
 
     # --- status and diagnostics, both QoS.
+    diag_values = {}  # the node's own counters, from its last diagnostics
+    for _, arr in got["diag_reliable"] + got["diag_best_effort"]:
+        for st in arr.status:
+            if st.name == "atmo/ros2":
+                diag_values = {kv.key: kv.value for kv in st.values}
     for key, label in (("status_reliable", "reliable (ROS 2 default)"),
                        ("status_best_effort", "best effort (sensor data)")):
         msgs = got[key]
@@ -274,7 +279,9 @@ def run_checks(c, node, spin_for, got, daemon, started, stderr_path,
         c.check(len(msgs) > 0 and ratio >= 0.9,
                 f"/atmo/status received, {label}",
                 f"{len(msgs)} in {window:.2f} s ({rate:.0f} Hz), {ratio:.1%} of the ticks "
-                f"{min(ticks) if ticks else '-'}..{max(ticks) if ticks else '-'}")
+                f"{min(ticks) if ticks else '-'}..{max(ticks) if ticks else '-'}; the node: "
+                f"publish_errors {diag_values.get('publish_errors')} (reliable window full), "
+                f"publish_dropped {diag_values.get('publish_dropped')}")
     for key, label in (("diag_reliable", "reliable (ROS 2 default)"),
                        ("diag_best_effort", "best effort (sensor data)")):
         c.check(len(got[key]) >= 2, f"/diagnostics received, {label}",
@@ -293,11 +300,6 @@ def run_checks(c, node, spin_for, got, daemon, started, stderr_path,
             f"x y z yaw = {[round(v, 6) for v in state]}, want {[round(v, 6) for v in want]}")
     c.check(0.0 <= last.estimate_age < 0.5, "status.estimate_age of a live estimate",
             f"{last.estimate_age:.4f} s")
-    diag_values = {}
-    for _, arr in got["diag_reliable"] + got["diag_best_effort"]:
-        for st in arr.status:
-            if st.name == "atmo/ros2":
-                diag_values = {kv.key: kv.value for kv in st.values}
     accepted = int(diag_values.get("estimates_accepted", "0"))
     c.check(accepted >= 0.8 * k and int(diag_values.get("invalid", "1")) == 0,
             "odometry over reliable and best-effort publishers accepted (diagnostics)",
@@ -313,13 +315,19 @@ def run_checks(c, node, spin_for, got, daemon, started, stderr_path,
     offsets = [recv - stamp_s(m.header.stamp) for recv, m in got["status_reliable"]]
     diag_offsets = [recv - stamp_s(m.header.stamp)
                     for recv, m in got["diag_reliable"] + got["diag_best_effort"]]
-    worst = max(offsets, key=abs) if offsets else float("inf")
-    worst_diag = max(diag_offsets, key=abs) if diag_offsets else float("inf")
-    c.check(abs(worst) <= STAMP_TOLERANCE_S, "status header.stamp is wall-clock ROS time",
-            f"reception - stamp: median {sorted(offsets)[len(offsets) // 2] * 1e3:.2f} ms, "
-            f"worst {worst * 1e3:.2f} ms over {len(offsets)}")
-    c.check(abs(worst_diag) <= STAMP_TOLERANCE_S, "diagnostics header.stamp is wall-clock ROS time",
-            f"worst {worst_diag * 1e3:.2f} ms over {len(diag_offsets)}")
+    # Reception is when the Python callback ran: on a loaded machine it can
+    # lag the arrival, so the median is held to the tolerance and every stamp
+    # to "not after its reception" (one clock; 1 ms for the two readings).
+    def judge(offs):
+        if not offs:
+            return False, "none received"
+        med = sorted(offs)[len(offs) // 2]
+        ok = abs(med) <= STAMP_TOLERANCE_S and min(offs) >= -1e-3
+        return ok, (f"reception - stamp: median {med * 1e3:.2f} ms, min {min(offs) * 1e3:.2f} ms, "
+                    f"max {max(offs) * 1e3:.2f} ms over {len(offs)}")
+    c.check(*judge(offsets)[:1], "status header.stamp is wall-clock ROS time", judge(offsets)[1])
+    c.check(*judge(diag_offsets)[:1], "diagnostics header.stamp is wall-clock ROS time",
+            judge(diag_offsets)[1])
     ticks_clock = [m.clock_ns for m in statuses]
     c.check(all(b > a for a, b in zip(ticks_clock, ticks_clock[1:])) and ticks_clock[0] < 600e9,
             "status.clock_ns is the stack's monotonic clock",

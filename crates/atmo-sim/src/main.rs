@@ -85,6 +85,15 @@ enum Command {
         /// Longest wait for the daemon to arm, s.
         #[arg(long, default_value_t = 60.0)]
         start_timeout: f64,
+        /// Publish the motion capture on this topic instead of the daemon's
+        /// estimate topic, for another ROS 2 node to play it to the daemon
+        /// (scripts/ros2-peer.sh sitl: an rclpy relay).
+        #[arg(long)]
+        estimate_topic: Option<String>,
+        /// Publish the pilot inputs on this topic instead of the daemon's
+        /// pilot topic (the same relay then plays them too).
+        #[arg(long)]
+        pilot_topic: Option<String>,
         /// No progress bar.
         #[arg(long)]
         quiet: bool,
@@ -106,8 +115,17 @@ fn main() -> Result<()> {
             config,
             out,
             start_timeout,
+            estimate_topic,
+            pilot_topic,
             quiet,
-        } => serve(&scenario, &config, &out, start_timeout, quiet),
+        } => serve(
+            &scenario,
+            &config,
+            &out,
+            start_timeout,
+            [estimate_topic, pilot_topic],
+            quiet,
+        ),
         Command::Explain(args) => explain(&args),
     }
 }
@@ -138,11 +156,23 @@ fn serve(
     config: &std::path::Path,
     out: &std::path::Path,
     start_timeout: f64,
+    [estimate_topic, pilot_topic]: [Option<String>; 2],
     quiet: bool,
 ) -> Result<()> {
     use atmo_sim::sitl::{ServeOptions, serve};
     let scenario = atmo_sim::Scenario::load(scenario_path)?;
-    let daemon = atmo_daemon::onboard::DaemonConfig::load(config)?;
+    let mut daemon = atmo_daemon::onboard::DaemonConfig::load(config)?;
+    let topics = &mut daemon.ros2.topics;
+    if let Some(topic) = estimate_topic {
+        topics.estimate.name = topic;
+    }
+    if let Some(topic) = pilot_topic {
+        topics.pilot.name = topic;
+    }
+    daemon
+        .ros2
+        .validate(std::path::Path::new("--estimate-topic/--pilot-topic"))
+        .context("serve's topics")?;
     let mut options = ServeOptions::new(daemon.ros2, daemon.drivers);
     options.start_timeout = std::time::Duration::from_secs_f64(start_timeout.max(0.0));
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
