@@ -96,7 +96,7 @@ test)
     daemon=${2:-${CARGO_TARGET_DIR:-target}/debug/atmo-daemon}
     # shellcheck disable=SC1090
     source "$env_file"
-    exec "$py" tests/python/rclpy_peer.py --daemon "$daemon" --config config/daemon.toml
+    exec "$py" tests/python/rclpy_peer.py --daemon "$daemon"
     ;;
 sitl)
     env_file=$(setup | tail -n1)

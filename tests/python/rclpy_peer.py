@@ -101,7 +101,6 @@ def stamp_s(stamp):
 def main():
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--daemon", required=True, help="the atmo-daemon binary")
-    ap.add_argument("--config", help="unused; the shipped config/daemon.toml is adapted")
     args = ap.parse_args()
     daemon_bin = Path(args.daemon).resolve()
     if not daemon_bin.exists():
