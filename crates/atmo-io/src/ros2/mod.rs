@@ -427,18 +427,14 @@ struct DdsNode {
     _context: Context,
 }
 
-/// How long the participant outlives the endpoints at shutdown: RustDDS
-/// sends the endpoints' SEDP disposes from its event loop, which stops with
-/// the participant.
-const UNDECLARE_GRACE: Duration = Duration::from_millis(250);
-
 impl DdsNode {
-    /// Drops `endpoints` (undeclaring them), gives RustDDS
-    /// [`UNDECLARE_GRACE`] to send their disposes, then drops the node and
-    /// the participant (which disposes itself).
+    /// Drops `endpoints` (RustDDS undeclares them while its event loop
+    /// runs), then the node and the participant (which disposes itself).
+    /// No wait in between: a grace period of 250 ms changed nothing in a
+    /// Fast DDS peer's graph, and it delayed the exit of the SITL server
+    /// past the daemon's driver-liveness timeout.
     fn shut_down<E>(self, endpoints: E) {
         drop(endpoints);
-        std::thread::sleep(UNDECLARE_GRACE);
         drop(self);
     }
 }
