@@ -134,7 +134,7 @@ fn check(path: &std::path::Path) -> Result<()> {
 fn run(path: &std::path::Path, log_path: Option<PathBuf>, duration: Option<f64>) -> Result<()> {
     let l = load(path)?;
     let stack = FlightStack::new(&l.robot, l.mpc, l.flight.clone())?;
-    let period = Duration::from_secs_f64(stack.period());
+    let period = atmo_daemon::control_loop::tick_period(stack.period());
 
     // SIGINT/SIGTERM only set a flag: the main thread shuts down in order.
     let terminate = Arc::new(AtomicBool::new(false));
