@@ -132,6 +132,7 @@ class IoHealth(IdlStruct, typename="atmo_msgs::msg::dds_::IoHealth_"):
 class MpcStatus(IdlStruct, typename="atmo_msgs::msg::dds_::MpcStatus_"):
     header: Header = field(default_factory=Header)
     tick: uint64 = 0
+    clock_ns: uint64 = 0
     mode: uint8 = 0
     mode_name: str = ""
     transition: str = ""

@@ -5,6 +5,11 @@
 //! its period is counted; if the loop falls more than a whole period behind,
 //! the missed deadlines are skipped (and counted) instead of being run back
 //! to back. The clock is a trait so that tests and replays drive time.
+//!
+//! One tick ([`ControlLoop::tick`]) is the same code everywhere: gather
+//! ([`TickIo`]) -> `FlightStack::step` -> emit -> `prepare_next`, with the
+//! scheduler's bookkeeping. [`ControlThread`] runs it on the monotonic
+//! clock; atmo-sim runs it on the plant's clock with a simulated `TickIo`.
 
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
@@ -99,6 +104,11 @@ impl Scheduler {
         self.period_ns
     }
 
+    /// The deadline of the next tick, ns (before any skip `wait` may make).
+    pub fn next_deadline_ns(&self) -> u64 {
+        self.deadline(self.tick)
+    }
+
     fn deadline(&self, tick: u64) -> u64 {
         self.start_ns + tick * self.period_ns
     }
@@ -139,23 +149,64 @@ impl Scheduler {
     }
 }
 
-/// Runs `body` every `period` on the calling thread until it returns false.
-/// `body` gets the deadline (the tick's time stamp) and the previous tick's timing.
-pub fn run_periodic<C: Clock>(
-    clock: &C,
-    period: Duration,
-    mut body: impl FnMut(u64, &TickTiming) -> bool,
-) -> TickTiming {
-    let period_ns = u64::try_from(period.as_nanos()).unwrap_or(u64::MAX);
-    let mut scheduler = Scheduler::new(period_ns, clock.now_ns() + period_ns);
-    let mut last = TickTiming::default();
-    loop {
-        let (deadline, woke) = scheduler.wait(clock);
-        let go_on = body(deadline, &last);
-        last = scheduler.finish(clock, deadline, woke);
-        if !go_on {
-            return last;
+/// The control period as the loop counts it: whole nanoseconds, rounded
+/// down, so that tick `k` is never scheduled after `k T`.
+pub fn tick_period(period_s: f64) -> Duration {
+    Duration::from_nanos((period_s.max(0.0) * 1e9) as u64)
+}
+
+/// The daemon's control loop, one tick at a time: wait for the deadline,
+/// gather the inputs, `FlightStack::step`, emit the outputs, run the MPC's
+/// preparation phase, close the tick's timing. The control thread runs it
+/// on the monotonic clock with the onboard I/O; the simulator runs the same
+/// code on the plant's clock with its simulated I/O.
+#[derive(Debug, Clone)]
+pub struct ControlLoop {
+    scheduler: Scheduler,
+    previous: TickTiming,
+}
+
+impl ControlLoop {
+    /// A loop ticking every `period`, the first deadline at `first_deadline_ns`.
+    pub fn new(period: Duration, first_deadline_ns: u64) -> Self {
+        let period_ns = u64::try_from(period.as_nanos()).unwrap_or(u64::MAX);
+        Self {
+            scheduler: Scheduler::new(period_ns, first_deadline_ns),
+            previous: TickTiming::default(),
         }
+    }
+
+    /// The deadline the next tick waits for, ns.
+    pub fn next_deadline_ns(&self) -> u64 {
+        self.scheduler.next_deadline_ns()
+    }
+
+    /// The last finished tick's timing.
+    pub fn previous(&self) -> &TickTiming {
+        &self.previous
+    }
+
+    /// Runs one tick; returns whether the flight stack stepped (`false`:
+    /// the I/O had nothing to act on yet). `emit` gets the previous tick's
+    /// timing (this one is still running).
+    pub fn tick<C: Clock, I: TickIo>(
+        &mut self,
+        clock: &C,
+        stack: &mut FlightStack,
+        io: &mut I,
+    ) -> bool {
+        let (deadline, woke) = self.scheduler.wait(clock);
+        let stepped = match io.gather(deadline) {
+            Some(inputs) => {
+                let outputs = stack.step(&inputs);
+                io.emit(&inputs, &outputs, &self.previous);
+                stack.prepare_next();
+                true
+            }
+            None => false,
+        };
+        self.previous = self.scheduler.finish(clock, deadline, woke);
+        stepped
     }
 }
 
@@ -278,16 +329,17 @@ impl ControlThread {
                 };
                 let mut stack = stack;
                 let clock = MonotonicClock::new();
-                run_periodic(&clock, period, |deadline, previous| {
-                    if let Some(inputs) = io.gather(deadline) {
-                        let outputs = stack.step(&inputs);
-                        io.emit(&inputs, &outputs, previous);
-                        stack.prepare_next();
-                    }
+                let first = clock
+                    .now_ns()
+                    .saturating_add(u64::try_from(period.as_nanos()).unwrap_or(u64::MAX));
+                let mut control = ControlLoop::new(period, first);
+                loop {
+                    control.tick(&clock, &mut stack, &mut io);
                     shared.ticks.fetch_add(1, Ordering::Relaxed);
-                    !stop_flag.load(Ordering::Relaxed)
-                });
-                stack
+                    if stop_flag.load(Ordering::Relaxed) {
+                        return stack;
+                    }
+                }
             })
             .map_err(|e| DaemonError::Setup(format!("control thread: {e}")))?;
         match ready_rx.recv() {

@@ -5,19 +5,28 @@
 //!   clock is an input): input validation, mode machine, tilt law with limits,
 //!   MPC feedback (thrusters), drive controller (wheels), failsafes, status.
 //! - [`observer`]: disturbance observer that makes the MPC offset-free.
-//! - [`control_loop`]: the 150 Hz control thread with absolute deadlines and
-//!   per-tick timing.
+//! - [`control_loop`]: the one tick (gather -> step -> emit -> prepare)
+//!   with absolute deadlines and per-tick timing, and the 150 Hz control
+//!   thread that runs it; the simulator runs the same tick.
+//! - [`inputs`]: how a tick's inputs are made of what arrived (newest
+//!   estimate, pilot with staleness, drive command, encoder, contact,
+//!   driver liveness, ground height), shared by every `TickIo`.
 //! - [`onboard`]: the onboard binary's I/O (ROS 2, iceoryx2 driver ports,
 //!   MCAP log) around the control thread, and `config/daemon.toml`.
 //! - [`telemetry`]: the tick's status as the `atmo_msgs/MpcStatus` message.
 //! - [`settings`], read from `config/flight.toml`.
-//! - `cli` (feature `cli`): the command-line argument groups the binaries share.
+//!
+//! The library is the flight stack and the control loop; the `atmo-daemon`
+//! binary's own dependencies (clap, signal-hook, tracing, anyhow) are the
+//! default `cli` feature.
+//! - `cli` (feature `cli-args`): the command-line argument groups the binaries share.
 
-#[cfg(feature = "cli")]
+#[cfg(feature = "cli-args")]
 pub mod cli;
 pub mod control_loop;
 pub mod error;
 pub mod flight_stack;
+pub mod inputs;
 pub mod modes;
 pub mod observer;
 pub mod onboard;

@@ -135,7 +135,7 @@ fn run(arg: &DaemonConfigArg, log_path: Option<PathBuf>, duration: Option<f64>) 
     let l = load(arg)?;
     let path = &arg.config;
     let stack = FlightStack::new(&l.robot, l.mpc, l.flight.clone())?;
-    let period = Duration::from_secs_f64(stack.period());
+    let period = atmo_daemon::control_loop::tick_period(stack.period());
 
     // SIGINT/SIGTERM only set a flag: the main thread shuts down in order.
     let terminate = Arc::new(AtomicBool::new(false));

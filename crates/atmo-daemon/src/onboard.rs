@@ -14,20 +14,19 @@
 //! queue is full, and the driver ports are zero-copy iceoryx2 services
 //! opened on the control thread itself (they are not `Send`).
 //!
-//! Input semantics:
-//! - The estimate's age is measured from when the ROS 2 thread accepted it
-//!   (message stamps come from another clock, ROS time; the node checks
-//!   they increase). An estimate older than the flight settings'
-//!   `failsafe.estimate_timeout` puts the stack in its failsafe.
-//! - The pilot input holds its switches when the pilot stream goes quiet for
-//!   `pilot_timeout_ms` (disarming a flying robot because a radio dropped
-//!   would drop it) but its velocity, yaw-rate and throttle commands go to
-//!   zero: the robot holds its position.
-//! - A drive command (`geometry_msgs/Twist`) newer than the pilot input and
-//!   younger than `drive_timeout_ms` sets the velocity and yaw rate while the
-//!   stack drives (forward speed along the current heading).
-//! - A required driver not heard from within the driver ports' liveness
-//!   timeout sets `driver_lost`: failsafe in the air, no take-off.
+//! Clocks: the stack runs on its own monotonic clock (from 0 at start;
+//! `MpcStatus.clock_ns`, `estimate_age`), and stamps its status with ROS
+//! time, the wall clock read when the tick gathers its inputs
+//! (`MpcStatus.header.stamp`). `/clock` (`use_sim_time`) is not followed.
+//!
+//! Input semantics (the shared [`crate::inputs::InputLatch`]): the estimate's
+//! age is measured from when the ROS 2 thread accepted it (message stamps
+//! come from another clock, ROS time; the node checks they increase); the
+//! pilot stream goes stale after `pilot_timeout_ms`, a drive command counts
+//! for `drive_timeout_ms`; a required driver not heard from within the
+//! driver ports' liveness timeout sets `driver_lost`: failsafe in the air,
+//! no take-off. The ground height is the config's `ground_z` (a ground
+//! height topic would feed [`crate::inputs::InputLatch::ground_z`]).
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -35,7 +34,6 @@ use std::sync::atomic::{AtomicBool, AtomicU8, AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 
 use atmo_core::config_file::{Checker, ConfigFile};
-use atmo_core::model::idx;
 use atmo_io::drivers::{DriverHealth, DriverPortsConfig, FlightPorts, monotonic_ns};
 use atmo_io::mcap_log::{Channel, Compression, LoggerHandle, LoggerOptions};
 use atmo_io::msg::{ActuatorMotors, IoHealth, MpcStatus, OffboardControlMode};
@@ -44,8 +42,8 @@ use serde::Deserialize;
 
 use crate::control_loop::{TickIo, TickTiming};
 use crate::error::{DaemonError, Result};
-use crate::flight_stack::{Estimate, PilotInput, StepInputs, StepOutputs};
-use crate::modes::Mode;
+use crate::flight_stack::{Estimate, StepInputs, StepOutputs};
+use crate::inputs::{DriveCommand, InputLatch, InputSettings};
 use crate::telemetry::pilot_from_message;
 
 /// `config/daemon.toml`: what the onboard binary loads. Paths are relative
@@ -81,7 +79,7 @@ pub struct DaemonConfig {
 }
 
 fn default_input_timeout_ms() -> u64 {
-    500
+    crate::inputs::DEFAULT_INPUT_TIMEOUT_MS
 }
 
 /// `[log]`: the MCAP flight log.
@@ -180,7 +178,7 @@ impl ConfigFile for DaemonConfig {
 /// read by the main thread for diagnostics and the exit report).
 #[derive(Debug, Default)]
 pub struct OnboardShared {
-    /// Current mode ([`Mode::code`]).
+    /// Current mode ([`crate::Mode::code`]).
     pub mode: AtomicU8,
     /// Drivers alive (bit i: [`atmo_io::drivers::DriverId`] i).
     pub drivers_alive: AtomicU8,
@@ -210,6 +208,16 @@ pub struct OnboardSettings {
 }
 
 impl OnboardSettings {
+    /// The input assembly's part.
+    pub fn inputs(&self) -> InputSettings {
+        InputSettings {
+            ground_z: self.ground_z,
+            pilot_timeout: self.pilot_timeout,
+            drive_timeout: self.drive_timeout,
+            estimate_timeout: self.estimate_timeout,
+        }
+    }
+
     pub fn new(config: &DaemonConfig, estimate_timeout: f64) -> Self {
         Self {
             ground_z: config.ground_z,
@@ -229,18 +237,23 @@ pub struct OnboardIo {
     ros_out: Ros2Publisher,
     log: LoggerHandle,
     status_channel: Channel<MpcStatus>,
-    settings: OnboardSettings,
+    px4_offboard: bool,
     shared: Arc<OnboardShared>,
     started: Instant,
-    estimate: Option<Estimate>,
-    pilot: PilotInput,
-    pilot_received: Option<Instant>,
-    drive: Option<atmo_io::ros2::DriveCommand>,
-    tilt_counts: Option<f64>,
-    contact: bool,
+    latch: InputLatch,
     health: Option<DriverHealth>,
-    mode: Mode,
     tick: u64,
+    /// ROS time (the wall clock) when this tick's inputs were gathered: the
+    /// status's header stamp (ROS tools show real dates, and a peer can
+    /// compare it with its own clock).
+    tick_ros_ns: u64,
+}
+
+/// The tick's clock stamp of something accepted at `received`: its age
+/// now, counted back from the tick's deadline.
+fn stamp_on_tick_clock(deadline_ns: u64, received: Instant) -> u64 {
+    let age = u64::try_from(received.elapsed().as_nanos()).unwrap_or(u64::MAX);
+    deadline_ns.saturating_sub(age)
 }
 
 impl OnboardIo {
@@ -261,39 +274,14 @@ impl OnboardIo {
             ros_out,
             log,
             status_channel,
-            settings,
+            px4_offboard: settings.px4_offboard,
             shared,
             started: Instant::now(),
-            estimate: None,
-            pilot: PilotInput::default(),
-            pilot_received: None,
-            drive: None,
-            tilt_counts: None,
-            contact: false,
+            latch: InputLatch::new(settings.inputs()),
             health: None,
-            mode: Mode::Disarmed,
             tick: 0,
+            tick_ros_ns: 0,
         })
-    }
-
-    /// The pilot input this tick: held switches, zeroed commands when the
-    /// stream is silent (`stale`), a fresh drive command while driving.
-    fn pilot_now(&self, yaw: f64, stale: bool) -> PilotInput {
-        let mut pilot = self.pilot;
-        if stale {
-            pilot.velocity = [0.0; 3];
-            pilot.yaw_rate = 0.0;
-            pilot.throttle = 0.0;
-        }
-        if let Some(drive) = self.drive
-            && self.mode == Mode::Drive
-            && drive.received.elapsed() <= self.settings.drive_timeout
-            && self.pilot_received.is_none_or(|at| drive.received > at)
-        {
-            pilot.velocity = [drive.forward * yaw.cos(), drive.forward * yaw.sin(), 0.0];
-            pilot.yaw_rate = drive.yaw_rate;
-        }
-        pilot
     }
 
     fn io_health(&self) -> IoHealth {
@@ -314,55 +302,47 @@ impl OnboardIo {
 
 impl TickIo for OnboardIo {
     fn gather(&mut self, deadline_ns: u64) -> Option<StepInputs> {
+        self.tick_ros_ns = atmo_io::wall_clock_ns();
         while let Some(e) = self.ros_in.latest_estimate() {
             // Age from acceptance (see the module doc), on the tick's clock.
-            let age = u64::try_from(e.received.elapsed().as_nanos()).unwrap_or(u64::MAX);
-            self.estimate = Some(Estimate {
-                stamp_ns: deadline_ns.saturating_sub(age),
+            self.latch.estimate(Estimate {
+                stamp_ns: stamp_on_tick_clock(deadline_ns, e.received),
                 state: e.state,
             });
         }
         while let Some(p) = self.ros_in.latest_pilot() {
-            self.pilot = pilot_from_message(&p.input);
-            self.pilot_received = Some(p.received);
+            let received = stamp_on_tick_clock(deadline_ns, p.received);
+            self.latch.pilot(pilot_from_message(&p.input), received);
         }
         while let Some(d) = self.ros_in.latest_drive() {
-            self.drive = Some(d);
+            self.latch.drive(DriveCommand {
+                forward: d.forward,
+                yaw_rate: d.yaw_rate,
+                received_ns: stamp_on_tick_clock(deadline_ns, d.received),
+            });
         }
         let drivers = self.ports.poll(monotonic_ns());
         if let Some(encoder) = drivers.tilt_encoder {
-            self.tilt_counts = Some(encoder.counts as f64);
+            self.latch.tilt_counts(encoder.counts as f64);
         }
         if let Some(contact) = drivers.ground_contact {
-            self.contact = contact.contact != 0;
+            self.latch.ground_contact(contact.contact != 0);
         }
+        self.latch
+            .drivers_alive(drivers.health.all_required_alive());
         self.health = Some(drivers.health);
-        let yaw = self.estimate.map_or(0.0, |e| e.state[idx::YAW]);
-        let pilot_stale = self
-            .pilot_received
-            .is_none_or(|at| at.elapsed() > self.settings.pilot_timeout);
-        if pilot_stale {
+        let assembled = self.latch.assemble(deadline_ns);
+        if assembled.pilot_stale {
             self.shared
                 .pilot_stale_ticks
                 .fetch_add(1, Ordering::Relaxed);
         }
-        let fresh = self.estimate.is_some_and(|e| {
-            deadline_ns.saturating_sub(e.stamp_ns) as f64 * 1e-9 <= self.settings.estimate_timeout
-        });
-        if !fresh {
+        if assembled.estimate_stale {
             self.shared
                 .estimates_stale_ticks
                 .fetch_add(1, Ordering::Relaxed);
         }
-        Some(StepInputs {
-            now_ns: deadline_ns,
-            estimate: self.estimate,
-            tilt_counts: self.tilt_counts,
-            pilot: self.pilot_now(yaw, pilot_stale),
-            ground_contact: self.contact,
-            ground_z: self.settings.ground_z,
-            driver_lost: !drivers.health.all_required_alive(),
-        })
+        Some(assembled.inputs)
     }
 
     fn emit(&mut self, inputs: &StepInputs, outputs: &StepOutputs, timing: &TickTiming) {
@@ -375,7 +355,7 @@ impl TickIo for OnboardIo {
         if !sent {
             self.shared.port_send_errors.fetch_add(1, Ordering::Relaxed);
         }
-        if self.settings.px4_offboard {
+        if self.px4_offboard {
             let us = u64::try_from(self.started.elapsed().as_micros()).unwrap_or(u64::MAX);
             self.ros_out
                 .try_publish_offboard(&OffboardControlMode::direct_actuator(us));
@@ -384,11 +364,12 @@ impl TickIo for OnboardIo {
         }
         let mut status = crate::telemetry::status_message(self.tick, inputs, outputs, timing);
         status.io = self.io_health();
+        status.ros_stamp_ns = self.tick_ros_ns;
         // Both drop and count when full; neither blocks.
         self.ros_out.try_publish_status(&status);
         self.log
             .try_log(self.status_channel, inputs.now_ns, &status);
-        self.mode = outputs.status.mode;
+        self.latch.mode(outputs.status.mode);
         self.tick += 1;
         let alive = status
             .io
@@ -397,7 +378,7 @@ impl TickIo for OnboardIo {
             .enumerate()
             .fold(0u8, |bits, (i, a)| bits | (u8::from(*a) << i));
         let s = &self.shared;
-        s.mode.store(self.mode.code(), Ordering::Relaxed);
+        s.mode.store(outputs.status.mode.code(), Ordering::Relaxed);
         s.drivers_alive.store(alive, Ordering::Relaxed);
         s.driver_deaths
             .store(status.io.driver_deaths.iter().sum(), Ordering::Relaxed);

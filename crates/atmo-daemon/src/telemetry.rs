@@ -46,6 +46,9 @@ pub fn status_message(
     let p = &inputs.pilot;
     MpcStatus {
         stamp_ns: s.now_ns,
+        // The stack's clock is ROS time in a simulation; the onboard daemon
+        // stamps the wall clock instead (its clock starts at 0).
+        ros_stamp_ns: s.now_ns,
         tick,
         mode: ModeMsg::from_code(s.mode.code()).unwrap_or_default(),
         transition: Label::new(s.transition.unwrap_or("")),

@@ -1,6 +1,8 @@
 //! FlightStack::step with the MPC tick (feedback) and prepare_next
-//! (preparation) allocate nothing of their own after start-up: a counting
-//! global allocator around the ticks of a flight, morphing and transition.
+//! (preparation) allocate nothing of their own after start-up, alone and in
+//! the shared tick body (`ControlLoop::tick` with the input latch): a
+//! counting global allocator around the ticks of a flight, morphing and
+//! transition.
 //! The one exception is inside Clarabel: its profiling timers rebuild a small
 //! hash table at every solve (one allocation, freed at the next solve); the
 //! test measures a bare solve and allows exactly that, nothing more.
@@ -10,8 +12,10 @@ use std::sync::atomic::{AtomicUsize, Ordering};
 
 use atmo_core::model::{Input, State, idx};
 use atmo_core::{Linkage, Model, RobotConfig};
+use atmo_daemon::control_loop::{Clock, ControlLoop, TickIo, TickTiming};
+use atmo_daemon::inputs::{InputLatch, InputSettings};
 use atmo_daemon::{
-    Estimate, FlightSettings, FlightStack, Mode, PilotInput, SolverState, StepInputs,
+    Estimate, FlightSettings, FlightStack, Mode, PilotInput, SolverState, StepInputs, StepOutputs,
 };
 use atmo_mpc::MpcSettings;
 
@@ -155,4 +159,113 @@ fn flight_stack_step_does_not_allocate_after_start_up() {
 fn deterministic(mut settings: MpcSettings) -> MpcSettings {
     settings.solver.time_limit = 10.0;
     settings
+}
+
+/// Time moves only when the test says so.
+struct StepClock(std::cell::Cell<u64>);
+
+impl Clock for StepClock {
+    fn now_ns(&self) -> u64 {
+        self.0.get()
+    }
+    fn sleep_until(&self, deadline_ns: u64) {
+        self.0.set(self.0.get().max(deadline_ns));
+    }
+}
+
+/// A `TickIo` over the shared input assembly, fed from a model of the robot.
+struct ModelIo {
+    latch: InputLatch,
+    thrust: [f64; 4],
+    tilt_velocity: f64,
+    mode: Mode,
+    solves: u32,
+}
+
+impl TickIo for ModelIo {
+    fn gather(&mut self, deadline_ns: u64) -> Option<StepInputs> {
+        Some(self.latch.assemble(deadline_ns).inputs)
+    }
+    fn emit(&mut self, _inputs: &StepInputs, outputs: &StepOutputs, _timing: &TickTiming) {
+        self.thrust = outputs.thrust;
+        self.tilt_velocity = outputs.tilt_velocity;
+        self.mode = outputs.status.mode;
+        self.solves = outputs.status.qp_solves;
+        self.latch.mode(outputs.status.mode);
+    }
+}
+
+/// The shared tick body (`ControlLoop::tick`: scheduler, gather through the
+/// input latch, step, emit, prepare_next) allocates nothing beyond
+/// Clarabel's one allocation per solve.
+#[test]
+fn control_loop_tick_does_not_allocate_after_start_up() {
+    let robot = RobotConfig::atmo();
+    let settings = FlightSettings::atmo();
+    let estimate_timeout = settings.failsafe.estimate_timeout;
+    let mut stack = FlightStack::new(
+        &robot,
+        deterministic(MpcSettings::atmo(&settings.mpc_preset).unwrap()),
+        settings,
+    )
+    .unwrap();
+    let model = Model::new(&robot);
+    let linkage = Linkage::from_config(&robot.linkage, robot.limits.tilt_max()).unwrap();
+    let period_ns = 6_666_667;
+    let clock = StepClock(std::cell::Cell::new(1_000_000_000));
+    let mut control = ControlLoop::new(std::time::Duration::from_nanos(period_ns), clock.now_ns());
+    let mut io = ModelIo {
+        latch: InputLatch::new(InputSettings::defaults(0.0, estimate_timeout)),
+        thrust: [0.0; 4],
+        tilt_velocity: 0.0,
+        mode: Mode::Disarmed,
+        solves: 0,
+    };
+    let pilot = PilotInput {
+        arm: true,
+        offboard: true,
+        mpc_enabled: true,
+        velocity: [0.2, 0.0, 0.3],
+        ..PilotInput::default()
+    };
+    let mut x = State::zeros();
+    x[idx::Z] = -1.0;
+    let mut tilt = 0.0;
+    let clarabel_per_solve = clarabel_allocations_per_solve();
+    let (mut allocations, mut allowed) = (0, 0);
+    let mut modes = [false; 8];
+    for tick in 0..400u64 {
+        let now = control.next_deadline_ns();
+        io.latch.estimate(Estimate {
+            stamp_ns: now,
+            state: x,
+        });
+        io.latch.pilot(pilot, now);
+        io.latch
+            .tilt_counts(linkage.counts_from_tilt(tilt).unwrap());
+        let before = ALLOCATIONS.load(Ordering::SeqCst);
+        assert!(control.tick(&clock, &mut stack, &mut io));
+        if tick >= 20 {
+            allocations += ALLOCATIONS.load(Ordering::SeqCst) - before;
+            allowed += io.solves as usize * clarabel_per_solve;
+        }
+        modes[io.mode.code() as usize] = true;
+        let u = Input::from_column_slice(&io.thrust);
+        x = model
+            .at_tilt(tilt)
+            .rk4_step(&x, &u, period_ns as f64 * 1e-9);
+        tilt = (tilt + io.tilt_velocity * period_ns as f64 * 1e-9).clamp(0.0, 1.5);
+        if -x[idx::Z] < 0.25 {
+            break;
+        }
+    }
+    assert!(
+        modes[Mode::Morphing.code() as usize] && modes[Mode::Transition.code() as usize],
+        "{modes:?}"
+    );
+    assert_eq!(control.previous().overruns_total, 0);
+    assert!(
+        allocations <= allowed,
+        "ControlLoop::tick allocated {allocations} times; Clarabel's solves account for at most {allowed}"
+    );
 }

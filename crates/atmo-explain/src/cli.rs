@@ -1,5 +1,7 @@
 //! The `atmo-sim explain` command: read (or, with `--demo`, generate) a
-//! recording, analyse it, write the outputs, print the verdict.
+//! recording, analyse it, write the outputs, print the verdict. [`Args`]
+//! is flattened into the binary's subcommand; the binary draws the
+//! progress bar from the [`Progress`] reports.
 
 use std::path::{Path, PathBuf};
 
@@ -8,27 +10,71 @@ use atmo_core::{ConfigFile, RobotConfig};
 use crate::output::write_all;
 use crate::recording::Recording;
 use crate::synth::{Flight, Profile, record};
-use crate::{ExplainError, Options, explain};
+use crate::{ExplainError, Options, Progress, explain_with_progress};
 use atmo_plant::config::{
     BatterySagConfig, ComOffsetConfig, DragConfig, EffectsConfig, MassErrorConfig, MotorLagConfig,
     PlantConfig, SensorsConfig, WindConfig,
 };
 use atmo_plant::ground_effect::GroundEffectConfig;
 
-/// Arguments of the command.
-#[derive(Debug, Clone)]
+/// Discrepancy finder: where a recording and the model disagree, which
+/// missing physics explains it, and the fit with it.
+///
+/// INPUT: a CSV recording with a header row and the columns t, x, y, z,
+/// yaw, pitch, roll, vx, vy, vz, wx, wy, wz, u1, u2, u3, u4, varphi (SI
+/// units, rad; NED world, FRD body, Euler ZYX, world velocity, body
+/// rates, normalized rotor commands); optional ground_z (NED z of the
+/// ground, 0 if absent) and battery_v. Unknown columns are ignored and
+/// listed; non-finite or time-reversing rows are skipped and counted.
+/// See docs/recording_format.md. A file ending in .mcap is read as the
+/// flight stack's log (topic /atmo/status, atmo_msgs/MpcStatus).
+/// Or --demo EFFECTS: generate a recording of the built-in plant with
+/// those effects concealed (e.g. --demo ground_effect,motor_lag).
+///
+/// WHAT IT DOES: acceleration residuals of the nominal model (the robot
+/// file only; Savitzky-Golay differentiation, window from the data
+/// rate), multi-step (0.5 s) prediction error, located by channel and
+/// by height, tilt, speed, thrust, time and command rate against the
+/// noise floor; candidate effects (ground_effect, motor_lag, drag, wind,
+/// thrust_scale, battery_sag, com_offset, inertia_error, mass_error)
+/// selected on held-out segments, with parameters, uncertainty and
+/// confidence.
+///
+/// OUTPUTS in --out: report.md, explain.json (mismatch_found, located,
+/// effects, heldout_rms_before/after, ground_effect_gain_grid, ...),
+/// fitted_effects.toml (a plant file: PlantConfig::load reads it),
+/// heatmap_before.png, heatmap_after.png, timeseries.png, effects.png;
+/// recording.csv with --demo. Exit status 0 also when a mismatch is
+/// found; errors (bad input) exit non-zero with a message naming the
+/// file and the problem.
+#[derive(Debug, Clone, clap::Args)]
 pub struct Args {
+    /// Recording: CSV, or the flight stack's MCAP log (*.mcap); see
+    /// docs/recording_format.md.
     pub recording: Option<PathBuf>,
+    /// Robot parameter file: the nominal model.
+    #[arg(long, default_value = "config/atmo.toml")]
     pub robot: PathBuf,
+    /// Output folder.
+    #[arg(long, default_value = "out/explain")]
     pub out: PathBuf,
-    /// Comma-separated effects to conceal in a generated recording.
+    /// Generate the recording instead: comma-separated effects to
+    /// conceal (ground_effect, motor_lag, drag, wind, battery_sag,
+    /// com_offset, mass_error, none).
+    #[arg(long)]
     pub demo: Option<String>,
-    /// Length of a generated recording (s).
+    /// Length of a --demo recording, s.
+    #[arg(long, default_value_t = 48.0)]
     pub duration: f64,
-    /// Sample rate of a generated recording (Hz).
+    /// Sample rate of a --demo recording, Hz.
+    #[arg(long, default_value_t = 120.0)]
     pub rate: f64,
+    /// Seed (demo flight and stability subsampling).
+    #[arg(long, default_value_t = 1)]
     pub seed: u64,
-    pub progress: bool,
+    /// No progress bar.
+    #[arg(long)]
+    pub quiet: bool,
 }
 
 /// Plant effects for `--demo` (plant defaults, steady wind 2 m/s north).
@@ -69,8 +115,9 @@ pub fn demo_effects(list: &str) -> Result<EffectsConfig, ExplainError> {
     Ok(fx)
 }
 
-/// Runs the command; returns what to print.
-pub fn run(args: &Args) -> Result<String, ExplainError> {
+/// Runs the command, telling `progress` where the analysis is; returns
+/// what to print.
+pub fn run(args: &Args, progress: &mut dyn FnMut(Progress)) -> Result<String, ExplainError> {
     let robot = RobotConfig::load(&args.robot).map_err(|e| ExplainError::Input {
         file: args.robot.clone(),
         message: e.to_string(),
@@ -114,11 +161,10 @@ pub fn run(args: &Args) -> Result<String, ExplainError> {
     };
     let opts = Options {
         seed: args.seed,
-        progress: args.progress,
         ..Options::default()
     };
     let start = std::time::Instant::now();
-    let ex = explain(&rec, &robot, &opts)?;
+    let ex = explain_with_progress(&rec, &robot, &opts, progress)?;
     let elapsed = start.elapsed().as_secs_f64();
     write_all(&ex, &args.out)?;
     Ok(summary(&ex, &args.out, elapsed))

@@ -16,7 +16,7 @@ use atmo_core::model::{Input, Model, TiltedBody, idx, rotation};
 use nalgebra::{Matrix3, Matrix6x4, Vector3, Vector6};
 
 use crate::ExplainError;
-use crate::recording::Recording;
+use crate::recording::{Recording, Sample};
 
 /// Channels of the residual: body-frame linear acceleration of B and
 /// angular acceleration.
@@ -231,90 +231,9 @@ impl Prepared {
             .iter()
             .map(|s| rotation(s.x[idx::YAW], s.x[idx::PITCH], s.x[idx::ROLL]))
             .collect();
-
-        // Envelope and contact.
-        let mut env = Vec::with_capacity(n);
-        let mut usable = vec![true; n];
-        let mut contact_rows = 0;
-        let t0 = t[0];
-        for (k, s) in samples.iter().enumerate() {
-            let body = table.at(s.varphi);
-            let p = Vector3::new(s.x[idx::X], s.x[idx::Y], s.x[idx::Z]);
-            let r = &rot[k];
-            let mut hsum = 0.0;
-            let mut lowest = f64::INFINITY;
-            for i in 0..4 {
-                let hub = p + r * body.rotor_position[i];
-                let h = s.ground_z - hub.z;
-                hsum += h;
-                let axis = r * body.rotor_axis[i];
-                let reach = (1.0 - axis.z * axis.z).max(0.0).sqrt() * wheel_radius;
-                lowest = lowest.min(h - reach);
-            }
-            if lowest < 0.03 {
-                usable[k] = false;
-                contact_rows += 1;
-            }
-            let v = Vector3::new(s.x[idx::VX], s.x[idx::VY], s.x[idx::VZ]);
-            let du = if k > 0 {
-                let d = t[k] - t[k - 1];
-                (s.u - samples[k - 1].u).abs().sum() / 4.0 / d.max(1e-6)
-            } else {
-                0.0
-            };
-            env.push(Envelope {
-                height: hsum / 4.0,
-                varphi: s.varphi,
-                speed: v.norm(),
-                thrust: s.u.sum() / 4.0,
-                time: s.t - t0,
-                command_rate: du,
-            });
-        }
-        // Smooth the command rate over the window (it is noisy per sample).
-        let raw: Vec<f64> = env.iter().map(|e| e.command_rate).collect();
-        let mut acc = 0.0;
-        let mut prefix = vec![0.0; n + 1];
-        for k in 0..n {
-            acc += raw[k];
-            prefix[k + 1] = acc;
-        }
-        for k in 0..n {
-            let a = k.saturating_sub(half);
-            let b = (k + half + 1).min(n);
-            env[k].command_rate = (prefix[b] - prefix[a]) / (b - a) as f64;
-        }
-
-        // Runs: split at gaps and at excluded rows.
-        let mut runs = Vec::new();
-        let mut gaps = 0;
-        let mut start: Option<usize> = None;
-        for k in 0..n {
-            let gap = k > 0 && t[k] - t[k - 1] > 2.0 * dt;
-            if gap {
-                gaps += 1;
-            }
-            if let Some(s0) = start {
-                if gap || !usable[k] {
-                    runs.push((s0, k));
-                    start = None;
-                }
-            }
-            if start.is_none() && usable[k] {
-                start = Some(k);
-            }
-        }
-        if let Some(s0) = start {
-            runs.push((s0, n));
-        }
-        let mut fit = vec![false; n];
-        for &(s, e) in &runs {
-            if e - s > 2 * half {
-                for f in &mut fit[s + half..e - half] {
-                    *f = true;
-                }
-            }
-        }
+        let (env, usable, contact_rows) = envelope(samples, &t, &rot, &table, wheel_radius, half);
+        let (runs, gaps) = runs_of(&t, &usable, dt);
+        let fit = fit_mask(&runs, half, n);
         let n_fit = fit.iter().filter(|f| **f).count();
         if n_fit < 20 {
             return Err(ExplainError::Input {
@@ -346,10 +265,21 @@ impl Prepared {
             wheel_radius,
             act: Vec::with_capacity(n),
         };
+        let meas = prep.measured(samples);
+        let nominal = prep.nominal_model(samples);
+        prep.resid = meas.iter().zip(&nominal).map(|(a, b)| a - b).collect();
+        prep.meas = meas;
+        prep.nominal = nominal;
+        prep.floor = prep.noise_floor(samples);
+        Ok(prep)
+    }
 
-        // Measured: differentiate world velocity and body rates.
-        let mut meas = vec![0.0; 6 * n];
-        for &(s, e) in &prep.runs {
+    /// Measured accelerations: world velocity and body rates differentiated
+    /// along each run.
+    fn measured(&self, samples: &[Sample]) -> Vec<f64> {
+        let half = self.half;
+        let mut meas = vec![0.0; 6 * self.n];
+        for &(s, e) in &self.runs {
             if e - s < 2 * half + 1 {
                 continue;
             }
@@ -366,33 +296,37 @@ impl Prepared {
                     ]
                 })
                 .collect();
-            prep.differentiate_into(&series, s, &mut meas);
+            self.differentiate_into(&series, s, &mut meas);
         }
-        // Nominal model.
-        let mut raw = vec![0.0; 6 * n];
+        meas
+    }
+
+    /// The nominal model's accelerations through `S`; fills `act` on the way.
+    fn nominal_model(&mut self, samples: &[Sample]) -> Vec<f64> {
+        let mut raw = vec![0.0; 6 * self.n];
         for (k, s) in samples.iter().enumerate() {
-            let body = prep.table.at(s.varphi);
-            let mut a = Matrix6x4::zeros();
-            a.fixed_view_mut::<3, 4>(0, 0).copy_from(&body.thrust_force);
-            a.fixed_view_mut::<3, 4>(3, 0)
-                .copy_from(&body.thrust_torque);
-            prep.act.push(body.mass_matrix_inv * a);
+            let body = self.table.at(s.varphi);
+            self.act.push(body.mass_matrix_inv * actuation(&body));
             let a = body.accelerations(&s.x, &s.u, &Vector6::zeros());
             raw[6 * k..6 * k + 6].copy_from_slice(a.as_slice());
         }
-        let mut nominal = vec![0.0; 6 * n];
-        prep.smooth(&raw, &mut nominal);
-        let resid: Vec<f64> = meas.iter().zip(&nominal).map(|(a, b)| a - b).collect();
+        let mut nominal = vec![0.0; 6 * self.n];
+        self.smooth(&raw, &mut nominal);
+        nominal
+    }
 
-        // Noise floor: white-noise level of the measured velocity and rates
-        // (second differences, robust scale), through the filter's gain.
-        let gain = prep.taps.iter().map(|h| h * h).sum::<f64>().sqrt();
+    /// Noise floor: white-noise level of the measured velocity and rates
+    /// (second differences, robust scale), through the filter's gain, plus
+    /// the command-timing error of the model side.
+    fn noise_floor(&self, samples: &[Sample]) -> [f64; 6] {
+        let n = self.n;
+        let gain = self.taps.iter().map(|h| h * h).sum::<f64>().sqrt();
         let mut floor = [0.0; 6];
         let cols = [idx::VX, idx::VY, idx::VZ, idx::WX, idx::WY, idx::WZ];
         let mut sig = [0.0; 6];
         for (c, &col) in cols.iter().enumerate() {
             let mut d2: Vec<f64> = Vec::with_capacity(n);
-            for &(s, e) in &prep.runs {
+            for &(s, e) in &self.runs {
                 for k in s + 1..e.saturating_sub(1) {
                     d2.push(
                         (samples[k + 1].x[col] - 2.0 * samples[k].x[col] + samples[k - 1].x[col])
@@ -411,23 +345,19 @@ impl Prepared {
         // the recording does not give; the trapezoid's error per interval
         // is about |B du| h / sqrt(12), and it accumulates through the
         // integration (variance through the tail sums of the taps).
-        let tails: f64 = (0..prep.taps.len())
-            .map(|j| prep.taps[j..].iter().sum::<f64>().powi(2))
+        let tails: f64 = (0..self.taps.len())
+            .map(|j| self.taps[j..].iter().sum::<f64>().powi(2))
             .sum();
         let mut cmd_var = [0.0; 6];
         let mut rows = 0usize;
         for k in 1..n {
-            if !prep.fit[k] {
+            if !self.fit[k] {
                 continue;
             }
-            let h = prep.t[k] - prep.t[k - 1];
-            let body = prep.table.at(samples[k].varphi);
-            let mut a = nalgebra::Matrix6x4::zeros();
-            a.fixed_view_mut::<3, 4>(0, 0).copy_from(&body.thrust_force);
-            a.fixed_view_mut::<3, 4>(3, 0)
-                .copy_from(&body.thrust_torque);
+            let h = self.t[k] - self.t[k - 1];
+            let body = self.table.at(samples[k].varphi);
             let du = samples[k].u - samples[k - 1].u;
-            let e = body.mass_matrix_inv * (a * du) * h;
+            let e = body.mass_matrix_inv * (actuation(&body) * du) * h;
             for c in 0..6 {
                 cmd_var[c] += e[c] * e[c] / 12.0;
             }
@@ -444,17 +374,128 @@ impl Prepared {
                 .sqrt()
                 .max(1e-6);
         }
-        prep.meas = meas;
-        prep.nominal = nominal;
-        prep.resid = resid;
-        prep.floor = floor;
-        Ok(prep)
+        floor
     }
 
     /// Indices of the rows used for fitting.
     pub fn fit_rows(&self) -> impl Iterator<Item = usize> + '_ {
         (0..self.n).filter(|&k| self.fit[k])
     }
+}
+
+/// `[A_F; A_T]`: the wrench per unit rotor command of a tilted body.
+fn actuation(body: &TiltedBody) -> Matrix6x4<f64> {
+    let mut a = Matrix6x4::zeros();
+    a.fixed_view_mut::<3, 4>(0, 0).copy_from(&body.thrust_force);
+    a.fixed_view_mut::<3, 4>(3, 0)
+        .copy_from(&body.thrust_torque);
+    a
+}
+
+/// Envelope per row, which rows are usable (wheels off the ground) and how
+/// many are not; the command rate smoothed over the filter window.
+fn envelope(
+    samples: &[Sample],
+    t: &[f64],
+    rot: &[Matrix3<f64>],
+    table: &BodyTable,
+    wheel_radius: f64,
+    half: usize,
+) -> (Vec<Envelope>, Vec<bool>, usize) {
+    let n = samples.len();
+    let mut env = Vec::with_capacity(n);
+    let mut usable = vec![true; n];
+    let mut contact_rows = 0;
+    let t0 = t[0];
+    for (k, s) in samples.iter().enumerate() {
+        let body = table.at(s.varphi);
+        let p = Vector3::new(s.x[idx::X], s.x[idx::Y], s.x[idx::Z]);
+        let r = &rot[k];
+        let mut hsum = 0.0;
+        let mut lowest = f64::INFINITY;
+        for i in 0..4 {
+            let hub = p + r * body.rotor_position[i];
+            let h = s.ground_z - hub.z;
+            hsum += h;
+            let axis = r * body.rotor_axis[i];
+            let reach = (1.0 - axis.z * axis.z).max(0.0).sqrt() * wheel_radius;
+            lowest = lowest.min(h - reach);
+        }
+        if lowest < 0.03 {
+            usable[k] = false;
+            contact_rows += 1;
+        }
+        let v = Vector3::new(s.x[idx::VX], s.x[idx::VY], s.x[idx::VZ]);
+        let du = if k > 0 {
+            let d = t[k] - t[k - 1];
+            (s.u - samples[k - 1].u).abs().sum() / 4.0 / d.max(1e-6)
+        } else {
+            0.0
+        };
+        env.push(Envelope {
+            height: hsum / 4.0,
+            varphi: s.varphi,
+            speed: v.norm(),
+            thrust: s.u.sum() / 4.0,
+            time: s.t - t0,
+            command_rate: du,
+        });
+    }
+    // Smooth the command rate over the window (it is noisy per sample).
+    let raw: Vec<f64> = env.iter().map(|e| e.command_rate).collect();
+    let mut acc = 0.0;
+    let mut prefix = vec![0.0; n + 1];
+    for k in 0..n {
+        acc += raw[k];
+        prefix[k + 1] = acc;
+    }
+    for k in 0..n {
+        let a = k.saturating_sub(half);
+        let b = (k + half + 1).min(n);
+        env[k].command_rate = (prefix[b] - prefix[a]) / (b - a) as f64;
+    }
+    (env, usable, contact_rows)
+}
+
+/// Contiguous usable runs `[start, end)`, split at time gaps (more than
+/// twice the median step `dt`) and at unusable rows; and the gap count.
+fn runs_of(t: &[f64], usable: &[bool], dt: f64) -> (Vec<(usize, usize)>, usize) {
+    let n = t.len();
+    let mut runs = Vec::new();
+    let mut gaps = 0;
+    let mut start: Option<usize> = None;
+    for k in 0..n {
+        let gap = k > 0 && t[k] - t[k - 1] > 2.0 * dt;
+        if gap {
+            gaps += 1;
+        }
+        if let Some(s0) = start {
+            if gap || !usable[k] {
+                runs.push((s0, k));
+                start = None;
+            }
+        }
+        if start.is_none() && usable[k] {
+            start = Some(k);
+        }
+    }
+    if let Some(s0) = start {
+        runs.push((s0, n));
+    }
+    (runs, gaps)
+}
+
+/// Rows inside a run, away from its ends by the half window.
+fn fit_mask(runs: &[(usize, usize)], half: usize, n: usize) -> Vec<bool> {
+    let mut fit = vec![false; n];
+    for &(s, e) in runs {
+        if e - s > 2 * half {
+            for f in &mut fit[s + half..e - half] {
+                *f = true;
+            }
+        }
+    }
+    fit
 }
 
 /// Cross-product matrix `[r]x`.

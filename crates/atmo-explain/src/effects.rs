@@ -18,11 +18,11 @@
 //! lagged commands once motor lag is in the model), `P_i` the projection
 //! onto rotor i's disc plane.
 
-use atmo_core::model::{Input, idx};
-use nalgebra::{Matrix3, Vector3, Vector4, Vector6};
+use atmo_core::model::{Input, TiltedBody, idx};
+use nalgebra::{Matrix3, Matrix6x4, Vector3, Vector4, Vector6};
 
 use crate::data::{Prepared, cross_matrix};
-use crate::recording::Recording;
+use crate::recording::{Recording, Sample};
 
 /// Hub heights of the fitted ground-effect table (m); the last column is 0.
 pub const GE_HEIGHTS: [f64; 5] = [0.25, 0.35, 0.45, 0.6, 0.75];
@@ -247,6 +247,63 @@ fn wrench(f: &Vector3<f64>, t: &Vector3<f64>) -> Vector6<f64> {
     Vector6::new(f.x, f.y, f.z, t.x, t.y, t.z)
 }
 
+/// First column of each candidate in the [`Layout`].
+struct Starts {
+    ge: usize,
+    lag: usize,
+    drag: usize,
+    wind: usize,
+    thrust_scale: usize,
+    battery: usize,
+    com: usize,
+    inertia: usize,
+    mass: usize,
+}
+
+impl Starts {
+    fn of(layout: &Layout) -> Self {
+        let at = |e: Effect| layout.columns(e).start;
+        Self {
+            ge: at(Effect::GroundEffect),
+            lag: at(Effect::MotorLag),
+            drag: at(Effect::Drag),
+            wind: at(Effect::Wind),
+            thrust_scale: at(Effect::ThrustScale),
+            battery: at(Effect::BatterySag),
+            com: at(Effect::ComOffset),
+            inertia: at(Effect::InertiaError),
+            mass: at(Effect::MassError),
+        }
+    }
+}
+
+/// What the regressors of one row are built from.
+struct Row<'a> {
+    k: usize,
+    sample: &'a Sample,
+    /// Thrust (commands, lagged by the knobs' tau).
+    thrust: &'a Input,
+    body: TiltedBody,
+    /// `M^-1 [A_F; A_T]` of the row.
+    act: &'a Matrix6x4<f64>,
+    rot: &'a Matrix3<f64>,
+}
+
+impl Row<'_> {
+    fn position(&self) -> Vector3<f64> {
+        let x = &self.sample.x;
+        Vector3::new(x[idx::X], x[idx::Y], x[idx::Z])
+    }
+    fn velocity(&self) -> Vector3<f64> {
+        let x = &self.sample.x;
+        Vector3::new(x[idx::VX], x[idx::VY], x[idx::VZ])
+    }
+    fn rates(&self) -> Vector3<f64> {
+        let x = &self.sample.x;
+        Vector3::new(x[idx::WX], x[idx::WY], x[idx::WZ])
+    }
+}
+
 /// Builds every candidate's columns for the knobs.
 ///
 /// `accel` (6 per row, filtered body-frame accelerations) is what the
@@ -265,20 +322,9 @@ pub fn build_columns(prep: &Prepared, rec: &Recording, knobs: &Knobs, accel: &[f
     let mut direct: Vec<Vec<f64>> = vec![vec![0.0; 6 * n]; 4];
     let mut lag_raw = vec![0.0; 6 * n];
     let mut energy = 0.0;
-    let c_ge = layout.columns(Effect::GroundEffect).start;
-    let c_lag = layout.columns(Effect::MotorLag).start;
-    let c_drag = layout.columns(Effect::Drag).start;
-    let c_wind = layout.columns(Effect::Wind).start;
-    let c_ts = layout.columns(Effect::ThrustScale).start;
-    let c_bat = layout.columns(Effect::BatterySag).start;
-    let c_com = layout.columns(Effect::ComOffset).start;
-    let c_in = layout.columns(Effect::InertiaError).start;
-    let c_m = layout.columns(Effect::MassError).start;
-    let wind_w = Vector3::new(knobs.wind[0], knobs.wind[1], 0.0);
-    let mut ge = [0.0; 17];
+    let at = Starts::of(&layout);
+    let wind = Vector3::new(knobs.wind[0], knobs.wind[1], 0.0);
     for k in 0..n {
-        let s = &samples[k];
-        let t = &thrust[k];
         if k > 0 {
             let dt = prep.t[k] - prep.t[k - 1];
             energy += dt
@@ -287,128 +333,178 @@ pub fn build_columns(prep: &Prepared, rec: &Recording, knobs: &Knobs, accel: &[f
                     .map(|v| v.max(0.0).powf(1.5))
                     .sum::<f64>();
         }
-        let body = prep.table.at(s.varphi);
-        let minv = &body.mass_matrix_inv;
-        let b = &prep.act[k];
-        let r = &prep.rot[k];
-        let x = &s.x;
-        let p = Vector3::new(x[idx::X], x[idx::Y], x[idx::Z]);
-        let v = Vector3::new(x[idx::VX], x[idx::VY], x[idx::VZ]);
-        let w = Vector3::new(x[idx::WX], x[idx::WY], x[idx::WZ]);
-        let bt = b * t;
-        // Thrust scale and battery.
-        push6(&mut raw[c_ts], k, &bt);
-        push6(&mut raw[c_bat], k, &(-bt * energy));
-        // Motor lag (difference of thrust and command) for the current tau.
-        push6(&mut lag_raw, k, &(b * (t - s.u)));
-        // Ground effect.
-        ge.fill(0.0);
-        let mut per_rotor = [[0.0; 17]; 4];
-        for i in 0..4 {
-            let hub = p + r * body.rotor_position[i];
-            let h = s.ground_z - hub.z;
-            ge_basis(h, s.varphi, 1.0, &mut per_rotor[i]);
-        }
-        for j in 0..17 {
-            let weights = Vector4::new(
-                per_rotor[0][j] * t[0],
-                per_rotor[1][j] * t[1],
-                per_rotor[2][j] * t[2],
-                per_rotor[3][j] * t[3],
-            );
-            if weights != Vector4::zeros() {
-                push6(&mut raw[c_ge + j], k, &(b * weights));
-            }
-        }
-        // Drag and wind.
-        let v_air = r.transpose() * (v - wind_w);
-        let mut rotor_w = Vector6::zeros();
-        let mut wind_cols = [Vector6::zeros(); 2];
-        let wind_dirs = [
-            r.transpose().column(0).into_owned(),
-            r.transpose().column(1).into_owned(),
-        ];
-        for i in 0..4 {
-            let n_i = &body.rotor_axis[i];
-            let r_i = &body.rotor_position[i];
-            let ti = t[i].max(0.0);
-            let vi = v_air + w.cross(r_i);
-            let f = -(vi - n_i * vi.dot(n_i)) * ti;
-            rotor_w += wrench(&f, &r_i.cross(&f));
-            for (jw, dir) in wind_dirs.iter().enumerate() {
-                let fw = (dir - n_i * dir.dot(n_i)) * ti;
-                wind_cols[jw] += wrench(&fw, &r_i.cross(&fw));
-            }
-        }
-        push6(&mut raw[c_drag], k, &(minv * rotor_w));
-        for axis in 0..3 {
-            let mut f = Vector3::zeros();
-            f[axis] = -0.5 * AIR_DENSITY * v_air[axis].abs() * v_air[axis];
-            push6(
-                &mut raw[c_drag + 1 + axis],
-                k,
-                &(minv * wrench(&f, &Vector3::zeros())),
-            );
-        }
-        for jw in 0..2 {
-            push6(&mut raw[c_wind + jw], k, &(minv * wind_cols[jw]));
-        }
-        // Mass properties: measured accelerations enter directly.
-        let g_b = r.transpose() * Vector3::new(0.0, 0.0, body.gravity);
-        // The change of the mass matrix acts on the true acceleration; to
-        // first order that is the nominal model's (filtered) one. Using the
-        // measured one would let these columns fit the measurement noise.
-        let a_meas = Vector3::new(accel[6 * k], accel[6 * k + 1], accel[6 * k + 2]);
-        let wd_meas = Vector3::new(accel[6 * k + 3], accel[6 * k + 4], accel[6 * k + 5]);
-        let m = body.mass;
-        let c = body.first_moment;
-        let inertia = body.inertia;
-        // mass_error: M' = M + d [[m I, -[c]x], [[c]x, 0]], W' = W + d [m g_b - w x (w x c); c x g_b].
-        let dw = wrench(&(g_b * m - w.cross(&w.cross(&c))), &c.cross(&g_b));
-        push6(&mut raw[c_m], k, &(minv * dw));
-        let dma = wrench(&(a_meas * m - c.cross(&wd_meas)), &c.cross(&a_meas));
-        push6(&mut direct[0], k, &(-(minv * dma)));
-        // inertia_error.
-        let gyro = wrench(&Vector3::zeros(), &(-w.cross(&(inertia * w))));
-        push6(&mut raw[c_in], k, &(minv * gyro));
-        push6(
-            &mut direct[1],
+        let sample = &samples[k];
+        let row = Row {
             k,
-            &(-(minv * wrench(&Vector3::zeros(), &(inertia * wd_meas)))),
+            sample,
+            thrust: &thrust[k],
+            body: prep.table.at(sample.varphi),
+            act: &prep.act[k],
+            rot: &prep.rot[k],
+        };
+        push_thrust_terms(&mut raw, &mut lag_raw, &at, &row, energy);
+        push_ground_effect(&mut raw, &at, &row);
+        push_drag_and_wind(&mut raw, &at, &row, &wind);
+        push_mass_properties(&mut raw, &mut direct, &at, &row, accel);
+    }
+    filter_columns(prep, &layout, &at, raw, &lag_raw, &direct)
+}
+
+/// Thrust scale, battery sag (thrust times the energy drawn so far) and
+/// motor lag (difference of thrust and command) for the current tau.
+fn push_thrust_terms(
+    raw: &mut [Vec<f64>],
+    lag_raw: &mut [f64],
+    at: &Starts,
+    row: &Row,
+    energy: f64,
+) {
+    let bt = row.act * row.thrust;
+    push6(&mut raw[at.thrust_scale], row.k, &bt);
+    push6(&mut raw[at.battery], row.k, &(-bt * energy));
+    push6(lag_raw, row.k, &(row.act * (row.thrust - row.sample.u)));
+}
+
+/// Ground effect: each rotor's basis at its hub height, times its thrust.
+fn push_ground_effect(raw: &mut [Vec<f64>], at: &Starts, row: &Row) {
+    let (s, t, r, p) = (row.sample, row.thrust, row.rot, row.position());
+    let mut per_rotor = [[0.0; 17]; 4];
+    for i in 0..4 {
+        let hub = p + r * row.body.rotor_position[i];
+        let h = s.ground_z - hub.z;
+        ge_basis(h, s.varphi, 1.0, &mut per_rotor[i]);
+    }
+    for j in 0..17 {
+        let weights = Vector4::new(
+            per_rotor[0][j] * t[0],
+            per_rotor[1][j] * t[1],
+            per_rotor[2][j] * t[2],
+            per_rotor[3][j] * t[3],
         );
-        // com_offset along body x and y (first order).
-        for j in 0..2 {
-            let mut d = Vector3::zeros();
-            d[j] = 1.0;
-            let md = d * m;
-            let dw = wrench(&(-w.cross(&w.cross(&md))), &md.cross(&g_b));
-            let di =
-                Matrix3::identity() * (2.0 * c.dot(&d)) - c * d.transpose() - d * c.transpose();
-            let dw = dw - wrench(&Vector3::zeros(), &w.cross(&(di * w)));
-            push6(&mut raw[c_com + j], k, &(minv * dw));
-            let di =
-                Matrix3::identity() * (2.0 * c.dot(&d)) - c * d.transpose() - d * c.transpose();
-            let dma = wrench(
-                &(-(cross_matrix(&md) * wd_meas)),
-                &(md.cross(&a_meas) + di * wd_meas),
-            );
-            push6(&mut direct[2 + j], k, &(-(minv * dma)));
+        if weights != Vector4::zeros() {
+            push6(&mut raw[at.ge + j], row.k, &(row.act * weights));
         }
     }
+}
+
+/// Rotor drag in the disc planes and quadratic body drag on the
+/// air-relative velocity (`wind` the current wind knob), and the wind
+/// columns (rotor drag per unit wind along world x and y).
+fn push_drag_and_wind(raw: &mut [Vec<f64>], at: &Starts, row: &Row, wind: &Vector3<f64>) {
+    let (t, r, body, k) = (row.thrust, row.rot, &row.body, row.k);
+    let minv = &body.mass_matrix_inv;
+    let w = row.rates();
+    let v_air = r.transpose() * (row.velocity() - wind);
+    let mut rotor_w = Vector6::zeros();
+    let mut wind_cols = [Vector6::zeros(); 2];
+    let wind_dirs = [
+        r.transpose().column(0).into_owned(),
+        r.transpose().column(1).into_owned(),
+    ];
+    for i in 0..4 {
+        let n_i = &body.rotor_axis[i];
+        let r_i = &body.rotor_position[i];
+        let ti = t[i].max(0.0);
+        let vi = v_air + w.cross(r_i);
+        let f = -(vi - n_i * vi.dot(n_i)) * ti;
+        rotor_w += wrench(&f, &r_i.cross(&f));
+        for (jw, dir) in wind_dirs.iter().enumerate() {
+            let fw = (dir - n_i * dir.dot(n_i)) * ti;
+            wind_cols[jw] += wrench(&fw, &r_i.cross(&fw));
+        }
+    }
+    push6(&mut raw[at.drag], k, &(minv * rotor_w));
+    for axis in 0..3 {
+        let mut f = Vector3::zeros();
+        f[axis] = -0.5 * AIR_DENSITY * v_air[axis].abs() * v_air[axis];
+        push6(
+            &mut raw[at.drag + 1 + axis],
+            k,
+            &(minv * wrench(&f, &Vector3::zeros())),
+        );
+    }
+    for jw in 0..2 {
+        push6(&mut raw[at.wind + jw], k, &(minv * wind_cols[jw]));
+    }
+}
+
+/// Mass properties (mass, inertia, centre-of-mass offset): the change of
+/// the gravity and gyroscopic wrench goes through `S`; the change of the
+/// mass matrix times `accel` (already filtered) enters `direct`.
+fn push_mass_properties(
+    raw: &mut [Vec<f64>],
+    direct: &mut [Vec<f64>],
+    at: &Starts,
+    row: &Row,
+    accel: &[f64],
+) {
+    let (r, body, k) = (row.rot, &row.body, row.k);
+    let minv = &body.mass_matrix_inv;
+    let w = row.rates();
+    let g_b = r.transpose() * Vector3::new(0.0, 0.0, body.gravity);
+    // The change of the mass matrix acts on the true acceleration; to
+    // first order that is the nominal model's (filtered) one. Using the
+    // measured one would let these columns fit the measurement noise.
+    let a_meas = Vector3::new(accel[6 * k], accel[6 * k + 1], accel[6 * k + 2]);
+    let wd_meas = Vector3::new(accel[6 * k + 3], accel[6 * k + 4], accel[6 * k + 5]);
+    let m = body.mass;
+    let c = body.first_moment;
+    let inertia = body.inertia;
+    // mass_error: M' = M + d [[m I, -[c]x], [[c]x, 0]], W' = W + d [m g_b - w x (w x c); c x g_b].
+    let dw = wrench(&(g_b * m - w.cross(&w.cross(&c))), &c.cross(&g_b));
+    push6(&mut raw[at.mass], k, &(minv * dw));
+    let dma = wrench(&(a_meas * m - c.cross(&wd_meas)), &c.cross(&a_meas));
+    push6(&mut direct[0], k, &(-(minv * dma)));
+    // inertia_error.
+    let gyro = wrench(&Vector3::zeros(), &(-w.cross(&(inertia * w))));
+    push6(&mut raw[at.inertia], k, &(minv * gyro));
+    push6(
+        &mut direct[1],
+        k,
+        &(-(minv * wrench(&Vector3::zeros(), &(inertia * wd_meas)))),
+    );
+    // com_offset along body x and y (first order).
+    for j in 0..2 {
+        let mut d = Vector3::zeros();
+        d[j] = 1.0;
+        let md = d * m;
+        let dw = wrench(&(-w.cross(&w.cross(&md))), &md.cross(&g_b));
+        let di = Matrix3::identity() * (2.0 * c.dot(&d)) - c * d.transpose() - d * c.transpose();
+        let dw = dw - wrench(&Vector3::zeros(), &w.cross(&(di * w)));
+        push6(&mut raw[at.com + j], k, &(minv * dw));
+        let dma = wrench(
+            &(-(cross_matrix(&md) * wd_meas)),
+            &(md.cross(&a_meas) + di * wd_meas),
+        );
+        push6(&mut direct[2 + j], k, &(-(minv * dma)));
+    }
+}
+
+/// Every column through `S` (the lag column from `lag_raw`), plus the
+/// direct parts of the mass-property columns on the fit rows.
+fn filter_columns(
+    prep: &Prepared,
+    layout: &Layout,
+    at: &Starts,
+    mut raw: Vec<Vec<f64>>,
+    lag_raw: &[f64],
+    direct: &[Vec<f64>],
+) -> Columns {
+    let n = prep.n;
     let mut buf = vec![0.0; 6 * n];
     for j in 0..layout.total {
-        if j == c_lag {
-            prep.smooth(&lag_raw, &mut buf);
+        if j == at.lag {
+            prep.smooth(lag_raw, &mut buf);
         } else if raw[j].iter().any(|v| *v != 0.0) {
             prep.smooth(&raw[j], &mut buf);
         } else {
             buf.fill(0.0);
         }
         let d = match j {
-            _ if j == c_m => Some(&direct[0]),
-            _ if j == c_in => Some(&direct[1]),
-            _ if j == c_com => Some(&direct[2]),
-            _ if j == c_com + 1 => Some(&direct[3]),
+            _ if j == at.mass => Some(&direct[0]),
+            _ if j == at.inertia => Some(&direct[1]),
+            _ if j == at.com => Some(&direct[2]),
+            _ if j == at.com + 1 => Some(&direct[3]),
             _ => None,
         };
         if let Some(d) = d {
@@ -423,7 +519,7 @@ pub fn build_columns(prep: &Prepared, rec: &Recording, knobs: &Knobs, accel: &[f
         std::mem::swap(&mut raw[j], &mut buf);
     }
     Columns {
-        layout,
+        layout: layout.clone(),
         data: raw,
         resid: prep.resid.clone(),
     }

@@ -75,6 +75,23 @@ pub fn json(ex: &Explanation) -> serde_json::Value {
 /// The human-readable report.
 pub fn report_md(ex: &Explanation) -> String {
     let mut s = String::new();
+    report_header(&mut s, ex);
+    report_residuals(&mut s, ex);
+    report_multistep(&mut s, ex);
+    report_where(&mut s, ex);
+    report_physics(&mut s, ex);
+    report_gain_grid(&mut s, ex);
+    let _ = writeln!(s, "\n![effect scores](effects.png)\n");
+    let _ = writeln!(
+        s,
+        "## 4. The model with the fitted effects\n\n[fitted_effects.toml](fitted_effects.toml) (a plant file):\n\n```toml\n{}```",
+        ex.fitted_effects_toml
+    );
+    s
+}
+
+/// Title, what was read, the verdict and the notes.
+fn report_header(s: &mut String, ex: &Explanation) {
     let _ = writeln!(s, "# Discrepancy report\n");
     let _ = writeln!(
         s,
@@ -102,6 +119,10 @@ pub fn report_md(ex: &Explanation) -> String {
     for n in &ex.notes {
         let _ = writeln!(s, "Note: {n}.\n");
     }
+}
+
+/// Section 1: noise floor and held-out RMS per channel.
+fn report_residuals(s: &mut String, ex: &Explanation) {
     let _ = writeln!(
         s,
         "## 1. Residuals\n\nNoise floor per channel (filtered sensor noise and command timing):\n"
@@ -143,6 +164,10 @@ pub fn report_md(ex: &Explanation) -> String {
         b.located_normalized,
         a.located_normalized
     );
+}
+
+/// Multi-step prediction errors before and after.
+fn report_multistep(s: &mut String, ex: &Explanation) {
     let mb = &ex.multistep_before;
     let ma = &ex.multistep_after;
     let _ = writeln!(
@@ -190,6 +215,10 @@ pub fn report_md(ex: &Explanation) -> String {
         mb.rate[0], mb.rate[1], mb.rate[2], ma.rate[0], ma.rate[1], ma.rate[2]
     );
     let _ = writeln!(s, "![time series](timeseries.png)\n");
+}
+
+/// Section 2: the located bins.
+fn report_where(s: &mut String, ex: &Explanation) {
     let _ = writeln!(s, "## 2. Where\n");
     if ex.located.is_empty() {
         let _ = writeln!(
@@ -222,6 +251,10 @@ pub fn report_md(ex: &Explanation) -> String {
         s,
         "\n![heat map before](heatmap_before.png) ![heat map after](heatmap_after.png)\n"
     );
+}
+
+/// Section 3: every candidate's verdict, confidence and parameters.
+fn report_physics(s: &mut String, ex: &Explanation) {
     let _ = writeln!(s, "## 3. Which physics\n");
     let _ = writeln!(
         s,
@@ -267,6 +300,10 @@ pub fn report_md(ex: &Explanation) -> String {
             params
         );
     }
+}
+
+/// The fitted ground-effect gain grid (when ground effect is selected).
+fn report_gain_grid(s: &mut String, ex: &Explanation) {
     if ex
         .effects
         .iter()
@@ -300,13 +337,6 @@ pub fn report_md(ex: &Explanation) -> String {
             let _ = writeln!(s);
         }
     }
-    let _ = writeln!(s, "\n![effect scores](effects.png)\n");
-    let _ = writeln!(
-        s,
-        "## 4. The model with the fitted effects\n\n[fitted_effects.toml](fitted_effects.toml) (a plant file):\n\n```toml\n{}```",
-        ex.fitted_effects_toml
-    );
-    s
 }
 
 fn heat_png(

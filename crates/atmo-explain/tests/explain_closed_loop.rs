@@ -1,6 +1,8 @@
 //! Closing the loop once: the ground effect fitted from one flight, written
 //! as a plant file and loaded into the plant, makes a replayed landing
 //! approach (another flight) match its recording better.
+// Helpers outside #[test] functions unwrap too (clippy.toml allows it in tests only).
+#![allow(clippy::unwrap_used)]
 
 use atmo_core::{ConfigFile, RobotConfig};
 use atmo_explain::data::Prepared;

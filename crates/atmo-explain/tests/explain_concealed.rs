@@ -4,6 +4,8 @@
 //! PRBS excitation; motion-capture noise and latency as configured by
 //! default) with effects switched on that the tool
 //! is not told about; the tool gets only the nominal robot model.
+// Helpers outside #[test] functions unwrap too (clippy.toml allows it in tests only).
+#![allow(clippy::unwrap_used)]
 
 use atmo_core::{ConfigFile, RobotConfig};
 use atmo_explain::synth::{Flight, Profile, record};

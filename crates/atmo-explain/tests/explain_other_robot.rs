@@ -2,6 +2,8 @@
 //! quadrotor (`config/quadrotor.toml`: ATMO's format at varphi = 0 with a
 //! 1.24 kg airframe's parameters), flown by the MPC on its own model, with a
 //! motor lag concealed and with nothing concealed.
+// Helpers outside #[test] functions unwrap too (clippy.toml allows it in tests only).
+#![allow(clippy::unwrap_used)]
 
 use atmo_core::{ConfigFile, RobotConfig};
 use atmo_explain::recording::Recording;

@@ -19,6 +19,7 @@ use criterion::{Criterion, criterion_group, criterion_main};
 fn status(k: u64) -> MpcStatus {
     let mut s = MpcStatus {
         stamp_ns: k * 6_666_667,
+        ros_stamp_ns: 1_700_000_000_000_000_000 + k * 6_666_667,
         tick: k,
         mode: Mode::Flight,
         transition: Label::EMPTY,

@@ -159,6 +159,7 @@ fn qp_solver_compare(c: &mut Criterion) {
             clarabel.solution.status,
             clarabel::solver::SolverStatus::Solved
         );
+        #[cfg(feature = "osqp-compare")]
         let reference = clarabel.solution.x.clone();
         group.bench_function(format!("clarabel_{label}"), |b| {
             b.iter(|| {

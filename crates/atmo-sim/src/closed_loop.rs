@@ -1,28 +1,32 @@
 //! Closed loop: a scenario flown by the flight stack (FlightStack +
 //! atmo-mpc) against the plant, tick by tick, with a summary of the landing.
 //!
+//! The flight stack runs in the daemon's own control loop
+//! ([`atmo_daemon::control_loop::ControlLoop`]) with a simulated clock and
+//! a simulated `TickIo` ([`crate::sim_io`]): every input it sees comes
+//! through the interface the onboard daemon uses.
+//!
 //! Timing: the plant steps at its fixed `dt` (1 ms); the flight stack ticks
-//! at its control rate (150 Hz) on the plant's clock (tick k at `k T`, the
-//! first plant step at or after it). Each tick sees the latest
-//! motion-capture estimate (stamped with the instant it describes), the
-//! tilt encoder, the ground-contact signal, the ground height under the
-//! robot and the scenario's pilot inputs; its outputs are held until the
-//! next tick. Deterministic: the flight stack's clock is the plant's.
+//! at its control rate (150 Hz) on the plant's clock (tick k's deadline
+//! `k T`, run at the first plant step at or after it). Its outputs are held
+//! until the next tick. Deterministic: the flight stack's clock is the
+//! plant's.
 
 use std::time::Instant;
 
 use atmo_core::RobotConfig;
 use atmo_core::model::{State, idx};
-use atmo_daemon::{
-    Estimate, FlightSettings, FlightStack, Mode, PilotInput, StepInputs, StepOutputs,
-};
+use atmo_daemon::control_loop::{TickTiming, tick_period};
+use atmo_daemon::inputs::InputSettings;
+use atmo_daemon::{FlightSettings, FlightStack, Mode, StepInputs, StepOutputs};
 use atmo_mpc::MpcSettings;
 use nalgebra::Vector3;
 use serde::Serialize;
 
 use crate::error::{Result, SimError};
 use crate::scenario::{Scenario, SuccessConfig};
-use atmo_plant::plant::{Command, Plant};
+use crate::sim_io::{SimControl, SimIo, SimTick, terrain_z_below};
+use atmo_plant::plant::Plant;
 
 /// One control tick as the runner saw it (what is logged and plotted).
 #[derive(Debug, Clone, Copy)]
@@ -30,6 +34,8 @@ pub struct TickRecord {
     pub time: f64,
     pub inputs: StepInputs,
     pub outputs: StepOutputs,
+    /// The previous tick's timing (on the simulated clock).
+    pub timing: TickTiming,
     /// The plant's true state and tilt at the tick.
     pub truth: State,
     pub truth_tilt: f64,
@@ -94,6 +100,9 @@ pub struct ControllerConfig {
     pub robot: RobotConfig,
     pub flight: FlightSettings,
     pub mpc: MpcSettings,
+    /// The daemon's input timeouts; its `ground_z` is replaced by the
+    /// scenario's terrain under the start.
+    pub inputs: InputSettings,
 }
 
 impl ControllerConfig {
@@ -102,10 +111,12 @@ impl ControllerConfig {
         let flight = FlightSettings::atmo();
         let mpc =
             MpcSettings::atmo(&flight.mpc_preset).map_err(|e| SimError::Setup(e.to_string()))?;
+        let inputs = InputSettings::defaults(0.0, flight.failsafe.estimate_timeout);
         Ok(Self {
             robot: RobotConfig::atmo(),
             flight,
             mpc,
+            inputs,
         })
     }
 
@@ -117,27 +128,6 @@ impl ControllerConfig {
         self.mpc.solver.time_limit = 10.0;
         self
     }
-}
-
-/// NED z of the ground plane straight below (x, y) of `p`.
-fn ground_z_below(plant: &Plant, p: &Vector3<f64>) -> f64 {
-    let plane = plant.plane();
-    // height(p) = n . (p - P0) drops by -n_z per metre of z: solve for the plane.
-    p.z + plane.height(p) / -plane.normal.z
-}
-
-/// The scenario's pilot inputs at `t`.
-pub fn pilot_input(scenario: &Scenario, t: f64) -> PilotInput {
-    scenario
-        .pilot_at(t)
-        .map_or(PilotInput::default(), |p| PilotInput {
-            velocity: p.velocity,
-            yaw_rate: p.yaw_rate,
-            throttle: p.throttle,
-            arm: p.arm,
-            offboard: p.offboard,
-            mpc_enabled: p.mpc,
-        })
 }
 
 /// The landing's bookkeeping, shared by the in-process runner ([`fly`])
@@ -238,23 +228,18 @@ impl LandingTracker {
     }
 }
 
-/// The flight stack's inputs from the plant at its current time: the
-/// latest motion-capture estimate (stamped with the instant it describes),
-/// tilt encoder, contact signal, ground height under the robot.
-pub fn sensed_inputs(plant: &Plant, pilot: PilotInput) -> StepInputs {
-    let state = plant.state();
-    let p = Vector3::new(state[idx::X], state[idx::Y], state[idx::Z]);
-    StepInputs {
-        now_ns: (plant.time() * 1e9).round() as u64,
-        estimate: plant.estimate().map(|e| Estimate {
-            stamp_ns: (e.measured_at.max(0.0) * 1e9).round() as u64,
-            state: e.state,
-        }),
-        tilt_counts: plant.encoder_counts().ok(),
-        pilot,
-        ground_contact: plant.contact_signal(),
-        ground_z: ground_z_below(plant, &p),
-        driver_lost: false,
+/// The record of `tick`, with the plant's truth at it.
+fn record(tick: &SimTick, plant: &Plant) -> TickRecord {
+    let truth = plant.state();
+    let ground = terrain_z_below(plant.plane(), truth[idx::X], truth[idx::Y]);
+    TickRecord {
+        time: plant.time(),
+        inputs: tick.inputs,
+        outputs: tick.outputs,
+        timing: tick.timing,
+        truth,
+        truth_tilt: plant.tilt(),
+        truth_height: ground - truth[idx::Z],
     }
 }
 
@@ -272,27 +257,24 @@ pub fn fly(
         controller.flight.clone(),
     )
     .map_err(|e| SimError::Setup(e.to_string()))?;
-    let period = stack.period();
     let duration = scenario.file.duration;
-    let mut next_tick = 0.0;
-    let mut tick: u64 = 0;
-    let mut command = Command::idle();
-    let mut tracker = LandingTracker::new((duration / period) as usize + 2);
+    let mut tracker = LandingTracker::new((duration / stack.period()) as usize + 2);
+    // The daemon's constant ground height: the terrain under the start.
+    let start = plant.state();
+    let inputs = InputSettings {
+        ground_z: terrain_z_below(plant.plane(), start[idx::X], start[idx::Y]),
+        ..controller.inputs
+    };
+    let io = SimIo::new(inputs, *plant.plane());
+    let mut control = SimControl::new(tick_period(stack.period()), io);
+    control.io.sense(&plant, scenario);
 
     while plant.time() < duration - 1e-9 {
-        let t = plant.time();
-        if t + 1e-9 >= next_tick {
-            let inputs = sensed_inputs(&plant, pilot_input(scenario, t));
-            let outputs = stack.step(&inputs);
-            command = Command {
-                rotors: atmo_core::model::Input::from(outputs.thrust),
-                tilt_rate: outputs.tilt_velocity,
-                wheel_rates: outputs.wheel_rates,
-            };
-            let s = &outputs.status;
+        if let Some(tick) = control.tick_if_due(&plant, &mut stack) {
+            let s = &tick.outputs.status;
             tracker.on_control_tick(
                 s.mode,
-                &outputs.thrust,
+                &tick.outputs.thrust,
                 (s.solver != atmo_daemon::SolverState::Idle).then_some(s.feedback_time),
                 s.mpc_failures_total,
                 [
@@ -302,23 +284,13 @@ pub fn fly(
                     s.rejected.ground,
                 ],
             );
-            let truth = plant.state();
-            on_tick(&TickRecord {
-                time: t,
-                inputs,
-                outputs,
-                truth,
-                truth_tilt: plant.tilt(),
-                truth_height: inputs.ground_z - truth[idx::Z],
-            });
-            stack.prepare_next();
-            tick += 1;
-            next_tick = tick as f64 * period;
+            on_tick(&record(&tick, &plant));
         }
-        let (force, torque) = scenario.disturbance_at(t);
+        let (force, torque) = scenario.disturbance_at(plant.time());
         plant.set_external_wrench(force, torque)?;
         let was_grounded = plant.contact_signal();
-        plant.step(&command)?;
+        plant.step(control.io.command())?;
+        control.io.sense(&plant, scenario);
         tracker.after_plant_step(&plant, was_grounded);
         if plant.crash().is_some() {
             break;
@@ -379,12 +351,8 @@ pub fn fly_logged(
         .map_err(io)?;
     let mut tick = 0;
     let summary = fly(scenario, controller, |r| {
-        let timing = atmo_daemon::control_loop::TickTiming {
-            tick,
-            deadline_ns: r.inputs.now_ns,
-            ..Default::default()
-        };
-        let message = atmo_daemon::telemetry::status_message(tick, &r.inputs, &r.outputs, &timing);
+        let message =
+            atmo_daemon::telemetry::status_message(tick, &r.inputs, &r.outputs, &r.timing);
         // Counted if dropped (queue full): reported as an error below.
         log.try_log(channel, r.inputs.now_ns, &message);
         tick += 1;

@@ -4,7 +4,8 @@
 //!   state, terrain, effect overrides, disturbances, duration, seed, and
 //!   what drives the robot.
 //! - [`closed_loop`]: the flight stack (atmo-daemon) flown against the
-//!   plant, tick by tick, with a simulated clock; [`monte_carlo`] runs many
+//!   plant in the daemon's own control loop, with a simulated clock and a
+//!   simulated `TickIo` ([`sim_io`]); [`monte_carlo`] runs many
 //!   randomized landings; [`figure`] draws the paper's Fig. 5A.
 //! - [`sitl`]: `atmo-sim serve`, the plant behind the daemon's real
 //!   transports (ROS 2 motion capture, iceoryx2 drivers) in real time.
@@ -17,6 +18,7 @@ pub mod error;
 pub mod figure;
 pub mod monte_carlo;
 pub mod scenario;
+pub mod sim_io;
 pub mod sitl;
 
 pub use error::{Result, SimError};

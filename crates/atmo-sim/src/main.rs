@@ -56,64 +56,9 @@ enum Command {
         #[arg(long)]
         jobs: Option<usize>,
     },
-    /// Discrepancy finder: where a recording and the model disagree, which
-    /// missing physics explains it, and the fit with it.
-    ///
-    /// INPUT: a CSV recording with a header row and the columns t, x, y, z,
-    /// yaw, pitch, roll, vx, vy, vz, wx, wy, wz, u1, u2, u3, u4, varphi (SI
-    /// units, rad; NED world, FRD body, Euler ZYX, world velocity, body
-    /// rates, normalized rotor commands); optional ground_z (NED z of the
-    /// ground, 0 if absent) and battery_v. Unknown columns are ignored and
-    /// listed; non-finite or time-reversing rows are skipped and counted.
-    /// See docs/recording_format.md. A file ending in .mcap is read as the
-    /// flight stack's log (topic /atmo/status, atmo_msgs/MpcStatus).
-    /// Or --demo EFFECTS: generate a recording of the built-in plant with
-    /// those effects concealed (e.g. --demo ground_effect,motor_lag).
-    ///
-    /// WHAT IT DOES: acceleration residuals of the nominal model (the robot
-    /// file only; Savitzky-Golay differentiation, window from the data
-    /// rate), multi-step (0.5 s) prediction error, located by channel and
-    /// by height, tilt, speed, thrust, time and command rate against the
-    /// noise floor; candidate effects (ground_effect, motor_lag, drag, wind,
-    /// thrust_scale, battery_sag, com_offset, inertia_error, mass_error)
-    /// selected on held-out segments, with parameters, uncertainty and
-    /// confidence.
-    ///
-    /// OUTPUTS in --out: report.md, explain.json (mismatch_found, located,
-    /// effects, heldout_rms_before/after, ground_effect_gain_grid, ...),
-    /// fitted_effects.toml (a plant file: PlantConfig::load reads it),
-    /// heatmap_before.png, heatmap_after.png, timeseries.png, effects.png;
-    /// recording.csv with --demo. Exit status 0 also when a mismatch is
-    /// found; errors (bad input) exit non-zero with a message naming the
-    /// file and the problem.
-    Explain {
-        /// Recording: CSV, or the flight stack's MCAP log (*.mcap); see
-        /// docs/recording_format.md.
-        recording: Option<PathBuf>,
-        /// Robot parameter file: the nominal model.
-        #[arg(long, default_value = "config/atmo.toml")]
-        robot: PathBuf,
-        /// Output folder.
-        #[arg(long, default_value = "out/explain")]
-        out: PathBuf,
-        /// Generate the recording instead: comma-separated effects to
-        /// conceal (ground_effect, motor_lag, drag, wind, battery_sag,
-        /// com_offset, mass_error, none).
-        #[arg(long)]
-        demo: Option<String>,
-        /// Length of a --demo recording, s.
-        #[arg(long, default_value_t = 48.0)]
-        duration: f64,
-        /// Sample rate of a --demo recording, Hz.
-        #[arg(long, default_value_t = 120.0)]
-        rate: f64,
-        /// Seed (demo flight and stability subsampling).
-        #[arg(long, default_value_t = 1)]
-        seed: u64,
-        /// No progress bar.
-        #[arg(long)]
-        quiet: bool,
-    },
+    // The help text is the doc comment of `atmo_explain::cli::Args` (a doc
+    // comment here would replace it).
+    Explain(atmo_explain::cli::Args),
     /// Software in the loop: run the plant in real time on the robot's
     /// transports, for the unmodified daemon (`atmo-daemon run`) to fly.
     /// Plays every driver on the iceoryx2 driver ports (takes thruster,
@@ -140,6 +85,15 @@ enum Command {
         /// Longest wait for the daemon to arm, s.
         #[arg(long, default_value_t = 60.0)]
         start_timeout: f64,
+        /// Publish the motion capture on this topic instead of the daemon's
+        /// estimate topic, for another ROS 2 node to play it to the daemon
+        /// (scripts/ros2-peer.sh sitl: an rclpy relay).
+        #[arg(long)]
+        estimate_topic: Option<String>,
+        /// Publish the pilot inputs on this topic instead of the daemon's
+        /// pilot topic (the same relay then plays them too).
+        #[arg(long)]
+        pilot_topic: Option<String>,
         /// No progress bar.
         #[arg(long)]
         quiet: bool,
@@ -172,32 +126,40 @@ fn main() -> Result<()> {
             config,
             out,
             start_timeout,
+            estimate_topic,
+            pilot_topic,
             quiet,
-        } => serve(&scenario.scenario, &config, &out, start_timeout, quiet),
-        Command::Explain {
-            recording,
-            robot,
-            out,
-            demo,
-            duration,
-            rate,
-            seed,
+        } => serve(
+            &scenario.scenario,
+            &config,
+            &out,
+            start_timeout,
+            [estimate_topic, pilot_topic],
             quiet,
-        } => {
-            let args = atmo_explain::cli::Args {
-                recording,
-                robot,
-                out,
-                demo,
-                duration,
-                rate,
-                seed,
-                progress: !quiet,
-            };
-            print!("{}", atmo_explain::cli::run(&args)?);
-            Ok(())
-        }
+        ),
+        Command::Explain(args) => explain(&args),
     }
+}
+
+/// `atmo-sim explain`: the analysis with its progress bar on stderr.
+fn explain(args: &atmo_explain::cli::Args) -> Result<()> {
+    let bar = if args.quiet {
+        indicatif::ProgressBar::hidden()
+    } else {
+        indicatif::ProgressBar::new(atmo_explain::STEPS.len() as u64)
+    };
+    bar.set_style(indicatif::ProgressStyle::with_template(
+        "{bar:30} {pos}/{len} {msg} [{elapsed}]",
+    )?);
+    let mut progress = |p: atmo_explain::Progress| {
+        bar.set_length(p.total as u64);
+        bar.set_position(p.done as u64);
+        bar.set_message(p.stage);
+    };
+    let summary = atmo_explain::cli::run(args, &mut progress);
+    bar.finish_and_clear();
+    print!("{}", summary?);
+    Ok(())
 }
 
 fn serve(
@@ -205,11 +167,23 @@ fn serve(
     config: &DaemonConfigArg,
     out: &std::path::Path,
     start_timeout: f64,
+    [estimate_topic, pilot_topic]: [Option<String>; 2],
     quiet: bool,
 ) -> Result<()> {
     use atmo_sim::sitl::{ServeOptions, serve};
     let scenario = atmo_sim::Scenario::load(scenario_path)?;
-    let daemon = config.load()?;
+    let mut daemon = config.load()?;
+    let topics = &mut daemon.ros2.topics;
+    if let Some(topic) = estimate_topic {
+        topics.estimate.name = topic;
+    }
+    if let Some(topic) = pilot_topic {
+        topics.pilot.name = topic;
+    }
+    daemon
+        .ros2
+        .validate(std::path::Path::new("--estimate-topic/--pilot-topic"))
+        .context("serve's topics")?;
     let mut options = ServeOptions::new(daemon.ros2, daemon.drivers);
     options.start_timeout = std::time::Duration::from_secs_f64(start_timeout.max(0.0));
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;

@@ -26,9 +26,10 @@ use atmo_io::msg::{MpcStatus, PilotInput as PilotMsg};
 use atmo_io::ros2::{Ros2Config, Ros2StartOptions, SitlNode};
 use atmo_io::wall_clock_ns;
 
-use crate::closed_loop::{LandingTracker, Summary, pilot_input};
+use crate::closed_loop::{LandingTracker, Summary};
 use crate::error::{Result, SimError};
 use crate::scenario::Scenario;
+use crate::sim_io::pilot_input;
 use atmo_plant::plant::Command;
 
 /// How the server runs.

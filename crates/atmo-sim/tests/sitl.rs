@@ -29,8 +29,7 @@ fn daemon_binary() -> PathBuf {
     DAEMON
         .get_or_init(|| {
             let sim = PathBuf::from(env!("CARGO_BIN_EXE_atmo-sim"));
-            let daemon =
-                sim.with_file_name(format!("atmo-daemon{}", std::env::consts::EXE_SUFFIX));
+            let daemon = sim.with_file_name(format!("atmo-daemon{}", std::env::consts::EXE_SUFFIX));
             if !daemon.exists() {
                 build_daemon(&sim);
             }
@@ -60,7 +59,14 @@ fn build_daemon(sim: &Path) {
     );
     let status = Command::new(env!("CARGO"))
         .current_dir(repo())
-        .args(["build", "-p", "atmo-daemon", "--bin", "atmo-daemon", "--profile"])
+        .args([
+            "build",
+            "-p",
+            "atmo-daemon",
+            "--bin",
+            "atmo-daemon",
+            "--profile",
+        ])
         .arg(profile)
         .arg("--target-dir")
         .arg(target_dir)

@@ -145,8 +145,13 @@ pub struct IoHealth {
 /// `mode_name` / `solver_status_name` are derived from the codes.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct MpcStatus {
-    /// Flight-stack clock at the start of the tick, ns (header.stamp).
+    /// Flight-stack clock at the start of the tick, ns since the stack
+    /// started (`clock_ns`; monotonic, the clock of `estimate_age`).
     pub stamp_ns: u64,
+    /// ROS time at the start of the tick, ns since the Unix epoch
+    /// (`header.stamp`): the wall clock on the robot, the simulated clock in
+    /// a simulation.
+    pub ros_stamp_ns: u64,
     pub tick: u64,
     pub mode: Mode,
     /// Reason of the transition taken this tick (empty if none).
@@ -167,6 +172,7 @@ pub struct MpcStatus {
     pub wheel_rates: [f64; 2],
     pub height: f64,
     pub ground_contact: bool,
+    /// Age of the estimate used, s; -1 if there is none yet.
     pub estimate_age: f64,
     pub feedback_time: f64,
     pub preparation_time: f64,
@@ -201,6 +207,7 @@ struct WireHeader<S> {
 struct Wire<S> {
     header: WireHeader<S>,
     tick: u64,
+    clock_ns: u64,
     mode: u8,
     mode_name: S,
     transition: S,
@@ -237,10 +244,11 @@ impl Serialize for MpcStatus {
     fn serialize<S: Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
         Wire::<&str> {
             header: WireHeader {
-                stamp: Time::from_ns(self.stamp_ns),
+                stamp: Time::from_ns(self.ros_stamp_ns),
                 frame_id: "",
             },
             tick: self.tick,
+            clock_ns: self.stamp_ns,
             mode: self.mode.code(),
             mode_name: self.mode.name(),
             transition: self.transition.as_str(),
@@ -279,7 +287,7 @@ impl Serialize for MpcStatus {
 impl<'de> Deserialize<'de> for MpcStatus {
     fn deserialize<D: Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
         let w = Wire::<String>::deserialize(deserializer)?;
-        let stamp_ns = w.header.stamp.to_ns().ok_or_else(|| {
+        let ros_stamp_ns = w.header.stamp.to_ns().ok_or_else(|| {
             D::Error::custom(format!(
                 "field `header.stamp`: {:?} is not a valid time",
                 w.header.stamp
@@ -294,7 +302,8 @@ impl<'de> Deserialize<'de> for MpcStatus {
             ))
         })?;
         Ok(Self {
-            stamp_ns,
+            stamp_ns: w.clock_ns,
+            ros_stamp_ns,
             tick: w.tick,
             mode,
             transition: Label::new(&w.transition),

@@ -110,34 +110,84 @@ pub fn definition(type_name: &str) -> Option<&'static str> {
         .map(|(_, text)| *text)
 }
 
-/// The complex field types a definition uses, as `pkg/Type`, in order.
-fn field_types(package: &str, text: &str) -> Vec<String> {
+/// How a field repeats: `T`, `T[N]`, `T[<=N]`, `T[]`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum ArrayKind {
+    None,
+    Fixed(u64),
+    Bounded(u64),
+    Unbounded,
+}
+
+/// One field of a `.msg` definition (constants are not fields).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub(crate) struct FieldDecl {
+    pub name: String,
+    /// A primitive (`float64`, `string`...) or `pkg/Type` (resolved:
+    /// `Header` is `std_msgs/Header`, a bare name is in `package`).
+    pub base: String,
+    /// `N` of `string<=N` / `wstring<=N`.
+    pub string_bound: Option<u64>,
+    pub array: ArrayKind,
+}
+
+/// The fields of a definition of `package`, in order. Comments, blank
+/// lines and constants (`TYPE NAME=VALUE`) are skipped; a default value
+/// after the name is ignored.
+pub(crate) fn fields(package: &str, text: &str) -> Vec<FieldDecl> {
     let mut out = Vec::new();
     for line in text.lines() {
         let line = line.split('#').next().unwrap_or_default().trim();
-        let Some(field_type) = line.split_whitespace().next() else {
+        let mut tokens = line.split_whitespace();
+        let (Some(field_type), Some(name)) = (tokens.next(), tokens.next()) else {
             continue;
         };
-        // Array suffix ([], [N], [<=N]) and bounded strings (string<=N).
-        let base = field_type
-            .split('[')
-            .next()
-            .unwrap_or_default()
-            .split("<=")
-            .next()
-            .unwrap_or_default();
-        if PRIMITIVES.contains(&base) {
-            continue;
+        if line[field_type.len()..].contains('=') {
+            continue; // a constant
         }
-        let full = if base.contains('/') {
+        let (element, array) = match field_type.split_once('[') {
+            None => (field_type, ArrayKind::None),
+            Some((element, rest)) => {
+                let inside = rest.trim_end_matches(']');
+                let array = if inside.is_empty() {
+                    ArrayKind::Unbounded
+                } else if let Some(n) = inside.strip_prefix("<=") {
+                    ArrayKind::Bounded(n.parse().unwrap_or(0))
+                } else {
+                    ArrayKind::Fixed(inside.parse().unwrap_or(0))
+                };
+                (element, array)
+            }
+        };
+        let (base, string_bound) = match element.split_once("<=") {
+            Some((base, n)) => (base, n.parse().ok()),
+            None => (element, None),
+        };
+        let base = if PRIMITIVES.contains(&base) {
+            base.to_string()
+        } else if base.contains('/') {
             short_name(base)
         } else if base == "Header" {
             "std_msgs/Header".to_string()
         } else {
             format!("{package}/{base}")
         };
-        if !out.contains(&full) {
-            out.push(full);
+        out.push(FieldDecl {
+            name: name.to_string(),
+            base,
+            string_bound,
+            array,
+        });
+    }
+    out
+}
+
+/// The complex field types a definition uses, as `pkg/Type`, in order.
+fn field_types(package: &str, text: &str) -> Vec<String> {
+    let mut out: Vec<String> = Vec::new();
+    for field in fields(package, text) {
+        if !PRIMITIVES.contains(&field.base.as_str()) && !out.contains(&field.base) {
+            out.push(field.base);
         }
     }
     out

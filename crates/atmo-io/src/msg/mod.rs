@@ -21,6 +21,7 @@ pub mod frames;
 mod label;
 mod px4;
 mod standard;
+mod type_hash;
 
 pub use atmo::{IoHealth, Mode, MpcStatus, PilotInput, SolverStatus, TickTiming};
 pub use definitions::{definition, schema_text};
@@ -30,6 +31,7 @@ pub use standard::{
     DiagnosticArray, DiagnosticStatus, Header, KeyValue, Odometry, Point, Pose, PoseWithCovariance,
     Quaternion, Time, Twist, TwistWithCovariance, Vector3,
 };
+pub use type_hash::{hashed_description, type_hash};
 
 use byteorder::{BigEndian, LittleEndian};
 use serde::Serialize;

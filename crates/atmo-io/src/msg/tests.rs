@@ -211,6 +211,7 @@ fn px4_messages() {
 pub(crate) fn sample_status() -> MpcStatus {
     let mut status = MpcStatus {
         stamp_ns: 12_000_000_345,
+        ros_stamp_ns: 1_780_000_012_000_000_345,
         tick: 1800,
         mode: Mode::Transition,
         transition: Label::new("below z*"),
@@ -275,26 +276,27 @@ pub(crate) fn sample_status() -> MpcStatus {
 fn mpc_status_layout() {
     let status = sample_status();
     let mut body = Vec::new();
-    body.extend(12i32.to_le_bytes());
+    body.extend(1_780_000_012i32.to_le_bytes()); // header.stamp: ROS time
     body.extend(345u32.to_le_bytes());
     body.extend([1, 0, 0, 0, 0]); // frame_id ""
     body.extend([0, 0, 0]); // pad to 16 for the u64 tick
     body.extend(1800u64.to_le_bytes());
-    body.push(5); // mode, offset 24
+    body.extend(12_000_000_345u64.to_le_bytes()); // clock_ns: the stack's clock
+    body.push(5); // mode, offset 32
     body.extend([0, 0, 0]);
     body.extend(11u32.to_le_bytes());
-    body.extend(b"transition\0"); // offset 32..43
-    body.push(0); // pad to 44
+    body.extend(b"transition\0"); // offset 40..51
+    body.push(0); // pad to 52
     body.extend(9u32.to_le_bytes());
-    body.extend(b"below z*\0"); // 48..57
-    body.push(2); // solver_status, 57
-    body.extend([0, 0]); // pad to 60
+    body.extend(b"below z*\0"); // 56..65
+    body.push(2); // solver_status, 65
+    body.extend([0, 0]); // pad to 68
     body.extend(9u32.to_le_bytes());
-    body.extend(b"degraded\0"); // 64..73
-    body.extend([0, 0, 0]); // pad to 76
-    body.extend(3u32.to_le_bytes()); // solver_iterations 76..80
-    body.extend(1u32.to_le_bytes()); // mpc_failed_ticks 80..84
-    body.extend([0, 0, 0, 0]); // pad to 88
+    body.extend(b"degraded\0"); // 72..81
+    body.extend([0, 0, 0]); // pad to 84
+    body.extend(3u32.to_le_bytes()); // solver_iterations 84..88
+    body.extend(1u32.to_le_bytes()); // mpc_failed_ticks 88..92
+    body.extend([0, 0, 0, 0]); // pad to 96
     body.extend(2u64.to_le_bytes());
     body.extend(f64s(&status.state));
     body.extend(f64s(&status.reference));
@@ -320,7 +322,7 @@ fn mpc_status_layout() {
         body.extend(v.to_le_bytes());
     }
     body.extend([1, 0, 1, 1]); // drivers_alive
-    body.extend([0; 4]); // pad to 8
+    body.extend([0; 4]); // pad to 16
     for v in [0u64, 1, 0, 2] {
         body.extend(v.to_le_bytes());
     }
@@ -356,7 +358,7 @@ fn malformed_payloads_are_errors_naming_the_topic() {
     assert!(decode::<MpcStatus>("/s", &bad).is_err());
     // A bad mode code names the field.
     let mut bad = good.clone();
-    bad[4 + 24] = 42;
+    bad[4 + 32] = 42; // mode, after the header, tick and clock_ns
     let text = decode::<MpcStatus>("/s", &bad).unwrap_err().to_string();
     assert!(text.contains("mode"), "{text}");
     // A huge string length does not allocate its way to a crash.
@@ -454,4 +456,77 @@ fn helpers_for_the_flight_stack() {
     assert!(OffboardControlMode::direct_actuator(7).direct_actuator);
     let x = atmo_core::model::State::from_fn(|i, _| i as f64);
     assert_eq!(MpcStatus::array(&x)[11], 11.0);
+}
+
+/// RIHS01 hashes as ROS 2 Kilted computes them: `type_hashes` of the
+/// `share/<pkg>/msg/<Type>.json` files of the PyPI wheels ros-builtin-interfaces
+/// 2.3.0, ros-std-msgs / ros-geometry-msgs / ros-nav-msgs /
+/// ros-diagnostic-msgs 5.5.1, and of atmo_msgs built by colcon
+/// (scripts/ros2-peer.sh). tests/python/rclpy_peer.py checks every type of
+/// the node against rclpy at run time.
+#[test]
+fn type_hashes_match_ros2() {
+    for (type_name, hash) in [
+        (
+            "builtin_interfaces/msg/Time",
+            "RIHS01_b106235e25a4c5ed35098aa0a61a3ee9c9b18d197f398b0e4206cea9acf9c197",
+        ),
+        (
+            "std_msgs/msg/Header",
+            "RIHS01_f49fb3ae2cf070f793645ff749683ac6b06203e41c891e17701b1cb597ce6a01",
+        ),
+        (
+            Twist::TYPE_NAME,
+            "RIHS01_9c45bf16fe0983d80e3cfe750d6835843d265a9a6c46bd2e609fcddde6fb8d2a",
+        ),
+        (
+            Odometry::TYPE_NAME,
+            "RIHS01_3cc97dc7fb7502f8714462c526d369e35b603cfc34d946e3f2eda2766dfec6e0",
+        ),
+        (
+            DiagnosticArray::TYPE_NAME,
+            "RIHS01_5a8a36efb05fb25070fa0fb3810290c0e6cd4862b54a8fb975a1ee8dc55a333e",
+        ),
+        (
+            PilotInput::TYPE_NAME,
+            "RIHS01_ac378df3770012e3651e1f07f4f6ae0d2ea7f9dd9982f2d4607c411ea162cc9c",
+        ),
+    ] {
+        assert_eq!(type_hash(type_name).unwrap(), hash, "{type_name}");
+    }
+}
+
+#[test]
+fn type_descriptions_follow_rosidl() {
+    // Constants are left out, fixed arrays add 48 to the element's id,
+    // sequences 144, and nested types are named in full.
+    let d = hashed_description(DiagnosticArray::TYPE_NAME).unwrap();
+    assert!(
+        d.starts_with(
+            "{\"type_description\": {\"type_name\": \"diagnostic_msgs/msg/DiagnosticArray\", \
+             \"fields\": [{\"name\": \"header\", \"type\": {\"type_id\": 1, \"capacity\": 0, \
+             \"string_capacity\": 0, \"nested_type_name\": \"std_msgs/msg/Header\"}}, \
+             {\"name\": \"status\", \"type\": {\"type_id\": 145,"
+        ),
+        "{d}"
+    );
+    assert!(!d.contains("\"OK\""), "constants are not hashed: {d}");
+    let names: Vec<&str> = d
+        .match_indices("{\"type_name\": \"")
+        .map(|(i, m)| d[i + m.len()..].split('"').next().unwrap())
+        .collect();
+    assert_eq!(
+        names,
+        [
+            "diagnostic_msgs/msg/DiagnosticArray",
+            "builtin_interfaces/msg/Time",
+            "diagnostic_msgs/msg/DiagnosticStatus",
+            "diagnostic_msgs/msg/KeyValue",
+            "std_msgs/msg/Header",
+        ]
+    );
+    assert!(matches!(
+        type_hash("atmo_msgs/msg/Nope"),
+        Err(IoError::UnknownType { .. })
+    ));
 }

@@ -6,9 +6,32 @@
 //! copies a fixed-size record and returns at once (a full queue drops and
 //! counts); [`Ros2Inputs::latest_estimate`], [`Ros2Inputs::latest_drive`]
 //! and [`Ros2Inputs::latest_pilot`] drain the newest accepted input without
-//! waiting. Streams use best-effort, volatile, keep-last-1 QoS. The domain
-//! id comes from `ROS_DOMAIN_ID` (default 0); with `loopback_only` the
-//! participant uses 127.0.0.1 only.
+//! waiting. The domain id comes from `ROS_DOMAIN_ID` (default 0); with
+//! `loopback_only` the participant uses 127.0.0.1 only.
+//!
+//! QoS per topic, as ROS 2 conventions expect (the README's topic table):
+//! - status and diagnostics out: reliable, volatile, keep last 10 (ROS 2's
+//!   default profile, what `ros2 topic echo`, rqt and diagnostic_aggregator
+//!   subscribe with; best-effort subscribers match too). RustDDS makes a
+//!   reliable writer wait while its window of 10 unacknowledged samples is
+//!   full: the node uses `WhenFull::Fail`, so a slow reliable subscriber
+//!   costs that sample (counted, `publish_errors`), never a wait of the node
+//!   thread, and the control thread only ever touches its bounded queue.
+//! - PX4 outputs: best effort, keep last 1 (what PX4's DDS bridge expects).
+//! - Inputs: best effort, keep last 1, which matches reliable and
+//!   best-effort publishers alike; a late sample is worth nothing.
+//!
+//! Shutdown: the endpoints are dropped before the node and the node before
+//! the DDS participant ([`DdsNode`] is the last field of the thread
+//! structs), so RustDDS disposes every endpoint (SEDP) and the participant
+//! while its event loop still runs, and a peer's graph forgets them at once
+//! instead of after the 50 s participant lease.
+//!
+//! Type hashes: RustDDS 0.15 sends no endpoint USER_DATA, where an rmw puts
+//! `typehash=RIHS01_...;` (peers see the hash as invalid; ROS 2 Kilted
+//! matches anyway). The node publishes the RIHS01 hash of each of its
+//! topic's types ([`crate::msg::type_hash`]) in its `atmo/ros2` diagnostics
+//! (`type_hash <topic>`), so a peer can check them.
 //!
 //! Inputs are checked on the node thread and counted ([`Ros2Counters`],
 //! also published on the diagnostics topic). Payloads that do not decode
@@ -43,6 +66,7 @@ use ros2_client::dds::rustdds::DomainParticipantBuilder;
 use ros2_client::{
     Context, MessageTypeName, Name, Node, NodeName, NodeOptions, Publisher, QosProfile,
     Subscription,
+    qos::{History, WhenFull},
 };
 use serde::Serialize;
 use serde::de::DeserializeOwned;
@@ -395,9 +419,30 @@ fn spawn_node_thread<N: 'static>(
     }
 }
 
+/// A node thread's ROS 2 node and DDS participant. Fields drop in order:
+/// the node (its `ros_discovery_info` entry), then the participant. Keep it
+/// the LAST field of a struct that also holds publishers and subscriptions,
+/// so they are dropped (undeclared) while the participant still runs.
+struct DdsNode {
+    node: Node,
+    _context: Context,
+}
+
+impl DdsNode {
+    /// Drops `endpoints` (RustDDS undeclares them while its event loop
+    /// runs), then the node and the participant (which disposes itself).
+    /// No wait in between: a grace period of 250 ms changed nothing in a
+    /// Fast DDS peer's graph, and it delayed the exit of the SITL server
+    /// past the daemon's driver-liveness timeout.
+    fn shut_down<E>(self, endpoints: E) {
+        drop(endpoints);
+        drop(self);
+    }
+}
+
 /// A DDS participant on `domain` (127.0.0.1 only with `loopback_only`) and
 /// a node named `node_name` in the config's namespace.
-fn dds_node(config: &Ros2Config, domain: u16, node_name: &str) -> Result<(Context, Node)> {
+fn dds_node(config: &Ros2Config, domain: u16, node_name: &str) -> Result<DdsNode> {
     let mut builder = DomainParticipantBuilder::new(domain);
     if config.loopback_only {
         builder = builder
@@ -414,7 +459,10 @@ fn dds_node(config: &Ros2Config, domain: u16, node_name: &str) -> Result<(Contex
     let node = context
         .new_node(name, NodeOptions::new().enable_rosout(false))
         .map_err(|e| ros_err("node", e))?;
-    Ok((context, node))
+    Ok(DdsNode {
+        node,
+        _context: context,
+    })
 }
 
 /// Entry point: [`Ros2Node::start`].
@@ -448,23 +496,39 @@ fn type_name<M: RosMessage>() -> MessageTypeName {
     MessageTypeName::new(pkg, name)
 }
 
-fn qos() -> QosProfile {
-    // Best effort, volatile, keep last 1: a late sample is worth nothing.
+/// Best effort, volatile, keep last 1: streams where a late sample is worth
+/// nothing (inputs; PX4 outputs). As a subscription it matches reliable and
+/// best-effort publishers.
+fn stream_qos() -> QosProfile {
     QosProfile::subscription_default()
+}
+
+/// Depth of [`reliable_qos`], ROS 2's default (`rmw_qos_profile_default`).
+const RELIABLE_DEPTH: usize = 10;
+
+/// ROS 2's default profile (reliable, volatile, keep last 10), as offered by
+/// a publisher that never waits for acknowledgements (`WhenFull::Fail`).
+fn reliable_qos() -> QosProfile {
+    QosProfile::subscription_default()
+        .reliability_reliable(WhenFull::Fail)
+        .history(History::KeepLast {
+            depth: RELIABLE_DEPTH,
+        })
 }
 
 fn publisher<M: RosMessage + Serialize>(
     node: &mut Node,
     topic: &TopicConfig,
+    qos: &QosProfile,
 ) -> Result<Option<Publisher<M>>> {
     if !topic.enabled {
         return Ok(None);
     }
     let context = format!("publisher `{}`", topic.name);
     let t = node
-        .create_topic(&split_name(&topic.name)?, type_name::<M>(), &qos())
+        .create_topic(&split_name(&topic.name)?, type_name::<M>(), qos)
         .map_err(|e| ros_err(&context, e))?;
-    node.create_publisher::<M>(&t, Some(qos()))
+    node.create_publisher::<M>(&t, Some(qos.clone()))
         .map(Some)
         .map_err(|e| ros_err(&context, e))
 }
@@ -478,9 +542,9 @@ fn subscription<M: RosMessage + DeserializeOwned>(
     }
     let context = format!("subscription `{}`", topic.name);
     let t = node
-        .create_topic(&split_name(&topic.name)?, type_name::<M>(), &qos())
+        .create_topic(&split_name(&topic.name)?, type_name::<M>(), &stream_qos())
         .map_err(|e| ros_err(&context, e))?;
-    node.create_subscription::<M>(&t, Some(qos()))
+    node.create_subscription::<M>(&t, Some(stream_qos()))
         .map(Some)
         .map_err(|e| ros_err(&context, e))
 }
@@ -492,8 +556,6 @@ enum EstimateSub {
 
 struct NodeThread {
     config: Ros2Config,
-    _context: Context,
-    _node: Node,
     status: Option<Publisher<MpcStatus>>,
     motors: Option<Publisher<ActuatorMotors>>,
     offboard: Option<Publisher<OffboardControlMode>>,
@@ -509,6 +571,32 @@ struct NodeThread {
     stop: Arc<AtomicBool>,
     last_stamp: Option<u64>,
     started: Instant,
+    /// `type_hash <topic>` = RIHS01 of each enabled topic's type.
+    type_hashes: Vec<KeyValue>,
+    /// Last: dropped after the endpoints above (see [`DdsNode`]).
+    _dds: DdsNode,
+}
+
+/// `type_hash <topic>` = the RIHS01 hash of its type, for each enabled topic.
+fn topic_type_hashes(topics: &Topics) -> Result<Vec<KeyValue>> {
+    let all = [
+        &topics.status,
+        &topics.estimate,
+        &topics.drive_command,
+        &topics.pilot,
+        &topics.actuator_motors,
+        &topics.offboard_mode,
+        &topics.diagnostics,
+    ];
+    all.into_iter()
+        .filter(|t| t.enabled)
+        .map(|t| {
+            Ok(KeyValue {
+                key: format!("type_hash {}", t.name),
+                value: crate::msg::type_hash(&t.type_name)?,
+            })
+        })
+        .collect()
 }
 
 /// At most this many samples are taken from one subscription per loop.
@@ -576,19 +664,21 @@ impl NodeThread {
         counters: Arc<Counters>,
         stop: Arc<AtomicBool>,
     ) -> Result<Self> {
-        let (context, mut node) = dds_node(&config, domain, &config.node_name)?;
+        let mut dds = dds_node(&config, domain, &config.node_name)?;
+        let node = &mut dds.node;
         let t = &config.topics;
-        let status = publisher::<MpcStatus>(&mut node, &t.status)?;
-        let motors = publisher::<ActuatorMotors>(&mut node, &t.actuator_motors)?;
-        let offboard = publisher::<OffboardControlMode>(&mut node, &t.offboard_mode)?;
-        let diagnostics = publisher::<DiagnosticArray>(&mut node, &t.diagnostics)?;
+        let status = publisher::<MpcStatus>(node, &t.status, &reliable_qos())?;
+        let motors = publisher::<ActuatorMotors>(node, &t.actuator_motors, &stream_qos())?;
+        let offboard = publisher::<OffboardControlMode>(node, &t.offboard_mode, &stream_qos())?;
+        let diagnostics = publisher::<DiagnosticArray>(node, &t.diagnostics, &reliable_qos())?;
         let estimate = if t.estimate.type_name == VehicleOdometry::TYPE_NAME {
-            subscription::<VehicleOdometry>(&mut node, &t.estimate)?.map(EstimateSub::Px4)
+            subscription::<VehicleOdometry>(node, &t.estimate)?.map(EstimateSub::Px4)
         } else {
-            subscription::<Odometry>(&mut node, &t.estimate)?.map(EstimateSub::Odometry)
+            subscription::<Odometry>(node, &t.estimate)?.map(EstimateSub::Odometry)
         };
-        let drive = subscription::<Twist>(&mut node, &t.drive_command)?;
-        let pilot = subscription::<PilotInput>(&mut node, &t.pilot)?;
+        let drive = subscription::<Twist>(node, &t.drive_command)?;
+        let pilot = subscription::<PilotInput>(node, &t.pilot)?;
+        let type_hashes = topic_type_hashes(t)?;
         let NodeChannels {
             out_rx,
             estimate_tx,
@@ -597,8 +687,6 @@ impl NodeThread {
         } = channels;
         Ok(Self {
             config,
-            _context: context,
-            _node: node,
             status,
             motors,
             offboard,
@@ -614,6 +702,8 @@ impl NodeThread {
             stop,
             last_stamp: None,
             started: Instant::now(),
+            type_hashes,
+            _dds: dds,
         })
     }
 
@@ -630,6 +720,26 @@ impl NodeThread {
                 next_diagnostics = Instant::now() + period;
             }
         }
+        let Self {
+            status,
+            motors,
+            offboard,
+            diagnostics,
+            estimate,
+            drive,
+            pilot,
+            _dds: dds,
+            ..
+        } = self;
+        dds.shut_down((
+            status,
+            motors,
+            offboard,
+            diagnostics,
+            estimate,
+            drive,
+            pilot,
+        ));
     }
 
     fn publish(&self, message: Outgoing) {
@@ -694,6 +804,7 @@ impl NodeThread {
                     key: "uptime_s".into(),
                     value: format!("{:.1}", self.started.elapsed().as_secs_f64()),
                 }))
+                .chain(self.type_hashes.iter().cloned())
                 .collect(),
         }
     }

@@ -33,11 +33,11 @@ use std::sync::mpsc::{Receiver, SyncSender, sync_channel};
 
 use atmo_core::ConfigFile;
 use atmo_core::model::State;
-use ros2_client::{Context, Node, Publisher, Subscription};
+use ros2_client::{Publisher, Subscription};
 
 use super::{
-    Ros2Config, Ros2StartOptions, Ros2Thread, count_publish, dds_node, domain_id, publish_queued,
-    publisher, spawn_node_thread, subscription, take_burst, try_queue,
+    DdsNode, Ros2Config, Ros2StartOptions, Ros2Thread, count_publish, dds_node, domain_id,
+    publish_queued, publisher, spawn_node_thread, stream_qos, subscription, take_burst, try_queue,
 };
 use crate::error::Result;
 use crate::msg::frames::{state_to_odometry, state_to_vehicle_odometry};
@@ -202,8 +202,6 @@ enum EstimatePub {
 }
 
 struct SitlThread {
-    _context: Context,
-    _node: Node,
     estimate: Option<EstimatePub>,
     pilot: Option<Publisher<PilotInput>>,
     status: Option<Subscription<MpcStatus>>,
@@ -211,6 +209,8 @@ struct SitlThread {
     status_tx: SyncSender<MpcStatus>,
     counters: Arc<Counters>,
     stop: Arc<AtomicBool>,
+    /// Last: dropped after the endpoints above (see [`DdsNode`]).
+    _dds: DdsNode,
 }
 
 impl SitlThread {
@@ -222,18 +222,19 @@ impl SitlThread {
         counters: Arc<Counters>,
         stop: Arc<AtomicBool>,
     ) -> Result<Self> {
-        let (context, mut node) = dds_node(config, domain, &SitlNode::node_name(config))?;
+        let mut dds = dds_node(config, domain, &SitlNode::node_name(config))?;
+        let node = &mut dds.node;
         let t = &config.topics;
+        // Sensor-style streams, as a motion-capture system and a radio send.
+        let qos = stream_qos();
         let estimate = if t.estimate.type_name == VehicleOdometry::TYPE_NAME {
-            publisher::<VehicleOdometry>(&mut node, &t.estimate)?.map(EstimatePub::Px4)
+            publisher::<VehicleOdometry>(node, &t.estimate, &qos)?.map(EstimatePub::Px4)
         } else {
-            publisher::<Odometry>(&mut node, &t.estimate)?.map(EstimatePub::Odometry)
+            publisher::<Odometry>(node, &t.estimate, &qos)?.map(EstimatePub::Odometry)
         };
-        let pilot = publisher::<PilotInput>(&mut node, &t.pilot)?;
-        let status = subscription::<MpcStatus>(&mut node, &t.status)?;
+        let pilot = publisher::<PilotInput>(node, &t.pilot, &qos)?;
+        let status = subscription::<MpcStatus>(node, &t.status)?;
         Ok(Self {
-            _context: context,
-            _node: node,
             estimate,
             pilot,
             status,
@@ -241,6 +242,7 @@ impl SitlThread {
             status_tx,
             counters,
             stop,
+            _dds: dds,
         })
     }
 
@@ -249,6 +251,14 @@ impl SitlThread {
             publish_queued(&self.out_rx, |m| self.publish(m));
             self.take_status();
         }
+        let Self {
+            estimate,
+            pilot,
+            status,
+            _dds: dds,
+            ..
+        } = self;
+        dds.shut_down((estimate, pilot, status));
     }
 
     fn publish(&self, message: Outgoing) {

@@ -53,6 +53,7 @@ pub fn status(k: u64) -> MpcStatus {
     let t = k as f64;
     let mut s = MpcStatus {
         stamp_ns: 1_000_000_000 + k * 6_666_667,
+        ros_stamp_ns: 1_780_000_000_000_000_000 + k * 6_666_667,
         tick: k,
         mode: Mode::ALL[(k % 8) as usize],
         transition: if k % 5 == 0 {
@@ -73,7 +74,7 @@ pub fn status(k: u64) -> MpcStatus {
         wheel_rates: [t * 0.01, -t * 0.01],
         height: 1.0 - 0.001 * t,
         ground_contact: k % 2 == 0,
-        estimate_age: if k == 3 { f64::INFINITY } else { 0.004 },
+        estimate_age: if k == 3 { -1.0 } else { 0.004 },
         feedback_time: 1.1e-3,
         preparation_time: 2.2e-3,
         pilot: PilotInput {

@@ -1,0 +1,313 @@
+//! The tick's input assembly, shared by every [`crate::control_loop::TickIo`]:
+//! the onboard I/O (ROS 2, driver ports) and the simulator's I/O feed the
+//! same [`InputLatch`] with what arrived, and it builds the tick's
+//! [`StepInputs`]. Only the sources differ; the rules below are one code.
+//!
+//! Times are ns on the tick's clock (the flight stack's `now_ns`); a source
+//! whose messages carry another clock converts the time it *accepted* a
+//! message to this one.
+//!
+//! - Estimate: the newest wins; its `stamp_ns` is set by the source (onboard:
+//!   when the ROS 2 thread accepted it). Older than `estimate_timeout` at
+//!   the tick is counted as stale (the flight stack then flies its failsafe).
+//! - Pilot: the newest wins. When the pilot stream is silent for longer than
+//!   `pilot_timeout` its switches hold (disarming a flying robot because a
+//!   radio dropped would drop it) but velocity, yaw-rate and throttle go to
+//!   zero: the robot holds its position.
+//! - Drive command: newer than the pilot input and younger than
+//!   `drive_timeout`, it sets velocity (forward along the current yaw) and
+//!   yaw rate while the stack is in [`Mode::Drive`].
+//! - Encoder, contact, driver liveness: the newest reading holds.
+//! - Ground height: the NED z of the ground under the robot, from a source
+//!   (a terrain map, a rangefinder, a topic) or, until one has spoken, the
+//!   configured constant.
+
+use std::time::Duration;
+
+use atmo_core::model::idx;
+
+use crate::flight_stack::{Estimate, PilotInput, StepInputs};
+use crate::modes::Mode;
+
+/// The pilot and drive timeouts when a config names none, ms.
+pub const DEFAULT_INPUT_TIMEOUT_MS: u64 = 500;
+
+/// How the latch turns arrivals into inputs.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct InputSettings {
+    /// NED z of the ground until a ground-height source speaks, m.
+    pub ground_z: f64,
+    /// Pilot stream silence after which its commands go to zero.
+    pub pilot_timeout: Duration,
+    /// Age after which a drive command is ignored.
+    pub drive_timeout: Duration,
+    /// The flight stack's estimate timeout, s (for the stale count).
+    pub estimate_timeout: f64,
+}
+
+/// A drive command (`geometry_msgs/Twist`) as the latch keeps it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct DriveCommand {
+    /// Forward speed, m/s.
+    pub forward: f64,
+    /// Yaw rate, rad/s (FRD).
+    pub yaw_rate: f64,
+    /// When it was accepted, ns on the tick's clock.
+    pub received_ns: u64,
+}
+
+/// One tick's inputs and what was wrong with them (for the counters).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Assembled {
+    pub inputs: StepInputs,
+    /// The pilot stream is silent (its commands were zeroed).
+    pub pilot_stale: bool,
+    /// No estimate young enough to fly on.
+    pub estimate_stale: bool,
+}
+
+/// The newest value of every source, and the rules that make a tick's
+/// inputs of them. Fixed size, no allocation.
+#[derive(Debug, Clone, Copy)]
+pub struct InputLatch {
+    settings: InputSettings,
+    estimate: Option<Estimate>,
+    pilot: PilotInput,
+    pilot_received_ns: Option<u64>,
+    drive: Option<DriveCommand>,
+    tilt_counts: Option<f64>,
+    contact: bool,
+    drivers_alive: bool,
+    ground_z: f64,
+    mode: Mode,
+}
+
+fn ns(d: Duration) -> u64 {
+    u64::try_from(d.as_nanos()).unwrap_or(u64::MAX)
+}
+
+impl InputSettings {
+    /// The daemon's defaults (`config/daemon.toml` without the keys) with
+    /// the flight settings' estimate timeout and the ground at `ground_z`.
+    pub fn defaults(ground_z: f64, estimate_timeout: f64) -> Self {
+        let timeout = Duration::from_millis(DEFAULT_INPUT_TIMEOUT_MS);
+        Self {
+            ground_z,
+            pilot_timeout: timeout,
+            drive_timeout: timeout,
+            estimate_timeout,
+        }
+    }
+}
+
+impl InputLatch {
+    /// Nothing heard yet: no estimate, no encoder, pilot silent, drivers alive
+    /// (a source that checks liveness says otherwise), ground at the
+    /// configured height.
+    pub fn new(settings: InputSettings) -> Self {
+        Self {
+            settings,
+            estimate: None,
+            pilot: PilotInput::default(),
+            pilot_received_ns: None,
+            drive: None,
+            tilt_counts: None,
+            contact: false,
+            drivers_alive: true,
+            ground_z: settings.ground_z,
+            mode: Mode::Disarmed,
+        }
+    }
+
+    pub fn settings(&self) -> &InputSettings {
+        &self.settings
+    }
+
+    /// A state estimate arrived.
+    pub fn estimate(&mut self, estimate: Estimate) {
+        self.estimate = Some(estimate);
+    }
+
+    /// A pilot input arrived at `received_ns`.
+    pub fn pilot(&mut self, pilot: PilotInput, received_ns: u64) {
+        self.pilot = pilot;
+        self.pilot_received_ns = Some(received_ns);
+    }
+
+    /// A drive command arrived.
+    pub fn drive(&mut self, drive: DriveCommand) {
+        self.drive = Some(drive);
+    }
+
+    /// A tilt encoder reading arrived (counts, continuous).
+    pub fn tilt_counts(&mut self, counts: f64) {
+        self.tilt_counts = Some(counts);
+    }
+
+    /// A ground-contact reading arrived.
+    pub fn ground_contact(&mut self, contact: bool) {
+        self.contact = contact;
+    }
+
+    /// The drivers' liveness: whether every required driver is heard from.
+    pub fn drivers_alive(&mut self, alive: bool) {
+        self.drivers_alive = alive;
+    }
+
+    /// A ground height arrived: NED z of the ground under the robot, m.
+    pub fn ground_z(&mut self, z: f64) {
+        self.ground_z = z;
+    }
+
+    /// The mode the last tick ended in (drive commands count only in
+    /// [`Mode::Drive`]).
+    pub fn mode(&mut self, mode: Mode) {
+        self.mode = mode;
+    }
+
+    /// The newest estimate, if any.
+    pub fn latest_estimate(&self) -> Option<Estimate> {
+        self.estimate
+    }
+
+    /// The inputs of the tick at `now_ns`.
+    pub fn assemble(&self, now_ns: u64) -> Assembled {
+        let pilot_stale = self
+            .pilot_received_ns
+            .is_none_or(|at| now_ns.saturating_sub(at) > ns(self.settings.pilot_timeout));
+        let estimate_stale = !self.estimate.is_some_and(|e| {
+            now_ns.saturating_sub(e.stamp_ns) as f64 * 1e-9 <= self.settings.estimate_timeout
+        });
+        let yaw = self.estimate.map_or(0.0, |e| e.state[idx::YAW]);
+        Assembled {
+            inputs: StepInputs {
+                now_ns,
+                estimate: self.estimate,
+                tilt_counts: self.tilt_counts,
+                pilot: self.pilot_now(now_ns, yaw, pilot_stale),
+                ground_contact: self.contact,
+                ground_z: self.ground_z,
+                driver_lost: !self.drivers_alive,
+            },
+            pilot_stale,
+            estimate_stale,
+        }
+    }
+
+    /// The pilot input at `now_ns`: held switches, zeroed commands when the
+    /// stream is silent, a fresh drive command while driving.
+    fn pilot_now(&self, now_ns: u64, yaw: f64, stale: bool) -> PilotInput {
+        let mut pilot = self.pilot;
+        if stale {
+            pilot.velocity = [0.0; 3];
+            pilot.yaw_rate = 0.0;
+            pilot.throttle = 0.0;
+        }
+        if let Some(drive) = self.drive
+            && self.mode == Mode::Drive
+            && now_ns.saturating_sub(drive.received_ns) <= ns(self.settings.drive_timeout)
+            && self
+                .pilot_received_ns
+                .is_none_or(|at| drive.received_ns > at)
+        {
+            pilot.velocity = [drive.forward * yaw.cos(), drive.forward * yaw.sin(), 0.0];
+            pilot.yaw_rate = drive.yaw_rate;
+        }
+        pilot
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use atmo_core::model::State;
+
+    fn latch() -> InputLatch {
+        InputLatch::new(InputSettings {
+            ground_z: -0.5,
+            pilot_timeout: Duration::from_millis(500),
+            drive_timeout: Duration::from_millis(300),
+            estimate_timeout: 0.1,
+        })
+    }
+
+    const MS: u64 = 1_000_000;
+
+    #[test]
+    fn silent_pilot_holds_switches_and_zeroes_commands() {
+        let mut l = latch();
+        let pilot = PilotInput {
+            velocity: [0.5, 0.0, 0.2],
+            yaw_rate: 0.3,
+            throttle: 0.6,
+            arm: true,
+            offboard: true,
+            mpc_enabled: true,
+        };
+        l.pilot(pilot, 1000 * MS);
+        let fresh = l.assemble(1400 * MS);
+        assert!(!fresh.pilot_stale);
+        assert_eq!(fresh.inputs.pilot, pilot);
+        let stale = l.assemble(1501 * MS);
+        assert!(stale.pilot_stale);
+        let p = stale.inputs.pilot;
+        assert_eq!((p.velocity, p.yaw_rate, p.throttle), ([0.0; 3], 0.0, 0.0));
+        assert!(p.arm && p.offboard && p.mpc_enabled);
+    }
+
+    #[test]
+    fn drive_command_counts_only_while_driving_fresh_and_newer_than_the_pilot() {
+        let mut l = latch();
+        let mut state = State::zeros();
+        state[idx::YAW] = std::f64::consts::FRAC_PI_2;
+        l.estimate(Estimate {
+            stamp_ns: 100 * MS,
+            state,
+        });
+        l.pilot(PilotInput::default(), 100 * MS);
+        l.drive(DriveCommand {
+            forward: 1.0,
+            yaw_rate: 0.2,
+            received_ns: 110 * MS,
+        });
+        assert_eq!(
+            l.assemble(120 * MS).inputs.pilot.yaw_rate,
+            0.0,
+            "not driving"
+        );
+        l.mode(Mode::Drive);
+        let p = l.assemble(120 * MS).inputs.pilot;
+        assert!((p.velocity[1] - 1.0).abs() < 1e-12 && p.velocity[0].abs() < 1e-12);
+        assert_eq!(p.yaw_rate, 0.2);
+        assert_eq!(l.assemble(411 * MS).inputs.pilot.yaw_rate, 0.0, "too old");
+        l.pilot(PilotInput::default(), 115 * MS);
+        assert_eq!(
+            l.assemble(120 * MS).inputs.pilot.yaw_rate,
+            0.0,
+            "pilot newer"
+        );
+    }
+
+    #[test]
+    fn ground_height_is_the_constant_until_a_source_speaks() {
+        let mut l = latch();
+        assert_eq!(l.assemble(0).inputs.ground_z, -0.5);
+        l.ground_z(-0.2);
+        assert_eq!(l.assemble(0).inputs.ground_z, -0.2);
+    }
+
+    #[test]
+    fn estimate_staleness_and_driver_liveness() {
+        let mut l = latch();
+        assert!(l.assemble(0).estimate_stale);
+        l.estimate(Estimate {
+            stamp_ns: 50 * MS,
+            state: State::zeros(),
+        });
+        assert!(!l.assemble(150 * MS).estimate_stale);
+        assert!(l.assemble(151 * MS).estimate_stale);
+        assert!(!l.assemble(0).inputs.driver_lost);
+        l.drivers_alive(false);
+        assert!(l.assemble(0).inputs.driver_lost);
+    }
+}

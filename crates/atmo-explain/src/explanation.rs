@@ -1,0 +1,147 @@
+//! What the analysis found: the [`Explanation`] and its parts (serialized
+//! into `explain.json` by [`crate::output`]).
+
+use serde::Serialize;
+
+use crate::HIGH_CONFIDENCE;
+use crate::locate::{self, Location};
+use crate::replay::ReplayError;
+use crate::select;
+
+/// One parameter with its uncertainty.
+#[derive(Debug, Clone, Serialize)]
+pub struct Parameter {
+    pub name: String,
+    pub value: f64,
+    /// One standard deviation (delete-a-fold jackknife; null if unknown).
+    pub std: Option<f64>,
+    pub unit: String,
+}
+
+/// A candidate effect's verdict.
+#[derive(Debug, Clone, Serialize)]
+pub struct EffectReport {
+    pub name: String,
+    pub physics: String,
+    pub selected: bool,
+    /// Inclusion frequency over random halves of the segments, in [0, 1].
+    pub confidence: f64,
+    /// Held-out improvement (noise-floor variances per residual entry) from
+    /// adding it to the selected model (or lost by removing it).
+    pub heldout_gain: f64,
+    pub parameters: Vec<Parameter>,
+    /// Effects this one cannot be told apart from with this data.
+    pub indistinguishable_from: Vec<String>,
+}
+
+/// One point of the ground-effect gain grid.
+#[derive(Debug, Clone, Serialize)]
+pub struct GridPoint {
+    pub height_m: f64,
+    pub varphi_deg: f64,
+    pub gain: f64,
+    pub std: f64,
+    /// Whether the recording has data there (at least 0.5 s within
+    /// +-0.05 m and +-3 deg).
+    pub covered: bool,
+}
+
+/// RMS per channel, overall and in the located region.
+#[derive(Debug, Clone, Serialize, Default)]
+pub struct RmsTable {
+    /// Per channel (a_x .. wdot_z), all held-out rows.
+    pub per_channel: [f64; 6],
+    /// Per channel, rows in the located region.
+    pub located_per_channel: [f64; 6],
+    /// RMS over the located channels in the located region, in units of
+    /// their noise floors.
+    pub located_normalized: f64,
+    pub located_rows: usize,
+}
+
+/// One channel over time: recording, nominal model and fitted model.
+#[derive(Debug, Clone, Default)]
+pub struct Series {
+    pub channel: usize,
+    pub t: Vec<f64>,
+    pub recording: Vec<f64>,
+    pub nominal: Vec<f64>,
+    pub fitted: Vec<f64>,
+}
+
+/// Everything the analysis found.
+#[derive(Debug, Clone, Serialize)]
+pub struct Explanation {
+    pub source: String,
+    pub rows: usize,
+    pub rows_used: usize,
+    pub rate_hz: f64,
+    pub duration_s: f64,
+    pub window_samples: usize,
+    pub ignored_columns: Vec<String>,
+    pub skipped_nonfinite: usize,
+    pub skipped_time: usize,
+    pub contact_rows: usize,
+    pub noise_floor: [f64; 6],
+    pub mismatch_found: bool,
+    pub verdict: String,
+    pub located: Vec<locate::Located>,
+    pub located_channels: Vec<String>,
+    pub effects: Vec<EffectReport>,
+    pub selection_steps: Vec<select::Step>,
+    pub indistinguishable: Vec<(String, String)>,
+    pub heldout_rms_before: RmsTable,
+    pub heldout_rms_after: RmsTable,
+    pub multistep_before: ReplayError,
+    pub multistep_after: ReplayError,
+    pub ground_effect_gain_grid: Vec<GridPoint>,
+    pub motor_lag_profile: Vec<(f64, f64)>,
+    pub fitted_effects_toml: String,
+    #[serde(skip)]
+    pub location_before: Option<Location>,
+    #[serde(skip)]
+    pub location_after: Option<Location>,
+    /// Series for the time-series plot: t, measured, nominal, fitted of the
+    /// most affected channel.
+    #[serde(skip)]
+    pub series: Option<Series>,
+    pub timings_s: Vec<(String, f64)>,
+    /// Warnings about how far the results can be trusted.
+    pub notes: Vec<String>,
+}
+
+impl Explanation {
+    /// The report of an effect by name.
+    pub fn effect(&self, name: &str) -> Option<&EffectReport> {
+        self.effects.iter().find(|e| e.name == name)
+    }
+
+    /// A parameter of an effect by name.
+    pub fn parameter(&self, effect: &str, name: &str) -> Option<f64> {
+        self.effect(effect)?
+            .parameters
+            .iter()
+            .find(|p| p.name == name)
+            .map(|p| p.value)
+    }
+
+    /// Selected effects in rank order.
+    pub fn selected(&self) -> Vec<&str> {
+        self.effects
+            .iter()
+            .filter(|e| e.selected)
+            .map(|e| e.name.as_str())
+            .collect()
+    }
+
+    /// Effects other than `expected` that are selected with high confidence
+    /// (>= [`HIGH_CONFIDENCE`]), in rank order.
+    pub fn confidently_claimed_besides(&self, expected: &[&str]) -> Vec<&str> {
+        self.effects
+            .iter()
+            .filter(|e| e.selected && e.confidence >= HIGH_CONFIDENCE)
+            .map(|e| e.name.as_str())
+            .filter(|n| !expected.contains(n))
+            .collect()
+    }
+}

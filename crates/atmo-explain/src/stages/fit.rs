@@ -1,0 +1,131 @@
+//! Stage 4, fit: the selected effects' coefficients on all data, their
+//! delete-a-fold jackknife deviations and the per-fold fits (for held-out
+//! predictions), with the wind refined in the drag regressors.
+
+use nalgebra::DVector;
+
+use crate::effects::{Columns, Effect, Knobs, Layout, build_columns};
+use crate::physical::Physical;
+use crate::recording::Recording;
+use crate::select::{self, Stats, fold_of};
+use crate::stages::select::stats_of;
+use crate::stages::{Residuals, Selection};
+
+/// How many times the wind is fed back into the drag regressors.
+const WIND_REFINEMENTS: usize = 3;
+
+/// The fitted model.
+#[derive(Debug, Clone)]
+pub struct Fit {
+    pub layout: Layout,
+    /// The effects in the model (drag added when wind was selected), sorted.
+    pub chosen: Vec<Effect>,
+    /// Regressor settings: motor-lag tau and the refined wind.
+    pub knobs: Knobs,
+    pub columns: Columns,
+    pub stats: Stats,
+    /// Columns of `chosen`, their coefficients on all data and jackknife
+    /// standard deviations.
+    pub idx: Vec<usize>,
+    pub theta: DVector<f64>,
+    pub sd: DVector<f64>,
+    /// Coefficients fitted without each fold (`select::FOLDS` of them).
+    pub fold_theta: Vec<DVector<f64>>,
+    /// Physical parameters of the fit on all data (wind included).
+    pub(crate) physical: Physical,
+}
+
+impl Fit {
+    /// Physical parameters of the fit without fold `f`, the wind knob
+    /// included.
+    pub(crate) fn fold_physical(&self, f: usize) -> Physical {
+        let mut p = Physical::from_theta(
+            &self.layout,
+            &self.chosen,
+            &self.idx,
+            &self.fold_theta[f],
+            self.knobs.tau,
+        );
+        if let Some(w) = p.wind.as_mut() {
+            w[0] += self.knobs.wind[0];
+            w[1] += self.knobs.wind[1];
+        }
+        p
+    }
+
+    /// The held-out prediction of the fitted effects: entry `i` of the
+    /// residual predicted by the fit on the folds other than row `k`'s.
+    pub fn heldout_residual(&self, res: &Residuals) -> Vec<f64> {
+        let mut after = self.columns.resid.clone();
+        for &k in &res.fit_rows {
+            let Some(s) = res.seg_of[k] else { continue };
+            let th = &self.fold_theta[fold_of(s)];
+            for c in 0..6 {
+                let i = 6 * k + c;
+                let mut pred = 0.0;
+                for (a, &j) in self.idx.iter().enumerate() {
+                    pred += th[a] * self.columns.data[j][i];
+                }
+                after[i] -= pred;
+            }
+        }
+        after
+    }
+}
+
+/// Fits the selected effects.
+pub fn fit_effects(res: &Residuals, rec: &Recording, sel: Selection) -> Fit {
+    let Selection {
+        layout,
+        mut knobs,
+        accel,
+        weights,
+        mut columns,
+        mut stats,
+        mut chosen,
+        ..
+    } = sel;
+    let prep = &res.prep;
+    // Wind is defined relative to drag.
+    if chosen.contains(&Effect::Wind) && !chosen.contains(&Effect::Drag) {
+        chosen.push(Effect::Drag);
+    }
+    chosen.sort();
+    // Refine the wind in the drag regressors (body drag is quadratic in it).
+    if chosen.contains(&Effect::Wind) {
+        for _ in 0..WIND_REFINEMENTS {
+            let (idx, theta, _) = select::fit_with_uncertainty(&stats, &layout, &chosen);
+            let phys = Physical::from_theta(&layout, &chosen, &idx, &theta, knobs.tau);
+            let w = phys.wind.unwrap_or([0.0; 2]);
+            let kr = phys.drag.map_or(0.0, |d| d[0]);
+            if kr <= 1e-3 {
+                break;
+            }
+            knobs.wind = [knobs.wind[0] + w[0], knobs.wind[1] + w[1]];
+            drop(columns);
+            columns = build_columns(prep, rec, &knobs, &accel);
+            stats = stats_of(&columns, &weights, &res.seg_of, res.nseg);
+        }
+    }
+    let (idx, theta, sd) = select::fit_with_uncertainty(&stats, &layout, &chosen);
+    let mut physical = Physical::from_theta(&layout, &chosen, &idx, &theta, knobs.tau);
+    if let Some(w) = physical.wind.as_mut() {
+        w[0] += knobs.wind[0];
+        w[1] += knobs.wind[1];
+    }
+    let fold_theta = (0..select::FOLDS)
+        .map(|f| stats.solve(&idx, &|s| fold_of(s) != f))
+        .collect();
+    Fit {
+        layout,
+        chosen,
+        knobs,
+        columns,
+        stats,
+        idx,
+        theta,
+        sd,
+        fold_theta,
+        physical,
+    }
+}

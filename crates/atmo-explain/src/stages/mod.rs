@@ -1,0 +1,28 @@
+//! The stages of [`crate::explain`], each a function from the previous
+//! stages' outputs to its own:
+//!
+//! | stage | function | output |
+//! | --- | --- | --- |
+//! | residuals | [`Residuals::new`] | [`Residuals`]: the prepared recording, weights, segments |
+//! | locate | [`locate_mismatch`] | [`Mismatch`]: located bins, region, RMS of the nominal model |
+//! | select | [`BaseRegressors::new`], [`profile_motor_lag`], [`select_effects`], [`Selection::stability`] | [`LagProfile`], [`Selection`], confidences |
+//! | fit | [`fit_effects`] | [`Fit`]: coefficients, jackknife deviations, fold fits |
+//! | validate | [`validate()`] | [`Validation`]: held-out residuals, plant file, multi-step errors |
+//! | report | [`report()`] | [`crate::Explanation`] |
+
+mod fit;
+mod locate;
+mod report;
+mod residuals;
+mod select;
+mod validate;
+
+#[cfg(test)]
+mod tests;
+
+pub use fit::{Fit, fit_effects};
+pub use locate::{Mismatch, locate_mismatch, rms_table};
+pub use report::{Findings, effect_reports, gain_grid, notes, plot_series, report, verdict};
+pub use residuals::Residuals;
+pub use select::{BaseRegressors, LagProfile, Selection, profile_motor_lag, select_effects};
+pub use validate::{Validation, validate};

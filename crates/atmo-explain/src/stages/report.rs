@@ -1,0 +1,404 @@
+//! Stage 6, report: every candidate's verdict with its parameters,
+//! held-out gain and the effects it cannot be told apart from; the
+//! ground-effect gain grid; the verdict; the time series to plot; the
+//! notes on how far the results can be trusted. Assembled into the
+//! [`Explanation`].
+
+use atmo_plant::ground_effect::GroundEffect;
+
+use crate::data::CHANNELS;
+use crate::effects::Effect;
+use crate::explanation::{EffectReport, Explanation, GridPoint, Parameter, Series};
+use crate::physical::{BATTERY_CAPACITY_WH, BATTERY_FULL_POWER_W};
+use crate::recording::Recording;
+use crate::select::{self, Step};
+use crate::stages::{Fit, LagProfile, Mismatch, Residuals, Validation};
+use crate::{GRID_HEIGHTS, GRID_TILTS_DEG, HIGH_CONFIDENCE};
+
+/// What the report is made of: every stage's output.
+#[derive(Debug, Clone, Copy)]
+pub struct Findings<'a> {
+    pub rec: &'a Recording,
+    pub res: &'a Residuals,
+    pub mismatch: &'a Mismatch,
+    pub lag: &'a LagProfile,
+    pub steps: &'a [Step],
+    pub confidence: &'a [(Effect, f64)],
+    pub fit: &'a Fit,
+    pub validation: &'a Validation,
+}
+
+/// Candidates' verdicts, sorted (selected first, then by confidence and
+/// held-out gain), and the pairs of effects the data cannot tell apart.
+pub fn effect_reports(
+    fit: &Fit,
+    confidence: &[(Effect, f64)],
+) -> (Vec<EffectReport>, Vec<(String, String)>) {
+    let active = vec![true; fit.stats.nseg()];
+    let (stats, layout, chosen) = (&fit.stats, &fit.layout, &fit.chosen);
+    let cv = |set: &[Effect]| stats.cv(&select::columns_for(layout, set), &active);
+    let entries = stats.entries_in(&active).max(1) as f64;
+    let cv_sel = stats.cv(&fit.idx, &active);
+    let mut reports = Vec::new();
+    let mut pairs: Vec<(String, String)> = Vec::new();
+    for &e in &Effect::ALL {
+        let selected = chosen.contains(&e);
+        let conf = confidence.iter().find(|c| c.0 == e).map_or(0.0, |c| c.1);
+        let gain = if selected {
+            let rest: Vec<Effect> = chosen.iter().copied().filter(|x| *x != e).collect();
+            (cv(&rest) - cv_sel) / entries
+        } else {
+            let mut more = chosen.clone();
+            more.push(e);
+            (cv_sel - cv(&more)) / entries
+        };
+        let mut indist = Vec::new();
+        if selected {
+            let rest: Vec<Effect> = chosen.iter().copied().filter(|x| *x != e).collect();
+            let without = cv(&rest);
+            for &f in &Effect::ALL {
+                if chosen.contains(&f) {
+                    continue;
+                }
+                let mut swapped = rest.clone();
+                swapped.push(f);
+                let cv_swap = cv(&swapped);
+                // The swap recovers at least 90 % of what e explains.
+                if without - cv_swap >= 0.9 * (without - cv_sel) && without - cv_sel > 0.0 {
+                    indist.push(f.name().to_string());
+                    pairs.push((e.name().to_string(), f.name().to_string()));
+                }
+            }
+        }
+        reports.push(EffectReport {
+            name: e.name().into(),
+            physics: e.physics().into(),
+            selected,
+            confidence: conf,
+            heldout_gain: gain,
+            parameters: effect_parameters(fit, e, selected),
+            indistinguishable_from: indist,
+        });
+    }
+    reports.sort_by(|a, b| {
+        b.selected
+            .cmp(&a.selected)
+            .then(b.confidence.total_cmp(&a.confidence))
+            .then(b.heldout_gain.total_cmp(&a.heldout_gain))
+    });
+    (reports, pairs)
+}
+
+/// Parameters of `e`: for a selected effect from the final fit; for a
+/// rejected one, what a fit with it added would give (for the record).
+fn effect_parameters(fit: &Fit, e: Effect, selected: bool) -> Vec<Parameter> {
+    let layout = &fit.layout;
+    let (pidx, ptheta, psd) = if selected {
+        (fit.idx.clone(), fit.theta.clone(), fit.sd.clone())
+    } else {
+        let mut more = fit.chosen.clone();
+        more.push(e);
+        select::fit_with_uncertainty(&fit.stats, layout, &more)
+    };
+    let coef = |c: usize| -> (f64, f64) {
+        pidx.iter()
+            .position(|i| *i == c)
+            .map_or((0.0, 0.0), |p| (ptheta[p], psd[p]))
+    };
+    let param = |name: String, (value, std): (f64, f64), unit: &str| Parameter {
+        name,
+        value,
+        std: Some(std),
+        unit: unit.into(),
+    };
+    let cols = layout.columns(e);
+    match e {
+        Effect::MotorLag => vec![
+            Parameter {
+                name: "time_constant".into(),
+                value: fit.knobs.tau,
+                std: None,
+                unit: "s".into(),
+            },
+            param(
+                "lag_term_scale".into(),
+                coef(cols.start),
+                "1 (1 = consistent)",
+            ),
+        ],
+        Effect::Wind => {
+            let kr = coef(layout.columns(Effect::Drag).start).0;
+            ["x", "y"]
+                .iter()
+                .enumerate()
+                .map(|(j, axis)| {
+                    let (c, cs) = coef(cols.start + j);
+                    let (v, s) = if kr.abs() > 1e-3 {
+                        (
+                            c / kr + fit.knobs.wind[j] * f64::from(u8::from(selected)),
+                            cs / kr.abs(),
+                        )
+                    } else {
+                        (0.0, f64::NAN)
+                    };
+                    Parameter {
+                        name: format!("steady_{axis}"),
+                        value: v,
+                        std: s.is_finite().then_some(s),
+                        unit: "m/s (NED)".into(),
+                    }
+                })
+                .collect()
+        }
+        Effect::BatterySag => {
+            let (c, cs) = coef(cols.start);
+            let k = 3600.0 * BATTERY_CAPACITY_WH / BATTERY_FULL_POWER_W;
+            vec![param(
+                "sag".into(),
+                (c * k, cs * k),
+                &format!(
+                    "thrust fraction at {BATTERY_CAPACITY_WH} Wh drawn at {BATTERY_FULL_POWER_W} W per rotor"
+                ),
+            )]
+        }
+        Effect::GroundEffect => {
+            let names = e.coefficient_names();
+            cols.enumerate()
+                .map(|(j, c)| param(names[j].clone(), coef(c), if j == 16 { "m^2" } else { "1" }))
+                .collect()
+        }
+        _ => {
+            let (names, units): (&[&str], &[&str]) = match e {
+                Effect::Drag => (
+                    &[
+                        "rotor_drag",
+                        "body_cd_area_x",
+                        "body_cd_area_y",
+                        "body_cd_area_z",
+                    ],
+                    &["N/(m/s)", "m^2", "m^2", "m^2"],
+                ),
+                Effect::ComOffset => (&["offset_x", "offset_y"], &["m", "m"]),
+                Effect::ThrustScale => (&["scale_minus_one"], &["1"]),
+                Effect::InertiaError => (&["inertia_scale_minus_one"], &["1"]),
+                _ => (&["mass_scale_minus_one"], &["1"]),
+            };
+            cols.enumerate()
+                .map(|(j, c)| param(names[j].into(), coef(c), units[j]))
+                .collect()
+        }
+    }
+}
+
+/// The ground-effect gain of the fitted plant file on the report grid, its
+/// spread over the folds (jackknife) and whether the recording covers each
+/// point (at least 0.5 s within +-0.05 m and +-3 deg).
+pub fn gain_grid(res: &Residuals, fit: &Fit) -> Vec<GridPoint> {
+    let prep = &res.prep;
+    let ge_fold: Vec<Option<GroundEffect>> = (0..select::FOLDS)
+        .map(|f| {
+            fit.fold_physical(f)
+                .ge_config()
+                .map(|c| GroundEffect::new(&c))
+        })
+        .collect();
+    let ge_all = fit.physical.ge_config().map(|c| GroundEffect::new(&c));
+    let min_rows = (0.5 / prep.dt).ceil() as usize;
+    let mut grid = Vec::new();
+    for &vd in &GRID_TILTS_DEG {
+        for &h in &GRID_HEIGHTS {
+            let count = res
+                .fit_rows
+                .iter()
+                .filter(|&&k| {
+                    (prep.env[k].height - h).abs() <= 0.05
+                        && (prep.env[k].varphi.to_degrees() - vd).abs() <= 3.0
+                })
+                .count();
+            let v = vd.to_radians();
+            let gain = ge_all.as_ref().map_or(0.0, |g| g.gain(h, v).mean);
+            let folds: Vec<f64> = ge_fold
+                .iter()
+                .map(|g| g.as_ref().map_or(0.0, |g| g.gain(h, v).mean))
+                .collect();
+            let k = folds.len() as f64;
+            let mean = folds.iter().sum::<f64>() / k;
+            let std =
+                ((k - 1.0) / k * folds.iter().map(|x| (x - mean).powi(2)).sum::<f64>()).sqrt();
+            grid.push(GridPoint {
+                height_m: h,
+                varphi_deg: vd,
+                gain,
+                std,
+                covered: count >= min_rows,
+            });
+        }
+    }
+    grid
+}
+
+/// Whether anything disagrees, and the one-line verdict.
+pub fn verdict(reports: &[EffectReport], chosen: &[Effect], mismatch: &Mismatch) -> (bool, String) {
+    let high = reports
+        .iter()
+        .any(|r| r.selected && r.confidence >= HIGH_CONFIDENCE);
+    let mismatch_found = !chosen.is_empty() || !mismatch.location.located.is_empty();
+    let verdict = if !mismatch_found {
+        "no significant mismatch: the nominal model explains the recording to its noise floor"
+            .to_string()
+    } else if chosen.is_empty() {
+        "mismatch located, but no candidate effect explains it (see the located regions)"
+            .to_string()
+    } else {
+        format!(
+            "mismatch found; explained by {}{}",
+            reports
+                .iter()
+                .filter(|r| r.selected)
+                .map(|r| {
+                    if r.indistinguishable_from.is_empty() {
+                        format!("{} (confidence {:.2})", r.name, r.confidence)
+                    } else {
+                        format!(
+                            "{} (confidence {:.2}; this data cannot tell it apart from {})",
+                            r.name,
+                            r.confidence,
+                            r.indistinguishable_from.join(", ")
+                        )
+                    }
+                })
+                .collect::<Vec<_>>()
+                .join(", "),
+            if high {
+                ""
+            } else {
+                "; no effect with high confidence"
+            }
+        )
+    };
+    (mismatch_found, verdict)
+}
+
+/// The time series to plot: the channel with the largest located excess
+/// (a_z when nothing is located) over a 20 s window where its nominal
+/// residual is largest (the whole recording when it is shorter than 30 s).
+pub fn plot_series(res: &Residuals, mismatch: &Mismatch, after: &[f64]) -> Series {
+    let prep = &res.prep;
+    let ch = mismatch
+        .location
+        .located
+        .iter()
+        .max_by(|a, b| a.rms_ratio.total_cmp(&b.rms_ratio))
+        .and_then(|l| CHANNELS.iter().position(|c| *c == l.channel))
+        .unwrap_or(2);
+    let duration = res.duration();
+    let (w0, w1) = if duration > 30.0 {
+        let t0 = prep.t[0];
+        let nb = duration.ceil() as usize + 1;
+        let mut per_s = vec![0.0; nb];
+        for &k in &res.fit_rows {
+            let r = prep.resid[6 * k + ch];
+            per_s[((prep.t[k] - t0) as usize).min(nb - 1)] += r * r;
+        }
+        let best = (0..nb.saturating_sub(20))
+            .max_by(|&a, &b| {
+                per_s[a..a + 20]
+                    .iter()
+                    .sum::<f64>()
+                    .total_cmp(&per_s[b..b + 20].iter().sum::<f64>())
+            })
+            .unwrap_or(0);
+        (t0 + best as f64, t0 + best as f64 + 20.0)
+    } else {
+        (f64::NEG_INFINITY, f64::INFINITY)
+    };
+    let mut series = Series {
+        channel: ch,
+        ..Series::default()
+    };
+    for &k in res
+        .fit_rows
+        .iter()
+        .filter(|&&k| prep.t[k] >= w0 && prep.t[k] <= w1)
+    {
+        series.t.push(prep.t[k]);
+        series.recording.push(prep.meas[6 * k + ch]);
+        series.nominal.push(prep.nominal[6 * k + ch]);
+        series
+            .fitted
+            .push(prep.meas[6 * k + ch] - after[6 * k + ch]);
+    }
+    series
+}
+
+/// Warnings about how far the results can be trusted.
+pub fn notes(res: &Residuals, fit: &Fit) -> Vec<String> {
+    let mut notes = Vec::new();
+    let used_segments = (0..res.nseg).filter(|&s| fit.stats.entries[s] > 0).count();
+    if used_segments < 10 {
+        notes.push(format!(
+            "only {used_segments} segments of airborne data (about {:.0} s): held-out \
+             scores and confidences rest on few segments; record longer for firm answers",
+            res.fit_rows.len() as f64 * res.prep.dt
+        ));
+    }
+    if res.prep.contact_rows > 0 {
+        notes.push(format!(
+            "{} rows at the ground left out (ground contact is not a candidate effect)",
+            res.prep.contact_rows
+        ));
+    }
+    notes
+}
+
+/// The explanation of the findings (without timings: [`crate::explain`]
+/// adds them).
+pub fn report(f: &Findings) -> Explanation {
+    let (rec, res, fit, val) = (f.rec, f.res, f.fit, f.validation);
+    let prep = &res.prep;
+    let (effects, indistinguishable) = effect_reports(fit, f.confidence);
+    let (mismatch_found, verdict) = verdict(&effects, &fit.chosen, f.mismatch);
+    let entries = fit.stats.entries_in(&vec![true; fit.stats.nseg()]).max(1) as f64;
+    let before = &f.mismatch.location;
+    Explanation {
+        source: rec.source.display().to_string(),
+        rows: rec.samples.len(),
+        rows_used: res.fit_rows.len(),
+        rate_hz: 1.0 / prep.dt,
+        duration_s: res.duration(),
+        window_samples: 2 * prep.half + 1,
+        ignored_columns: rec.ignored_columns.clone(),
+        skipped_nonfinite: rec.skipped_nonfinite,
+        skipped_time: rec.skipped_time,
+        contact_rows: prep.contact_rows,
+        noise_floor: prep.floor,
+        mismatch_found,
+        verdict,
+        located: before.located.clone(),
+        located_channels: before
+            .channels
+            .iter()
+            .map(|&c| CHANNELS[c].to_string())
+            .collect(),
+        effects,
+        selection_steps: f.steps.to_vec(),
+        indistinguishable,
+        heldout_rms_before: f.mismatch.rms.clone(),
+        heldout_rms_after: val.rms.clone(),
+        multistep_before: val.multistep_before,
+        multistep_after: val.multistep_after,
+        ground_effect_gain_grid: gain_grid(res, fit),
+        motor_lag_profile: f
+            .lag
+            .points
+            .iter()
+            .map(|(t, c)| (*t, c / entries))
+            .collect(),
+        fitted_effects_toml: val.toml.clone(),
+        location_before: Some(before.clone()),
+        location_after: Some(val.location.clone()),
+        series: Some(plot_series(res, f.mismatch, &val.after)),
+        timings_s: Vec::new(),
+        notes: notes(res, fit),
+    }
+}

@@ -1,0 +1,242 @@
+//! The daemon's control loop in simulation: a simulated [`Clock`] (the
+//! plant's time) and a simulated [`TickIo`] whose sources are the plant's
+//! sensors, the scenario's pilot script and the scenario's terrain.
+//!
+//! The tick itself is the daemon's [`ControlLoop`] (gather ->
+//! `FlightStack::step` -> emit -> `prepare_next`, with its scheduler) and
+//! the inputs are assembled by the daemon's [`InputLatch`], exactly as
+//! onboard; only the sources differ:
+//!
+//! | input          | onboard (`OnboardIo`)              | simulation ([`SimIo`])                         |
+//! |----------------|------------------------------------|------------------------------------------------|
+//! | estimate       | ROS 2 odometry, age from acceptance | the plant's motion capture, age from publication |
+//! | pilot          | ROS 2 `PilotInput`                 | the scenario's script at [`PILOT_RATE_HZ`]      |
+//! | encoder        | iceoryx2 driver port               | the plant's encoder                            |
+//! | contact        | iceoryx2 driver port               | the plant's contact signal                     |
+//! | driver liveness| heartbeats                         | always alive (the simulated drivers answer)    |
+//! | ground height  | config constant                    | the scenario's terrain map at the *estimated* position, with each estimate |
+//!
+//! A source's sample is "accepted" when the runner calls [`SimIo::sense`]
+//! after a plant step; at the tick its age (plant time since acceptance)
+//! stamps it on the tick's clock, as the onboard I/O does with its
+//! `Instant`s. Nothing of the plant's truth reaches the flight stack.
+
+use std::cell::Cell;
+use std::time::Duration;
+
+use atmo_core::model::{Input, idx};
+use atmo_daemon::control_loop::{Clock, ControlLoop, TickIo, TickTiming};
+use atmo_daemon::inputs::{InputLatch, InputSettings};
+use atmo_daemon::{Estimate, FlightStack, PilotInput, StepInputs, StepOutputs};
+use atmo_plant::contact::Plane;
+use atmo_plant::plant::{Command, Plant};
+
+use crate::scenario::Scenario;
+
+/// Rate of the scenario's pilot stream (a radio link's frame rate), Hz.
+pub const PILOT_RATE_HZ: f64 = 50.0;
+
+/// Plant time in ns (the simulated clock's unit).
+pub fn time_ns(t: f64) -> u64 {
+    (t.max(0.0) * 1e9).round() as u64
+}
+
+/// The scenario's pilot inputs at `t`, as the flight stack reads them (the
+/// one place a scenario's `[[pilot]]` becomes a pilot input: the in-process
+/// runner and the SITL server both send this).
+pub fn pilot_input(scenario: &Scenario, t: f64) -> PilotInput {
+    scenario
+        .pilot_at(t)
+        .map_or(PilotInput::default(), |p| PilotInput {
+            velocity: p.velocity,
+            yaw_rate: p.yaw_rate,
+            throttle: p.throttle,
+            arm: p.arm,
+            offboard: p.offboard,
+            mpc_enabled: p.mpc,
+        })
+}
+
+/// NED z of the terrain plane straight below (x, y).
+pub fn terrain_z_below(plane: &Plane, x: f64, y: f64) -> f64 {
+    let (n, p0) = (&plane.normal, &plane.point);
+    p0.z - (n.x * (x - p0.x) + n.y * (y - p0.y)) / n.z
+}
+
+/// The plant's clock: time moves only when the plant steps. The runner
+/// steps the plant up to a tick's deadline before it runs the tick, so
+/// there is never anything to sleep for.
+#[derive(Debug, Default)]
+pub struct SimClock {
+    now_ns: Cell<u64>,
+}
+
+impl SimClock {
+    pub fn set(&self, now_ns: u64) {
+        self.now_ns.set(now_ns);
+    }
+}
+
+impl Clock for SimClock {
+    fn now_ns(&self) -> u64 {
+        self.now_ns.get()
+    }
+
+    fn sleep_until(&self, _deadline_ns: u64) {}
+}
+
+/// One tick as the simulated I/O saw it.
+#[derive(Debug, Clone, Copy)]
+pub struct SimTick {
+    pub inputs: StepInputs,
+    pub outputs: StepOutputs,
+    /// The previous tick's timing (what the daemon logs with this tick).
+    pub timing: TickTiming,
+}
+
+/// A sample accepted at `at_ns` (plant time), not yet handed to a tick.
+#[derive(Debug, Clone, Copy)]
+struct Arrived<T> {
+    value: T,
+    at_ns: u64,
+}
+
+/// The simulated [`TickIo`]: the plant's sensors and the scenario's pilot
+/// and terrain in, the plant's command out.
+#[derive(Debug)]
+pub struct SimIo {
+    latch: InputLatch,
+    plane: Plane,
+    now_ns: u64,
+    estimate_sequence: Option<u64>,
+    estimate: Option<Arrived<atmo_core::model::State>>,
+    pilot: Option<Arrived<PilotInput>>,
+    pilot_period_ns: u64,
+    next_pilot_ns: u64,
+    command: Command,
+    last: Option<SimTick>,
+}
+
+impl SimIo {
+    /// `settings` as the daemon's (timeouts; `ground_z` until the first
+    /// estimate gives the terrain map a position).
+    pub fn new(settings: InputSettings, plane: Plane) -> Self {
+        Self {
+            latch: InputLatch::new(settings),
+            plane,
+            now_ns: 0,
+            estimate_sequence: None,
+            estimate: None,
+            pilot: None,
+            pilot_period_ns: time_ns(1.0 / PILOT_RATE_HZ),
+            next_pilot_ns: 0,
+            command: Command::idle(),
+            last: None,
+        }
+    }
+
+    /// Accepts what the robot's sources deliver at the plant's current
+    /// time: call once before the first tick and after every plant step.
+    pub fn sense(&mut self, plant: &Plant, scenario: &Scenario) {
+        self.now_ns = time_ns(plant.time());
+        if let Some(e) = plant.estimate()
+            && self.estimate_sequence != Some(e.sequence)
+        {
+            self.estimate_sequence = Some(e.sequence);
+            self.estimate = Some(Arrived {
+                value: e.state,
+                at_ns: self.now_ns,
+            });
+        }
+        if self.now_ns >= self.next_pilot_ns {
+            self.pilot = Some(Arrived {
+                value: pilot_input(scenario, plant.time()),
+                at_ns: self.now_ns,
+            });
+            self.next_pilot_ns += self.pilot_period_ns;
+        }
+        if let Ok(counts) = plant.encoder_counts() {
+            self.latch.tilt_counts(counts);
+        }
+        self.latch.ground_contact(plant.contact_signal());
+    }
+
+    /// The command the last tick left for the plant (held until the next).
+    pub fn command(&self) -> &Command {
+        &self.command
+    }
+
+    /// The last tick, once (`None` if no tick ran since the last call).
+    pub fn take_tick(&mut self) -> Option<SimTick> {
+        self.last.take()
+    }
+
+    /// The tick's clock stamp of a sample accepted at `at_ns` (its age at
+    /// the tick counted back from the deadline, as onboard).
+    fn stamp(&self, deadline_ns: u64, at_ns: u64) -> u64 {
+        deadline_ns.saturating_sub(self.now_ns.saturating_sub(at_ns))
+    }
+}
+
+impl TickIo for SimIo {
+    fn gather(&mut self, deadline_ns: u64) -> Option<StepInputs> {
+        if let Some(e) = self.estimate.take() {
+            self.latch.estimate(Estimate {
+                stamp_ns: self.stamp(deadline_ns, e.at_ns),
+                state: e.value,
+            });
+            // The terrain map, looked up where the robot believes it is.
+            let z = terrain_z_below(&self.plane, e.value[idx::X], e.value[idx::Y]);
+            self.latch.ground_z(z);
+        }
+        if let Some(p) = self.pilot.take() {
+            self.latch.pilot(p.value, self.stamp(deadline_ns, p.at_ns));
+        }
+        Some(self.latch.assemble(deadline_ns).inputs)
+    }
+
+    fn emit(&mut self, inputs: &StepInputs, outputs: &StepOutputs, timing: &TickTiming) {
+        self.command = Command {
+            rotors: Input::from(outputs.thrust),
+            tilt_rate: outputs.tilt_velocity,
+            wheel_rates: outputs.wheel_rates,
+        };
+        self.latch.mode(outputs.status.mode);
+        self.last = Some(SimTick {
+            inputs: *inputs,
+            outputs: *outputs,
+            timing: *timing,
+        });
+    }
+}
+
+/// The daemon's control loop on the plant's clock.
+#[derive(Debug)]
+pub struct SimControl {
+    pub clock: SimClock,
+    pub io: SimIo,
+    control: ControlLoop,
+}
+
+impl SimControl {
+    /// Ticks every `period` (the daemon's control period), the first at t = 0.
+    pub fn new(period: Duration, io: SimIo) -> Self {
+        Self {
+            clock: SimClock::default(),
+            io,
+            control: ControlLoop::new(period, 0),
+        }
+    }
+
+    /// Runs the control tick if its deadline has come at the plant's
+    /// current time (the first plant step at or after it) and returns it.
+    pub fn tick_if_due(&mut self, plant: &Plant, stack: &mut FlightStack) -> Option<SimTick> {
+        let now = time_ns(plant.time());
+        if now < self.control.next_deadline_ns() {
+            return None;
+        }
+        self.clock.set(now);
+        self.control.tick(&self.clock, stack, &mut self.io);
+        self.io.take_tick()
+    }
+}

@@ -1,0 +1,147 @@
+"""The SITL wheel landing with the motion capture played by rclpy on Fast DDS.
+
+Three processes on loopback, in a domain of their own: the UNMODIFIED
+atmo-daemon binary; `atmo-sim serve` (the plant, every driver, the pilot),
+told to publish its motion capture on a side topic (`--estimate-topic
+/atmo/sim/odom`) that the daemon does not read, and its pilot inputs on
+another (`--pilot-topic /atmo/sim/pilot`); and this rclpy node, which plays
+both to the daemon: every nav_msgs/Odometry from the side topic is
+republished, as rclpy's own message, on the daemon's estimate topic
+(/atmo/mocap/odom, ROS 2 default QoS), and the pilot inputs on /atmo/pilot
+once estimates flow. The landing can only succeed if the daemon flies on
+what rclpy sent.
+
+Run by scripts/ros2-peer.sh (which builds the venv):
+
+    scripts/ros2-peer.sh sitl [path/to/atmo-daemon [path/to/atmo-sim]]
+
+Prints PASS/FAIL lines and `N passed, M failed`; exit 1 on any failure.
+"""
+
+import argparse
+import json
+import os
+import random
+import signal
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from rclpy_peer import REPO, Checks, daemon_config  # noqa: E402
+
+SIDE_TOPIC = "/atmo/sim/odom"
+ESTIMATE_TOPIC = "/atmo/mocap/odom"
+PILOT_SIDE_TOPIC = "/atmo/sim/pilot"
+PILOT_TOPIC = "/atmo/pilot"
+# The pilot (with its arm switch) is played only once this many estimates
+# went through, so the daemon never arms before it has an estimate.
+ESTIMATES_BEFORE_PILOT = 20
+
+
+def main():
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--daemon", required=True)
+    ap.add_argument("--sim", required=True)
+    ap.add_argument("--scenario", default=str(REPO / "config/scenarios/wheel_landing.toml"))
+    args = ap.parse_args()
+    for binary in (args.daemon, args.sim):
+        if not Path(binary).exists():
+            sys.exit(f"rclpy_sitl: {binary} does not exist: build it (cargo build)")
+
+    import rclpy
+    from rclpy.executors import SingleThreadedExecutor
+    from rclpy.qos import QoSProfile, qos_profile_sensor_data
+    from nav_msgs.msg import Odometry
+    from atmo_msgs.msg import PilotInput
+
+    c = Checks()
+    domain = random.Random(os.getpid() ^ int(time.time())).randrange(200, 232)
+    tmp = Path(tempfile.mkdtemp(prefix="atmo-rclpy-sitl-"))
+    tag = f"rsitl{os.getpid()}"
+    config = daemon_config(tmp, tag)
+    env = dict(os.environ, ROS_DOMAIN_ID=str(domain))
+    print(f"rclpy_sitl: domain {domain}, run folder {tmp}", flush=True)
+
+    rclpy.init(domain_id=domain)
+    node = rclpy.create_node("atmo_mocap_relay")
+    executor = SingleThreadedExecutor()
+    executor.add_node(node)
+    relay = node.create_publisher(Odometry, ESTIMATE_TOPIC, QoSProfile(depth=10))
+    relayed = []
+
+    def play(msg):
+        out = Odometry()  # rclpy's own message, field by field
+        out.header = msg.header
+        out.child_frame_id = msg.child_frame_id
+        out.pose = msg.pose
+        out.twist = msg.twist
+        relay.publish(out)
+        relayed.append(time.monotonic())
+
+    node.create_subscription(Odometry, SIDE_TOPIC, play, qos_profile_sensor_data)
+    pilot_relay = node.create_publisher(PilotInput, PILOT_TOPIC, QoSProfile(depth=10))
+    pilots = []
+
+    def play_pilot(msg):
+        if len(relayed) >= ESTIMATES_BEFORE_PILOT:
+            pilot_relay.publish(msg)
+            pilots.append(time.monotonic())
+
+    node.create_subscription(PilotInput, PILOT_SIDE_TOPIC, play_pilot, qos_profile_sensor_data)
+
+    def spawn(name, argv):
+        return subprocess.Popen(argv, cwd=tmp, env=env, stdin=subprocess.DEVNULL,
+                                stdout=open(tmp / f"{name}.stdout", "w"),
+                                stderr=open(tmp / f"{name}.stderr", "w"))
+
+    daemon = spawn("atmo-daemon", [str(Path(args.daemon).resolve()), "run", "--config",
+                                   str(config), "--log", str(tmp / "flight.mcap")])
+    server = spawn("atmo-sim", [str(Path(args.sim).resolve()), "serve", args.scenario,
+                                "--config", str(config), "--out", str(tmp / "out"),
+                                "--estimate-topic", SIDE_TOPIC, "--pilot-topic", PILOT_SIDE_TOPIC,
+                                "--quiet"])
+    try:
+        deadline = time.monotonic() + 180.0
+        while server.poll() is None and time.monotonic() < deadline:
+            executor.spin_once(timeout_sec=0.002)
+        if server.poll() is None:
+            server.kill()
+        code = server.wait()
+        summary_path = tmp / "out" / "summary.json"
+        summary = json.loads(summary_path.read_text()) if summary_path.exists() else {}
+        s = summary.get("summary", {})
+        rate = 0.0
+        if len(relayed) > 1:
+            rate = (len(relayed) - 1) / (relayed[-1] - relayed[0])
+        c.check(len(relayed) > 100, "rclpy played the motion capture to the daemon",
+                f"{len(relayed)} Odometry republished on {ESTIMATE_TOPIC} ({rate:.0f} Hz), "
+                f"{len(pilots)} PilotInput on {PILOT_TOPIC}")
+        c.check(code == 0 and summary.get("succeeded") is True,
+                "the SITL wheel landing succeeded on rclpy's estimates",
+                f"serve exit {code}; " + ", ".join(
+                    f"{k} {s[k]}" for k in sorted(s) if isinstance(s[k], (int, float)))[:600])
+        daemon.send_signal(signal.SIGTERM)
+        try:
+            daemon_code = daemon.wait(timeout=20)
+        except subprocess.TimeoutExpired:
+            daemon_code = None
+        c.check(daemon_code == 0, "daemon exits 0 on SIGTERM", f"exit code {daemon_code}")
+    finally:
+        for p in (server, daemon):
+            if p.poll() is None:
+                p.kill()
+                p.wait()
+        node.destroy_node()
+        rclpy.shutdown()
+    print(f"{c.passed} passed, {c.failed} failed", flush=True)
+    if c.failed:
+        for name in ("atmo-sim", "atmo-daemon"):
+            print(f"--- {name} stderr:\n{(tmp / f'{name}.stderr').read_text()[-2000:]}")
+    return 1 if c.failed else 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
