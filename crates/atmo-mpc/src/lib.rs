@@ -77,13 +77,18 @@
 
 pub mod controller;
 pub mod error;
+pub mod homotopy;
 pub mod qp;
 pub mod settings;
 
 pub use controller::{
-    AlphaSchedule, DegradedCause, FailureCause, Mpc, Outcome, SqpReport, TickOutput, TickTimings,
-    wrap_angle,
+    AlphaSchedule, DegradedCause, FailureCause, FeedbackPath, HomotopyFallback, Mpc, Outcome,
+    SqpReport, TickOutput, TickTimings, wrap_angle,
 };
+pub use homotopy::{Bound, BoxHomotopy, HomotopyStop};
 pub use error::{MpcError, Result};
 pub use qp::{LinearizedHorizon, QpSnapshot, SolveReport};
-pub use settings::{CostPreset, Formulation, MpcFile, MpcSettings, SolverSettings};
+pub use settings::{
+    CostPreset, FeedbackMethod, FeedbackSettings, Formulation, MpcFile, MpcSettings, Predictor,
+    SolverSettings,
+};
