@@ -69,6 +69,12 @@ pub enum HomotopyStop {
 /// A pivot `d` with `d^2 < PIVOT_TOLERANCE * H_ii` counts as ill-conditioned.
 const PIVOT_TOLERANCE: f64 = 1e-12;
 
+/// A slack or multiplier that ends the segment above `-ZERO_TOLERANCE`
+/// (times the scale of `H` for multipliers) does not block. Without it a
+/// degenerate variable (at its bound with a zero multiplier) whose end value
+/// is a round-off `-1e-16` flips between fixed and free at zero step length.
+const ZERO_TOLERANCE: f64 = 1e-11;
+
 /// The homotopy's state: working set, factor, current point, current data.
 pub struct BoxHomotopy {
     n: usize,
@@ -196,14 +202,16 @@ impl BoxHomotopy {
     fn walk(&mut self, h: &[f64], max_changes: u32) -> Result<u32, HomotopyStop> {
         let n = self.n;
         let mut changes = 0;
+        let h_scale = (0..n).fold(1.0_f64, |m, i| m.max(h[i * n + i].abs()));
+        let (slack_tol, multiplier_tol) = (ZERO_TOLERANCE, ZERO_TOLERANCE * h_scale);
         loop {
             self.working_set_point(h);
             // First breakpoint on the segment s in [0, 1].
             let mut step = 1.0;
             let mut blocking = None;
             // A quantity that is >= 0 now and `end` at the segment's end.
-            let mut consider = |now: f64, end: f64, i: usize, to: Bound| {
-                if end < 0.0 {
+            let mut consider = |now: f64, end: f64, tol: f64, i: usize, to: Bound| {
+                if end < -tol {
                     let now = now.max(0.0);
                     let s = now / (now - end);
                     if s < step {
@@ -216,11 +224,16 @@ impl BoxHomotopy {
                 match self.bound[i] {
                     Bound::Free => {
                         let (z, z_w) = (self.z[i], self.z_w[i]);
-                        consider(z - self.lo[i], z_w - self.lo_end[i], i, Bound::Lower);
-                        consider(self.hi[i] - z, self.hi_end[i] - z_w, i, Bound::Upper);
+                        let tol = slack_tol;
+                        consider(z - self.lo[i], z_w - self.lo_end[i], tol, i, Bound::Lower);
+                        consider(self.hi[i] - z, self.hi_end[i] - z_w, tol, i, Bound::Upper);
                     }
-                    Bound::Lower => consider(self.grad[i], self.grad_w[i], i, Bound::Free),
-                    Bound::Upper => consider(-self.grad[i], -self.grad_w[i], i, Bound::Free),
+                    Bound::Lower => {
+                        consider(self.grad[i], self.grad_w[i], multiplier_tol, i, Bound::Free);
+                    }
+                    Bound::Upper => {
+                        consider(-self.grad[i], -self.grad_w[i], multiplier_tol, i, Bound::Free);
+                    }
                 }
             }
             let Some((i, to)) = blocking else {

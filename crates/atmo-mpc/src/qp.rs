@@ -754,17 +754,27 @@ impl CondensedQp {
         let clarabel = self.solver.solve();
         let n = NU * self.steps;
         let sol = &self.solver.solver.solution;
-        for i in 0..n {
-            // Rows 0..n: du <= hi (slack s_i), rows n..2n: -du <= -lo.
-            let (s_hi, y_hi) = (sol.s[i], sol.z[i]);
-            let (s_lo, y_lo) = (sol.s[n + i], sol.z[n + i]);
-            self.guess[i] = if s_hi < y_hi {
-                Bound::Upper
-            } else if s_lo < y_lo {
-                Bound::Lower
-            } else {
-                Bound::Free
-            };
+        if matches!(
+            clarabel.status,
+            SolverStatus::Solved | SolverStatus::AlmostSolved
+        ) {
+            for i in 0..n {
+                // Rows 0..n: du <= hi (slack s_i), rows n..2n: -du <= -lo.
+                let (s_hi, y_hi) = (sol.s[i], sol.z[i]);
+                let (s_lo, y_lo) = (sol.s[n + i], sol.z[n + i]);
+                self.guess[i] = if s_hi < y_hi {
+                    Bound::Upper
+                } else if s_lo < y_lo {
+                    Bound::Lower
+                } else {
+                    Bound::Free
+                };
+            }
+        } else {
+            // An iterate cut short (time or iteration limit) guesses badly
+            // (measured: more than 80 changes from it); the last tick's
+            // working set is closer.
+            self.guess.copy_from_slice(self.homotopy.working_set());
         }
         self.set_homotopy_target();
         let correction = self

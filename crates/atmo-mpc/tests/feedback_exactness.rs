@@ -24,6 +24,7 @@ use atmo_core::model::{Model, NU, NX, State};
 use atmo_mpc::qp::QpBackend;
 use atmo_mpc::{Bound, Formulation, LinearizedHorizon, Mpc, SolverSettings};
 use clarabel::solver::SolverStatus;
+use nalgebra::{DMatrix, DVector};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use scenarios::{NAMES, scenario};
@@ -56,7 +57,8 @@ fn reference_settings(shipped: &SolverSettings) -> SolverSettings {
 /// Linearizations of `PLANS` preparations of a closed loop in the situation.
 fn recorded_plans(name: &str) -> Vec<LinearizedHorizon> {
     let sc = scenario(name);
-    let settings = scenarios::settings(Formulation::Condensed);
+    let mut settings = scenarios::settings(Formulation::Condensed);
+    settings.solver.time_limit = 1.0;
     let mut mpc = Mpc::new(Model::new(&RobotConfig::atmo()), settings).unwrap();
     sc.apply(&mut mpc);
     mpc.reset(&sc.start).unwrap();
@@ -105,6 +107,50 @@ fn kkt_violation(h: &[f64], q: &[f64], hi: &[f64], ubar: &[f64], z: &[f64], ws: 
     worst
 }
 
+/// Clarabel's solution made exact on its own active set (as OSQP's
+/// "polishing" does): bounds within `near` of the solution are taken as
+/// active, the free entries solve `H_FF z_F = -(q_F + H_FA z_A)` (nalgebra's
+/// Cholesky, independent of the homotopy's factor updates).
+fn polish(
+    h: &[f64],
+    q: &[f64],
+    hi: &[f64],
+    ubar: &[f64],
+    z: &[f64],
+    near: f64,
+) -> (Vec<f64>, Vec<Bound>) {
+    let n = q.len();
+    let ws: Vec<Bound> = (0..n)
+        .map(|i| {
+            if (z[i] - hi[i]).abs() < near {
+                Bound::Upper
+            } else if (z[i] + ubar[i]).abs() < near {
+                Bound::Lower
+            } else {
+                Bound::Free
+            }
+        })
+        .collect();
+    let mut out: Vec<f64> = (0..n)
+        .map(|i| match ws[i] {
+            Bound::Upper => hi[i],
+            Bound::Lower => -ubar[i],
+            Bound::Free => 0.0,
+        })
+        .collect();
+    let free: Vec<usize> = (0..n).filter(|&i| ws[i] == Bound::Free).collect();
+    let m = free.len();
+    let hff = DMatrix::from_fn(m, m, |r, c| h[free[r] * n + free[c]]);
+    let rhs = DVector::from_fn(m, |r, _| {
+        -(q[free[r]] + (0..n).map(|j| h[free[r] * n + j] * out[j]).sum::<f64>())
+    });
+    let zf = hff.cholesky().expect("H_FF is positive definite").solve(&rhs);
+    for (r, &i) in free.iter().enumerate() {
+        out[i] = zf[r];
+    }
+    (out, ws)
+}
+
 #[derive(Default)]
 struct Tally {
     cases: usize,
@@ -112,13 +158,20 @@ struct Tally {
     most_changes: u32,
     fallbacks: usize,
     worst_vs_reference: f64,
+    /// Against Clarabel's solution itself.
+    worst_vs_raw: f64,
+    raw_within: usize,
+    /// Reference solutions no closeness threshold made a KKT point of.
+    unpolished: usize,
     worst_kkt: f64,
     worst_fallback_vs_reference: f64,
 }
 
 #[test]
 fn homotopy_feedback_equals_a_tight_clarabel_solve() {
-    let shipped = scenarios::settings(Formulation::Condensed);
+    let mut shipped = scenarios::settings(Formulation::Condensed);
+    // Numbers are under test, not the machine's load: no wall-clock limit.
+    shipped.solver.time_limit = 1.0;
     let feedback = shipped.feedback;
     let tight = reference_settings(&shipped.solver);
     let mut rng = ChaCha8Rng::seed_from_u64(18);
@@ -158,23 +211,38 @@ fn homotopy_feedback_equals_a_tight_clarabel_solve() {
                     Ok(changes) => {
                         tally.changed += usize::from(changes > 0);
                         tally.most_changes = tally.most_changes.max(changes);
-                        let d = deviation(under_test.raw_solution(), reference.raw_solution());
-                        assert!(
-                            d <= 1e-6,
-                            "{name}: homotopy vs reference {d:.3e} after {changes} changes"
-                        );
-                        tally.worst_vs_reference = tally.worst_vs_reference.max(d);
                         let snap = under_test.snapshot();
                         let n = NU * lin.steps();
+                        let (hi, ubar) = (&snap.b[..n], &snap.b[n..]);
                         let qp = under_test.condensed_mut().unwrap();
-                        let v = kkt_violation(
-                            qp.hessian(),
-                            &snap.q,
-                            &snap.b[..n],
-                            &snap.b[n..],
-                            qp.raw_solution(),
-                            qp.working_set(),
+                        let h = qp.hessian();
+                        let v = kkt_violation(h, &snap.q, hi, ubar, qp.raw_solution(), qp.working_set());
+                        assert!(v <= 1e-9, "{name}: KKT violation {v:.3e}");
+                        tally.worst_kkt = tally.worst_kkt.max(v);
+                        let raw = reference.raw_solution();
+                        let d_raw = deviation(qp.raw_solution(), raw);
+                        tally.raw_within += usize::from(d_raw <= 1e-6);
+                        tally.worst_vs_raw = tally.worst_vs_raw.max(d_raw);
+                        // The first closeness that gives a KKT point: the
+                        // raw solution is off by up to ~1e-5 where a bound's
+                        // multiplier is nearly zero.
+                        let polished = [1e-7, 1e-6, 1e-5, 1e-4, 1e-8, 1e-9].iter().find_map(|&near| {
+                            let (z, ws) = polish(h, &snap.q, hi, ubar, raw, near);
+                            (kkt_violation(h, &snap.q, hi, ubar, &z, &ws) <= 1e-9).then_some(z)
+                        });
+                        let Some(polished) = polished else {
+                            // Not counted as agreement: reported.
+                            tally.unpolished += 1;
+                            eprintln!("{name}: Clarabel's solution could not be polished (raw deviation {d_raw:.2e})");
+                            continue;
+                        };
+                        let d = deviation(qp.raw_solution(), &polished);
+                        assert!(
+                            d <= 1e-6,
+                            "{name}: homotopy vs polished reference {d:.3e} after {changes} changes \
+                             (raw reference {d_raw:.3e})"
                         );
+                        tally.worst_vs_reference = tally.worst_vs_reference.max(d);
                         assert!(v <= 1e-9, "{name}: KKT violation {v:.3e}");
                         tally.worst_kkt = tally.worst_kkt.max(v);
                     }
@@ -191,22 +259,29 @@ fn homotopy_feedback_equals_a_tight_clarabel_solve() {
                 }
             }
         }
+        let solved = tally.cases - tally.fallbacks;
         eprintln!(
             "{name}: {} cases, {:.1} % needed active-set changes (at most {}), {:.2} % fell back \
-             to Clarabel; max |homotopy - reference| = {:.2e}, max KKT residual {:.2e}, \
-             fallbacks vs reference {:.2e}",
+             to Clarabel; max |homotopy - polished reference| = {:.2e}, max KKT residual {:.2e}; \
+             raw Clarabel 1e-11 within 1e-6 in {} of {solved} (max {:.2e}), {} references not \
+             polishable; fallbacks (Clarabel at the shipped 1e-6) vs reference {:.2e}",
             tally.cases,
             100.0 * tally.changed as f64 / tally.cases as f64,
             tally.most_changes,
             100.0 * tally.fallbacks as f64 / tally.cases as f64,
             tally.worst_vs_reference,
             tally.worst_kkt,
+            tally.raw_within,
+            tally.worst_vs_raw,
+            tally.unpolished,
             tally.worst_fallback_vs_reference,
         );
         total.cases += tally.cases;
         total.changed += tally.changed;
         total.fallbacks += tally.fallbacks;
+        total.unpolished += tally.unpolished;
     }
+    assert_eq!(total.unpolished, 0, "references that could not be polished");
     eprintln!(
         "all: {} cases, {:.1} % with active-set changes, {:.2} % fallbacks",
         total.cases,
