@@ -86,7 +86,7 @@ fn rti_feedback(c: &mut Criterion) {
 }
 
 /// The fallback path: the homotopy may change no bound and each estimate is
-/// jolted by +-0.5 rad/s in roll rate, so the walk stops at its first
+/// jolted by +-2 rad/s in roll and pitch rate, so the walk stops at its first
 /// breakpoint and Clarabel solves at the estimate. Only the ticks that fell
 /// back are timed.
 fn rti_feedback_fallback(c: &mut Criterion) {
@@ -110,7 +110,9 @@ fn rti_feedback_fallback(c: &mut Criterion) {
                     sc.apply(&mut mpc);
                     mpc.prepare().unwrap();
                     let mut x = estimates[i % RECORDED_TICKS];
-                    x[idx::WX] += if i % 2 == 0 { 0.5 } else { -0.5 };
+                    let jolt = if i % 2 == 0 { 2.0 } else { -2.0 };
+                    x[idx::WX] += jolt;
+                    x[idx::WY] -= jolt;
                     i += 1;
                     tried += 1;
                     let start = Instant::now();

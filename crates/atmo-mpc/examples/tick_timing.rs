@@ -33,8 +33,16 @@ fn main() {
     );
     println!("| --- | --- | --- | --- | --- | --- | --- |");
     for (label, formulation, method) in [
-        ("condensed/homotopy", Formulation::Condensed, FeedbackMethod::Homotopy),
-        ("condensed/clarabel", Formulation::Condensed, FeedbackMethod::Clarabel),
+        (
+            "condensed/homotopy",
+            Formulation::Condensed,
+            FeedbackMethod::Homotopy,
+        ),
+        (
+            "condensed/clarabel",
+            Formulation::Condensed,
+            FeedbackMethod::Clarabel,
+        ),
         ("sparse", Formulation::Sparse, FeedbackMethod::Clarabel),
     ] {
         for name in NAMES {

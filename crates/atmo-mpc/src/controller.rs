@@ -203,6 +203,8 @@ pub struct Mpc {
     plan_diverged: bool,
     preparation_time: Duration,
     preparation_solve: SolveReport,
+    /// The `dx_0` the last preparation solved at.
+    predicted_e0: State,
     /// The preparation's exact solution at the predicted state, when the
     /// homotopy is in use: `Ok` (ready) or why it is not.
     prepared_solution: Option<std::result::Result<(), HomotopyStop>>,
@@ -251,6 +253,7 @@ impl Mpc {
                 solve_time: 0.0,
             },
             prepared_solution: None,
+            predicted_e0: State::zeros(),
             last_applied: None,
             homotopy_fallbacks: 0,
             failed_ticks: 0,
@@ -348,6 +351,12 @@ impl Mpc {
     /// Clarabel solve ([`FeedbackPath::is_fallback`]).
     pub fn homotopy_fallbacks(&self) -> u64 {
         self.homotopy_fallbacks
+    }
+
+    /// The deviation `x_pred - xbar_0` the last preparation solved the QP at
+    /// (zero without the homotopy).
+    pub fn predicted_deviation_of_last_preparation(&self) -> State {
+        self.predicted_e0
     }
 
     /// True when the feedback uses the homotopy (configured, condensed QP).
@@ -534,6 +543,7 @@ impl Mpc {
         self.preparation_solve.iterations = 0;
         if self.uses_homotopy() {
             let e0 = self.predicted_deviation(shift);
+            self.predicted_e0 = e0;
             let max_changes = self.settings.feedback.max_preparation_changes;
             if let Some(qp) = self.qp.condensed_mut() {
                 let prepared = qp.prepare_solution(&e0, max_changes)?;
@@ -689,7 +699,9 @@ impl Mpc {
                 {
                     Outcome::Degraded(DegradedCause::TimeLimit)
                 }
-                other => return Ok(self.fail_on(path, FailureCause::Solver(other), timings, start)),
+                other => {
+                    return Ok(self.fail_on(path, FailureCause::Solver(other), timings, start));
+                }
             };
             (outcome, path)
         };

@@ -232,7 +232,13 @@ impl BoxHomotopy {
                         consider(self.grad[i], self.grad_w[i], multiplier_tol, i, Bound::Free);
                     }
                     Bound::Upper => {
-                        consider(-self.grad[i], -self.grad_w[i], multiplier_tol, i, Bound::Free);
+                        consider(
+                            -self.grad[i],
+                            -self.grad_w[i],
+                            multiplier_tol,
+                            i,
+                            Bound::Free,
+                        );
                     }
                 }
             }
@@ -309,11 +315,7 @@ impl BoxHomotopy {
                 0.0
             } else {
                 let row = &h[i * n..(i + 1) * n];
-                row.iter()
-                    .zip(&self.z_w)
-                    .map(|(a, b)| a * b)
-                    .sum::<f64>()
-                    + self.q_end[i]
+                row.iter().zip(&self.z_w).map(|(a, b)| a * b).sum::<f64>() + self.q_end[i]
             };
         }
     }
@@ -503,9 +505,15 @@ mod tests {
             let k = hom.walk_to_target(&h, 10 * n as u32).unwrap();
             changed += usize::from(k > 0);
             let v = kkt_violation(&h, &q2, &lo, &hi, hom.solution());
-            assert!(v < 1e-10, "trial {trial}: KKT violation {v} after {k} changes");
+            assert!(
+                v < 1e-10,
+                "trial {trial}: KKT violation {v} after {k} changes"
+            );
         }
-        assert!(changed > 100, "only {changed} walks changed the working set");
+        assert!(
+            changed > 100,
+            "only {changed} walks changed the working set"
+        );
     }
 
     #[test]
@@ -519,7 +527,9 @@ mod tests {
         tq.copy_from_slice(&q);
         tlo.copy_from_slice(&lo);
         thi.copy_from_slice(&hi);
-        let needed = hom.solve_from_guess(&h, &vec![Bound::Free; n], 100).unwrap();
+        let needed = hom
+            .solve_from_guess(&h, &vec![Bound::Free; n], 100)
+            .unwrap();
         assert!(needed > 1, "{needed}");
         let mut again = BoxHomotopy::new(n);
         let (tq, tlo, thi) = again.target_mut();

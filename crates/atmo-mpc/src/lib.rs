@@ -85,8 +85,8 @@ pub use controller::{
     AlphaSchedule, DegradedCause, FailureCause, FeedbackPath, HomotopyFallback, Mpc, Outcome,
     SqpReport, TickOutput, TickTimings, wrap_angle,
 };
-pub use homotopy::{Bound, BoxHomotopy, HomotopyStop};
 pub use error::{MpcError, Result};
+pub use homotopy::{Bound, BoxHomotopy, HomotopyStop};
 pub use qp::{LinearizedHorizon, QpSnapshot, SolveReport};
 pub use settings::{
     CostPreset, FeedbackMethod, FeedbackSettings, Formulation, MpcFile, MpcSettings, Predictor,

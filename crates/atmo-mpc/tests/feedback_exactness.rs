@@ -73,7 +73,11 @@ fn recorded_plans(name: &str) -> Vec<LinearizedHorizon> {
             plans.push(mpc.linearization().clone());
         }
         let out = mpc.feedback(&x).unwrap();
-        assert!(out.outcome.is_fresh(), "{name} tick {tick}: {:?}", out.outcome);
+        assert!(
+            out.outcome.is_fresh(),
+            "{name} tick {tick}: {:?}",
+            out.outcome
+        );
         for _ in 0..7 {
             x = body.rk4_step(&x, &out.u, h);
         }
@@ -144,7 +148,10 @@ fn polish(
     let rhs = DVector::from_fn(m, |r, _| {
         -(q[free[r]] + (0..n).map(|j| h[free[r] * n + j] * out[j]).sum::<f64>())
     });
-    let zf = hff.cholesky().expect("H_FF is positive definite").solve(&rhs);
+    let zf = hff
+        .cholesky()
+        .expect("H_FF is positive definite")
+        .solve(&rhs);
     for (r, &i) in free.iter().enumerate() {
         out[i] = zf[r];
     }
@@ -207,55 +214,54 @@ fn homotopy_feedback_equals_a_tight_clarabel_solve() {
                         .map(|(x, y)| (x - y).abs())
                         .fold(0.0, f64::max)
                 };
-                match walked {
-                    Ok(changes) => {
-                        tally.changed += usize::from(changes > 0);
-                        tally.most_changes = tally.most_changes.max(changes);
-                        let snap = under_test.snapshot();
-                        let n = NU * lin.steps();
-                        let (hi, ubar) = (&snap.b[..n], &snap.b[n..]);
-                        let qp = under_test.condensed_mut().unwrap();
-                        let h = qp.hessian();
-                        let v = kkt_violation(h, &snap.q, hi, ubar, qp.raw_solution(), qp.working_set());
-                        assert!(v <= 1e-9, "{name}: KKT violation {v:.3e}");
-                        tally.worst_kkt = tally.worst_kkt.max(v);
-                        let raw = reference.raw_solution();
-                        let d_raw = deviation(qp.raw_solution(), raw);
-                        tally.raw_within += usize::from(d_raw <= 1e-6);
-                        tally.worst_vs_raw = tally.worst_vs_raw.max(d_raw);
-                        // The first closeness that gives a KKT point: the
-                        // raw solution is off by up to ~1e-5 where a bound's
-                        // multiplier is nearly zero.
-                        let polished = [1e-7, 1e-6, 1e-5, 1e-4, 1e-8, 1e-9].iter().find_map(|&near| {
+                if let Ok(changes) = walked {
+                    tally.changed += usize::from(changes > 0);
+                    tally.most_changes = tally.most_changes.max(changes);
+                    let snap = under_test.snapshot();
+                    let n = NU * lin.steps();
+                    let (hi, ubar) = (&snap.b[..n], &snap.b[n..]);
+                    let qp = under_test.condensed_mut().unwrap();
+                    let h = qp.hessian();
+                    let v =
+                        kkt_violation(h, &snap.q, hi, ubar, qp.raw_solution(), qp.working_set());
+                    assert!(v <= 1e-9, "{name}: KKT violation {v:.3e}");
+                    tally.worst_kkt = tally.worst_kkt.max(v);
+                    let raw = reference.raw_solution();
+                    let d_raw = deviation(qp.raw_solution(), raw);
+                    tally.raw_within += usize::from(d_raw <= 1e-6);
+                    tally.worst_vs_raw = tally.worst_vs_raw.max(d_raw);
+                    // The first closeness that gives a KKT point: the
+                    // raw solution is off by up to ~1e-5 where a bound's
+                    // multiplier is nearly zero.
+                    let polished = [1e-7, 1e-6, 1e-5, 1e-4, 1e-8, 1e-9]
+                        .iter()
+                        .find_map(|&near| {
                             let (z, ws) = polish(h, &snap.q, hi, ubar, raw, near);
                             (kkt_violation(h, &snap.q, hi, ubar, &z, &ws) <= 1e-9).then_some(z)
                         });
-                        let Some(polished) = polished else {
-                            // Not counted as agreement: reported.
-                            tally.unpolished += 1;
-                            eprintln!("{name}: Clarabel's solution could not be polished (raw deviation {d_raw:.2e})");
-                            continue;
-                        };
-                        let d = deviation(qp.raw_solution(), &polished);
-                        assert!(
-                            d <= 1e-6,
-                            "{name}: homotopy vs polished reference {d:.3e} after {changes} changes \
-                             (raw reference {d_raw:.3e})"
+                    let Some(polished) = polished else {
+                        // Not counted as agreement: reported.
+                        tally.unpolished += 1;
+                        eprintln!(
+                            "{name}: Clarabel's solution could not be polished (raw deviation {d_raw:.2e})"
                         );
-                        tally.worst_vs_reference = tally.worst_vs_reference.max(d);
-                        assert!(v <= 1e-9, "{name}: KKT violation {v:.3e}");
-                        tally.worst_kkt = tally.worst_kkt.max(v);
-                    }
-                    Err(_) => {
-                        // The controller then solves with Clarabel at the
-                        // shipped tolerances: that is what it would fly.
-                        tally.fallbacks += 1;
-                        under_test.set_initial_deviation(&actual).unwrap();
-                        under_test.solve();
-                        let d = deviation(under_test.raw_solution(), reference.raw_solution());
-                        tally.worst_fallback_vs_reference =
-                            tally.worst_fallback_vs_reference.max(d);
-                    }
+                        continue;
+                    };
+                    let d = deviation(qp.raw_solution(), &polished);
+                    assert!(
+                        d <= 1e-6,
+                        "{name}: homotopy vs polished reference {d:.3e} after {changes} changes \
+                             (raw reference {d_raw:.3e})"
+                    );
+                    tally.worst_vs_reference = tally.worst_vs_reference.max(d);
+                } else {
+                    // The controller then solves with Clarabel at the
+                    // shipped tolerances: that is what it would fly.
+                    tally.fallbacks += 1;
+                    under_test.set_initial_deviation(&actual).unwrap();
+                    under_test.solve();
+                    let d = deviation(under_test.raw_solution(), reference.raw_solution());
+                    tally.worst_fallback_vs_reference = tally.worst_fallback_vs_reference.max(d);
                 }
             }
         }

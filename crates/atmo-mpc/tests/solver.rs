@@ -268,11 +268,19 @@ fn homotopy_is_exact_whatever_clarabel_gave_in_the_preparation() {
         mpc.tick(&x).unwrap()
     };
     let full = solve_with_cap(40);
-    assert!(matches!(full.path, FeedbackPath::Homotopy { .. }), "{:?}", full.path);
+    assert!(
+        matches!(full.path, FeedbackPath::Homotopy { .. }),
+        "{:?}",
+        full.path
+    );
     for cap in [1, 2] {
         let out = solve_with_cap(cap);
         assert_eq!(out.outcome, Outcome::Solved);
-        assert!(matches!(out.path, FeedbackPath::Homotopy { .. }), "{:?}", out.path);
+        assert!(
+            matches!(out.path, FeedbackPath::Homotopy { .. }),
+            "{:?}",
+            out.path
+        );
         assert!(
             (out.u - full.u).amax() < 1e-9,
             "cap {cap}: {:.2e}",
