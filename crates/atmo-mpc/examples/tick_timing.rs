@@ -67,9 +67,7 @@ fn main() {
                 prepare.push(mid - start);
                 feedback.push(end - mid);
                 tick.push(end - start);
-                iterations.push(
-                    out.timings.preparation_solver_iterations + out.timings.solver_iterations,
-                );
+                iterations.push(out.timings.solver_iterations);
                 changed += usize::from(matches!(
                     out.path,
                     FeedbackPath::Homotopy { active_set_changes } if active_set_changes > 0

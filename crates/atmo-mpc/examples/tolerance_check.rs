@@ -32,8 +32,7 @@ fn main() {
         for i in 0..ticks {
             sc.apply(&mut mpc);
             let out = mpc.tick(&estimates[i % recorded]).unwrap();
-            iterations
-                .push(out.timings.preparation_solver_iterations + out.timings.solver_iterations);
+            iterations.push(out.timings.solver_iterations);
             let qp = mpc.qp_snapshot();
             let mut fresh = qp.fresh_solver(&precise).unwrap();
             fresh.solve();

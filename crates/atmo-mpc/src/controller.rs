@@ -87,6 +87,9 @@ pub struct TickTimings {
     /// The Clarabel solve inside the feedback (zero when the homotopy gave
     /// the solution).
     pub solve: Duration,
+    pub feedback_solver_iterations: u32,
+    /// Interior-point iterations behind this tick's solution: the
+    /// preparation's solve plus the feedback's (> 0 whenever a QP was solved).
     pub solver_iterations: u32,
 }
 
@@ -669,6 +672,7 @@ impl Mpc {
             _ => None,
         };
         let (outcome, path) = if let Some(active_set_changes) = walked {
+            timings.solver_iterations = timings.preparation_solver_iterations;
             (
                 Outcome::Solved,
                 FeedbackPath::Homotopy { active_set_changes },
@@ -683,7 +687,8 @@ impl Mpc {
             }
             let report: SolveReport = self.qp.solve();
             timings.solve = Duration::from_secs_f64(report.solve_time.max(0.0));
-            timings.solver_iterations = report.iterations;
+            timings.feedback_solver_iterations = report.iterations;
+            timings.solver_iterations = timings.preparation_solver_iterations + report.iterations;
             let outcome = match report.status {
                 SolverStatus::Solved => Outcome::Solved,
                 SolverStatus::AlmostSolved => Outcome::Degraded(DegradedCause::ReducedAccuracy),
