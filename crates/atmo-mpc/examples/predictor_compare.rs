@@ -16,7 +16,7 @@ use std::time::Duration;
 
 use atmo_core::RobotConfig;
 use atmo_core::model::{Model, NX, State, idx};
-use atmo_mpc::{FeedbackPath, Formulation, Mpc, Predictor, wrap_angle};
+use atmo_mpc::{FeedbackMethod, FeedbackPath, Formulation, Mpc, Predictor, wrap_angle};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use scenarios::{NAMES, scenario};
@@ -32,14 +32,19 @@ fn main() {
         .and_then(|a| a.parse().ok())
         .unwrap_or(1500);
     println!(
-        "| scenario | predictor | prediction error p50 / p99 (noise sd) | ticks with active-set changes | changes p99 | fallbacks | feedback p50 / p99 (us) |"
+        "| scenario | predictor / feedback | prediction error p50 / p99 (noise sd) | ticks with active-set changes | changes p99 | fallbacks | diverged preparations | feedback p50 / p99 (us) | final position error (m) |"
     );
-    println!("| --- | --- | --- | --- | --- | --- | --- |");
+    println!("| --- | --- | --- | --- | --- | --- | --- | --- | --- |");
     for name in NAMES {
-        for predictor in [Predictor::Plan, Predictor::Model] {
+        for (predictor, method) in [
+            (Predictor::Plan, FeedbackMethod::Homotopy),
+            (Predictor::Model, FeedbackMethod::Homotopy),
+            (Predictor::Model, FeedbackMethod::Clarabel),
+        ] {
             let sc = scenario(name);
             let mut settings = scenarios::settings(Formulation::Condensed);
             settings.feedback.predictor = predictor;
+            settings.feedback.method = method;
             settings.solver.time_limit = 1.0;
             let mut mpc = Mpc::new(Model::new(&RobotConfig::atmo()), settings).unwrap();
             sc.apply(&mut mpc);
@@ -51,12 +56,16 @@ fn main() {
             let mut errors = Vec::with_capacity(ticks);
             let mut changes = Vec::with_capacity(ticks);
             let mut feedback: Vec<Duration> = Vec::with_capacity(ticks);
+            let mut diverged = 0;
             for _ in 0..ticks {
                 let estimate = State::from_fn(|i, _| {
                     x[i] + NOISE[i] * 3f64.sqrt() * rng.random_range(-1.0..=1.0)
                 });
                 sc.apply(&mut mpc);
-                mpc.prepare().unwrap();
+                // A diverged plan is restarted by the feedback (counted below).
+                if mpc.prepare().is_err() {
+                    diverged += 1;
+                }
                 let mut e0 = estimate - mpc.plan_states()[0];
                 e0[idx::YAW] = wrap_angle(e0[idx::YAW]);
                 let miss = e0 - mpc.predicted_deviation_of_last_preparation();
@@ -69,7 +78,8 @@ fn main() {
                 feedback.push(out.timings.feedback);
                 changes.push(match out.path {
                     FeedbackPath::Homotopy { active_set_changes } => active_set_changes,
-                    _ => u32::MAX,
+                    FeedbackPath::Clarabel { fallback: None } | FeedbackPath::NoSolve => 0,
+                    FeedbackPath::Clarabel { fallback: Some(_) } => u32::MAX,
                 });
                 for _ in 0..7 {
                     x = body.rk4_step(&x, &out.u, h);
@@ -82,13 +92,14 @@ fn main() {
             changes.sort_unstable();
             let p = |n: usize, q: f64| ((n - 1) as f64 * q).round() as usize;
             println!(
-                "| {name} | {predictor:?} | {:.2} / {:.2} | {:.1} % | {} | {fallbacks} | {:.1} / {:.1} |",
+                "| {name} | {predictor:?} / {method:?} | {:.2} / {:.2} | {:.1} % | {} | {fallbacks} | {diverged} | {:.1} / {:.1} | {:.3} |",
                 errors[p(ticks, 0.5)],
                 errors[p(ticks, 0.99)],
                 100.0 * changed as f64 / ticks as f64,
                 changes[p(ticks, 0.99)],
                 feedback[p(ticks, 0.5)].as_secs_f64() * 1e6,
                 feedback[p(ticks, 0.99)].as_secs_f64() * 1e6,
+                (x.fixed_rows::<3>(0) - sc.reference.fixed_rows::<3>(0)).norm(),
             );
         }
     }
