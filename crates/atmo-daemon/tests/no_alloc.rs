@@ -109,7 +109,13 @@ fn flight_stack_step_does_not_allocate_after_start_up() {
         stack.prepare_next();
         let after = ALLOCATIONS.load(Ordering::SeqCst);
         if tick >= 20 {
-            assert_eq!(after - mid, 0, "prepare_next allocated at tick {tick}");
+            // The preparation runs one Clarabel solve (at the predicted state,
+            // seeding the MPC's homotopy feedback): only its own block may appear.
+            assert!(
+                after - mid <= clarabel_per_solve,
+                "prepare_next allocated {} times at tick {tick}",
+                after - mid
+            );
             // Only the Clarabel solve inside the feedback phase may allocate,
             // and no more than a bare solve does (measured above).
             let solves = out.status.qp_solves as usize;

@@ -1,6 +1,6 @@
-//! RTI timing: one full tick, the feedback phase alone, and the same QPs
-//! solved by Clarabel and (with `--features osqp-compare`, needs cmake) OSQP
-//! in both formulations.
+//! RTI timing: one full tick, the feedback phase alone (the homotopy, and
+//! its fallback to Clarabel), and the same QPs solved by Clarabel and (with
+//! `--features osqp-compare`, needs cmake) OSQP in both formulations.
 
 #[path = "support/scenarios.rs"]
 mod scenarios;
@@ -8,7 +8,9 @@ mod scenarios;
 use std::hint::black_box;
 use std::time::{Duration, Instant};
 
-use atmo_mpc::{Formulation, Mpc, Outcome, QpSnapshot};
+use atmo_core::RobotConfig;
+use atmo_core::model::{Model, idx};
+use atmo_mpc::{FeedbackMethod, Formulation, Mpc, Outcome, QpSnapshot};
 use clarabel::solver::IPSolver;
 use criterion::{Criterion, criterion_group, criterion_main};
 use scenarios::{NAMES, scenario};
@@ -51,6 +53,8 @@ fn rti_feedback(c: &mut Criterion) {
         let (mut mpc, estimates) = sc.warmed_up(formulation(), RECORDED_TICKS);
         let mut i = 0;
         let mut not_solved = 0;
+        let mut fallbacks = 0;
+        let mut changed = 0;
         group.bench_function(name, |b| {
             b.iter_custom(|iters| {
                 let mut total = Duration::ZERO;
@@ -63,12 +67,70 @@ fn rti_feedback(c: &mut Criterion) {
                     let out = mpc.feedback(black_box(&x)).unwrap();
                     total += start.elapsed();
                     not_solved += usize::from(out.outcome != Outcome::Solved);
+                    fallbacks += usize::from(out.path.is_fallback());
+                    changed += usize::from(matches!(
+                        out.path,
+                        atmo_mpc::FeedbackPath::Homotopy { active_set_changes } if active_set_changes > 0
+                    ));
                     black_box(out.u);
                 }
                 total
             });
         });
-        eprintln!("rti_feedback/{name}: {not_solved} of {i} ticks not Solved");
+        eprintln!(
+            "rti_feedback/{name}: {not_solved} of {i} ticks not Solved, {fallbacks} fell back to \
+             Clarabel, {changed} changed the active set"
+        );
+    }
+    group.finish();
+}
+
+/// The fallback path: the homotopy may change no bound and each estimate is
+/// jolted by +-2 rad/s in roll and pitch rate, so the walk stops at its first
+/// breakpoint and Clarabel solves at the estimate. Only the ticks that fell
+/// back are timed.
+fn rti_feedback_fallback(c: &mut Criterion) {
+    let mut group = c.benchmark_group("rti_feedback_fallback");
+    for name in NAMES {
+        let sc = scenario(name);
+        let mut settings = scenarios::settings(formulation());
+        settings.feedback.max_active_set_changes = 0;
+        assert_eq!(settings.feedback.method, FeedbackMethod::Homotopy);
+        let (_, estimates) = sc.warmed_up(formulation(), RECORDED_TICKS);
+        let mut mpc = Mpc::new(Model::new(&RobotConfig::atmo()), settings).unwrap();
+        sc.apply(&mut mpc);
+        mpc.reset(&sc.start).unwrap();
+        let mut i = 0;
+        let mut tried = 0;
+        group.bench_function(name, |b| {
+            b.iter_custom(|iters| {
+                let mut total = Duration::ZERO;
+                let mut timed = 0;
+                while timed < iters {
+                    sc.apply(&mut mpc);
+                    mpc.prepare().unwrap();
+                    let mut x = estimates[i % RECORDED_TICKS];
+                    let jolt = if i % 2 == 0 { 2.0 } else { -2.0 };
+                    x[idx::WX] += jolt;
+                    x[idx::WY] -= jolt;
+                    i += 1;
+                    tried += 1;
+                    let start = Instant::now();
+                    let out = mpc.feedback(black_box(&x)).unwrap();
+                    let took = start.elapsed();
+                    if out.path.is_fallback() {
+                        total += took;
+                        timed += 1;
+                    }
+                    black_box(out.u);
+                }
+                total
+            });
+        });
+        eprintln!(
+            "rti_feedback_fallback/{name}: {} fallbacks timed of {tried} ticks",
+            mpc.homotopy_fallbacks()
+        );
     }
     group.finish();
 }
@@ -197,6 +259,7 @@ criterion_group!(
     benches,
     rti_tick,
     rti_feedback,
+    rti_feedback_fallback,
     formulation_compare,
     qp_solver_compare
 );

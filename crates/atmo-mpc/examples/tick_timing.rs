@@ -1,14 +1,16 @@
 //! Per-tick timing distribution (p50, p99, max) of the RTI controller in
-//! the three benchmark situations, both formulations. Criterion gives
-//! medians; this gives the tail. Run with
+//! the three benchmark situations: condensed with the homotopy feedback (the
+//! shipped setting), condensed with a Clarabel feedback, sparse. Criterion
+//! gives medians; this gives the tail. Run with
 //! `cargo run --release -p atmo-mpc --example tick_timing [ticks]`.
 
+#[allow(dead_code)]
 #[path = "../benches/support/scenarios.rs"]
 mod scenarios;
 
 use std::time::{Duration, Instant};
 
-use atmo_mpc::Formulation;
+use atmo_mpc::{FeedbackMethod, FeedbackPath, Formulation};
 use scenarios::{NAMES, scenario};
 
 fn percentile(sorted: &[Duration], p: f64) -> Duration {
@@ -27,13 +29,29 @@ fn main() {
         .unwrap_or(3000);
     let recorded = 150;
     println!(
-        "| formulation | scenario | phase | p50 (us) | p99 (us) | max (us) | IPM iterations p50 |"
+        "| configuration | scenario | phase | p50 (us) | p99 (us) | max (us) | IPM iterations p50 (prepare + feedback) |"
     );
     println!("| --- | --- | --- | --- | --- | --- | --- |");
-    for formulation in [Formulation::Condensed, Formulation::Sparse] {
+    for (label, formulation, method) in [
+        (
+            "condensed/homotopy",
+            Formulation::Condensed,
+            FeedbackMethod::Homotopy,
+        ),
+        (
+            "condensed/clarabel",
+            Formulation::Condensed,
+            FeedbackMethod::Clarabel,
+        ),
+        ("sparse", Formulation::Sparse, FeedbackMethod::Clarabel),
+    ] {
         for name in NAMES {
             let sc = scenario(name);
-            let (mut mpc, estimates) = sc.warmed_up(formulation, recorded);
+            let mut settings = scenarios::settings(formulation);
+            settings.feedback.method = method;
+            let (mut mpc, estimates) = sc.warmed_up_with(settings, recorded);
+            let fallbacks_before = mpc.homotopy_fallbacks();
+            let mut changed = 0;
             let mut prepare = Vec::with_capacity(ticks);
             let mut feedback = Vec::with_capacity(ticks);
             let mut tick = Vec::with_capacity(ticks);
@@ -50,10 +68,14 @@ fn main() {
                 feedback.push(end - mid);
                 tick.push(end - start);
                 iterations.push(out.timings.solver_iterations);
+                changed += usize::from(matches!(
+                    out.path,
+                    FeedbackPath::Homotopy { active_set_changes } if active_set_changes > 0
+                ));
                 if out.outcome != atmo_mpc::Outcome::Solved {
                     if not_solved < 5 {
                         eprintln!(
-                            "{formulation:?} {name}: tick {i}: outcome not Solved: {:?} after {} iterations",
+                            "{label} {name}: tick {i}: outcome not Solved: {:?} after {} iterations",
                             out.outcome, out.timings.solver_iterations
                         );
                     }
@@ -68,7 +90,7 @@ fn main() {
             ] {
                 samples.sort_unstable();
                 println!(
-                    "| {formulation:?} | {name} | {phase} | {:.0} | {:.0} | {:.0} | {} |",
+                    "| {label} | {name} | {phase} | {:.1} | {:.1} | {:.0} | {} |",
                     micros(percentile(samples, 0.5)),
                     micros(percentile(samples, 0.99)),
                     micros(*samples.last().unwrap()),
@@ -76,8 +98,12 @@ fn main() {
                 );
             }
             if not_solved > 0 {
+                println!("| {label} | {name} | ticks not Solved | {not_solved} of {ticks} | | | |");
+            }
+            if mpc.uses_homotopy() {
                 println!(
-                    "| {formulation:?} | {name} | ticks not Solved | {not_solved} of {ticks} | | | |"
+                    "| {label} | {name} | homotopy: ticks with active-set changes / fallbacks to Clarabel | {changed} / {} of {ticks} | | | |",
+                    mpc.homotopy_fallbacks() - fallbacks_before
                 );
             }
         }

@@ -8,8 +8,9 @@ use atmo_core::model::{Input, Model, State, idx};
 use clarabel::solver::SolverStatus;
 
 use crate::error::{MpcError, Result};
+use crate::homotopy::HomotopyStop;
 use crate::qp::{LinearizedHorizon, QpBackend, QpSnapshot, SolveReport};
-use crate::settings::{Formulation, MpcSettings};
+use crate::settings::{FeedbackMethod, Formulation, MpcSettings, Predictor};
 
 /// Wraps an angle to (-pi, pi].
 pub fn wrap_angle(a: f64) -> f64 {
@@ -75,13 +76,51 @@ impl Outcome {
 /// Wall-clock cost of one tick.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct TickTimings {
-    /// The preparation that preceded this feedback.
+    /// The preparation that preceded this feedback (including its Clarabel
+    /// solve at the predicted state).
     pub preparation: Duration,
+    /// The Clarabel solve inside the preparation (zero without the homotopy).
+    pub preparation_solve: Duration,
+    pub preparation_solver_iterations: u32,
     /// Estimate in, command out.
     pub feedback: Duration,
-    /// The Clarabel solve inside the feedback.
+    /// The Clarabel solve inside the feedback (zero when the homotopy gave
+    /// the solution).
     pub solve: Duration,
+    pub feedback_solver_iterations: u32,
+    /// Interior-point iterations behind this tick's solution: the
+    /// preparation's solve plus the feedback's (> 0 whenever a QP was solved).
     pub solver_iterations: u32,
+}
+
+/// Why the feedback fell back from the homotopy to a full Clarabel solve.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum HomotopyFallback {
+    /// The preparation's correction of Clarabel's active set stopped.
+    Preparation(HomotopyStop),
+    /// The feedback's walk to the estimate stopped.
+    Feedback(HomotopyStop),
+}
+
+/// How the feedback phase got the QP's solution.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FeedbackPath {
+    /// The parametric active-set homotopy from the prepared solution: the
+    /// exact QP solution, after `active_set_changes` working-set changes.
+    Homotopy { active_set_changes: u32 },
+    /// A full Clarabel solve at the estimate; `fallback` says why when the
+    /// homotopy was configured (`None`: Clarabel is the configured method, or
+    /// the sparse formulation).
+    Clarabel { fallback: Option<HomotopyFallback> },
+    /// No QP solved (non-finite estimate, failed preparation).
+    NoSolve,
+}
+
+impl FeedbackPath {
+    /// True when the homotopy was configured and could not give the solution.
+    pub fn is_fallback(&self) -> bool {
+        matches!(self, Self::Clarabel { fallback: Some(_) })
+    }
 }
 
 /// What one feedback phase returns.
@@ -91,6 +130,7 @@ pub struct TickOutput {
     pub u: Input,
     pub outcome: Outcome,
     pub timings: TickTimings,
+    pub path: FeedbackPath,
 }
 
 /// Result of [`Mpc::converge_sqp`].
@@ -165,6 +205,16 @@ pub struct Mpc {
     /// The last preparation met a non-finite linearization.
     plan_diverged: bool,
     preparation_time: Duration,
+    preparation_solve: SolveReport,
+    /// The `dx_0` the last preparation solved at.
+    predicted_e0: State,
+    /// The preparation's exact solution at the predicted state, when the
+    /// homotopy is in use: `Ok` (ready) or why it is not.
+    prepared_solution: Option<std::result::Result<(), HomotopyStop>>,
+    /// The last finite estimate and the command flown after it (the model predictor's start).
+    last_applied: Option<(State, Input)>,
+    /// Feedback phases that fell back from the homotopy to Clarabel.
+    homotopy_fallbacks: u64,
     failed_ticks: u32,
     /// Estimated disturbance wrench the predictions include (offset-free MPC).
     disturbance: nalgebra::Vector6<f64>,
@@ -200,6 +250,15 @@ impl Mpc {
             preparation_ok: false,
             plan_diverged: false,
             preparation_time: Duration::ZERO,
+            preparation_solve: SolveReport {
+                status: SolverStatus::Unsolved,
+                iterations: 0,
+                solve_time: 0.0,
+            },
+            prepared_solution: None,
+            predicted_e0: State::zeros(),
+            last_applied: None,
+            homotopy_fallbacks: 0,
             failed_ticks: 0,
             disturbance: nalgebra::Vector6::zeros(),
             settings,
@@ -258,6 +317,11 @@ impl Mpc {
         self.stage_dt
     }
 
+    /// The linearization along the plan of the last preparation.
+    pub fn linearization(&self) -> &LinearizedHorizon {
+        &self.lin
+    }
+
     /// Predicted states `x_0..x_N` of the current plan.
     pub fn plan_states(&self) -> &[State] {
         &self.plan_x
@@ -286,6 +350,24 @@ impl Mpc {
         self.failed_ticks
     }
 
+    /// Feedback phases so far that fell back from the homotopy to a full
+    /// Clarabel solve ([`FeedbackPath::is_fallback`]).
+    pub fn homotopy_fallbacks(&self) -> u64 {
+        self.homotopy_fallbacks
+    }
+
+    /// The deviation `x_pred - xbar_0` the last preparation solved the QP at
+    /// (zero without the homotopy).
+    pub fn predicted_deviation_of_last_preparation(&self) -> State {
+        self.predicted_e0
+    }
+
+    /// True when the feedback uses the homotopy (configured, condensed QP).
+    pub fn uses_homotopy(&self) -> bool {
+        self.settings.feedback.method == FeedbackMethod::Homotopy
+            && self.formulation() == Formulation::Condensed
+    }
+
     /// Starts the plan at `x0` (held over the horizon) with hover-trim
     /// inputs at the current tilt sequence. Call once before the first tick
     /// and after a `NonFiniteLinearization`.
@@ -294,6 +376,7 @@ impl Mpc {
         self.restart_plan(x0);
         self.failed_ticks = 0;
         self.prepared = false;
+        self.last_applied = None;
         Ok(())
     }
 
@@ -458,9 +541,47 @@ impl Mpc {
             self.lin.x_err[k] = e;
         }
         self.qp.load(&self.lin)?;
+        self.prepared_solution = None;
+        self.preparation_solve.solve_time = 0.0;
+        self.preparation_solve.iterations = 0;
+        if self.uses_homotopy() {
+            let e0 = self.predicted_deviation(shift);
+            self.predicted_e0 = e0;
+            let max_changes = self.settings.feedback.max_preparation_changes;
+            if let Some(qp) = self.qp.condensed_mut() {
+                let prepared = qp.prepare_solution(&e0, max_changes)?;
+                self.preparation_solve = prepared.clarabel;
+                self.prepared_solution = Some(prepared.correction.map(|_| ()));
+            }
+        }
         self.preparation_ok = true;
         self.preparation_time = start.elapsed();
         Ok(self.preparation_time)
+    }
+
+    /// `x_pred - xbar_0` for the estimate the preparation expects (see
+    /// [`Predictor`]); zero (the shifted plan) when there is no last estimate.
+    /// Without a shift (re-planning at the same time) the last estimate itself.
+    fn predicted_deviation(&self, shifted: bool) -> State {
+        let Some((x, u)) = self.last_applied else {
+            return State::zeros();
+        };
+        let predicted = match (shifted, self.settings.feedback.predictor) {
+            (false, _) => x,
+            (true, Predictor::Plan) => return State::zeros(),
+            (true, Predictor::Model) => self
+                .model
+                .at_tilt(self.varphi[0])
+                .with_disturbance(self.disturbance)
+                .rk4_step(&x, &u, self.settings.horizon.tick_period),
+        };
+        let mut e0 = predicted - self.plan_x[0];
+        e0[idx::YAW] = wrap_angle(e0[idx::YAW]);
+        if e0.iter().all(|v| v.is_finite()) {
+            e0
+        } else {
+            State::zeros()
+        }
     }
 
     /// Moves the plan forward by one controller period: linear interpolation
@@ -495,10 +616,20 @@ impl Mpc {
         }
     }
 
-    /// Feedback phase: insert the estimate, solve, return the command.
-    /// Never panics on bad numbers: a non-finite estimate or a failed solve
-    /// gives the shifted previous plan and a `Fallback`/`Failed` outcome.
+    /// Feedback phase: the QP's solution at the estimate (the homotopy from
+    /// the prepared solution, or Clarabel), applied to the plan; returns the
+    /// command. Never panics on bad numbers: a non-finite estimate or a failed
+    /// solve gives the shifted previous plan and a `Fallback`/`Failed` outcome.
     pub fn feedback(&mut self, x_est: &State) -> Result<TickOutput> {
+        let out = self.feedback_inner(x_est)?;
+        self.last_applied = x_est
+            .iter()
+            .all(|v| v.is_finite())
+            .then_some((*x_est, out.u));
+        Ok(out)
+    }
+
+    fn feedback_inner(&mut self, x_est: &State) -> Result<TickOutput> {
         if !self.prepared {
             return Err(MpcError::NotPrepared);
         }
@@ -506,6 +637,8 @@ impl Mpc {
         let start = Instant::now();
         let mut timings = TickTimings {
             preparation: self.preparation_time,
+            preparation_solve: Duration::from_secs_f64(self.preparation_solve.solve_time.max(0.0)),
+            preparation_solver_iterations: self.preparation_solve.iterations,
             ..TickTimings::default()
         };
         if let Some(entry) = x_est.iter().position(|v| !v.is_finite()) {
@@ -522,34 +655,66 @@ impl Mpc {
         }
         let mut e0 = x_est - self.plan_x[0];
         e0[idx::YAW] = wrap_angle(e0[idx::YAW]);
-        if self.qp.set_initial_deviation(&e0).is_err() {
-            return Ok(self.fail(FailureCause::PreparationFailed, timings, start));
-        }
-        let report: SolveReport = self.qp.solve();
-        timings.solve = Duration::from_secs_f64(report.solve_time.max(0.0));
-        timings.solver_iterations = report.iterations;
-        let outcome = match report.status {
-            SolverStatus::Solved => Outcome::Solved,
-            SolverStatus::AlmostSolved => Outcome::Degraded(DegradedCause::ReducedAccuracy),
-            // A limit hit early leaves an iterate far from the optimum (up to
-            // 0.27 in u after 0-2 iterations, measured): fly the shifted plan
-            // unless the iterate already meets the reduced tolerances.
-            SolverStatus::MaxIterations if self.qp.iterate_usable() => {
-                Outcome::Degraded(DegradedCause::IterationLimit)
+        let max_changes = self.settings.feedback.max_active_set_changes;
+        let mut fallback = None;
+        let walked = match (self.prepared_solution, self.qp.condensed_mut()) {
+            (Some(Ok(())), Some(qp)) => match qp.feedback_solution(&e0, max_changes) {
+                Ok(changes) => Some(changes),
+                Err(stop) => {
+                    fallback = Some(HomotopyFallback::Feedback(stop));
+                    None
+                }
+            },
+            (Some(Err(stop)), _) => {
+                fallback = Some(HomotopyFallback::Preparation(stop));
+                None
             }
-            // Our per-solve clock ends a solve through the termination callback.
-            SolverStatus::MaxTime | SolverStatus::CallbackTerminated
-                if self.qp.iterate_usable() =>
-            {
-                Outcome::Degraded(DegradedCause::TimeLimit)
+            _ => None,
+        };
+        let (outcome, path) = if let Some(active_set_changes) = walked {
+            timings.solver_iterations = timings.preparation_solver_iterations;
+            (
+                Outcome::Solved,
+                FeedbackPath::Homotopy { active_set_changes },
+            )
+        } else {
+            if fallback.is_some() {
+                self.homotopy_fallbacks += 1;
             }
-            other => return Ok(self.fail(FailureCause::Solver(other), timings, start)),
+            let path = FeedbackPath::Clarabel { fallback };
+            if self.qp.set_initial_deviation(&e0).is_err() {
+                return Ok(self.fail_on(path, FailureCause::PreparationFailed, timings, start));
+            }
+            let report: SolveReport = self.qp.solve();
+            timings.solve = Duration::from_secs_f64(report.solve_time.max(0.0));
+            timings.feedback_solver_iterations = report.iterations;
+            timings.solver_iterations = timings.preparation_solver_iterations + report.iterations;
+            let outcome = match report.status {
+                SolverStatus::Solved => Outcome::Solved,
+                SolverStatus::AlmostSolved => Outcome::Degraded(DegradedCause::ReducedAccuracy),
+                // A limit hit early leaves an iterate far from the optimum (up to
+                // 0.27 in u after 0-2 iterations, measured): fly the shifted plan
+                // unless the iterate already meets the reduced tolerances.
+                SolverStatus::MaxIterations if self.qp.iterate_usable() => {
+                    Outcome::Degraded(DegradedCause::IterationLimit)
+                }
+                // Our per-solve clock ends a solve through the termination callback.
+                SolverStatus::MaxTime | SolverStatus::CallbackTerminated
+                    if self.qp.iterate_usable() =>
+                {
+                    Outcome::Degraded(DegradedCause::TimeLimit)
+                }
+                other => {
+                    return Ok(self.fail_on(path, FailureCause::Solver(other), timings, start));
+                }
+            };
+            (outcome, path)
         };
         self.qp.extract(&self.lin, &e0, &mut self.dx, &mut self.du);
         let finite = self.dx.iter().all(|x| x.iter().all(|v| v.is_finite()))
             && self.du.iter().all(|u| u.iter().all(|v| v.is_finite()));
         if !finite {
-            return Ok(self.fail(FailureCause::NonFiniteSolution, timings, start));
+            return Ok(self.fail_on(path, FailureCause::NonFiniteSolution, timings, start));
         }
         for k in 0..=self.steps {
             self.plan_x[k] += self.dx[k];
@@ -564,7 +729,22 @@ impl Mpc {
             u: self.plan_u[0],
             outcome,
             timings,
+            path,
         })
+    }
+
+    /// [`Self::fail`] after a solve was attempted on `path`.
+    fn fail_on(
+        &mut self,
+        path: FeedbackPath,
+        cause: FailureCause,
+        timings: TickTimings,
+        start: Instant,
+    ) -> TickOutput {
+        TickOutput {
+            path,
+            ..self.fail(cause, timings, start)
+        }
     }
 
     fn fail(
@@ -597,6 +777,7 @@ impl Mpc {
             u: u.map(|v| v.clamp(0.0, 1.0)),
             outcome,
             timings,
+            path: FeedbackPath::NoSolve,
         }
     }
 

@@ -55,6 +55,32 @@
 //! Which one is the default is decided by measurement (`benches/rti.rs`,
 //! BENCHMARKS.md); `config/mpc.toml` selects it.
 //!
+//! # Feedback in microseconds: the exact parametric solution
+//!
+//! In the condensed QP the estimate enters only the linear term
+//! `q(dx_0) = g0 + M dx_0` and the constraints are boxes, so the solution is
+//! a piecewise-affine function of `dx_0`, affine on each active set. With
+//! `feedback.method = "homotopy"` (the default):
+//!
+//! - the **preparation** predicts `dx_0` (`feedback.predictor`: one RK4 step
+//!   of the model from the last estimate with the applied command, or the
+//!   shifted plan, `dx_0 = 0`), has Clarabel solve the QP there, reads the
+//!   active set off its solution (a bound is active where its slack is below
+//!   its multiplier), factors `H_FF` (free inputs) and corrects that active
+//!   set into the exact solution at the prediction ([`homotopy`]);
+//! - the **feedback** forms `q` at the actual `dx_0` and walks the
+//!   parametric active-set homotopy (qpOASES's online active-set strategy)
+//!   along the line from the predicted to the actual `q`, one bound added or
+//!   dropped per breakpoint by a rank-one update of the Cholesky factor. The
+//!   result is the QP's exact solution (round-off of one Cholesky solve).
+//!   More than `feedback.max_active_set_changes` changes, or a near-singular
+//!   pivot, fall back to a full Clarabel solve at the estimate, reported as
+//!   [`FeedbackPath::Clarabel`] with the reason and counted
+//!   ([`Mpc::homotopy_fallbacks`]).
+//!
+//! The sparse formulation has equality constraints in which `dx_0` appears
+//! (`dx_0 = x_est - xbar_0`) and keeps the Clarabel feedback.
+//!
 //! # Solver
 //!
 //! Clarabel (interior point) is built once in [`Mpc::new`] with a fixed
@@ -73,17 +99,23 @@
 //! linearization is not finite is restarted from the next estimate.
 //!
 //! Nothing in the tick allocates in this crate (`tests/no_alloc.rs`; Clarabel's
-//! `solve` itself allocates one block per call in its timers).
+//! `solve` itself allocates one block per call in its timers, now in the
+//! preparation; the homotopy feedback allocates nothing).
 
 pub mod controller;
 pub mod error;
+pub mod homotopy;
 pub mod qp;
 pub mod settings;
 
 pub use controller::{
-    AlphaSchedule, DegradedCause, FailureCause, Mpc, Outcome, SqpReport, TickOutput, TickTimings,
-    wrap_angle,
+    AlphaSchedule, DegradedCause, FailureCause, FeedbackPath, HomotopyFallback, Mpc, Outcome,
+    SqpReport, TickOutput, TickTimings, wrap_angle,
 };
 pub use error::{MpcError, Result};
+pub use homotopy::{Bound, BoxHomotopy, HomotopyStop};
 pub use qp::{LinearizedHorizon, QpSnapshot, SolveReport};
-pub use settings::{CostPreset, Formulation, MpcFile, MpcSettings, SolverSettings};
+pub use settings::{
+    CostPreset, FeedbackMethod, FeedbackSettings, Formulation, MpcFile, MpcSettings, Predictor,
+    SolverSettings,
+};

@@ -18,6 +18,7 @@ use clarabel::solver::{
 use nalgebra::{SMatrix, SVector};
 
 use crate::error::{MpcError, Result};
+use crate::homotopy::{Bound, BoxHomotopy, HomotopyStop};
 use crate::settings::{Formulation, SolverSettings};
 
 /// Everything the QP needs from one linearization along the plan.
@@ -273,10 +274,14 @@ impl QpBackend {
         }
     }
 
+    /// Clarabel on the QP as loaded in it.
     pub fn solve(&mut self) -> SolveReport {
         match self {
             Self::Sparse(qp) => qp.solver.solve(),
-            Self::Condensed(qp) => qp.solver.solve(),
+            Self::Condensed(qp) => {
+                qp.solved_by = SolvedBy::Clarabel;
+                qp.solver.solve()
+            }
         }
     }
 
@@ -315,7 +320,15 @@ impl QpBackend {
     pub fn raw_solution(&self) -> &[f64] {
         match self {
             Self::Sparse(qp) => &qp.solver.solver.solution.x,
-            Self::Condensed(qp) => &qp.solver.solver.solution.x,
+            Self::Condensed(qp) => qp.raw_solution(),
+        }
+    }
+
+    /// The condensed QP, whose box-only constraints allow the homotopy.
+    pub fn condensed_mut(&mut self) -> Option<&mut CondensedQp> {
+        match self {
+            Self::Sparse(_) => None,
+            Self::Condensed(qp) => Some(qp),
         }
     }
 }
@@ -529,6 +542,28 @@ pub struct CondensedQp {
     lambda: Vec<State>,
     p_pattern: CscMatrix<f64>,
     a_pattern: CscMatrix<f64>,
+    /// The exact solution, moved from the predicted to the actual `e0`.
+    homotopy: BoxHomotopy,
+    /// Working set read off Clarabel's solution.
+    guess: Vec<Bound>,
+    /// Where the current solution comes from.
+    solved_by: SolvedBy,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum SolvedBy {
+    Clarabel,
+    Homotopy,
+}
+
+/// What the preparation's solve at the predicted state gave.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PreparedSolution {
+    /// Clarabel at the predicted state.
+    pub clarabel: SolveReport,
+    /// The walk from Clarabel's active set to the exact solution: working-set
+    /// changes, or why it stopped (then the feedback must use Clarabel).
+    pub correction: std::result::Result<u32, HomotopyStop>,
 }
 
 fn g_index(k: usize, j: usize) -> usize {
@@ -578,6 +613,9 @@ impl CondensedQp {
             lambda: vec![State::zeros(); steps + 1],
             p_pattern,
             a_pattern,
+            homotopy: BoxHomotopy::new(n),
+            guess: vec![Bound::Free; n],
+            solved_by: SolvedBy::Clarabel,
         };
         // Build the real solver from the real start-up values, so that its
         // equilibration matches the problem it will see.
@@ -677,18 +715,118 @@ impl CondensedQp {
         self.solver.solver.update_q(&self.q).map_err(solver_error)
     }
 
-    fn set_initial_deviation(&mut self, e0: &State) -> Result<()> {
+    /// `q = g0 + M e0`.
+    fn gradient_at(&mut self, e0: &State) {
         for i in 0..self.steps {
             let gi = self.m[i] * e0;
             for d in 0..NU {
                 self.q[NU * i + d] = self.g0[NU * i + d] + gi[d];
             }
         }
+    }
+
+    fn set_initial_deviation(&mut self, e0: &State) -> Result<()> {
+        self.gradient_at(e0);
+        self.solved_by = SolvedBy::Clarabel;
         self.solver.solver.update_q(&self.q).map_err(solver_error)
     }
 
+    /// The homotopy's target: the current `q` and the box.
+    fn set_homotopy_target(&mut self) {
+        let n = NU * self.steps;
+        let (q, lo, hi) = self.homotopy.target_mut();
+        q.copy_from_slice(&self.q);
+        hi.copy_from_slice(&self.b[..n]);
+        for (l, ubar) in lo.iter_mut().zip(&self.b[n..]) {
+            *l = -ubar;
+        }
+    }
+
+    /// Preparation: Clarabel solves at the predicted `e0`; the working set
+    /// read off its solution (a bound is active where its slack is below its
+    /// multiplier) is corrected by the homotopy into the exact solution there.
+    pub fn prepare_solution(
+        &mut self,
+        e0_predicted: &State,
+        max_changes: u32,
+    ) -> Result<PreparedSolution> {
+        self.set_initial_deviation(e0_predicted)?;
+        let clarabel = self.solver.solve();
+        let n = NU * self.steps;
+        let sol = &self.solver.solver.solution;
+        if matches!(
+            clarabel.status,
+            SolverStatus::Solved | SolverStatus::AlmostSolved
+        ) {
+            for i in 0..n {
+                // Rows 0..n: du <= hi (slack s_i), rows n..2n: -du <= -lo.
+                let (s_hi, y_hi) = (sol.s[i], sol.z[i]);
+                let (s_lo, y_lo) = (sol.s[n + i], sol.z[n + i]);
+                self.guess[i] = if s_hi < y_hi {
+                    Bound::Upper
+                } else if s_lo < y_lo {
+                    Bound::Lower
+                } else {
+                    Bound::Free
+                };
+            }
+        } else {
+            // An iterate cut short (time or iteration limit) guesses badly
+            // (measured: more than 80 changes from it); the last tick's
+            // working set is closer.
+            self.guess.copy_from_slice(self.homotopy.working_set());
+        }
+        self.set_homotopy_target();
+        let correction = self
+            .homotopy
+            .solve_from_guess(&self.hessian, &self.guess, max_changes);
+        if correction.is_ok() {
+            self.solved_by = SolvedBy::Homotopy;
+        }
+        Ok(PreparedSolution {
+            clarabel,
+            correction,
+        })
+    }
+
+    /// Feedback: moves the prepared exact solution to `e0` (only `q` changes).
+    /// On `Err` the solution is unusable; solve with Clarabel instead.
+    pub fn feedback_solution(
+        &mut self,
+        e0: &State,
+        max_changes: u32,
+    ) -> std::result::Result<u32, HomotopyStop> {
+        self.gradient_at(e0);
+        self.set_homotopy_target();
+        let walked = self.homotopy.walk_to_target(&self.hessian, max_changes);
+        self.solved_by = if walked.is_ok() {
+            SolvedBy::Homotopy
+        } else {
+            SolvedBy::Clarabel
+        };
+        walked
+    }
+
+    /// The dense Hessian `H` (n x n, symmetric).
+    pub fn hessian(&self) -> &[f64] {
+        &self.hessian
+    }
+
+    /// The homotopy's working set after the last preparation or feedback.
+    pub fn working_set(&self) -> &[Bound] {
+        self.homotopy.working_set()
+    }
+
+    /// Primal solution of the last solve (Clarabel's or the homotopy's).
+    pub fn raw_solution(&self) -> &[f64] {
+        match self.solved_by {
+            SolvedBy::Clarabel => &self.solver.solver.solution.x,
+            SolvedBy::Homotopy => self.homotopy.solution(),
+        }
+    }
+
     fn extract(&self, lin: &LinearizedHorizon, e0: &State, dx: &mut [State], du: &mut [Input]) {
-        let z = &self.solver.solver.solution.x;
+        let z = self.raw_solution();
         dx[0] = *e0;
         for k in 0..self.steps {
             du[k] = SVector::<f64, NU>::from_column_slice(&z[NU * k..NU * (k + 1)]);

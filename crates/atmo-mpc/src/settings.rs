@@ -21,6 +21,7 @@ pub struct MpcFile {
     /// Named cost presets (`fig5`, `default`).
     pub presets: BTreeMap<String, CostPreset>,
     pub solver: SolverSettings,
+    pub feedback: FeedbackSettings,
     pub failure: FailureSettings,
 }
 
@@ -96,6 +97,42 @@ pub struct SolverSettings {
     pub max_step_fraction: f64,
 }
 
+/// How the feedback phase turns the estimate into the QP's solution.
+#[derive(Debug, Clone, Copy, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "lowercase")]
+pub enum FeedbackMethod {
+    /// Clarabel solves at the predicted state in the preparation; the
+    /// feedback walks the exact parametric active-set homotopy from there to
+    /// the estimate (condensed formulation only; the sparse one uses Clarabel).
+    Homotopy,
+    /// A full Clarabel solve at the estimate in the feedback.
+    Clarabel,
+}
+
+/// Where the preparation expects the next estimate.
+#[derive(Debug, Clone, Copy, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "lowercase")]
+pub enum Predictor {
+    /// The shifted plan's first state (`dx_0 = 0`).
+    Plan,
+    /// One RK4 step of the model over a controller period from the last
+    /// estimate with the command applied after it.
+    Model,
+}
+
+#[derive(Debug, Clone, Copy, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct FeedbackSettings {
+    pub method: FeedbackMethod,
+    pub predictor: Predictor,
+    /// Working-set changes the feedback's homotopy may make before it falls
+    /// back to a full Clarabel solve at the estimate.
+    pub max_active_set_changes: u32,
+    /// The same cap for the preparation's walk from Clarabel's active set to
+    /// the exact solution at the predicted state.
+    pub max_preparation_changes: u32,
+}
+
 #[derive(Debug, Clone, Copy, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct FailureSettings {
@@ -111,6 +148,7 @@ pub struct MpcSettings {
     pub preset_name: String,
     pub weights: CostPreset,
     pub solver: SolverSettings,
+    pub feedback: FeedbackSettings,
     pub failure: FailureSettings,
 }
 
@@ -187,6 +225,18 @@ impl ConfigFile for MpcFile {
             "",
         )?;
         c.range(
+            "feedback.max_active_set_changes",
+            self.feedback.max_active_set_changes,
+            0..=10_000,
+            "changes",
+        )?;
+        c.range(
+            "feedback.max_preparation_changes",
+            self.feedback.max_preparation_changes,
+            0..=10_000,
+            "changes",
+        )?;
+        c.range(
             "failure.grace_ticks",
             self.failure.grace_ticks,
             0..=10_000,
@@ -212,6 +262,7 @@ impl MpcFile {
             preset_name: name.to_string(),
             weights,
             solver: self.solver,
+            feedback: self.feedback,
             failure: self.failure,
         })
     }

@@ -12,9 +12,10 @@ mod common;
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::cell::Cell;
 
-use atmo_core::model::{State, idx};
-use atmo_mpc::{Formulation, Mpc, Outcome};
-use common::{SUBSTEPS, controller, hover_at};
+use atmo_core::RobotConfig;
+use atmo_core::model::{Model, State, idx};
+use atmo_mpc::{FeedbackPath, Formulation, Mpc, Outcome};
+use common::{SUBSTEPS, hover_at};
 
 struct Counting;
 
@@ -64,11 +65,29 @@ struct Counts {
     parameters_and_prepare: usize,
     feedback: usize,
     bare_solve: usize,
+    /// Feedback phases by path.
+    homotopy_ticks: usize,
+    clarabel_ticks: usize,
     fallback: usize,
 }
 
-fn measure(formulation: Formulation) -> Counts {
-    let mut mpc: Mpc = controller(formulation);
+/// How the feedback is asked to run.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Feedback {
+    /// The shipped settings (homotopy in the condensed formulation).
+    Shipped,
+    /// No working-set change allowed and the estimate jolted by +-2 rad/s in
+    /// roll and pitch rate each tick: the
+    /// homotopy falls back to Clarabel whenever the active set moves.
+    ForcedFallback,
+}
+
+fn measure(formulation: Formulation, feedback: Feedback) -> Counts {
+    let mut settings = common::settings(formulation);
+    if feedback == Feedback::ForcedFallback {
+        settings.feedback.max_active_set_changes = 0;
+    }
+    let mut mpc = Mpc::new(Model::new(&RobotConfig::atmo()), settings).unwrap();
     let tick_period = mpc.settings().horizon.tick_period;
     let h = tick_period / SUBSTEPS as f64;
     let reference = hover_at(0.0, 0.0, 1.5);
@@ -91,7 +110,13 @@ fn measure(formulation: Formulation) -> Counts {
             mpc.prepare()
         });
         prep.unwrap();
-        let (out, n_fb) = count(|| mpc.feedback(&x));
+        let mut estimate = x;
+        if feedback == Feedback::ForcedFallback {
+            let jolt = if tick % 2 == 0 { 2.0 } else { -2.0 };
+            estimate[idx::WX] += jolt;
+            estimate[idx::WY] -= jolt;
+        }
+        let (out, n_fb) = count(|| mpc.feedback(&estimate));
         let out = out.unwrap();
         assert!(out.outcome.is_fresh(), "{:?}", out.outcome);
         let (_, n_solve) = count(|| mpc.resolve_loaded_qp());
@@ -99,6 +124,11 @@ fn measure(formulation: Formulation) -> Counts {
             counts.parameters_and_prepare += n_prep;
             counts.feedback += n_fb;
             counts.bare_solve += n_solve;
+            match out.path {
+                FeedbackPath::Homotopy { .. } => counts.homotopy_ticks += 1,
+                FeedbackPath::Clarabel { .. } => counts.clarabel_ticks += 1,
+                FeedbackPath::NoSolve => {}
+            }
         }
         let body = mpc.model().at_tilt(varphi);
         for _ in 0..SUBSTEPS {
@@ -109,10 +139,9 @@ fn measure(formulation: Formulation) -> Counts {
     let mut bad: State = x;
     bad[idx::WX] = f64::NAN;
     for _ in 0..5 {
-        let (out, n) = count(|| {
-            mpc.prepare().unwrap();
-            mpc.feedback(&bad).unwrap()
-        });
+        // The preparation (with its Clarabel solve) is counted above.
+        mpc.prepare().unwrap();
+        let (out, n) = count(|| mpc.feedback(&bad).unwrap());
         assert!(matches!(out.outcome, Outcome::Fallback { .. }));
         counts.fallback += n;
     }
@@ -121,28 +150,51 @@ fn measure(formulation: Formulation) -> Counts {
 
 #[test]
 fn tick_does_not_allocate_in_our_code() {
-    for formulation in [Formulation::Condensed, Formulation::Sparse] {
-        let c = measure(formulation);
+    for (formulation, feedback) in [
+        (Formulation::Condensed, Feedback::Shipped),
+        (Formulation::Condensed, Feedback::ForcedFallback),
+        (Formulation::Sparse, Feedback::Shipped),
+    ] {
+        let c = measure(formulation, feedback);
+        let case = format!("{formulation:?}, {feedback:?}");
         eprintln!(
-            "{formulation:?}, {MEASURED_TICKS} ticks: parameters+prepare {} allocations, feedback {}, \
-             bare Clarabel solve {} (same QP again), fallback path {}",
-            c.parameters_and_prepare, c.feedback, c.bare_solve, c.fallback
-        );
-        assert_eq!(
-            c.parameters_and_prepare, 0,
-            "{formulation:?}: preparation allocates"
-        );
-        assert_eq!(
-            c.fallback, 0,
-            "{formulation:?}: the fallback path allocates"
-        );
-        // Whatever the feedback allocates beyond the bare solve is ours.
-        assert!(
-            c.feedback <= c.bare_solve,
-            "{formulation:?}: feedback allocates {} vs {} in the bare solve",
+            "{case}, {MEASURED_TICKS} ticks ({} homotopy, {} Clarabel feedbacks): parameters+prepare \
+             {} allocations, feedback {}, bare Clarabel solve {} (same QP again), failure path {}",
+            c.homotopy_ticks,
+            c.clarabel_ticks,
+            c.parameters_and_prepare,
             c.feedback,
-            c.bare_solve
+            c.bare_solve,
+            c.fallback
         );
+        // Whatever a phase allocates beyond Clarabel's own per-solve block
+        // (one per solve it runs, counted in the bare solve) is ours.
+        let (prepare_solves, feedback_solves) = match (formulation, feedback) {
+            (Formulation::Sparse, _) => (0, MEASURED_TICKS),
+            (Formulation::Condensed, _) => (MEASURED_TICKS, c.clarabel_ticks),
+        };
+        let per_solve = c.bare_solve.div_ceil(MEASURED_TICKS);
+        assert!(
+            c.parameters_and_prepare <= per_solve * prepare_solves,
+            "{case}: preparation allocates {} in {prepare_solves} Clarabel solves",
+            c.parameters_and_prepare
+        );
+        assert!(
+            c.feedback <= per_solve * feedback_solves,
+            "{case}: feedback allocates {} in {feedback_solves} Clarabel solves",
+            c.feedback
+        );
+        assert_eq!(c.fallback, 0, "{case}: the failure path allocates");
+        match (formulation, feedback) {
+            (Formulation::Condensed, Feedback::Shipped) => {
+                assert_eq!(c.clarabel_ticks, 0, "{case}: the homotopy fell back");
+                assert_eq!(c.feedback, 0, "{case}: the homotopy feedback allocates");
+            }
+            (Formulation::Condensed, Feedback::ForcedFallback) => {
+                assert!(c.clarabel_ticks > 0, "{case}: no fallback was forced");
+            }
+            (Formulation::Sparse, _) => assert_eq!(c.homotopy_ticks, 0),
+        }
     }
 }
 
@@ -153,7 +205,7 @@ fn tick_does_not_allocate_in_our_code() {
 #[test]
 fn clarabel_solve_allocates_once_per_solve_in_its_timers() {
     for formulation in [Formulation::Condensed, Formulation::Sparse] {
-        let c = measure(formulation);
+        let c = measure(formulation, Feedback::Shipped);
         assert!(
             c.bare_solve <= MEASURED_TICKS,
             "{formulation:?}: Clarabel's solve allocated {} times in {MEASURED_TICKS} solves",

@@ -5,7 +5,9 @@ mod common;
 
 use atmo_core::RobotConfig;
 use atmo_core::model::{Model, State, idx};
-use atmo_mpc::{FailureCause, Formulation, Mpc, MpcError, Outcome, wrap_angle};
+use atmo_mpc::{
+    FailureCause, FeedbackMethod, FeedbackPath, Formulation, Mpc, MpcError, Outcome, wrap_angle,
+};
 use clarabel::solver::IPSolver;
 use clarabel::solver::SolverStatus;
 use common::{controller, hover_at, run, settings};
@@ -41,6 +43,8 @@ fn max_abs_diff(a: &[f64], b: &[f64]) -> f64 {
 fn updated_matches_fresh(formulation: Formulation, equilibrate: bool, tolerance: f64) {
     let mut s = settings(formulation);
     s.solver.equilibrate = equilibrate;
+    // Clarabel's in-place updates are under test: its solution, not the homotopy's.
+    s.feedback.method = FeedbackMethod::Clarabel;
     let mut mpc = Mpc::new(Model::new(&RobotConfig::atmo()), s.clone()).unwrap();
     let x = mid_recovery(&mut mpc, 20);
     let out = mpc.tick(&x).unwrap();
@@ -198,13 +202,15 @@ fn non_finite_estimate_flies_the_shifted_plan_then_fails() {
     assert_eq!(mpc.failed_ticks(), 0);
 }
 
-/// Capping the interior-point iterations: an iterate that is still far from
-/// the optimum is not flown (fallback to the shifted plan); one that meets the
-/// reduced tolerances is (degraded); enough iterations solve.
+/// Capping the interior-point iterations of a Clarabel feedback (the
+/// homotopy's fallback): an iterate that is still far from the optimum is not
+/// flown (fallback to the shifted plan); one that meets the reduced
+/// tolerances is (degraded); enough iterations solve.
 #[test]
 fn iteration_cap_falls_back_early_and_degrades_late() {
     let solve_with_cap = |cap: u32| {
         let mut s = settings(Formulation::Condensed);
+        s.feedback.method = FeedbackMethod::Clarabel;
         s.solver.max_iter = cap;
         let mut mpc = Mpc::new(Model::new(&RobotConfig::atmo()), s).unwrap();
         mpc.set_reference_constant(&hover_at(0.0, 0.0, 1.0))
@@ -243,6 +249,44 @@ fn iteration_cap_falls_back_early_and_degrades_late() {
         }
     }
     assert!(degraded > 0, "no cap gave a usable iterate");
+}
+
+/// With the homotopy, Clarabel's solution in the preparation only seeds the
+/// active set: an iterate cut off after one or two iterations still ends in
+/// the exact solution (the correction walks from its active set), the same
+/// command as with an uncapped Clarabel.
+#[test]
+fn homotopy_is_exact_whatever_clarabel_gave_in_the_preparation() {
+    let solve_with_cap = |cap: u32| {
+        let mut s = settings(Formulation::Condensed);
+        s.solver.max_iter = cap;
+        let mut mpc = Mpc::new(Model::new(&RobotConfig::atmo()), s).unwrap();
+        mpc.set_reference_constant(&hover_at(0.0, 0.0, 1.0))
+            .unwrap();
+        let x = perturbed(1.0);
+        mpc.reset(&x).unwrap();
+        mpc.tick(&x).unwrap()
+    };
+    let full = solve_with_cap(40);
+    assert!(
+        matches!(full.path, FeedbackPath::Homotopy { .. }),
+        "{:?}",
+        full.path
+    );
+    for cap in [1, 2] {
+        let out = solve_with_cap(cap);
+        assert_eq!(out.outcome, Outcome::Solved);
+        assert!(
+            matches!(out.path, FeedbackPath::Homotopy { .. }),
+            "{:?}",
+            out.path
+        );
+        assert!(
+            (out.u - full.u).amax() < 1e-9,
+            "cap {cap}: {:.2e}",
+            (out.u - full.u).amax()
+        );
+    }
 }
 
 #[test]

@@ -90,7 +90,12 @@ impl Scenario {
     /// A controller warmed up on this situation, and the estimates of a
     /// closed loop of `ticks` ticks (plant: atmo-core RK4, 7 substeps per tick).
     pub fn warmed_up(&self, formulation: Formulation, ticks: usize) -> (Mpc, Vec<State>) {
-        let mut mpc = Mpc::new(Model::new(&RobotConfig::atmo()), settings(formulation)).unwrap();
+        self.warmed_up_with(settings(formulation), ticks)
+    }
+
+    /// [`Self::warmed_up`] with the given settings.
+    pub fn warmed_up_with(&self, settings: MpcSettings, ticks: usize) -> (Mpc, Vec<State>) {
+        let mut mpc = Mpc::new(Model::new(&RobotConfig::atmo()), settings).unwrap();
         self.apply(&mut mpc);
         mpc.reset(&self.start).unwrap();
         let h = mpc.settings().horizon.tick_period / 7.0;
