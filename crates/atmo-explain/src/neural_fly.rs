@@ -41,7 +41,7 @@ pub fn is_neural_fly_header(header: &str) -> bool {
 
 /// Splits one CSV row at the commas outside double quotes (their vector
 /// cells are quoted list literals with commas inside).
-fn split_row(line: &str) -> Vec<&str> {
+pub fn split_row(line: &str) -> Vec<&str> {
     let mut out = Vec::new();
     let mut start = 0;
     let mut quoted = false;

@@ -27,11 +27,11 @@ pub struct Gains {
 impl Default for Gains {
     fn default() -> Self {
         Self {
-            kp: 6.0,
-            kd: 4.5,
-            ki: 1.5,
-            k_att: 9.0,
-            k_rate: 28.0,
+            kp: 4.0,
+            kd: 3.6,
+            ki: 1.0,
+            k_att: 6.0,
+            k_rate: 16.0,
         }
     }
 }

@@ -2,8 +2,8 @@
 //! CSV writer (docs/recording_format.md).
 //!
 //! Reference (NED, repeating every 16 s): 10 s at 1.5 m altitude of two
-//! frequency sweeps (x: 0.3 -> 1.8 rad/s, y at 0.7 of that, 1.5 m
-//! amplitude: up to ~2.5 m/s), a small vertical sweep and a yaw swing; then a
+//! frequency sweeps (x: 0.3 -> 1.5 rad/s, y at 0.7 of that, 1.5 m
+//! amplitude: up to ~2 m/s), a small vertical sweep and a yaw swing; then a
 //! 6 s low pass: down to `low_altitude` in 2 s (raised cosine), 2 s there
 //! crossing at 0.4 m/s, 2 s back up. Velocity and acceleration of the
 //! reference by central differences of the position.
@@ -95,12 +95,13 @@ fn reference_position(t: f64, low_altitude: f64) -> (Vector3<f64>, f64) {
     let s = t - cycle * PERIOD;
     let smooth = |x: f64| 0.5 - 0.5 * (std::f64::consts::PI * x.clamp(0.0, 1.0)).cos();
     if s < 10.0 {
-        // Sweeps: phase of a chirp 0.3 -> 1.8 rad/s over the 10 s; the
-        // squared fade keeps the reference acceleration continuous.
-        let phase = 0.3 * s + 0.075 * s * s;
-        let fade = (smooth(s / 1.5) * smooth((10.0 - s) / 1.5)).powi(2);
+        // Sweeps: phase of a chirp 0.3 -> 1.5 rad/s over the 10 s; both
+        // start at zero, and the squared fade (2.5 s) keeps the reference
+        // acceleration continuous and within ~4 m/s^2.
+        let phase = 0.3 * s + 0.06 * s * s;
+        let fade = (smooth(s / 2.5) * smooth((10.0 - s) / 2.5)).powi(2);
         let x = 1.5 * fade * phase.sin();
-        let y = 1.5 * fade * (0.7 * phase + 1.0).sin();
+        let y = 1.5 * fade * (0.7 * phase).sin();
         let z = -HIGH - 0.3 * fade * (0.5 * phase).sin();
         let yaw = 0.5 * fade * (0.35 * phase).sin();
         (Vector3::new(x, y, z), yaw)
@@ -113,7 +114,8 @@ fn reference_position(t: f64, low_altitude: f64) -> (Vector3<f64>, f64) {
     }
 }
 
-fn reference(t: f64, low_altitude: f64) -> Reference {
+/// The reference at `t` (position, velocity, acceleration, yaw).
+pub fn reference(t: f64, low_altitude: f64) -> Reference {
     let h = 1e-3;
     let (p0, yaw) = reference_position(t, low_altitude);
     let (pm, _) = reference_position(t - h, low_altitude);

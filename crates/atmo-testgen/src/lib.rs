@@ -39,7 +39,7 @@ pub enum GenError {
 }
 
 /// Concealed effects by name, at the values the tests use:
-/// `ground_effect` (rotor radius 0.19 m), `motor_lag` (40 ms), `drag`
+/// `ground_effect` (rotor radius 0.19 m), `motor_lag` (30 ms), `drag`
 /// (rotor drag 0.03, Cd A 0.06 / 0.06 / 0.10 m^2) with `wind` (2 m/s north),
 /// `com_offset` (8 mm forward, -5 mm right), `thrust_scale` (+8 %),
 /// `thrust_curve` (b = 0.3), `none`.
@@ -49,7 +49,7 @@ pub fn concealed(list: &str) -> Result<sim::Concealed, GenError> {
         match name {
             "none" => {}
             "ground_effect" => fx.ground_effect_radius = Some(0.19),
-            "motor_lag" => fx.motor_lag = Some(0.040),
+            "motor_lag" => fx.motor_lag = Some(0.030),
             "drag" => fx.drag = Some((0.03, [0.06, 0.06, 0.10])),
             "wind" => fx.wind = [2.0, 0.0, 0.0],
             "com_offset" => fx.com_offset = Some([0.008, -0.005, 0.0]),
