@@ -20,7 +20,7 @@ fn robot() -> RobotConfig {
     RobotConfig::load(
         Path::new(env!("CARGO_MANIFEST_DIR")).join("../../config/neural_fly_quadrotor.toml"),
     )
-    .unwrap()
+    .expect("config/neural_fly_quadrotor.toml")
 }
 
 const FLIGHTS: [&str; 2] = [

@@ -7,7 +7,7 @@ use atmo_testgen::robot::{RigidBody, RobotFile};
 
 fn atmo() -> RigidBody {
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../config/atmo.toml");
-    RigidBody::at_tilt(&RobotFile::load(&path).unwrap(), 0.0)
+    RigidBody::at_tilt(&RobotFile::load(&path).expect("config/atmo.toml"), 0.0)
 }
 
 #[test]
