@@ -66,7 +66,8 @@ impl Recording {
     }
 
     /// Reads a recording; the format is chosen by the extension (`.mcap`:
-    /// the flight stack's log, anything else: CSV).
+    /// the flight stack's log, anything else: CSV) and, for CSV, by the
+    /// header (a Neural-Fly log's header: [`crate::neural_fly`]).
     pub fn load(path: impl AsRef<Path>) -> Result<Self, ExplainError> {
         let path = path.as_ref();
         let ext = path
@@ -88,6 +89,10 @@ impl Recording {
                 e.utf8_error().valid_up_to()
             ),
         })?;
+        let header = text.lines().find(|l| !l.trim().is_empty()).unwrap_or("");
+        if crate::neural_fly::is_neural_fly_header(header) {
+            return crate::neural_fly::from_neural_fly_str(&text, path);
+        }
         Self::from_csv_str(&text, path)
     }
 

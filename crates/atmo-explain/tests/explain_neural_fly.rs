@@ -1,0 +1,142 @@
+//! The Neural-Fly importer on real flights (tests/data, 12 s of two flights
+//! of O'Connell et al., Science Robotics 7(66), 2022; docs/neural_fly.md):
+//! the conventions worked out from the data hold after conversion.
+
+use std::path::{Path, PathBuf};
+
+use atmo_core::RobotConfig;
+use atmo_core::model::{idx, rotation};
+use atmo_explain::neural_fly::split_row;
+use atmo_explain::recording::Recording;
+use nalgebra::Vector3;
+
+fn data(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/data")
+        .join(name)
+}
+
+fn robot() -> RobotConfig {
+    RobotConfig::load(
+        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../config/neural_fly_quadrotor.toml"),
+    )
+    .expect("config/neural_fly_quadrotor.toml")
+}
+
+const FLIGHTS: [&str; 2] = [
+    "neural_fly_L1_nowind_12s.csv",
+    "neural_fly_L1_100wind_12s.csv",
+];
+
+#[test]
+fn detected_and_converted_to_ned() {
+    for name in FLIGHTS {
+        let rec = Recording::load(data(name)).unwrap();
+        assert_eq!(rec.samples.len(), 600, "{name}");
+        assert_eq!((rec.skipped_nonfinite, rec.skipped_time), (0, 0));
+        for col in ["fa", "q", "T_sp", "hover_throttle"] {
+            assert!(
+                rec.ignored_columns.iter().any(|c| c == col),
+                "{name}: {col}"
+            );
+        }
+        // The figure 8 flies 1.4-3 m above their floor: NED z between -3.1 and
+        // -1.3; pwm 800-1540 (100 % fan) over the full scale 2000.
+        for s in &rec.samples {
+            assert!(
+                (-3.1..-1.3).contains(&s.x[idx::Z]),
+                "{name}: z {}",
+                s.x[idx::Z]
+            );
+            assert!(
+                s.u.iter().all(|u| (0.3..0.85).contains(u)),
+                "{name}: u {:?}",
+                s.u
+            );
+        }
+        assert!((rec.median_dt() - 0.02).abs() < 1e-4);
+    }
+}
+
+#[test]
+fn body_rates_agree_with_the_converted_attitude() {
+    // vee(R^T dR/dt) in FRD from the converted Euler angles must match the
+    // converted body rates (a wrong flip of either shows as ~200 % error).
+    let rec = Recording::load(data(FLIGHTS[0])).unwrap();
+    let rot = |k: usize| {
+        let x = &rec.samples[k].x;
+        rotation(x[idx::YAW], x[idx::PITCH], x[idx::ROLL])
+    };
+    let (mut err, mut norm) = (0.0, 0.0);
+    for k in 1..rec.samples.len() - 1 {
+        let h = rec.samples[k + 1].t - rec.samples[k - 1].t;
+        let w_hat = rot(k).transpose() * (rot(k + 1) - rot(k - 1)) / h;
+        let rebuilt = Vector3::new(w_hat[(2, 1)], w_hat[(0, 2)], w_hat[(1, 0)]);
+        let x = &rec.samples[k].x;
+        let w = Vector3::new(x[idx::WX], x[idx::WY], x[idx::WZ]);
+        err += (rebuilt - w).norm_squared();
+        norm += w.norm_squared();
+    }
+    let rel = (err / norm).sqrt();
+    assert!(rel < 0.3, "relative body-rate mismatch {rel:.3}");
+}
+
+#[test]
+fn robot_file_hover_thrust_and_mass_match_the_flight() {
+    // No wind: the mean thrust the robot file gives for the recorded
+    // commands is the weight (the flight stays at one height on average);
+    // and the authors' fa obeys fa_xy = m a_xy in the body frame for the
+    // file's mass (thrust is along body z).
+    let robot = robot();
+    let model = atmo_core::model::Model::new(&robot);
+    let rec = Recording::load(data(FLIGHTS[0])).unwrap();
+    let mean_thrust = rec
+        .samples
+        .iter()
+        .map(|s| s.u.sum() * robot.rotor.k_thrust)
+        .sum::<f64>()
+        / rec.samples.len() as f64;
+    let weight = model.weight();
+    assert!(
+        (mean_thrust / weight - 1.0).abs() < 0.05,
+        "mean thrust {mean_thrust:.2} N against weight {weight:.2} N"
+    );
+    let text = std::fs::read_to_string(data(FLIGHTS[1])).unwrap();
+    let rec = Recording::load(data(FLIGHTS[1])).unwrap();
+    let column = split_row(text.lines().next().unwrap())
+        .iter()
+        .position(|c| *c == "fa")
+        .unwrap();
+    let fa: Vec<Vector3<f64>> = text
+        .lines()
+        .skip(1)
+        .map(|l| {
+            let v: Vec<f64> = serde_json::from_str(split_row(l)[column]).unwrap();
+            // z-up world to NED.
+            Vector3::new(v[0], -v[1], -v[2])
+        })
+        .collect();
+    let (mut sxy, mut sxx) = (0.0, 0.0);
+    for k in 1..rec.samples.len() - 1 {
+        let (a, b) = (&rec.samples[k - 1], &rec.samples[k + 1]);
+        let dv = Vector3::new(
+            b.x[idx::VX] - a.x[idx::VX],
+            b.x[idx::VY] - a.x[idx::VY],
+            b.x[idx::VZ] - a.x[idx::VZ],
+        ) / (b.t - a.t);
+        let x = &rec.samples[k].x;
+        let rt = rotation(x[idx::YAW], x[idx::PITCH], x[idx::ROLL]).transpose();
+        let acc_b = rt * (dv - Vector3::new(0.0, 0.0, robot.environment.gravity));
+        let fa_b = rt * fa[k];
+        for i in 0..2 {
+            sxy += acc_b[i] * fa_b[i];
+            sxx += acc_b[i] * acc_b[i];
+        }
+    }
+    let mass = sxy / sxx;
+    assert!(
+        (mass / model.mass() - 1.0).abs() < 0.02,
+        "fa_xy / a_xy = {mass:.3} kg against the file's {:.3} kg",
+        model.mass()
+    );
+}

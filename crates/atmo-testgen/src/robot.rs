@@ -1,0 +1,251 @@
+//! The robot file, read on its own (the keys of `config/atmo.toml` the
+//! rigid body needs; other sections are ignored), and the seven bodies
+//! combined into one rigid body at a fixed tilt, described about its
+//! centre of mass.
+//!
+//! Bodies: the base (CoM at the base origin B), two arms hinged at A (the
+//! right arm turned by +varphi about body x, the left by -varphi, the left
+//! arm the right one mirrored in y), four rotors (PX4 quad-x: 1 front-right
+//! and 4 back-right on the right arm, 2 back-left and 3 front-left on the
+//! left). Arm inertia, `authors_model` convention: the listed tensor is
+//! about the hinge, in the arm frame, as listed for the left arm and with
+//! its xz and yz products negated for the right arm (the mirror image in
+//! y of a tensor negates xy and yz; the authors' right-arm tensor negates
+//! xz and yz). `about_com`: the tensor about the arm's CoM, right arm as
+//! listed, left arm mirrored.
+
+use std::path::Path;
+
+use nalgebra::{Matrix3, Vector3};
+use serde::Deserialize;
+
+use crate::GenError;
+
+#[derive(Debug, Clone, Copy, Deserialize)]
+struct Tensor {
+    xx: f64,
+    yy: f64,
+    zz: f64,
+    xy: f64,
+    xz: f64,
+    yz: f64,
+}
+
+impl Tensor {
+    fn matrix(self) -> Matrix3<f64> {
+        Matrix3::new(
+            self.xx, self.xy, self.xz, self.xy, self.yy, self.yz, self.xz, self.yz, self.zz,
+        )
+    }
+}
+
+#[derive(Debug, Clone, Deserialize)]
+struct Environment {
+    gravity: f64,
+}
+
+#[derive(Debug, Clone, Deserialize)]
+struct Base {
+    mass: f64,
+    inertia: Tensor,
+}
+
+#[derive(Debug, Clone, Copy, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+enum Convention {
+    AuthorsModel,
+    AboutCom,
+}
+
+#[derive(Debug, Clone, Deserialize)]
+struct Arm {
+    mass: f64,
+    inertia: Tensor,
+    inertia_convention: Convention,
+    base_to_hinge: [f64; 3],
+    hinge_to_com: [f64; 3],
+    hinge_to_rotor1: [f64; 3],
+}
+
+#[derive(Debug, Clone, Deserialize)]
+struct Rotor {
+    mass: f64,
+    inertia: [f64; 3],
+    k_thrust: f64,
+    k_moment: f64,
+    yaw_sign: [f64; 4],
+}
+
+#[derive(Debug, Clone, Deserialize)]
+struct Wheels {
+    radius: f64,
+}
+
+/// The sections of a robot file the generator reads.
+#[derive(Debug, Clone, Deserialize)]
+pub struct RobotFile {
+    environment: Environment,
+    base: Base,
+    arm: Arm,
+    rotor: Rotor,
+    wheels: Wheels,
+}
+
+impl RobotFile {
+    /// Reads a robot file (TOML).
+    pub fn load(path: &Path) -> Result<Self, GenError> {
+        let text = std::fs::read_to_string(path).map_err(|e| GenError::Robot {
+            file: path.display().to_string(),
+            message: e.to_string(),
+        })?;
+        toml::from_str(&text).map_err(|e| GenError::Robot {
+            file: path.display().to_string(),
+            message: e.to_string(),
+        })
+    }
+}
+
+/// One rigid body: ATMO frozen at a tilt.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RigidBody {
+    pub gravity: f64,
+    pub mass: f64,
+    /// Centre of mass relative to B, body frame (m).
+    pub com: Vector3<f64>,
+    /// Inertia about the centre of mass, body frame (kg m^2).
+    pub inertia_com: Matrix3<f64>,
+    /// Rotor hubs relative to B, body frame (m).
+    pub rotor_position: [Vector3<f64>; 4],
+    /// Unit thrust directions, body frame.
+    pub rotor_axis: [Vector3<f64>; 4],
+    /// Thrust of one rotor at full command (N).
+    pub k_thrust: f64,
+    /// Reaction moment per unit thrust (m).
+    pub k_moment: f64,
+    pub yaw_sign: [f64; 4],
+    pub wheel_radius: f64,
+    pub varphi: f64,
+}
+
+/// `m (|d|^2 I - d d^T)`: the Steiner term of a point mass at d.
+fn steiner(m: f64, d: &Vector3<f64>) -> Matrix3<f64> {
+    (Matrix3::identity() * d.dot(d) - d * d.transpose()) * m
+}
+
+fn turn_about_x(angle: f64) -> Matrix3<f64> {
+    let (s, c) = angle.sin_cos();
+    Matrix3::new(1.0, 0.0, 0.0, 0.0, c, -s, 0.0, s, c)
+}
+
+/// Point masses with a tensor about their own CoM, body frame.
+struct Part {
+    mass: f64,
+    at: Vector3<f64>,
+    inertia: Matrix3<f64>,
+}
+
+impl RigidBody {
+    /// The composite body at tilt `varphi` (rad).
+    pub fn at_tilt(robot: &RobotFile, varphi: f64) -> Self {
+        let mirror = Matrix3::from_diagonal(&Vector3::new(1.0, -1.0, 1.0));
+        let arm = &robot.arm;
+        let hinge_right = Vector3::from(arm.base_to_hinge);
+        let com_right = Vector3::from(arm.hinge_to_com);
+        let listed = arm.inertia.matrix();
+        // Each arm: (sign of its turn, hinge, hinge -> CoM in the arm frame,
+        // tensor about the arm CoM in the arm frame).
+        let arm_about_com = |hinge_to_com: &Vector3<f64>, about_hinge: Matrix3<f64>| {
+            about_hinge - steiner(arm.mass, hinge_to_com)
+        };
+        let (right_tensor, left_tensor) = match arm.inertia_convention {
+            Convention::AuthorsModel => {
+                let mut right = listed;
+                for (i, j) in [(0, 2), (1, 2)] {
+                    right[(i, j)] = -right[(i, j)];
+                    right[(j, i)] = -right[(j, i)];
+                }
+                (
+                    arm_about_com(&com_right, right),
+                    arm_about_com(&(mirror * com_right), listed),
+                )
+            }
+            Convention::AboutCom => (listed, mirror * listed * mirror),
+        };
+        let arms = [
+            (turn_about_x(varphi), hinge_right, com_right, right_tensor),
+            (
+                turn_about_x(-varphi),
+                mirror * hinge_right,
+                mirror * com_right,
+                left_tensor,
+            ),
+        ];
+        let mut parts = vec![Part {
+            mass: robot.base.mass,
+            at: Vector3::zeros(),
+            inertia: robot.base.inertia.matrix(),
+        }];
+        for (turn, hinge, to_com, tensor) in &arms {
+            parts.push(Part {
+                mass: arm.mass,
+                at: hinge + turn * to_com,
+                inertia: turn * tensor * turn.transpose(),
+            });
+        }
+        let r1 = Vector3::from(arm.hinge_to_rotor1);
+        // Rotor i: (arm, hinge -> hub in that arm's frame).
+        let rotors = [
+            (0, r1),
+            (1, Vector3::new(-r1.x, -r1.y, r1.z)),
+            (1, Vector3::new(r1.x, -r1.y, r1.z)),
+            (0, Vector3::new(-r1.x, r1.y, r1.z)),
+        ];
+        let [ixx, iyy, izz] = robot.rotor.inertia;
+        let mut rotor_position = [Vector3::zeros(); 4];
+        let mut rotor_axis = [Vector3::zeros(); 4];
+        for (i, (a, hub)) in rotors.iter().enumerate() {
+            let (turn, hinge, _, _) = &arms[*a];
+            rotor_position[i] = hinge + turn * hub;
+            rotor_axis[i] = turn * Vector3::new(0.0, 0.0, -1.0);
+            parts.push(Part {
+                mass: robot.rotor.mass,
+                at: rotor_position[i],
+                inertia: turn
+                    * Matrix3::from_diagonal(&Vector3::new(ixx, iyy, izz))
+                    * turn.transpose(),
+            });
+        }
+        let mass: f64 = parts.iter().map(|p| p.mass).sum();
+        let com = parts.iter().map(|p| p.at * p.mass).sum::<Vector3<f64>>() / mass;
+        let inertia_com = parts
+            .iter()
+            .map(|p| p.inertia + steiner(p.mass, &(p.at - com)))
+            .sum();
+        Self {
+            gravity: robot.environment.gravity,
+            mass,
+            com,
+            inertia_com,
+            rotor_position,
+            rotor_axis,
+            k_thrust: robot.rotor.k_thrust,
+            k_moment: robot.rotor.k_moment,
+            yaw_sign: robot.rotor.yaw_sign,
+            wheel_radius: robot.wheels.radius,
+            varphi,
+        }
+    }
+
+    /// Body force and torque about the CoM of rotor thrusts `t` (N).
+    pub fn rotor_wrench(&self, t: &[f64; 4]) -> (Vector3<f64>, Vector3<f64>) {
+        let mut force = Vector3::zeros();
+        let mut torque = Vector3::zeros();
+        for i in 0..4 {
+            let f = self.rotor_axis[i] * t[i];
+            force += f;
+            torque += (self.rotor_position[i] - self.com).cross(&f)
+                - self.rotor_axis[i] * (self.yaw_sign[i] * self.k_moment * t[i]);
+        }
+        (force, torque)
+    }
+}
