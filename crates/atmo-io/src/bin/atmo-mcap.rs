@@ -4,11 +4,13 @@
 //! atmo-mcap recover <truncated.mcap> <out.mcap>   make a killed writer's log valid
 //! atmo-mcap info <log.mcap>                        messages per topic and time span
 //! ```
+//!
+//! Both check every chunk's CRC and report the corrupt chunks they skipped.
 
 use std::collections::BTreeMap;
 use std::process::ExitCode;
 
-use atmo_io::mcap_log::{read_log, recover};
+use atmo_io::mcap_log::{read_log_lossy, recover};
 
 const USAGE: &str =
     "usage:\n  atmo-mcap recover <truncated.mcap> <out.mcap>\n  atmo-mcap info <log.mcap>";
@@ -32,8 +34,14 @@ fn main() -> ExitCode {
                     .map(|why| format!(" (input truncated: {why})"))
                     .unwrap_or_default()
             );
+            if !r.skipped.is_sound() {
+                eprintln!("atmo-mcap: skipped: {}", r.skipped);
+            }
         }),
-        ["info", log] => read_log(log).map(|messages| {
+        ["info", log] => read_log_lossy(log).map(|(messages, integrity)| {
+            if !integrity.is_sound() {
+                eprintln!("atmo-mcap: {log}: skipped: {integrity}");
+            }
             let mut topics: BTreeMap<&str, (usize, &str, u64, u64)> = BTreeMap::new();
             for m in &messages {
                 let e = topics
