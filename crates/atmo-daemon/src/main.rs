@@ -40,8 +40,9 @@ enum Command {
         /// MCAP log file (overrides [log] path).
         #[arg(long)]
         log: Option<PathBuf>,
-        /// Stop by itself after this many seconds (tests, bench runs).
-        #[arg(long)]
+        /// Stop by itself after this many seconds (tests, bench runs; finite,
+        /// at most one week).
+        #[arg(long, value_parser = atmo_core::cli_numbers::run_duration_s)]
         duration: Option<f64>,
     },
     /// Load and validate every config file the daemon would use, print what
@@ -234,10 +235,29 @@ fn run(arg: &DaemonConfigArg, log_path: Option<PathBuf>, duration: Option<f64>) 
 
 #[cfg(test)]
 mod tests {
+    use super::*;
+
     /// clap's own consistency checks (unique argument ids, defaults that parse).
     #[test]
     fn the_command_line_is_consistent() {
         use clap::CommandFactory as _;
-        super::Cli::command().debug_assert();
+        Cli::command().debug_assert();
+    }
+
+    /// Issue 21: `run --duration nan|inf|1e300` ran until killed.
+    #[test]
+    fn run_refuses_a_duration_that_never_ends() {
+        for value in ["nan", "inf", "1e300", "-1", "0"] {
+            let flag = format!("--duration={value}");
+            let err = Cli::try_parse_from(["atmo-daemon", "run", flag.as_str()])
+                .err()
+                .unwrap_or_else(|| panic!("--duration {value} accepted"));
+            let text = err.to_string();
+            assert!(
+                text.contains("--duration") && text.contains(value),
+                "{text}"
+            );
+        }
+        assert!(Cli::try_parse_from(["atmo-daemon", "run", "--duration", "2.5"]).is_ok());
     }
 }

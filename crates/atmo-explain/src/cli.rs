@@ -63,11 +63,11 @@ pub struct Args {
     /// com_offset, mass_error, none).
     #[arg(long)]
     pub demo: Option<String>,
-    /// Length of a --demo recording, s.
-    #[arg(long, default_value_t = 48.0)]
+    /// Length of a --demo recording, s (at most 3600).
+    #[arg(long, default_value_t = 48.0, value_parser = atmo_core::cli_numbers::demo_duration_s)]
     pub duration: f64,
-    /// Sample rate of a --demo recording, Hz.
-    #[arg(long, default_value_t = 120.0)]
+    /// Sample rate of a --demo recording, Hz (at most 1000).
+    #[arg(long, default_value_t = 120.0, value_parser = atmo_core::cli_numbers::sample_rate_hz)]
     pub rate: f64,
     /// Seed (demo flight and stability subsampling).
     #[arg(long, default_value_t = 1)]
@@ -220,4 +220,36 @@ fn summary(ex: &crate::Explanation, out: &Path, elapsed: f64) -> String {
         out.display()
     );
     s
+}
+
+#[cfg(test)]
+mod tests {
+    use clap::Parser;
+
+    #[derive(Parser)]
+    struct Explain {
+        #[command(flatten)]
+        args: super::Args,
+    }
+
+    /// Issue 21: `--demo --duration inf` panicked, `1e9` aborted allocating.
+    #[test]
+    fn demo_duration_and_rate_are_finite_and_bounded() {
+        for (flag, value) in [
+            ("--duration", "inf"),
+            ("--duration", "1e9"),
+            ("--duration", "nan"),
+            ("--rate", "inf"),
+            ("--rate", "0"),
+            ("--rate", "1e7"),
+        ] {
+            let err = Explain::try_parse_from(["explain", "--demo", "none", flag, value])
+                .err()
+                .unwrap_or_else(|| panic!("{flag} {value} accepted"));
+            let text = err.to_string();
+            assert!(text.contains(flag) && text.contains(value), "{text}");
+        }
+        let ok = Explain::try_parse_from(["explain", "--demo", "none", "--duration", "12"]);
+        assert_eq!(ok.map(|e| e.args.duration).ok(), Some(12.0));
+    }
 }

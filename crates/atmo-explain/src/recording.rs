@@ -26,6 +26,11 @@ pub const STATUS_TOPIC: &str = "/atmo/status";
 pub const OPTIONAL_COLUMNS: [&str; 2] = ["ground_z", "battery_v"];
 
 /// One sample of a recording.
+/// Largest time between two consecutive rows of a recording, s.
+pub const MAX_ROW_GAP_S: f64 = 10.0;
+/// Largest median row spacing of a recording, s (a sample rate of 1 Hz).
+pub const MAX_MEDIAN_DT_S: f64 = 1.0;
+
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Sample {
     /// s.
@@ -179,6 +184,9 @@ impl Recording {
                 battery_v: None,
             });
         }
+        if let Some(message) = rec.median_spacing_error() {
+            return Err(fail(message));
+        }
         if rec.samples.is_empty() {
             return Err(fail(format!(
                 "no usable rows on {STATUS_TOPIC}: {} non-finite, {} out of order",
@@ -188,7 +196,11 @@ impl Recording {
         Ok(rec)
     }
 
-    /// Parses CSV text; `file` names the origin in errors.
+    /// Parses CSV text; `file` names the origin in errors. Time rule: `t` in seconds, increasing (rows
+    /// that do not advance are skipped and counted), consecutive rows at
+    /// most [`MAX_ROW_GAP_S`] apart and the median spacing at most
+    /// [`MAX_MEDIAN_DT_S`]; otherwise an error naming the line and values
+    /// (timestamps in ms, us or ns, a stray 1e20).
     pub fn from_csv_str(text: &str, file: impl Into<PathBuf>) -> Result<Self, ExplainError> {
         let file = file.into();
         let fail = |message: String| ExplainError::Input {
@@ -256,7 +268,8 @@ impl Recording {
         let mut fields: Vec<&str> = Vec::with_capacity(names.len());
         let mut values = [0.0; 18];
         let mut last_t = f64::NEG_INFINITY;
-        for (_, line) in lines {
+        let mut last_line = 0;
+        for (index, line) in lines {
             fields.clear();
             fields.extend(line.split(','));
             let parse = |i: usize| -> Option<f64> {
@@ -286,7 +299,17 @@ impl Recording {
                 rec.skipped_time += 1;
                 continue;
             }
+            if last_t.is_finite() && values[0] - last_t > MAX_ROW_GAP_S {
+                return Err(fail(format!(
+                    "line {}: t = {} is {} s after line {last_line} (t = {last_t}): gaps over \
+                     {MAX_ROW_GAP_S} s are refused (t must be seconds, not ms, us or ns)",
+                    index + 1,
+                    values[0],
+                    values[0] - last_t
+                )));
+            }
             last_t = values[0];
+            last_line = index + 1;
             rec.samples.push(Sample {
                 t: values[0],
                 x: State::from_column_slice(&values[1..13]),
@@ -295,6 +318,9 @@ impl Recording {
                 ground_z,
                 battery_v: battery.and_then(parse),
             });
+        }
+        if let Some(message) = rec.median_spacing_error() {
+            return Err(fail(message));
         }
         if rec.samples.is_empty() {
             return Err(fail(format!(
@@ -325,6 +351,17 @@ impl Recording {
     }
 
     /// Median time step (s).
+    /// The time rule's median spacing check (see [`Recording::from_csv_str`]).
+    fn median_spacing_error(&self) -> Option<String> {
+        let dt = self.median_dt();
+        (self.samples.len() > 1 && (dt.is_nan() || dt > MAX_MEDIAN_DT_S)).then(|| {
+            format!(
+                "column t: the median spacing of the rows is {dt} s, over {MAX_MEDIAN_DT_S} s \
+                 (t must be seconds, not ms, us or ns)"
+            )
+        })
+    }
+
     pub fn median_dt(&self) -> f64 {
         let mut d: Vec<f64> = self.samples.windows(2).map(|w| w[1].t - w[0].t).collect();
         if d.is_empty() {
@@ -332,5 +369,54 @@ impl Recording {
         }
         d.sort_by(f64::total_cmp);
         d[d.len() / 2]
+    }
+}
+
+#[cfg(test)]
+mod time_axis_tests {
+    use super::Recording;
+
+    fn csv(times: &[&str]) -> String {
+        let mut text =
+            String::from("t,x,y,z,yaw,pitch,roll,vx,vy,vz,wx,wy,wz,u1,u2,u3,u4,varphi\n");
+        for t in times {
+            text.push_str(t);
+            text.push_str(",0,0,1,0,0,0,0,0,0,0,0,0,0.5,0.5,0.5,0.5,0\n");
+        }
+        text
+    }
+
+    /// Issue 21: 1e20, 1.7e12, a gap of 1e19 s and us timestamps panicked,
+    /// aborted or hung; now an error naming the line and the value.
+    #[test]
+    fn implausible_time_axes_are_refused_with_line_and_value() {
+        let cases: [(&[&str], &str); 4] = [
+            (
+                &["0", "0.01", "1e20", "1e20"],
+                "line 4: t = 100000000000000000000",
+            ),
+            (&["0", "0.01", "1700000000000"], "line 4: t = 1700000000000"),
+            (&["0", "1e19"], "line 3: t = 10000000000000000000"),
+            (&["0", "8333", "16666", "25000"], "line 3: t = 8333"),
+        ];
+        for (times, expected) in cases {
+            let err = Recording::from_csv_str(&csv(times), "r.csv")
+                .unwrap_err()
+                .to_string();
+            assert!(err.contains(expected) && err.contains("r.csv"), "{err}");
+        }
+        let slow = ["0", "2", "4", "6"];
+        let err = Recording::from_csv_str(&csv(&slow), "r.csv")
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("median spacing of the rows is 2 s"), "{err}");
+        let fine = ["0", "0.01", "0.02", "0.03"];
+        assert_eq!(
+            Recording::from_csv_str(&csv(&fine), "r.csv")
+                .unwrap()
+                .samples
+                .len(),
+            4
+        );
     }
 }

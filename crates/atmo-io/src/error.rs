@@ -46,6 +46,16 @@ pub enum IoError {
         #[source]
         source: mcap::McapError,
     },
+    /// A log has corrupt chunks or messages (read with the `*_lossy` readers
+    /// or `atmo-mcap recover` to keep the sound rest).
+    #[error("{file}: corrupt log: {integrity}")]
+    LogCorrupt {
+        file: PathBuf,
+        integrity: crate::mcap_log::Integrity,
+    },
+    /// A file given as an MCAP log is not one.
+    #[error("{file}: not an MCAP file ({reason})")]
+    NotMcap { file: PathBuf, reason: String },
     /// A log has a channel or schema this crate does not understand.
     #[error("{file}: channel `{topic}`: {reason}")]
     LogChannel {

@@ -46,8 +46,9 @@ enum Command {
         /// Output folder; results go to OUT/<scenario name>/.
         #[arg(long, default_value = "out")]
         out: PathBuf,
-        /// Monte Carlo: fly this many randomized copies instead of one flight.
-        #[arg(long)]
+        /// Monte Carlo: fly this many randomized copies instead of one flight
+        /// (1 to 100000).
+        #[arg(long, value_parser = atmo_core::cli_numbers::run_count)]
         runs: Option<usize>,
         /// Seed of the first Monte Carlo run (run i uses seed + i).
         #[arg(long, default_value_t = 1)]

@@ -4,12 +4,14 @@
 //! atmo-mcap recover <truncated.mcap> <out.mcap>   make a killed writer's log valid
 //! atmo-mcap info <log.mcap>                        messages per topic and time span
 //! ```
+//!
+//! Both check every chunk's CRC and report the corrupt chunks they skipped.
 
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 use std::process::ExitCode;
 
-use atmo_io::mcap_log::{LoggedMessage, read_log, recover};
+use atmo_io::mcap_log::{LoggedMessage, read_log_lossy, recover};
 use clap::{Parser, Subcommand};
 
 /// Tools for the flight stack's MCAP logs (`atmo-daemon run` and
@@ -62,8 +64,16 @@ fn main() -> ExitCode {
                     .map(|why| format!(" (input truncated: {why})"))
                     .unwrap_or_default()
             );
+            if !r.skipped.is_sound() {
+                eprintln!("atmo-mcap: skipped: {}", r.skipped);
+            }
         }),
-        Command::Info { log } => read_log(&log).map(|messages| print_topics(&messages)),
+        Command::Info { log } => read_log_lossy(&log).map(|(messages, integrity)| {
+            if !integrity.is_sound() {
+                eprintln!("atmo-mcap: {}: skipped: {integrity}", log.display());
+            }
+            print_topics(&messages);
+        }),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

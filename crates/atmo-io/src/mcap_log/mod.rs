@@ -11,18 +11,25 @@
 //!   loses at most that much. Drops are written to the log itself on
 //!   [`LOGGER_TOPIC`] as a `diagnostic_msgs/DiagnosticArray`.
 //! - [`recover`]: turns a truncated log (killed writer) into a valid one.
-//! - [`read_log`] / [`read_topic`]: decode a log back into Rust types.
+//! - [`read_log`] / [`read_topic`]: decode a log back into Rust types. Every
+//!   chunk's CRC is checked before its messages are used; a corrupt chunk or
+//!   an undecodable message is skipped and counted ([`Integrity`]), an error
+//!   for the strict readers, a count for the `*_lossy` ones and `recover`.
 
 mod logger;
 mod reader;
 mod recover;
+mod scan;
 
 pub use logger::{
     Channel, Compression, LOGGER_TOPIC, LogPayload, LogSummary, Loggable, LoggerHandle,
     LoggerOptions, LoggerThread, McapLogger,
 };
-pub use reader::{AnyMessage, LoggedMessage, read_log, read_topic};
+pub use reader::{
+    AnyMessage, LoggedMessage, read_log, read_log_lossy, read_topic, read_topic_lossy,
+};
 pub use recover::{RecoverReport, recover};
+pub use scan::Integrity;
 
 /// MCAP profile of every log.
 pub const PROFILE: &str = "ros2";

@@ -2,6 +2,7 @@
 
 use std::path::Path;
 
+use super::scan::{Integrity, scan};
 use super::{MESSAGE_ENCODING, SCHEMA_ENCODING};
 use crate::error::{IoError, Result};
 use crate::msg::{
@@ -59,70 +60,155 @@ fn decode_any(topic: &str, type_name: &str, data: &[u8]) -> Result<Option<AnyMes
     }))
 }
 
+/// Checks that `bytes` start with the MCAP magic, so that a file of random
+/// bytes, CSV or nothing is refused by name rather than read as an empty log.
+pub(super) fn check_magic(path: &Path, bytes: &[u8]) -> Result<()> {
+    let reason = if bytes.is_empty() {
+        "the file is empty".to_string()
+    } else if bytes.len() < mcap::MAGIC.len() || !bytes.starts_with(mcap::MAGIC) {
+        let head = &bytes[..bytes.len().min(8)];
+        format!(
+            "its first bytes {head:02x?} are not the MCAP magic {:02x?}",
+            mcap::MAGIC
+        )
+    } else {
+        return Ok(());
+    };
+    Err(IoError::NotMcap {
+        file: path.to_path_buf(),
+        reason,
+    })
+}
+
+/// What a reader's visitor makes of one message.
+enum Visit<T> {
+    Skip,
+    Keep(T),
+    /// The payload does not decode: skipped and counted.
+    Undecodable(IoError),
+}
+
+/// Every message of `path` that `visit` keeps, in file order, with what was
+/// skipped as corrupt. Structural errors (truncation, a channel this crate
+/// cannot read) are errors naming the file.
+fn read_messages<T>(
+    path: &Path,
+    mut visit: impl FnMut(&mcap::Message<'_>) -> Result<Visit<T>>,
+) -> Result<(Vec<T>, Integrity)> {
+    let bytes = read_file(path)?;
+    check_magic(path, &bytes)?;
+    let mut out = Vec::new();
+    let mut undecodable = 0u64;
+    let mut first_undecodable = None;
+    let end = scan(&bytes, false, |message| {
+        match visit(&message)? {
+            Visit::Skip => {}
+            Visit::Keep(value) => out.push(value),
+            Visit::Undecodable(e) => {
+                undecodable += 1;
+                first_undecodable.get_or_insert_with(|| {
+                    format!(
+                        "message {} at log time {} ns: {e}",
+                        message.sequence, message.log_time
+                    )
+                });
+            }
+        }
+        Ok::<(), IoError>(())
+    })?;
+    if let Some(source) = end.stopped_by {
+        return Err(IoError::Mcap {
+            file: path.to_path_buf(),
+            source,
+        });
+    }
+    let mut integrity = end.integrity;
+    integrity.undecodable_messages = undecodable;
+    if let Some(first) = first_undecodable {
+        integrity.note(|| first);
+    }
+    Ok((out, integrity))
+}
+
+fn any_message(path: &Path, message: &mcap::Message<'_>) -> Result<Visit<LoggedMessage>> {
+    let channel = &message.channel;
+    let channel_error = |reason: String| IoError::LogChannel {
+        file: path.to_path_buf(),
+        topic: channel.topic.clone(),
+        reason,
+    };
+    let Some(schema) = channel.schema.as_ref() else {
+        return Err(channel_error("no schema".into()));
+    };
+    if schema.encoding != SCHEMA_ENCODING || channel.message_encoding != MESSAGE_ENCODING {
+        return Err(channel_error(format!(
+            "encodings {}/{}, expected {SCHEMA_ENCODING}/{MESSAGE_ENCODING}",
+            schema.encoding, channel.message_encoding
+        )));
+    }
+    Ok(
+        match decode_any(&channel.topic, &schema.name, &message.data) {
+            Ok(Some(decoded)) => Visit::Keep(LoggedMessage {
+                topic: channel.topic.clone(),
+                type_name: schema.name.clone(),
+                sequence: message.sequence,
+                log_time_ns: message.log_time,
+                publish_time_ns: message.publish_time,
+                message: decoded,
+            }),
+            Ok(None) => return Err(channel_error(format!("unknown schema {}", schema.name))),
+            Err(e) => Visit::Undecodable(e),
+        },
+    )
+}
+
+fn sound<T>(path: &Path, read: (Vec<T>, Integrity)) -> Result<Vec<T>> {
+    let (messages, integrity) = read;
+    if integrity.is_sound() {
+        Ok(messages)
+    } else {
+        Err(IoError::LogCorrupt {
+            file: path.to_path_buf(),
+            integrity,
+        })
+    }
+}
+
 /// Reads every message of a finished log, in file order, decoding each into
 /// its Rust type. A channel that is not `ros2msg`/`cdr` or whose schema this
 /// crate does not know is an error naming the file and topic (this reader is
 /// for the project's own logs); a truncated log is an MCAP error (run
-/// [`super::recover`] first).
+/// [`super::recover`] first); a corrupt chunk (CRC mismatch) or message is
+/// [`IoError::LogCorrupt`] with the counts ([`read_log_lossy`] keeps the rest).
 pub fn read_log(path: impl AsRef<Path>) -> Result<Vec<LoggedMessage>> {
     let path = path.as_ref();
-    let bytes = read_file(path)?;
-    let stream = mcap::MessageStream::new(&bytes).map_err(|source| IoError::Mcap {
-        file: path.to_path_buf(),
-        source,
-    })?;
-    let mut out = Vec::new();
-    for message in stream {
-        let message = message.map_err(|source| IoError::Mcap {
-            file: path.to_path_buf(),
-            source,
-        })?;
-        let channel = &message.channel;
-        let channel_error = |reason: String| IoError::LogChannel {
-            file: path.to_path_buf(),
-            topic: channel.topic.clone(),
-            reason,
-        };
-        let Some(schema) = channel.schema.as_ref() else {
-            return Err(channel_error("no schema".into()));
-        };
-        if schema.encoding != SCHEMA_ENCODING || channel.message_encoding != MESSAGE_ENCODING {
-            return Err(channel_error(format!(
-                "encodings {}/{}, expected {SCHEMA_ENCODING}/{MESSAGE_ENCODING}",
-                schema.encoding, channel.message_encoding
-            )));
-        }
-        let decoded = decode_any(&channel.topic, &schema.name, &message.data)?
-            .ok_or_else(|| channel_error(format!("unknown schema {}", schema.name)))?;
-        out.push(LoggedMessage {
-            topic: channel.topic.clone(),
-            type_name: schema.name.clone(),
-            sequence: message.sequence,
-            log_time_ns: message.log_time,
-            publish_time_ns: message.publish_time,
-            message: decoded,
-        });
-    }
-    Ok(out)
+    sound(path, read_log_lossy(path)?)
+}
+
+/// Like [`read_log`], but skips corrupt chunks and undecodable messages,
+/// counting them in the returned [`Integrity`].
+pub fn read_log_lossy(path: impl AsRef<Path>) -> Result<(Vec<LoggedMessage>, Integrity)> {
+    let path = path.as_ref();
+    read_messages(path, |message| any_message(path, message))
 }
 
 /// Reads the messages of one topic as type `M`: `(log_time_ns, message)` in
-/// file order. The topic's schema must be `M`'s type.
+/// file order. The topic's schema must be `M`'s type. Corruption is an error
+/// as in [`read_log`].
 pub fn read_topic<M: RosMessage>(path: impl AsRef<Path>, topic: &str) -> Result<Vec<(u64, M)>> {
     let path = path.as_ref();
-    let bytes = read_file(path)?;
-    let stream = mcap::MessageStream::new(&bytes).map_err(|source| IoError::Mcap {
-        file: path.to_path_buf(),
-        source,
-    })?;
-    let mut out = Vec::new();
-    for message in stream {
-        let message = message.map_err(|source| IoError::Mcap {
-            file: path.to_path_buf(),
-            source,
-        })?;
+    sound(path, read_topic_lossy::<M>(path, topic)?)
+}
+
+/// Like [`read_topic`], skipping and counting corrupt chunks and messages.
+pub fn read_topic_lossy<M: RosMessage>(
+    path: impl AsRef<Path>,
+    topic: &str,
+) -> Result<(Vec<(u64, M)>, Integrity)> {
+    let path = path.as_ref();
+    read_messages(path, |message| {
         if message.channel.topic != topic {
-            continue;
+            return Ok(Visit::Skip);
         }
         let schema_name = message
             .channel
@@ -136,7 +222,9 @@ pub fn read_topic<M: RosMessage>(path: impl AsRef<Path>, topic: &str) -> Result<
                 reason: format!("schema {schema_name}, expected {}", M::TYPE_NAME),
             });
         }
-        out.push((message.log_time, decode::<M>(topic, &message.data)?));
-    }
-    Ok(out)
+        Ok(match decode::<M>(topic, &message.data) {
+            Ok(decoded) => Visit::Keep((message.log_time, decoded)),
+            Err(e) => Visit::Undecodable(e),
+        })
+    })
 }

@@ -2,12 +2,12 @@
 
 use std::collections::BTreeMap;
 use std::fs::File;
-use std::io::{BufReader, BufWriter};
+use std::io::BufWriter;
 use std::path::{Path, PathBuf};
 
-use mcap::sans_io::LinearReaderOptions;
-
 use super::PROFILE;
+use super::reader::check_magic;
+use super::scan::{Integrity, scan};
 use crate::error::{IoError, Result};
 
 /// What [`recover`] saved.
@@ -21,13 +21,18 @@ pub struct RecoverReport {
     pub last_log_time_ns: u64,
     /// Why reading stopped early (the truncated record), if it did.
     pub stopped_by: Option<String>,
+    /// Corrupt chunks skipped (CRC mismatch) and the messages they held.
+    pub skipped: Integrity,
 }
 
 /// Copies every complete message of `input` (a log whose writer was killed:
 /// no summary, no footer, maybe half a chunk) into a new, finished log at
 /// `output` with the same schemas and channels. Messages of the chunk being
 /// written at the kill are lost; with the logger's periodic flush that is at
-/// most the last flush period. A valid log is copied whole.
+/// most the last flush period. A valid log is copied whole. A chunk whose CRC
+/// does not match is skipped and counted in [`RecoverReport::skipped`]. Input
+/// that does not start with the MCAP magic (random bytes, CSV, an empty file)
+/// is refused with [`IoError::NotMcap`] before anything is written.
 pub fn recover(input: impl AsRef<Path>, output: impl AsRef<Path>) -> Result<RecoverReport> {
     let input = input.as_ref();
     let output = output.as_ref();
@@ -41,7 +46,8 @@ pub fn recover(input: impl AsRef<Path>, output: impl AsRef<Path>) -> Result<Reco
         let file = file.to_path_buf();
         move |source| IoError::File { file, source }
     };
-    let reader = BufReader::new(File::open(input).map_err(file_err(input))?);
+    let bytes = std::fs::read(input).map_err(file_err(input))?;
+    check_magic(input, &bytes)?;
     let out = File::create(output).map_err(file_err(output))?;
     let mcap_err = |file: &Path| {
         let file = file.to_path_buf();
@@ -54,24 +60,12 @@ pub fn recover(input: impl AsRef<Path>, output: impl AsRef<Path>) -> Result<Reco
         .create(BufWriter::new(out))
         .map_err(mcap_err(output))?;
 
-    let messages = mcap::io::MessageReader::new_with_options(
-        reader,
-        LinearReaderOptions::default().with_skip_end_magic(true),
-    );
     // Input channel id -> output channel id.
     let mut channels: BTreeMap<u16, u16> = BTreeMap::new();
     let mut schemas: BTreeMap<u16, u16> = BTreeMap::new();
     let mut copied = 0u64;
     let mut last = 0u64;
-    let mut stopped_by = None;
-    for message in messages {
-        let message = match message {
-            Ok(m) => m,
-            Err(e) => {
-                stopped_by = Some(e.to_string());
-                break;
-            }
-        };
+    let end = scan(&bytes, true, |message| {
         let channel = &message.channel;
         let out_channel = if let Some(id) = channels.get(&channel.id) {
             *id
@@ -114,13 +108,15 @@ pub fn recover(input: impl AsRef<Path>, output: impl AsRef<Path>) -> Result<Reco
             .map_err(mcap_err(output))?;
         copied += 1;
         last = last.max(message.log_time);
-    }
+        Ok::<(), IoError>(())
+    })?;
     writer.finish().map_err(mcap_err(output))?;
     Ok(RecoverReport {
         output: output.to_path_buf(),
         messages: copied,
         channels: channels.len(),
         last_log_time_ns: last,
-        stopped_by,
+        stopped_by: end.stopped_by.map(|e| e.to_string()),
+        skipped: end.integrity,
     })
 }

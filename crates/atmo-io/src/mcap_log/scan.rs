@@ -1,0 +1,193 @@
+//! Walking a log's records chunk by chunk, checking every chunk's CRC.
+//!
+//! The `mcap` crate's message streams leave chunk CRCs unchecked by default
+//! and stop at the first error, so a flipped bit inside a compressed chunk
+//! either changes values silently or loses the rest of the log. Here each
+//! chunk is decompressed whole ([`mcap::read::ChunkReader`] checks the CRC of
+//! the uncompressed bytes at the chunk's end) before any of its messages is
+//! handed on: a corrupt chunk is skipped and counted, with the number of
+//! messages it held (from the message index records that follow it), and
+//! reading goes on with the next chunk.
+
+use std::borrow::Cow;
+
+use mcap::McapError;
+use mcap::read::{ChannelAccumulator, ChunkReader, LinearReader, Options};
+use mcap::records::Record;
+
+/// What a read skipped because it was corrupt (0 everywhere for a sound log).
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct Integrity {
+    /// Chunks whose CRC did not match or that did not decompress.
+    pub corrupt_chunks: u64,
+    /// Messages in those chunks, counted from their message indexes (a
+    /// truncated log has none for its last chunk).
+    pub messages_in_corrupt_chunks: u64,
+    /// Messages whose payload did not decode as their schema's type.
+    pub undecodable_messages: u64,
+    /// The first corruption seen, for the error message.
+    pub first_problem: Option<String>,
+}
+
+impl Integrity {
+    /// Whether nothing was skipped.
+    pub fn is_sound(&self) -> bool {
+        self.corrupt_chunks == 0 && self.undecodable_messages == 0
+    }
+
+    pub(super) fn note(&mut self, problem: impl FnOnce() -> String) {
+        if self.first_problem.is_none() {
+            self.first_problem = Some(problem());
+        }
+    }
+}
+
+impl std::fmt::Display for Integrity {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "{} corrupt chunk(s) skipped ({} messages), {} undecodable message(s) skipped",
+            self.corrupt_chunks, self.messages_in_corrupt_chunks, self.undecodable_messages
+        )?;
+        if let Some(first) = &self.first_problem {
+            write!(f, "; first: {first}")?;
+        }
+        Ok(())
+    }
+}
+
+/// How a scan ended.
+pub(super) struct ScanEnd {
+    pub integrity: Integrity,
+    /// The structural error that stopped the scan (truncation, bad magic),
+    /// if any; the messages before it were delivered.
+    pub stopped_by: Option<McapError>,
+}
+
+/// Calls `on_message` for every message of `bytes` (an MCAP file) whose
+/// chunk is sound, in file order. `truncated_ok` reads a log without footer
+/// or end magic (a killed writer's) up to its last complete record.
+/// `on_message`'s error aborts the scan and is returned.
+pub(super) fn scan<E>(
+    bytes: &[u8],
+    truncated_ok: bool,
+    mut on_message: impl FnMut(mcap::Message<'static>) -> Result<(), E>,
+) -> Result<ScanEnd, E> {
+    let options = truncated_ok
+        .then_some(Options::IgnoreEndMagic)
+        .into_iter()
+        .collect();
+    let mut integrity = Integrity::default();
+    let records = match LinearReader::new_with_options(bytes, options) {
+        Ok(records) => records,
+        Err(e) => {
+            return Ok(ScanEnd {
+                integrity,
+                stopped_by: Some(e),
+            });
+        }
+    };
+    let mut channels = ChannelAccumulator::<'static>::default();
+    let mut after_corrupt_chunk = false;
+    let mut past_data_end = false;
+    let mut chunk_number = 0u64;
+    let mut stopped_by = None;
+    for record in records {
+        let record = match record {
+            Ok(record) => record,
+            Err(e) => {
+                stopped_by = Some(e);
+                break;
+            }
+        };
+        if past_data_end {
+            continue; // the summary repeats schemas and channels
+        }
+        match record {
+            Record::Chunk { header, data } => {
+                chunk_number += 1;
+                let inner: Result<Vec<Record<'_>>, McapError> =
+                    ChunkReader::new(header, &data).and_then(Iterator::collect);
+                match inner {
+                    Ok(inner) => {
+                        after_corrupt_chunk = false;
+                        for record in inner {
+                            if let Err(e) = dispatch(record, &mut channels, &mut on_message) {
+                                return handled(e, integrity);
+                            }
+                        }
+                    }
+                    Err(e) => {
+                        integrity.corrupt_chunks += 1;
+                        integrity.note(|| format!("chunk {chunk_number}: {e}"));
+                        after_corrupt_chunk = true;
+                    }
+                }
+            }
+            Record::MessageIndex(index) if after_corrupt_chunk => {
+                integrity.messages_in_corrupt_chunks += index.records.len() as u64;
+            }
+            Record::DataEnd(_) => {
+                if truncated_ok {
+                    break;
+                }
+                past_data_end = true;
+            }
+            other => {
+                after_corrupt_chunk = false;
+                if let Err(e) = dispatch(other, &mut channels, &mut on_message) {
+                    return handled(e, integrity);
+                }
+            }
+        }
+    }
+    Ok(ScanEnd {
+        integrity,
+        stopped_by,
+    })
+}
+
+/// A structural error of a record (bad schema or channel) or the caller's own.
+enum DispatchError<E> {
+    Mcap(McapError),
+    Caller(E),
+}
+
+/// The caller's error aborts; a bad schema or channel record stops the scan
+/// like a truncation.
+fn handled<E>(e: DispatchError<E>, integrity: Integrity) -> Result<ScanEnd, E> {
+    match e {
+        DispatchError::Caller(e) => Err(e),
+        DispatchError::Mcap(e) => Ok(ScanEnd {
+            integrity,
+            stopped_by: Some(e),
+        }),
+    }
+}
+
+fn dispatch<E>(
+    record: Record<'_>,
+    channels: &mut ChannelAccumulator<'static>,
+    on_message: &mut impl FnMut(mcap::Message<'static>) -> Result<(), E>,
+) -> Result<(), DispatchError<E>> {
+    match record {
+        Record::Schema { header, data } => channels
+            .add_schema(header, Cow::Owned(data.into_owned()))
+            .map_err(DispatchError::Mcap),
+        Record::Channel(channel) => channels.add_channel(channel).map_err(DispatchError::Mcap),
+        Record::Message { header, data } => {
+            let channel = channels.get(header.channel_id).ok_or(DispatchError::Mcap(
+                McapError::UnknownChannel(header.sequence, header.channel_id),
+            ))?;
+            on_message(mcap::Message {
+                channel,
+                sequence: header.sequence,
+                log_time: header.log_time,
+                publish_time: header.publish_time,
+                data: Cow::Owned(data.into_owned()),
+            })
+            .map_err(DispatchError::Caller)
+        }
+        _ => Ok(()),
+    }
+}
