@@ -3,8 +3,8 @@
 //! nothing concealed the two must agree far below the recording noise, or
 //! the "clean" flights would not be clean for the discrepancy finder.
 
-use atmo_core::RobotConfig;
 use atmo_core::model::{Input, Model, State, idx, rotation};
+use atmo_core::{ConfigFile as _, RobotConfig};
 use atmo_testgen::robot::{RigidBody, RobotFile};
 use atmo_testgen::sim::{Concealed, Truth};
 use nalgebra::{Rotation3, UnitQuaternion, Vector3};

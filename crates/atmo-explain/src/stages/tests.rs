@@ -8,9 +8,9 @@
 
 use std::sync::OnceLock;
 
-use atmo_core::{ConfigFile as _, RobotConfig};
 use atmo_core::control::WheelRates;
 use atmo_core::model::{Model, State, idx};
+use atmo_core::{ConfigFile as _, RobotConfig};
 use atmo_plant::config::{EffectsConfig, MassErrorConfig, PlantConfig, TerrainConfig};
 use atmo_plant::plant::{Command, InitialState, Plant};
 use nalgebra::Vector4;
