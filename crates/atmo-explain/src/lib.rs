@@ -39,7 +39,7 @@ pub mod data;
 pub mod effects;
 mod explanation;
 pub mod locate;
-pub mod neural_fly;
+
 pub mod output;
 mod physical;
 pub mod recording;

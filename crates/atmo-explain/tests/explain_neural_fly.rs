@@ -6,8 +6,8 @@ use std::path::{Path, PathBuf};
 
 use atmo_core::model::{idx, rotation};
 use atmo_core::{ConfigFile as _, RobotConfig};
-use atmo_explain::neural_fly::split_row;
 use atmo_explain::recording::Recording;
+use atmo_explain::recording::neural_fly::split_row;
 use nalgebra::Vector3;
 
 fn data(name: &str) -> PathBuf {

@@ -49,10 +49,7 @@ pub enum IoError {
     /// A log has corrupt chunks or messages (read with the `*_lossy` readers
     /// or `atmo-mcap recover` to keep the sound rest).
     #[error("{file}: corrupt log: {integrity}")]
-    LogCorrupt {
-        file: PathBuf,
-        integrity: crate::mcap_log::Integrity,
-    },
+    LogCorrupt { file: PathBuf, integrity: Integrity },
     /// A file given as an MCAP log is not one.
     #[error("{file}: not an MCAP file ({reason})")]
     NotMcap { file: PathBuf, reason: String },
@@ -79,3 +76,44 @@ pub enum IoError {
 
 /// Result alias for atmo-io.
 pub type Result<T> = std::result::Result<T, IoError>;
+
+/// What a read skipped because it was corrupt (0 everywhere for a sound log).
+#[derive(Debug, Clone, Default, PartialEq, Eq)]
+pub struct Integrity {
+    /// Chunks whose CRC did not match or that did not decompress.
+    pub corrupt_chunks: u64,
+    /// Messages in those chunks, counted from their message indexes (a
+    /// truncated log has none for its last chunk).
+    pub messages_in_corrupt_chunks: u64,
+    /// Messages whose payload did not decode as their schema's type.
+    pub undecodable_messages: u64,
+    /// The first corruption seen, for the error message.
+    pub first_problem: Option<String>,
+}
+
+impl Integrity {
+    /// Whether nothing was skipped.
+    pub fn is_sound(&self) -> bool {
+        self.corrupt_chunks == 0 && self.undecodable_messages == 0
+    }
+
+    pub(crate) fn note(&mut self, problem: impl FnOnce() -> String) {
+        if self.first_problem.is_none() {
+            self.first_problem = Some(problem());
+        }
+    }
+}
+
+impl std::fmt::Display for Integrity {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "{} corrupt chunk(s) skipped ({} messages), {} undecodable message(s) skipped",
+            self.corrupt_chunks, self.messages_in_corrupt_chunks, self.undecodable_messages
+        )?;
+        if let Some(first) = &self.first_problem {
+            write!(f, "; first: {first}")?;
+        }
+        Ok(())
+    }
+}

@@ -8,6 +8,8 @@
 //! ignored and listed; rows with a non-finite value, or whose time does not
 //! increase, are skipped and counted.
 
+pub mod neural_fly;
+
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
@@ -72,7 +74,7 @@ impl Recording {
 
     /// Reads a recording; the format is chosen by the extension (`.mcap`:
     /// the flight stack's log, anything else: CSV) and, for CSV, by the
-    /// header (a Neural-Fly log's header: [`crate::neural_fly`]).
+    /// header (a Neural-Fly log's header: [`crate::recording::neural_fly`]).
     pub fn load(path: impl AsRef<Path>) -> Result<Self, ExplainError> {
         let path = path.as_ref();
         let ext = path
@@ -95,8 +97,8 @@ impl Recording {
             ),
         })?;
         let header = text.lines().find(|l| !l.trim().is_empty()).unwrap_or("");
-        if crate::neural_fly::is_neural_fly_header(header) {
-            return crate::neural_fly::from_neural_fly_str(&text, path);
+        if neural_fly::is_neural_fly_header(header) {
+            return neural_fly::from_neural_fly_str(&text, path);
         }
         Self::from_csv_str(&text, path)
     }
