@@ -4,6 +4,8 @@
 //! contact...) and meets the scenario's success criteria: for the landings,
 //! no crash, touchdown tilt past the critical angle region, a soft impact
 //! and a drive on.
+// Test, bench and example code: an unwrap that fails is the failure report.
+#![allow(clippy::unwrap_used)]
 
 use std::path::PathBuf;
 

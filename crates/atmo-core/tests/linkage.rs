@@ -1,5 +1,7 @@
 //! Linkage kinematics: round trips over the whole range, monotonicity and
 //! out-of-range inputs.
+// Test, bench and example code: an unwrap that fails is the failure report.
+#![allow(clippy::unwrap_used)]
 
 use atmo_core::{CoreError, Linkage, RobotConfig};
 

@@ -1,5 +1,7 @@
 //! FlightStack against the atmo-core model (no plant effects): it flies,
 //! morphs within its limits, and each failsafe does what it says.
+// Test, bench and example code: an unwrap that fails is the failure report.
+#![allow(clippy::unwrap_used)]
 
 use atmo_core::model::{Input, State, idx};
 use atmo_core::{Linkage, Model, RobotConfig};

@@ -6,6 +6,8 @@
 //! The one exception is inside Clarabel: its profiling timers rebuild a small
 //! hash table at every solve (one allocation, freed at the next solve); the
 //! test measures a bare solve and allows exactly that, nothing more.
+// Test, bench and example code: an unwrap that fails is the failure report.
+#![allow(clippy::unwrap_used)]
 
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::sync::atomic::{AtomicUsize, Ordering};

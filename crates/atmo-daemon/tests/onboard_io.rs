@@ -11,6 +11,8 @@
 //! custom allocator for it, is open), freed when the sample is sent. The
 //! test measures a bare send and allows exactly that for the tick's three
 //! command sends, nothing more.
+// Test, bench and example code: an unwrap that fails is the failure report.
+#![allow(clippy::unwrap_used)]
 
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::cell::Cell;

@@ -8,6 +8,8 @@
 //! - `writer_status`: wall time per status from `try_log` until the writer
 //!   has encoded and written it (zstd chunks, flush every 0.5 s): the writer
 //!   thread's cost per tick.
+// Test, bench and example code: an unwrap that fails is the failure report.
+#![allow(clippy::unwrap_used)]
 
 use std::hint::black_box;
 use std::time::{Duration, Instant};

@@ -4,6 +4,8 @@
 //! heartbeats in, tick-to-driver latency, a killed driver detected within
 //! the liveness timeout, a restarted driver reconnecting, and the stale
 //! resources of a crashed run cleaned at start-up.
+// Test, bench and example code: an unwrap that fails is the failure report.
+#![allow(clippy::unwrap_used)]
 
 use std::process::{Child, Command};
 

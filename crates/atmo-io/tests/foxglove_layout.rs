@@ -1,6 +1,8 @@
 //! The shipped Foxglove layout is valid JSON, every panel in the layout tree
 //! is configured, and every message path names a field of the message on
 //! its topic (so a renamed field cannot silently empty a plot).
+// Test, bench and example code: an unwrap that fails is the failure report.
+#![allow(clippy::unwrap_used)]
 
 use std::collections::BTreeSet;
 

@@ -3,6 +3,8 @@
 //! in, and each kind of bad input counted without a panic: malformed CDR, a
 //! message of another type on the topic, NaN in odometry, stamps going
 //! backwards. Runs on its own domain id.
+// Test, bench and example code: an unwrap that fails is the failure report.
+#![allow(clippy::unwrap_used)]
 
 mod support;
 
@@ -82,6 +84,8 @@ fn wait_for(what: &str, timeout: Duration, mut f: impl FnMut() -> bool) {
 }
 
 #[test]
+// One live node exercised end to end: the steps share its discovery and state.
+#[allow(clippy::too_many_lines)]
 fn node_talks_to_a_second_participant_and_counts_bad_input() {
     let domain = domain();
     let config = Ros2Config {

@@ -7,6 +7,8 @@
 //!
 //! Needs the Python peers: `scripts/python-peers.sh` makes the venv and
 //! `.ci/run` runs this test with `ATMO_PYTHON` set (`--ignored`).
+// Test, bench and example code: an unwrap that fails is the failure report.
+#![allow(clippy::unwrap_used)]
 
 mod support;
 

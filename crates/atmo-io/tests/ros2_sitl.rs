@@ -4,6 +4,8 @@
 //! plant arrive at the daemon unchanged, the daemon's status arrives at the
 //! plant unchanged, bad pilot inputs are rejected and counted, and the
 //! pilot topic's type is checked in the config.
+// Test, bench and example code: an unwrap that fails is the failure report.
+#![allow(clippy::unwrap_used)]
 
 mod support;
 

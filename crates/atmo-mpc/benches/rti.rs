@@ -1,6 +1,8 @@
 //! RTI timing: one full tick, the feedback phase alone (the homotopy, and
 //! its fallback to Clarabel), and the same QPs solved by Clarabel and (with
 //! `--features osqp-compare`, needs cmake) OSQP in both formulations.
+// Test, bench and example code: an unwrap that fails is the failure report.
+#![allow(clippy::unwrap_used)]
 
 #[path = "support/scenarios.rs"]
 mod scenarios;

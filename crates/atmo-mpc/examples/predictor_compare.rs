@@ -7,6 +7,8 @@
 //! Reports the prediction error (largest entry over the noise scale), the
 //! share of ticks whose feedback changed the active set and the feedback time.
 //! `cargo run --release -p atmo-mpc --example predictor_compare [ticks]`
+// Test, bench and example code: an unwrap that fails is the failure report.
+#![allow(clippy::unwrap_used)]
 
 #[allow(dead_code)]
 #[path = "../benches/support/scenarios.rs"]

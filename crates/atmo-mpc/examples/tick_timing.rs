@@ -3,6 +3,8 @@
 //! shipped setting), condensed with a Clarabel feedback, sparse. Criterion
 //! gives medians; this gives the tail. Run with
 //! `cargo run --release -p atmo-mpc --example tick_timing [ticks]`.
+// Test, bench and example code: an unwrap that fails is the failure report.
+#![allow(clippy::unwrap_used)]
 
 #[allow(dead_code)]
 #[path = "../benches/support/scenarios.rs"]

@@ -3,6 +3,8 @@
 //! fresh Clarabel at 1e-10; reports the largest |u_0| difference over the
 //! `Solved` ticks and the interior-point iterations. Evidence for `tol_*` in config/mpc.toml.
 //! `cargo run --release -p atmo-mpc --example tolerance_check [ticks]`
+// Test, bench and example code: an unwrap that fails is the failure report.
+#![allow(clippy::unwrap_used)]
 
 #[path = "../benches/support/scenarios.rs"]
 mod scenarios;

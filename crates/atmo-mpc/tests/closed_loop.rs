@@ -1,4 +1,6 @@
 //! Closed-loop tests against the atmo-core model (no plant effects).
+// Test, bench and example code: an unwrap that fails is the failure report.
+#![allow(clippy::unwrap_used)]
 
 mod common;
 

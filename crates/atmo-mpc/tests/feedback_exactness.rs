@@ -14,6 +14,8 @@
 //! the interior-point reference is the one with the larger error (its
 //! distance to the optimum scales with its tolerances), so the 1e-6 bound is
 //! mostly a bound on the reference.
+// Test, bench and example code: an unwrap that fails is the failure report.
+#![allow(clippy::unwrap_used)]
 
 #[allow(dead_code)]
 #[path = "../benches/support/scenarios.rs"]

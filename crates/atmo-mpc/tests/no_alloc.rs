@@ -2,7 +2,8 @@
 //! (this test binary only) counts heap allocations made on the test's own
 //! thread while counting is switched on; the bare Clarabel solve is counted
 //! separately so that its share, if any, is reported on its own.
-
+// Test, bench and example code: an unwrap that fails is the failure report.
+#![allow(clippy::unwrap_used)]
 // A global allocator needs `unsafe impl GlobalAlloc`; it only forwards to
 // the system allocator and bumps a counter.
 #![allow(unsafe_code)]

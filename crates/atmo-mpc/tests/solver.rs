@@ -1,5 +1,7 @@
 //! The QP and its solver: in-place updates, the two formulations, RTI
 //! against converged SQP, outcomes on bad input.
+// Test, bench and example code: an unwrap that fails is the failure report.
+#![allow(clippy::unwrap_used)]
 
 mod common;
 

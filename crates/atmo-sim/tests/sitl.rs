@@ -9,6 +9,8 @@
 //! looked for next to it; `cargo test -p atmo-sim` alone does not build it,
 //! so then the test builds it there itself (same cargo, profile and target
 //! directory).
+// Test, bench and example code: an unwrap that fails is the failure report.
+#![allow(clippy::unwrap_used)]
 
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, ExitStatus, Stdio};

@@ -1,5 +1,6 @@
 //! Shared by the integration tests: sample messages and the interop folder.
-
+// Test, bench and example code: an unwrap that fails is the failure report.
+#![allow(clippy::unwrap_used)]
 #![allow(dead_code)]
 
 use std::path::PathBuf;

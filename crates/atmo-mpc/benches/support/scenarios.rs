@@ -1,6 +1,8 @@
 //! The three benchmark situations, shared by `benches/rti.rs` and
 //! `examples/tick_timing.rs`. Each records a short closed loop against the
 //! atmo-core model so that the timed ticks see realistic estimates and plans.
+// Test, bench and example code: an unwrap that fails is the failure report.
+#![allow(clippy::unwrap_used)]
 
 use atmo_core::RobotConfig;
 use atmo_core::control::blending_alpha;

@@ -1,6 +1,7 @@
 //! Closed-loop harness shared by the integration tests: the atmo-core model
 //! as the plant (RK4 at about 1 ms), the MPC at 150 Hz.
-
+// Test, bench and example code: an unwrap that fails is the failure report.
+#![allow(clippy::unwrap_used)]
 #![allow(dead_code)]
 
 use atmo_core::RobotConfig;
