@@ -131,7 +131,8 @@ pub struct Status {
     pub feedback_time: f64,
     pub preparation_time: f64,
     pub solver_iterations: u32,
-    /// QP solves this tick: 1, or more when a mode change re-planned.
+    /// QP solves this tick: 1, or more when a mode change re-planned or
+    /// warmed the MPC up (its preparation solves once with the homotopy feedback).
     pub qp_solves: u32,
     /// Drive reference: forward speed m/s and yaw rate rad/s.
     pub drive_velocity: [f64; 2],
@@ -558,6 +559,10 @@ impl FlightStack {
             self.configure_mpc(state);
             if let Ok(prep) = self.mpc.prepare() {
                 self.last_preparation_time = prep.as_secs_f64();
+                // The homotopy's preparation is a Clarabel solve of this tick.
+                if self.mpc.uses_homotopy() {
+                    status.qp_solves += 1;
+                }
             }
             self.mpc_warm = true;
         }
