@@ -284,6 +284,23 @@ fn the_daemon_binary_lands_on_the_wheels_against_the_plant_server() {
         touchdown.varphi.to_degrees()
     );
     assert!(touchdown.ground_contact);
+    // The estimate-to-command latency the robot felt (issue 18): the MPC
+    // feedback phase of every tick that ran it, as the daemon logged it.
+    let mut feedback: Vec<f64> = status
+        .iter()
+        .filter(|(_, s)| s.solver_status != SolverStatus::Idle)
+        .map(|(_, s)| s.feedback_time)
+        .collect();
+    assert!(!feedback.is_empty(), "no tick ran the MPC");
+    feedback.sort_by(f64::total_cmp);
+    let at = |q: f64| feedback[((feedback.len() - 1) as f64 * q).round() as usize] * 1e6;
+    println!(
+        "sitl: MPC feedback over {} ticks: median {:.1} us, p99 {:.1} us, max {:.1} us",
+        feedback.len(),
+        at(0.5),
+        at(0.99),
+        at(1.0)
+    );
     // Every driver alive from arming to the end; nothing lost on the way.
     let armed = status
         .iter()
