@@ -141,6 +141,7 @@ class MpcStatus(IdlStruct, typename="atmo_msgs::msg::dds_::MpcStatus_"):
     solver_iterations: uint32 = 0
     mpc_failed_ticks: uint32 = 0
     mpc_failures_total: uint64 = 0
+    feedback_fallbacks_total: uint64 = 0
     state: array[float64, 12] = field(default_factory=lambda: [0.0] * 12)
     reference: array[float64, 12] = field(default_factory=lambda: [0.0] * 12)
     predicted_next: array[float64, 12] = field(default_factory=lambda: [0.0] * 12)

@@ -127,6 +127,8 @@ pub struct Status {
     pub solver: SolverState,
     pub mpc_failed_ticks: u32,
     pub mpc_failures_total: u64,
+    /// Feedbacks that fell back from the homotopy to a full Clarabel solve, since start.
+    pub feedback_fallbacks_total: u64,
     /// MPC feedback and preparation times, s (preparation: of the previous `prepare_next`).
     pub feedback_time: f64,
     pub preparation_time: f64,
@@ -444,6 +446,7 @@ impl FlightStack {
             solver: SolverState::Idle,
             mpc_failed_ticks,
             mpc_failures_total: self.mpc_failures_total,
+            feedback_fallbacks_total: self.mpc.homotopy_fallbacks(),
             feedback_time: 0.0,
             preparation_time: self.last_preparation_time,
             solver_iterations: 0,
@@ -592,6 +595,7 @@ impl FlightStack {
             self.mpc_failures_total += 1;
         }
         status.mpc_failures_total = self.mpc_failures_total;
+        status.feedback_fallbacks_total = self.mpc.homotopy_fallbacks();
         status.feedback_time = out.timings.feedback.as_secs_f64();
         status.solver_iterations = out.timings.solver_iterations;
         status.predicted_next = self.mpc.plan_states().get(1).copied().unwrap_or(*state);

@@ -56,6 +56,7 @@ pub fn status_message(
         solver_iterations: s.solver_iterations,
         mpc_failed_ticks: s.mpc_failed_ticks,
         mpc_failures_total: s.mpc_failures_total,
+        feedback_fallbacks_total: s.feedback_fallbacks_total,
         state: s.state.into(),
         reference: s.reference.into(),
         predicted_next: s.predicted_next.into(),

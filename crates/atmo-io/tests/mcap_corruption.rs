@@ -14,14 +14,22 @@ use atmo_io::mcap_log::{
     Compression, LoggerOptions, McapLogger, read_log, read_log_lossy, read_topic, recover,
 };
 use atmo_io::msg::MpcStatus;
-use support::{interop_dir, status};
+use support::status;
+
+/// Corrupt logs live apart from the interop folder, whose every log the
+/// Python reference reader checks against its expected messages.
+fn corruption_dir() -> std::path::PathBuf {
+    let dir = std::path::PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("atmo-io-corruption");
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
 
 const MESSAGES: u64 = 400;
 const CHUNK_OPCODE: u8 = 0x06;
 
 /// A finished log of `MESSAGES` statuses in small chunks (several chunks).
 fn write_log(name: &str, compression: Compression) -> PathBuf {
-    let path = interop_dir().join(name);
+    let path = corruption_dir().join(name);
     let options = LoggerOptions {
         compression,
         chunk_size: 4096,
@@ -70,7 +78,7 @@ fn flip_bit_in_second_chunk(log: &Path, name: &str) -> PathBuf {
     );
     let target = &chunks[1];
     bytes[target.start + target.len() / 2] ^= 0x10;
-    let out = interop_dir().join(name);
+    let out = corruption_dir().join(name);
     std::fs::write(&out, bytes).unwrap();
     out
 }
@@ -108,7 +116,7 @@ fn flipped_bit_is_caught(compression: Compression, name: &str) {
     }
 
     // recover copies the sound chunks and reports the skipped one.
-    let recovered = interop_dir().join(format!("{name}_recovered.mcap"));
+    let recovered = corruption_dir().join(format!("{name}_recovered.mcap"));
     let report = recover(&bad, &recovered).unwrap();
     assert_eq!(report.skipped.corrupt_chunks, 1, "{report:?}");
     assert_eq!(report.messages, messages.len() as u64);
@@ -128,7 +136,7 @@ fn a_flipped_bit_in_an_uncompressed_chunk_fails_its_crc() {
 
 #[test]
 fn recover_refuses_input_that_is_not_mcap() {
-    let dir = interop_dir();
+    let dir = corruption_dir();
     let random: Vec<u8> = (0..4096u32)
         .map(|i| (i.wrapping_mul(2_654_435_761) >> 13) as u8)
         .collect();

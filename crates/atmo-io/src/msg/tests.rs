@@ -219,6 +219,7 @@ pub(crate) fn sample_status() -> MpcStatus {
         solver_iterations: 3,
         mpc_failed_ticks: 1,
         mpc_failures_total: 2,
+        feedback_fallbacks_total: 1,
         thrust: [0.5, 0.6, 0.7, 0.8],
         alpha: 0.25,
         varphi: 1.0,
@@ -297,7 +298,8 @@ fn mpc_status_layout() {
     body.extend(3u32.to_le_bytes()); // solver_iterations 84..88
     body.extend(1u32.to_le_bytes()); // mpc_failed_ticks 88..92
     body.extend([0, 0, 0, 0]); // pad to 96
-    body.extend(2u64.to_le_bytes());
+    body.extend(2u64.to_le_bytes()); // mpc_failures_total
+    body.extend(1u64.to_le_bytes()); // feedback_fallbacks_total
     body.extend(f64s(&status.state));
     body.extend(f64s(&status.reference));
     body.extend(f64s(&status.predicted_next));

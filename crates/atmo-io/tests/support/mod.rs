@@ -66,6 +66,7 @@ pub fn status(k: u64) -> MpcStatus {
         solver_iterations: (k % 4) as u32,
         mpc_failed_ticks: (k % 3) as u32,
         mpc_failures_total: k / 3,
+        feedback_fallbacks_total: k / 5,
         thrust: [0.1 + 1e-3 * t, 0.2, 0.3, 0.4 - 1e-4 * t],
         alpha: (t * 0.01).sin().abs(),
         varphi: 0.001 * t,
