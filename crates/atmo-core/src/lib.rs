@@ -20,6 +20,7 @@
 //! Frames: NED world, FRD body, Euler ZYX; SI units, radians. Nothing here
 //! allocates on the heap or does I/O (except reading a config file).
 
+pub mod alloc_counter;
 pub mod cli_numbers;
 pub mod config;
 pub mod config_file;

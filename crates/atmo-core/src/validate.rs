@@ -40,22 +40,22 @@ impl ConfigFile for RobotConfig {
             "m/s^2",
         )?;
 
-        c.positive("base.mass", self.base.mass)?;
+        c.range("base.mass", self.base.mass, 1e-3..=1e3, "kg")?;
         c.inertia("base.inertia", &self.base.inertia.matrix())?;
 
-        c.positive("arm.mass", self.arm.mass)?;
+        c.range("arm.mass", self.arm.mass, 1e-4..=1e3, "kg")?;
         c.inertia("arm.inertia", &self.arm.inertia.matrix())?;
         c.finite("arm.base_to_hinge", &self.arm.base_to_hinge)?;
         c.finite("arm.hinge_to_com", &self.arm.hinge_to_com)?;
         c.finite("arm.hinge_to_rotor1", &self.arm.hinge_to_rotor1)?;
 
-        c.positive("rotor.mass", self.rotor.mass)?;
+        c.range("rotor.mass", self.rotor.mass, 1e-5..=1e2, "kg")?;
         let [ixx, iyy, izz] = self.rotor.inertia;
         c.inertia(
             "rotor.inertia",
             &Matrix3::from_diagonal(&Vector3::new(ixx, iyy, izz)),
         )?;
-        c.positive("rotor.k_thrust", self.rotor.k_thrust)?;
+        c.range("rotor.k_thrust", self.rotor.k_thrust, 1e-3..=1e5, "N")?;
         c.range("rotor.k_moment", self.rotor.k_moment, 0.0..=1.0, "m")?;
         for (i, s) in self.rotor.yaw_sign.iter().enumerate() {
             if *s != 1.0 && *s != -1.0 {
@@ -115,8 +115,36 @@ impl ConfigFile for RobotConfig {
                 lim.morph_height,
             ));
         }
+        can_hover_with_reserve(self, &c)?;
         composite_is_physical(self, &c)
     }
+}
+
+/// A robot the physics cannot fly is refused here, not found in flight:
+/// the four rotors at full command must carry the weight with the flight
+/// reserve, `4 kT / (m g) >= limits.thrust_reserve` (m of all seven bodies),
+/// so that the in-flight tilt limit `acos(r m g / T_max)` exists.
+fn can_hover_with_reserve(config: &RobotConfig, c: &Checker<'_>) -> Result<(), CoreError> {
+    let mass = config.base.mass + 2.0 * config.arm.mass + 4.0 * config.rotor.mass;
+    let weight = mass * config.environment.gravity;
+    let ratio = 4.0 * config.rotor.k_thrust / weight;
+    let reserve = config.limits.thrust_reserve;
+    if ratio >= reserve {
+        return Ok(());
+    }
+    Err(c.fail(
+        "rotor.k_thrust",
+        format!(
+            "four rotors that carry the weight with limits.thrust_reserve = {reserve}: \
+             4 k_thrust >= {:.2} N for a total mass of {mass:.3} kg \
+             (base.mass + 2 arm.mass + 4 rotor.mass)",
+            reserve * weight
+        ),
+        format!(
+            "{} N: thrust-to-weight {ratio:.3}, the robot cannot fly",
+            config.rotor.k_thrust
+        ),
+    ))
 }
 
 /// The composite body must have a positive-definite inertia wherever the

@@ -88,7 +88,34 @@ fn negative_mass_is_out_of_range() {
     let msg = message(&err);
     assert!(matches!(err, CoreError::ConfigValue { .. }));
     assert!(
-        msg.contains("base.mass") && msg.contains("> 0") && msg.contains("-2.33"),
+        msg.contains("base.mass") && msg.contains("[0.001, 1000] kg") && msg.contains("-2.33"),
+        "{msg}"
+    );
+}
+
+#[test]
+fn a_robot_too_heavy_for_its_rotors_is_refused_naming_the_thrust_and_the_reason() {
+    // base.mass 20 kg: thrust-to-weight 112.6 N / (23.16 kg g) = 0.496.
+    let err = load_with("mass = 2.33", "mass = 20.0");
+    let msg = message(&err);
+    assert!(
+        msg.contains("rotor.k_thrust")
+            && msg.contains("thrust-to-weight 0.496")
+            && msg.contains("cannot fly")
+            && msg.contains("limits.thrust_reserve = 1.35"),
+        "{msg}"
+    );
+    // Flies, but without the flight reserve of 1.35 (thrust-to-weight 1.30).
+    let err = load_with("k_thrust = 28.15", "k_thrust = 17.5");
+    assert!(message(&err).contains("thrust-to-weight 1.30"), "{err}");
+}
+
+#[test]
+fn an_absurd_mass_is_refused_at_its_own_key() {
+    let err = load_with("mass = 2.33", "mass = 1e308");
+    let msg = message(&err);
+    assert!(
+        msg.contains("base.mass") && msg.contains("[0.001, 1000] kg"),
         "{msg}"
     );
 }

@@ -1,40 +1,20 @@
 //! f, the Jacobians and the RK4 step with sensitivities allocate nothing:
 //! a counting global allocator around the calls (this test binary only).
 
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::sync::atomic::{AtomicUsize, Ordering};
-
 use atmo_core::RobotConfig;
+use atmo_core::alloc_counter::thread_allocations;
 use atmo_core::model::{Input, Model, State};
 
-struct Counting;
-
-static ALLOCATIONS: AtomicUsize = AtomicUsize::new(0);
-
-#[allow(unsafe_code)] // a global allocator is unsafe by definition; it only counts and forwards
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        ALLOCATIONS.fetch_add(1, Ordering::SeqCst);
-        unsafe { System.alloc(layout) }
-    }
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        unsafe { System.dealloc(ptr, layout) }
-    }
-    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        ALLOCATIONS.fetch_add(1, Ordering::SeqCst);
-        unsafe { System.realloc(ptr, layout, new_size) }
-    }
-}
-
 #[global_allocator]
-static GLOBAL: Counting = Counting;
+static GLOBAL: atmo_core::alloc_counter::CountingAllocator =
+    atmo_core::alloc_counter::CountingAllocator;
 
 #[test]
 fn dynamics_jacobians_and_rk4_do_not_allocate() {
     let model = Model::new(&RobotConfig::atmo());
     let x = State::from_fn(|i, _| 0.1 * i as f64 - 0.3);
     let u = Input::new(0.5, 0.6, 0.55, 0.45);
-    let before = ALLOCATIONS.load(Ordering::SeqCst);
+    let before = thread_allocations();
     let mut acc = 0.0;
     for k in 0..100 {
         let varphi = 1.5 * f64::from(k) / 100.0;
@@ -47,7 +27,7 @@ fn dynamics_jacobians_and_rk4_do_not_allocate() {
     }
     // Past 86 deg the authors' convention needs the inertia floor: also allocation-free.
     acc += model.at_tilt(1.55).mass_matrix_inv[(0, 0)];
-    let after = ALLOCATIONS.load(Ordering::SeqCst);
+    let after = thread_allocations();
     assert!(acc.is_finite());
     assert_eq!(
         after - before,

@@ -9,9 +9,7 @@
 // Test, bench and example code: an unwrap that fails is the failure report.
 #![allow(clippy::unwrap_used)]
 
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::sync::atomic::{AtomicUsize, Ordering};
-
+use atmo_core::alloc_counter::thread_allocations;
 use atmo_core::model::{Input, State, idx};
 use atmo_core::{Linkage, Model, RobotConfig};
 use atmo_daemon::control_loop::{Clock, ControlLoop, TickIo, TickTiming};
@@ -21,37 +19,9 @@ use atmo_daemon::{
 };
 use atmo_mpc::MpcSettings;
 
-struct Counting;
-
-static ALLOCATIONS: AtomicUsize = AtomicUsize::new(0);
-
-/// The counter is global: the tests of this file take turns, or one test's
-/// allocations are counted against the other.
-static ONE_AT_A_TIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
-
-fn one_at_a_time() -> std::sync::MutexGuard<'static, ()> {
-    ONE_AT_A_TIME
-        .lock()
-        .unwrap_or_else(std::sync::PoisonError::into_inner)
-}
-
-#[allow(unsafe_code)] // a global allocator is unsafe by definition; it only counts and forwards
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        ALLOCATIONS.fetch_add(1, Ordering::SeqCst);
-        unsafe { System.alloc(layout) }
-    }
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        unsafe { System.dealloc(ptr, layout) }
-    }
-    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        ALLOCATIONS.fetch_add(1, Ordering::SeqCst);
-        unsafe { System.realloc(ptr, layout, new_size) }
-    }
-}
-
 #[global_allocator]
-static GLOBAL: Counting = Counting;
+static GLOBAL: atmo_core::alloc_counter::CountingAllocator =
+    atmo_core::alloc_counter::CountingAllocator;
 
 /// Allocations of one bare Clarabel solve of the MPC's QP (nothing of ours around it).
 fn clarabel_allocations_per_solve() -> usize {
@@ -66,16 +36,15 @@ fn clarabel_allocations_per_solve() -> usize {
     for _ in 0..5 {
         mpc.tick(&x).unwrap();
     }
-    let before = ALLOCATIONS.load(Ordering::SeqCst);
+    let before = thread_allocations();
     for _ in 0..10 {
         mpc.resolve_loaded_qp();
     }
-    (ALLOCATIONS.load(Ordering::SeqCst) - before) / 10
+    (thread_allocations() - before) / 10
 }
 
 #[test]
 fn flight_stack_step_does_not_allocate_after_start_up() {
-    let _turn = one_at_a_time();
     let robot = RobotConfig::atmo();
     let settings = FlightSettings::atmo();
     let mut stack = FlightStack::new(
@@ -116,11 +85,11 @@ fn flight_stack_step_does_not_allocate_after_start_up() {
             driver_lost: false,
         };
         // The first ticks warm the MPC up (start-up); count from tick 20 on.
-        let before = ALLOCATIONS.load(Ordering::SeqCst);
+        let before = thread_allocations();
         let out = stack.step(&inputs);
-        let mid = ALLOCATIONS.load(Ordering::SeqCst);
+        let mid = thread_allocations();
         stack.prepare_next();
-        let after = ALLOCATIONS.load(Ordering::SeqCst);
+        let after = thread_allocations();
         if tick >= 20 {
             // The preparation runs one Clarabel solve (at the predicted state,
             // seeding the MPC's homotopy feedback): only its own block may appear.
@@ -219,7 +188,6 @@ impl TickIo for ModelIo {
 /// Clarabel's one allocation per solve.
 #[test]
 fn control_loop_tick_does_not_allocate_after_start_up() {
-    let _turn = one_at_a_time();
     let robot = RobotConfig::atmo();
     let settings = FlightSettings::atmo();
     let estimate_timeout = settings.failsafe.estimate_timeout;
@@ -263,10 +231,10 @@ fn control_loop_tick_does_not_allocate_after_start_up() {
         io.latch.pilot(pilot, now);
         io.latch
             .tilt_counts(linkage.counts_from_tilt(tilt).unwrap());
-        let before = ALLOCATIONS.load(Ordering::SeqCst);
+        let before = thread_allocations();
         assert!(control.tick(&clock, &mut stack, &mut io));
         if tick >= 20 {
-            allocations += ALLOCATIONS.load(Ordering::SeqCst) - before;
+            allocations += thread_allocations() - before;
             // The feedback's solves (status.qp_solves) and the preparation's
             // one Clarabel solve (prepare_next, checked alone to be exactly
             // that in the test above).

@@ -14,13 +14,11 @@
 // Test, bench and example code: an unwrap that fails is the failure report.
 #![allow(clippy::unwrap_used)]
 
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::cell::Cell;
 use std::sync::Arc;
-use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::{Duration, Instant};
 
 use atmo_core::RobotConfig;
+use atmo_core::alloc_counter::thread_allocations;
 use atmo_core::model::{State, idx};
 use atmo_daemon::control_loop::{TickIo, TickTiming};
 use atmo_daemon::onboard::{OnboardIo, OnboardSettings, OnboardShared};
@@ -31,36 +29,9 @@ use atmo_io::msg::{MpcStatus, PilotInput as PilotMsg};
 use atmo_io::ros2::{Ros2Config, Ros2Node, Ros2StartOptions, SitlNode};
 use atmo_mpc::MpcSettings;
 
-thread_local! {
-    static COUNTING: Cell<bool> = const { Cell::new(false) };
-}
-static ALLOCATIONS: AtomicUsize = AtomicUsize::new(0);
-
-struct Counting;
-
-fn count() {
-    if COUNTING.try_with(Cell::get).unwrap_or(false) {
-        ALLOCATIONS.fetch_add(1, Ordering::SeqCst);
-    }
-}
-
-#[allow(unsafe_code)] // a global allocator is unsafe by definition; it only counts and forwards
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        count();
-        unsafe { System.alloc(layout) }
-    }
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        unsafe { System.dealloc(ptr, layout) }
-    }
-    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        count();
-        unsafe { System.realloc(ptr, layout, new_size) }
-    }
-}
-
 #[global_allocator]
-static GLOBAL: Counting = Counting;
+static GLOBAL: atmo_core::alloc_counter::CountingAllocator =
+    atmo_core::alloc_counter::CountingAllocator;
 
 /// Allocations of one bare iceoryx2 send through the driver ports.
 fn iceoryx_allocations_per_send() -> usize {
@@ -72,12 +43,10 @@ fn iceoryx_allocations_per_send() -> usize {
     let mut driver = DriverEndpoint::open(&drivers, "bare_driver").unwrap();
     let mut total = 0;
     for i in 0..40 {
-        let before = ALLOCATIONS.load(Ordering::SeqCst);
-        COUNTING.with(|c| c.set(true));
+        let before = thread_allocations();
         ports.send_thrust([0.5; 4]);
-        COUNTING.with(|c| c.set(false));
         if i >= 20 {
-            total += ALLOCATIONS.load(Ordering::SeqCst) - before;
+            total += thread_allocations() - before;
         }
         let _ = driver.receive();
     }
@@ -178,17 +147,13 @@ fn onboard_tick_io_allocates_nothing_of_its_own() {
             deadline_ns: deadline,
             ..TickTiming::default()
         };
-        let before = ALLOCATIONS.load(Ordering::SeqCst);
-        COUNTING.with(|c| c.set(true));
+        let before = thread_allocations();
         let inputs = io.gather(deadline).unwrap();
-        COUNTING.with(|c| c.set(false));
-        let gathered = ALLOCATIONS.load(Ordering::SeqCst);
-        COUNTING.with(|c| c.set(true));
+        let gathered = thread_allocations();
         io.emit(&inputs, &outputs, &timing);
-        COUNTING.with(|c| c.set(false));
         if tick >= warm_up {
             gather_allocations += gathered - before;
-            emit_allocations += ALLOCATIONS.load(Ordering::SeqCst) - gathered;
+            emit_allocations += thread_allocations() - gathered;
         }
         last = Some(inputs);
     }

@@ -48,23 +48,7 @@ impl BodyTable {
         if w == 0.0 {
             return *a;
         }
-        let v = 1.0 - w;
-        TiltedBody {
-            varphi,
-            gravity: a.gravity,
-            mass: a.mass * v + b.mass * w,
-            first_moment: a.first_moment * v + b.first_moment * w,
-            inertia: a.inertia * v + b.inertia * w,
-            mass_matrix: a.mass_matrix * v + b.mass_matrix * w,
-            mass_matrix_inv: a.mass_matrix_inv * v + b.mass_matrix_inv * w,
-            thrust_force: a.thrust_force * v + b.thrust_force * w,
-            thrust_torque: a.thrust_torque * v + b.thrust_torque * w,
-            rotor_position: std::array::from_fn(|i| {
-                a.rotor_position[i] * v + b.rotor_position[i] * w
-            }),
-            rotor_axis: std::array::from_fn(|i| a.rotor_axis[i] * v + b.rotor_axis[i] * w),
-            disturbance: a.disturbance * v + b.disturbance * w,
-        }
+        atmo_plant::lerp_body(a, b, w, varphi)
     }
 }
 

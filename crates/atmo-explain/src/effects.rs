@@ -180,21 +180,6 @@ pub fn classical_weight(varphi: f64) -> f64 {
     }
 }
 
-fn bracket(xs: &[f64], x: f64) -> (usize, f64) {
-    let n = xs.len();
-    if x <= xs[0] {
-        return (0, 0.0);
-    }
-    if x >= xs[n - 1] {
-        return (n - 2, 1.0);
-    }
-    let mut i = 0;
-    while xs[i + 1] < x {
-        i += 1;
-    }
-    (i, (x - xs[i]) / (xs[i + 1] - xs[i]))
-}
-
 /// Ground-effect basis at hub height `h` and tilt `varphi`: adds
 /// `scale * phi_j` into `out[j]` for the 17 coefficients.
 pub fn ge_basis(h: f64, varphi: f64, scale: f64, out: &mut [f64]) {
@@ -206,8 +191,8 @@ pub fn ge_basis(h: f64, varphi: f64, scale: f64, out: &mut [f64]) {
     }
     if wc < 1.0 {
         let tilts: Vec<f64> = GE_TILTS_DEG.iter().map(|d| d.to_radians()).collect();
-        let (i, wt) = bracket(&tilts, varphi);
-        let (j, wh) = bracket(&GE_HEIGHTS, h);
+        let (i, wt) = atmo_plant::ground_effect::bracket(&tilts, varphi);
+        let (j, wh) = atmo_plant::ground_effect::bracket(&GE_HEIGHTS, h);
         let s = scale * (1.0 - wc);
         for (ri, rw) in [(i, 1.0 - wt), (i + 1, wt)] {
             for (cj, cw) in [(j, 1.0 - wh), (j + 1, wh)] {

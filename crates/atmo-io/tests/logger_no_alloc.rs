@@ -8,65 +8,23 @@
 //! thread while those calls run (the logger, DDS and iceoryx2 threads
 //! allocate freely).
 
-#![allow(unsafe_code)] // a GlobalAlloc impl is unsafe by definition
-
 mod support;
 
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::cell::Cell;
-use std::sync::atomic::{AtomicU64, Ordering};
-
+use atmo_core::alloc_counter::count;
 use atmo_io::drivers::{DriverPortsConfig, FlightPorts, monotonic_ns};
 use atmo_io::mcap_log::{LoggerOptions, McapLogger, read_log};
 use atmo_io::msg::{ActuatorMotors, MpcStatus, OffboardControlMode, PilotInput};
 use atmo_io::ros2::{Ros2Config, Ros2Node, Ros2StartOptions, SitlNode};
 use support::{drive, motors, status};
 
-struct Counting;
-
-static ALLOCATIONS: AtomicU64 = AtomicU64::new(0);
-
-thread_local! {
-    static COUNTING: Cell<bool> = const { Cell::new(false) };
-}
-
-// SAFETY: forwards to the system allocator unchanged; only counts.
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        if COUNTING.with(Cell::get) {
-            ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
-        }
-        // SAFETY: same contract as the caller's.
-        unsafe { System.alloc(layout) }
-    }
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        // SAFETY: same contract as the caller's.
-        unsafe { System.dealloc(ptr, layout) }
-    }
-    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        if COUNTING.with(Cell::get) {
-            ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
-        }
-        // SAFETY: same contract as the caller's.
-        unsafe { System.realloc(ptr, layout, new_size) }
-    }
-}
-
 #[global_allocator]
-static GLOBAL: Counting = Counting;
-
-fn counted<R>(f: impl FnOnce() -> R) -> (R, u64) {
-    let before = ALLOCATIONS.load(Ordering::Relaxed);
-    COUNTING.with(|c| c.set(true));
-    let r = f();
-    COUNTING.with(|c| c.set(false));
-    (r, ALLOCATIONS.load(Ordering::Relaxed) - before)
-}
+static GLOBAL: atmo_core::alloc_counter::CountingAllocator =
+    atmo_core::alloc_counter::CountingAllocator;
 
 #[test]
 fn try_log_does_not_allocate() {
     // The counter itself works.
-    let (_, n) = counted(|| std::hint::black_box(vec![1u8; 16]));
+    let (_, n) = count(|| std::hint::black_box(vec![1u8; 16]));
     assert_eq!(n, 1);
 
     let path = std::env::temp_dir().join(format!("atmo-io-noalloc-{}.mcap", std::process::id()));
@@ -87,7 +45,7 @@ fn try_log_does_not_allocate() {
 
     // 20 s of 150 Hz ticks in bursts: some records go through, some are
     // dropped (a 64-slot queue) — both paths must be allocation-free.
-    let (accepted, n) = counted(|| {
+    let (accepted, n) = count(|| {
         let mut accepted = 0u64;
         for k in 0..3000 {
             accepted += u64::from(log.try_log(status_ch, k as u64, &statuses[k]));
@@ -138,7 +96,7 @@ fn ros2_and_driver_port_calls_do_not_allocate() {
     let mut send_allocations = 0;
     let mut poll_allocations = 0;
     for k in 0..300 {
-        let ((), n) = counted(|| {
+        let ((), n) = count(|| {
             ros.try_publish_status(&statuses[k]);
             ros.try_publish_motors(&commands[k]);
             ros.try_publish_offboard(&offboard);
@@ -152,13 +110,13 @@ fn ros2_and_driver_port_calls_do_not_allocate() {
             let _ = sitl.counters();
         });
         ros_allocations += n;
-        let ((), n) = counted(|| {
+        let ((), n) = count(|| {
             assert!(ports.send_thrust([0.1, 0.2, 0.3, 0.4]));
             assert!(ports.send_tilt_velocity(0.1));
             assert!(ports.send_wheel_rates([1.0, 1.0]));
         });
         send_allocations += n;
-        let (_, n) = counted(|| {
+        let (_, n) = count(|| {
             assert!(ports.notify_drivers());
             ports.poll(monotonic_ns())
         });

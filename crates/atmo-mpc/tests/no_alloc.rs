@@ -1,62 +1,21 @@
 //! The tick allocates nothing in our code. A counting global allocator
-//! (this test binary only) counts heap allocations made on the test's own
-//! thread while counting is switched on; the bare Clarabel solve is counted
+//! (`atmo_core::alloc_counter`, this test binary only) counts heap
+//! allocations made on the test's own thread; the bare Clarabel solve is counted
 //! separately so that its share, if any, is reported on its own.
 // Test, bench and example code: an unwrap that fails is the failure report.
 #![allow(clippy::unwrap_used)]
-// A global allocator needs `unsafe impl GlobalAlloc`; it only forwards to
-// the system allocator and bumps a counter.
-#![allow(unsafe_code)]
 
 mod common;
 
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::cell::Cell;
-
 use atmo_core::RobotConfig;
+use atmo_core::alloc_counter::count;
 use atmo_core::model::{Model, State, idx};
 use atmo_mpc::{FeedbackPath, Formulation, Mpc, Outcome};
 use common::{SUBSTEPS, hover_at};
 
-struct Counting;
-
-thread_local! {
-    // Per thread, so that tests running in parallel do not see each other.
-    static COUNTING: Cell<bool> = const { Cell::new(false) };
-    static ALLOCATIONS: Cell<usize> = const { Cell::new(0) };
-}
-
-fn bump() {
-    if COUNTING.with(Cell::get) {
-        ALLOCATIONS.with(|n| n.set(n.get() + 1));
-    }
-}
-
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        bump();
-        unsafe { System.alloc(layout) }
-    }
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        unsafe { System.dealloc(ptr, layout) }
-    }
-    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        bump();
-        unsafe { System.realloc(ptr, layout, new_size) }
-    }
-}
-
 #[global_allocator]
-static GLOBAL: Counting = Counting;
-
-/// Allocations made by `f` on this thread.
-fn count<T>(f: impl FnOnce() -> T) -> (T, usize) {
-    let before = ALLOCATIONS.with(Cell::get);
-    COUNTING.with(|c| c.set(true));
-    let out = f();
-    COUNTING.with(|c| c.set(false));
-    (out, ALLOCATIONS.with(Cell::get) - before)
-}
+static GLOBAL: atmo_core::alloc_counter::CountingAllocator =
+    atmo_core::alloc_counter::CountingAllocator;
 
 const TICKS: usize = 200;
 const MEASURED_TICKS: usize = 180;

@@ -94,7 +94,7 @@ pub(crate) fn state_derivative(x: &State, att: &Attitude, acc: &Vector6<f64>) ->
 /// (second-order in the spacing), far below the model errors the plant
 /// simulates on purpose.
 #[inline(always)]
-pub(crate) fn lerp_body(a: &TiltedBody, b: &TiltedBody, w: f64, varphi: f64) -> TiltedBody {
+pub fn lerp_body(a: &TiltedBody, b: &TiltedBody, w: f64, varphi: f64) -> TiltedBody {
     let v = 1.0 - w;
     TiltedBody {
         varphi,

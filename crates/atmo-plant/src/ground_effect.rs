@@ -231,7 +231,7 @@ pub fn cheeseman_bennett(r: f64, z: f64) -> f64 {
 /// Index i with `xs[i] <= x <= xs[i + 1]` and the weight of `xs[i + 1]`,
 /// with x clamped into the range.
 #[inline(always)]
-fn bracket(xs: &[f64], x: f64) -> (usize, f64) {
+pub fn bracket(xs: &[f64], x: f64) -> (usize, f64) {
     let n = xs.len();
     if x <= xs[0] {
         return (0, 0.0);

@@ -67,6 +67,7 @@ pub mod noise;
 pub mod plant;
 pub mod sensors;
 
+pub use body::lerp_body;
 pub use config::{EffectsConfig, PlantConfig, TerrainConfig};
 pub use error::{PlantError, Result};
 pub use plant::{Command, CrashKind, Event, EventKind, InitialState, Plant};

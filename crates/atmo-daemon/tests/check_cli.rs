@@ -1,0 +1,75 @@
+//! `atmo-daemon check` refuses a robot the physics cannot fly, naming the
+//! file, the key and the reason (issue 21), and accepts the shipped files.
+// Test code: an unwrap that fails is the failure report.
+#![allow(clippy::unwrap_used)]
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn config_dir() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../../config")
+}
+
+/// A copy of `config/` in a fresh folder, with `atmo.toml`'s `from` replaced.
+fn configs_with(tag: &str, from: &str, to: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("atmo-check-{tag}-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    for name in ["daemon.toml", "flight.toml", "mpc.toml", "atmo.toml"] {
+        let text = std::fs::read_to_string(config_dir().join(name)).unwrap();
+        let text = if name == "atmo.toml" {
+            assert!(text.contains(from), "test setup: `{from}` not in atmo.toml");
+            text.replacen(from, to, 1)
+        } else {
+            text
+        };
+        std::fs::write(dir.join(name), text).unwrap();
+    }
+    dir
+}
+
+fn check(dir: &Path) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_atmo-daemon"))
+        .args(["check", "--config"])
+        .arg(dir.join("daemon.toml"))
+        .output()
+        .unwrap()
+}
+
+#[test]
+fn check_accepts_the_shipped_configuration() {
+    let out = check(&config_dir());
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+#[test]
+fn check_refuses_a_robot_with_thrust_to_weight_below_one() {
+    // base.mass 20 kg: thrust-to-weight 0.50, the case of issue 21.
+    let dir = configs_with("heavy", "mass = 2.33", "mass = 20.0");
+    let out = check(&dir);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "accepted: {stderr}");
+    assert!(
+        stderr.contains("atmo.toml")
+            && stderr.contains("rotor.k_thrust")
+            && stderr.contains("cannot fly"),
+        "{stderr}"
+    );
+    std::fs::remove_dir_all(dir).unwrap();
+}
+
+#[test]
+fn check_refuses_an_absurd_mass_at_its_key() {
+    let dir = configs_with("absurd", "mass = 2.33", "mass = 1e308");
+    let out = check(&dir);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "accepted: {stderr}");
+    assert!(
+        stderr.contains("atmo.toml") && stderr.contains("base.mass"),
+        "{stderr}"
+    );
+    std::fs::remove_dir_all(dir).unwrap();
+}
