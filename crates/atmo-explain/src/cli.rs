@@ -122,8 +122,9 @@ pub fn run(args: &Args, progress: &mut dyn FnMut(Progress)) -> Result<String, Ex
         file: args.robot.clone(),
         message: e.to_string(),
     })?;
-    std::fs::create_dir_all(&args.out)
-        .map_err(|e| ExplainError::Output(format!("creating {}: {e}", args.out.display())))?;
+    // Staged: a run that fails leaves an earlier run's folder as it was.
+    let out = atmo_io::output_dir::StagedDir::new(&args.out)
+        .map_err(|e| ExplainError::Output(e.to_string()))?;
     let rec = match (&args.recording, &args.demo) {
         (Some(path), None) => Recording::load(path)?,
         (None, Some(list)) => {
@@ -137,11 +138,11 @@ pub fn run(args: &Args, progress: &mut dyn FnMut(Progress)) -> Result<String, Ex
             let flight = Flight::new(Profile::Mixed, args.duration, args.seed);
             let rec = record(&robot, &plant, &flight)
                 .map_err(|e| ExplainError::Output(format!("generating the demo: {e}")))?;
-            let path = args.out.join("recording.csv");
+            let path = out.path().join("recording.csv");
             std::fs::write(&path, rec.to_csv())
                 .map_err(|e| ExplainError::Output(format!("writing {}: {e}", path.display())))?;
             Recording {
-                source: path,
+                source: args.out.join("recording.csv"),
                 ..rec
             }
         }
@@ -166,7 +167,9 @@ pub fn run(args: &Args, progress: &mut dyn FnMut(Progress)) -> Result<String, Ex
     let start = std::time::Instant::now();
     let ex = explain_with_progress(&rec, &robot, &opts, progress)?;
     let elapsed = start.elapsed().as_secs_f64();
-    write_all(&ex, &args.out)?;
+    write_all(&ex, out.path())?;
+    out.commit()
+        .map_err(|e| ExplainError::Output(e.to_string()))?;
     Ok(summary(&ex, &args.out, elapsed))
 }
 

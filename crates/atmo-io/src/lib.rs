@@ -10,6 +10,7 @@
 //! - [`ros2`]: the ROS 2 node (status out, estimates, drive commands and
 //!   pilot inputs in, PX4 offboard outputs, diagnostics), never blocking the
 //!   control thread, and its SITL peer for the plant server.
+//! - [`output_dir`]: output folders written whole or not at all.
 //!
 //! Conventions: NED world, FRD body, Euler ZYX, the 12-state order of
 //! `atmo_core::model::idx`; time in u64 nanoseconds.
@@ -19,6 +20,7 @@ pub mod drivers;
 pub mod error;
 pub mod mcap_log;
 pub mod msg;
+pub mod output_dir;
 #[cfg(feature = "ros2")]
 pub mod ros2;
 

@@ -19,15 +19,23 @@ pub fn run(
     let scenario = Scenario::load(scenario_path).with_context(|| "loading the scenario")?;
     let controller = ControllerConfig::atmo()?.deterministic();
     let dir: PathBuf = out.join(&scenario.file.name);
-    std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
-    match runs {
-        None => single(&scenario, &controller, &dir),
+    // Staged: a run that fails leaves an earlier run's folder as it was.
+    let staged = atmo_io::output_dir::StagedDir::new(&dir)?;
+    let succeeded = match runs {
+        None => single(&scenario, &controller, staged.path())?,
         Some(0) => bail!("--runs must be at least 1"),
-        Some(n) => many(&scenario, &controller, &dir, n, seed, jobs),
+        Some(n) => many(&scenario, &controller, staged.path(), n, seed, jobs)?,
+    };
+    let dir = staged.commit()?;
+    println!("wrote             {}", dir.display());
+    if !succeeded {
+        std::process::exit(1);
     }
+    Ok(())
 }
 
-fn single(scenario: &Scenario, controller: &ControllerConfig, dir: &Path) -> Result<()> {
+/// One flight, its outputs written into `dir`; whether it succeeded.
+fn single(scenario: &Scenario, controller: &ControllerConfig, dir: &Path) -> Result<bool> {
     let mut records: Vec<TickRecord> = Vec::new();
     let log_path = dir.join("flight.mcap");
     let (summary, log) = fly_logged(scenario, controller, &log_path, |r| records.push(*r))?;
@@ -76,20 +84,14 @@ fn single(scenario: &Scenario, controller: &ControllerConfig, dir: &Path) -> Res
         summary.sim_time_s / summary.wall_time_s.max(1e-9)
     );
     println!(
-        "wrote             {}, {} and {} ({} messages)",
-        summary_path.display(),
-        figure_path.display(),
-        log_path.display(),
+        "outputs           summary.json, figure.png and flight.mcap ({} messages)",
         log.written
     );
     println!(
         "result            {}",
         if ok { "SUCCESS" } else { "FAILED" }
     );
-    if !ok {
-        std::process::exit(1);
-    }
-    Ok(())
+    Ok(ok)
 }
 
 fn many(
@@ -99,7 +101,7 @@ fn many(
     runs: usize,
     seed: u64,
     jobs: Option<usize>,
-) -> Result<()> {
+) -> Result<bool> {
     let threads = jobs
         .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, std::num::NonZero::get));
     let bar = ProgressBar::new(runs as u64);
@@ -140,6 +142,6 @@ fn many(
             f.summary.crash_reason
         );
     }
-    println!("wrote {}", path.display());
-    Ok(())
+    println!("outputs           monte_carlo.json");
+    Ok(true)
 }
