@@ -35,10 +35,11 @@ use atmo_core::ConfigFile;
 use atmo_core::model::State;
 use ros2_client::{Publisher, Subscription};
 
-use super::{
-    DdsNode, Ros2Config, Ros2StartOptions, Ros2Thread, count_publish, dds_node, domain_id,
-    publish_queued, publisher, spawn_node_thread, stream_qos, subscription, take_burst, try_queue,
+use super::dds::{
+    DdsNode, count_publish, dds_node, domain_id, publish_queued, publisher, spawn_node_thread,
+    stream_qos, subscription, take_burst, try_queue,
 };
+use super::{Ros2Config, Ros2StartOptions, Ros2Thread};
 use crate::error::Result;
 use crate::msg::frames::{state_to_odometry, state_to_vehicle_odometry};
 use crate::msg::{MpcStatus, Odometry, PilotInput, RosMessage, VehicleOdometry};

@@ -1,0 +1,394 @@
+//! The daemon's node thread: builds the publishers and subscriptions of
+//! [`Ros2Config`], publishes what the control thread queues, and checks,
+//! converts and counts every input before it reaches the control thread.
+
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc::{Receiver, SyncSender, sync_channel};
+use std::time::{Duration, Instant};
+
+use atmo_core::ConfigFile;
+use atmo_core::model::State;
+use ros2_client::{Publisher, Subscription};
+
+use super::dds::{
+    DdsNode, TAKE_BURST, bump, count_publish, dds_node, domain_id, publish_queued, publisher,
+    reliable_qos, spawn_node_thread, stream_qos, subscription, take_burst,
+};
+use super::{
+    Counters, DriveCommand, Outgoing, PilotCommand, Ros2Config, Ros2Inputs, Ros2Node,
+    Ros2Publisher, Ros2StartOptions, Ros2Thread, RosEstimate, Topics,
+};
+use crate::error::{IoError, Result};
+use crate::msg::frames::{odometry_to_state, vehicle_odometry_to_state};
+use crate::msg::{
+    ActuatorMotors, DiagnosticArray, DiagnosticStatus, KeyValue, MpcStatus, Odometry,
+    OffboardControlMode, PilotInput, RosMessage, Time, Twist, VehicleOdometry,
+};
+
+/// Whether a pilot input may be used: every number finite, throttle in [0, 1].
+fn pilot_is_valid(p: &PilotInput) -> bool {
+    p.velocity.iter().all(|v| v.is_finite())
+        && p.yaw_rate.is_finite()
+        && (0.0..=1.0).contains(&p.throttle)
+}
+
+enum EstimateSub {
+    Odometry(Subscription<Odometry>),
+    Px4(Subscription<VehicleOdometry>),
+}
+
+struct NodeThread {
+    config: Ros2Config,
+    status: Option<Publisher<MpcStatus>>,
+    motors: Option<Publisher<ActuatorMotors>>,
+    offboard: Option<Publisher<OffboardControlMode>>,
+    diagnostics: Option<Publisher<DiagnosticArray>>,
+    estimate: Option<EstimateSub>,
+    drive: Option<Subscription<Twist>>,
+    pilot: Option<Subscription<PilotInput>>,
+    out_rx: Receiver<Outgoing>,
+    estimate_tx: SyncSender<RosEstimate>,
+    drive_tx: SyncSender<DriveCommand>,
+    pilot_tx: SyncSender<PilotCommand>,
+    counters: Arc<Counters>,
+    stop: Arc<AtomicBool>,
+    last_stamp: Option<u64>,
+    started: Instant,
+    /// `type_hash <topic>` = RIHS01 of each enabled topic's type.
+    type_hashes: Vec<KeyValue>,
+    /// Last: dropped after the endpoints above (see [`DdsNode`]).
+    _dds: DdsNode,
+}
+
+/// `type_hash <topic>` = the RIHS01 hash of its type, for each enabled topic.
+fn topic_type_hashes(topics: &Topics) -> Result<Vec<KeyValue>> {
+    let all = [
+        &topics.status,
+        &topics.estimate,
+        &topics.drive_command,
+        &topics.pilot,
+        &topics.actuator_motors,
+        &topics.offboard_mode,
+        &topics.diagnostics,
+    ];
+    all.into_iter()
+        .filter(|t| t.enabled)
+        .map(|t| {
+            Ok(KeyValue {
+                key: format!("type_hash {}", t.name),
+                value: crate::msg::type_hash(&t.type_name)?,
+            })
+        })
+        .collect()
+}
+
+impl Ros2Node {
+    /// Creates the participant, node, publishers and subscriptions (errors
+    /// are returned here, not later), then starts the node thread.
+    pub fn start(
+        config: &Ros2Config,
+        options: Ros2StartOptions,
+    ) -> Result<(Ros2Publisher, Ros2Inputs, Ros2Thread)> {
+        config.validate(std::path::Path::new("(ros2 config)"))?;
+        let domain = domain_id(options)?;
+        let config = config.clone();
+        let counters = Arc::new(Counters::default());
+        let stop = Arc::new(AtomicBool::new(false));
+        let (out_tx, out_rx) = sync_channel(config.publish_queue);
+        let (estimate_tx, estimate_rx) = sync_channel(16);
+        let (drive_tx, drive_rx) = sync_channel(16);
+        let (pilot_tx, pilot_rx) = sync_channel(16);
+        let channels = NodeChannels {
+            out_rx,
+            estimate_tx,
+            drive_tx,
+            pilot_tx,
+        };
+        let thread_counters = Arc::clone(&counters);
+        let thread_stop = Arc::clone(&stop);
+        let thread = spawn_node_thread(
+            "ros2-node",
+            stop,
+            move || NodeThread::build(config, domain, channels, thread_counters, thread_stop),
+            NodeThread::run,
+        )?;
+        Ok((
+            Ros2Publisher {
+                tx: out_tx,
+                counters: Arc::clone(&counters),
+            },
+            Ros2Inputs {
+                estimates: estimate_rx,
+                drive: drive_rx,
+                pilot: pilot_rx,
+                counters,
+            },
+            thread,
+        ))
+    }
+}
+
+/// The node thread's ends of the channels to the control thread.
+struct NodeChannels {
+    out_rx: Receiver<Outgoing>,
+    estimate_tx: SyncSender<RosEstimate>,
+    drive_tx: SyncSender<DriveCommand>,
+    pilot_tx: SyncSender<PilotCommand>,
+}
+
+impl NodeThread {
+    fn build(
+        config: Ros2Config,
+        domain: u16,
+        channels: NodeChannels,
+        counters: Arc<Counters>,
+        stop: Arc<AtomicBool>,
+    ) -> Result<Self> {
+        let mut dds = dds_node(&config, domain, &config.node_name)?;
+        let node = &mut dds.node;
+        let t = &config.topics;
+        let status = publisher::<MpcStatus>(node, &t.status, &reliable_qos())?;
+        let motors = publisher::<ActuatorMotors>(node, &t.actuator_motors, &stream_qos())?;
+        let offboard = publisher::<OffboardControlMode>(node, &t.offboard_mode, &stream_qos())?;
+        let diagnostics = publisher::<DiagnosticArray>(node, &t.diagnostics, &reliable_qos())?;
+        let estimate = if t.estimate.type_name == VehicleOdometry::TYPE_NAME {
+            subscription::<VehicleOdometry>(node, &t.estimate)?.map(EstimateSub::Px4)
+        } else {
+            subscription::<Odometry>(node, &t.estimate)?.map(EstimateSub::Odometry)
+        };
+        let drive = subscription::<Twist>(node, &t.drive_command)?;
+        let pilot = subscription::<PilotInput>(node, &t.pilot)?;
+        let type_hashes = topic_type_hashes(t)?;
+        let NodeChannels {
+            out_rx,
+            estimate_tx,
+            drive_tx,
+            pilot_tx,
+        } = channels;
+        Ok(Self {
+            config,
+            status,
+            motors,
+            offboard,
+            diagnostics,
+            estimate,
+            drive,
+            pilot,
+            out_rx,
+            estimate_tx,
+            drive_tx,
+            pilot_tx,
+            counters,
+            stop,
+            last_stamp: None,
+            started: Instant::now(),
+            type_hashes,
+            _dds: dds,
+        })
+    }
+
+    fn run(mut self) {
+        let period = Duration::from_millis(self.config.diagnostics_period_ms);
+        let mut next_diagnostics = Instant::now() + period;
+        while !self.stop.load(Ordering::Relaxed) {
+            publish_queued(&self.out_rx, |m| self.publish(m));
+            self.take_estimates();
+            self.take_drive();
+            self.take_pilot();
+            if Instant::now() >= next_diagnostics {
+                self.publish(Outgoing::Diagnostics(Box::default()));
+                next_diagnostics = Instant::now() + period;
+            }
+        }
+        let Self {
+            status,
+            motors,
+            offboard,
+            diagnostics,
+            estimate,
+            drive,
+            pilot,
+            _dds: dds,
+            ..
+        } = self;
+        dds.shut_down((
+            status,
+            motors,
+            offboard,
+            diagnostics,
+            estimate,
+            drive,
+            pilot,
+        ));
+    }
+
+    fn publish(&self, message: Outgoing) {
+        let result = match message {
+            Outgoing::Status(m) => self.status.as_ref().map(|p| p.publish(m).is_ok()),
+            Outgoing::Motors(m) => self.motors.as_ref().map(|p| p.publish(m).is_ok()),
+            Outgoing::Offboard(m) => self.offboard.as_ref().map(|p| p.publish(m).is_ok()),
+            Outgoing::Diagnostics(mut m) => {
+                m.status.push(self.own_diagnostics());
+                if m.header.stamp == Time::default() {
+                    m.header.stamp = Time::from_ns(crate::wall_clock_ns());
+                }
+                self.diagnostics.as_ref().map(|p| p.publish(*m).is_ok())
+            }
+        };
+        count_publish(
+            result,
+            &self.counters.published,
+            &self.counters.publish_errors,
+        );
+    }
+
+    fn own_diagnostics(&self) -> DiagnosticStatus {
+        let c = self.counters.snapshot();
+        let rejected =
+            c.malformed + c.invalid + c.stamp_backwards + c.drive_rejected + c.pilot_rejected;
+        let pairs: [(&str, u64); 13] = [
+            ("estimates_received", c.estimates_received),
+            ("estimates_accepted", c.estimates_accepted),
+            ("malformed", c.malformed),
+            ("invalid", c.invalid),
+            ("stamp_backwards", c.stamp_backwards),
+            ("drive_received", c.drive_received),
+            ("drive_rejected", c.drive_rejected),
+            ("pilot_received", c.pilot_received),
+            ("pilot_rejected", c.pilot_rejected),
+            ("inputs_dropped", c.inputs_dropped),
+            ("published", c.published),
+            ("publish_dropped", c.publish_dropped),
+            ("publish_errors", c.publish_errors),
+        ];
+        DiagnosticStatus {
+            level: if rejected + c.publish_dropped + c.publish_errors > 0 {
+                DiagnosticStatus::WARN
+            } else {
+                DiagnosticStatus::OK
+            },
+            name: "atmo/ros2".into(),
+            message: if rejected > 0 {
+                format!("{rejected} inputs rejected")
+            } else {
+                "ok".into()
+            },
+            hardware_id: self.config.node_name.clone(),
+            values: pairs
+                .iter()
+                .map(|(k, v)| KeyValue {
+                    key: (*k).to_string(),
+                    value: v.to_string(),
+                })
+                .chain(std::iter::once(KeyValue {
+                    key: "uptime_s".into(),
+                    value: format!("{:.1}", self.started.elapsed().as_secs_f64()),
+                }))
+                .chain(self.type_hashes.iter().cloned())
+                .collect(),
+        }
+    }
+
+    fn take_estimates(&mut self) {
+        let topic = self.config.topics.estimate.name.clone();
+        for _ in 0..TAKE_BURST {
+            let converted: Option<std::result::Result<(u64, State), IoError>> = match &self.estimate
+            {
+                None => return,
+                Some(EstimateSub::Odometry(sub)) => match sub.take() {
+                    Ok(None) => return,
+                    Ok(Some((odom, _))) => Some(odom.header.stamp.to_ns().map_or_else(
+                        || {
+                            Err(IoError::InvalidField {
+                                topic: topic.clone(),
+                                field: "header.stamp",
+                                reason: "negative or invalid time".into(),
+                            })
+                        },
+                        |stamp| odometry_to_state(&topic, &odom).map(|x| (stamp, x)),
+                    )),
+                    Err(_) => None,
+                },
+                Some(EstimateSub::Px4(sub)) => match sub.take() {
+                    Ok(None) => return,
+                    Ok(Some((odom, _))) => Some(
+                        vehicle_odometry_to_state(&topic, &odom)
+                            .map(|x| (odom.timestamp_sample.saturating_mul(1000), x)),
+                    ),
+                    Err(_) => None,
+                },
+            };
+            match converted {
+                None => bump(&self.counters.malformed),
+                Some(Err(_)) => {
+                    bump(&self.counters.estimates_received);
+                    bump(&self.counters.invalid);
+                }
+                Some(Ok((stamp_ns, state))) => {
+                    bump(&self.counters.estimates_received);
+                    if self.last_stamp.is_some_and(|last| stamp_ns <= last) {
+                        bump(&self.counters.stamp_backwards);
+                        continue;
+                    }
+                    self.last_stamp = Some(stamp_ns);
+                    bump(&self.counters.estimates_accepted);
+                    let estimate = RosEstimate {
+                        stamp_ns,
+                        received: Instant::now(),
+                        state,
+                    };
+                    if self.estimate_tx.try_send(estimate).is_err() {
+                        bump(&self.counters.inputs_dropped);
+                    }
+                }
+            }
+        }
+    }
+
+    fn take_drive(&self) {
+        let Some(sub) = &self.drive else { return };
+        let c = &self.counters;
+        take_burst(
+            sub,
+            &c.malformed,
+            &c.drive_received,
+            &c.inputs_dropped,
+            &self.drive_tx,
+            |twist: Twist| {
+                let (forward, yaw_rate) = (twist.linear.x, -twist.angular.z);
+                if !forward.is_finite() || !yaw_rate.is_finite() {
+                    bump(&c.drive_rejected);
+                    return None;
+                }
+                Some(DriveCommand {
+                    forward,
+                    yaw_rate,
+                    received: Instant::now(),
+                })
+            },
+        );
+    }
+
+    fn take_pilot(&self) {
+        let Some(sub) = &self.pilot else { return };
+        let c = &self.counters;
+        take_burst(
+            sub,
+            &c.malformed,
+            &c.pilot_received,
+            &c.inputs_dropped,
+            &self.pilot_tx,
+            |input: PilotInput| {
+                if !pilot_is_valid(&input) {
+                    bump(&c.pilot_rejected);
+                    return None;
+                }
+                Some(PilotCommand {
+                    input,
+                    received: Instant::now(),
+                })
+            },
+        );
+    }
+}
