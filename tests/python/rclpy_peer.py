@@ -15,8 +15,9 @@ Checks, each printed PASS/FAIL with its numbers, then `N passed, M failed`
 - header stamps are within 0.1 s of this machine's wall clock;
 - the RIHS01 type hashes the daemon computes equal rclpy's;
 - after SIGTERM the daemon exits 0, logs no RustDDS removal errors, and no
-  endpoint of it is left in the graph 2 s later (a known failure today, see
-  KNOWN_FAILURES; ATMO_PEER_MEASURE_GHOSTS=1 measures how long they stay).
+  endpoint of it is left in the graph 2 s later (the node's farewell SPDP
+  dispose, atmo-io src/ros2/farewell.rs; ATMO_PEER_MEASURE_GHOSTS=1 measures
+  how long they stay when they do).
 """
 
 import argparse
@@ -45,12 +46,7 @@ GHOST_DEADLINE_S = 2.0
 
 # Checks known to fail, with why; a failure of one is reported as XFAIL and
 # not counted as failed, a pass as XPASS and counted as failed (remove it here).
-KNOWN_FAILURES = {
-    "no daemon endpoint in the graph 2 s after SIGTERM":
-        "RustDDS 0.15.1 disposes its endpoints and participant at shutdown "
-        "(drop order fixed, no removal errors) but Fast DDS 3.2.3 keeps them "
-        "until the participant lease ends (README, ROS 2 section)",
-}
+KNOWN_FAILURES: dict[str, str] = {}
 
 
 class Checks:

@@ -8,7 +8,7 @@ use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::mpsc::{Receiver, RecvTimeoutError, SyncSender, TrySendError, sync_channel};
 use std::time::Duration;
 
-use ros2_client::dds::rustdds::DomainParticipantBuilder;
+use ros2_client::dds::rustdds::{DomainParticipant, DomainParticipantBuilder, RTPSEntity};
 use ros2_client::{
     Context, MessageTypeName, Name, Node, NodeName, NodeOptions, Publisher, QosProfile,
     Subscription,
@@ -17,6 +17,7 @@ use ros2_client::{
 use serde::Serialize;
 use serde::de::DeserializeOwned;
 
+use super::farewell::Farewell;
 use super::{Ros2Config, Ros2StartOptions, Ros2Thread, TopicConfig, domain_id_from_env};
 use crate::error::{IoError, Result};
 use crate::msg::RosMessage;
@@ -106,7 +107,7 @@ pub(super) fn spawn_node_thread<N: 'static>(
     thread_name: &str,
     stop: Arc<AtomicBool>,
     build: impl FnOnce() -> Result<N> + Send + 'static,
-    run: fn(N),
+    run: fn(N) -> Result<()>,
 ) -> Result<Ros2Thread> {
     let (ready_tx, ready_rx) = sync_channel::<Result<()>>(1);
     // DDS entities are built on the thread that uses them.
@@ -115,8 +116,7 @@ pub(super) fn spawn_node_thread<N: 'static>(
         .spawn(move || match build() {
             Ok(node) => {
                 let _ = ready_tx.send(Ok(()));
-                run(node);
-                Ok(())
+                run(node)
             }
             Err(e) => {
                 let text = e.to_string();
@@ -145,18 +145,29 @@ pub(super) fn spawn_node_thread<N: 'static>(
 /// so they are dropped (undeclared) while the participant still runs.
 pub(super) struct DdsNode {
     pub(super) node: Node,
-    _context: Context,
+    context: Context,
+    farewell: Farewell,
 }
 
 impl DdsNode {
     /// Drops `endpoints` (RustDDS undeclares them while its event loop
-    /// runs), then the node and the participant (which disposes itself).
-    /// No wait in between: a grace period of 250 ms changed nothing in a
-    /// Fast DDS peer's graph, and it delayed the exit of the SITL server
-    /// past the daemon's driver-liveness timeout.
-    pub(super) fn shut_down<E>(self, endpoints: E) {
+    /// runs), then the node and the participant (which stops its threads),
+    /// then sends the [`Farewell`] that makes peers forget the participant
+    /// and its endpoints at once. An error only if no farewell datagram
+    /// could be sent at all.
+    pub(super) fn shut_down<E>(self, endpoints: E) -> Result<()> {
         drop(endpoints);
-        drop(self);
+        let Self {
+            node,
+            context,
+            farewell,
+        } = self;
+        drop(node);
+        drop(context);
+        farewell
+            .send()
+            .map(|_| ())
+            .map_err(|e| ros_err("farewell (SPDP dispose of the participant)", e))
     }
 }
 
@@ -172,6 +183,12 @@ pub(super) fn dds_node(config: &Ros2Config, domain: u16, node_name: &str) -> Res
     let participant = builder
         .build()
         .map_err(|e| ros_err(&format!("DDS participant on domain {domain}"), e))?;
+    let farewell = Farewell {
+        guid_prefix: participant_guid_prefix(&participant),
+        domain,
+        participant_id: participant.participant_id(),
+        loopback_only: config.loopback_only,
+    };
     let context =
         Context::from_domain_participant(participant).map_err(|e| ros_err("context", e))?;
     let name = NodeName::new(&config.namespace, node_name)
@@ -181,8 +198,15 @@ pub(super) fn dds_node(config: &Ros2Config, domain: u16, node_name: &str) -> Res
         .map_err(|e| ros_err("node", e))?;
     Ok(DdsNode {
         node,
-        _context: context,
+        context,
+        farewell,
     })
+}
+
+fn participant_guid_prefix(participant: &DomainParticipant) -> [u8; 12] {
+    let mut prefix = [0u8; 12];
+    prefix.copy_from_slice(participant.guid().prefix.as_ref());
+    prefix
 }
 
 pub(super) fn ros_err(context: &str, e: impl std::fmt::Display) -> IoError {

@@ -22,10 +22,13 @@
 //!   best-effort publishers alike; a late sample is worth nothing.
 //!
 //! Shutdown: the endpoints are dropped before the node and the node before
-//! the DDS participant ([`DdsNode`](dds::DdsNode) is the last field of the thread
-//! structs), so RustDDS disposes every endpoint (SEDP) and the participant
-//! while its event loop still runs, and a peer's graph forgets them at once
-//! instead of after the 50 s participant lease.
+//! the DDS participant ([`DdsNode`](dds::DdsNode) is the last field of the
+//! thread structs), so RustDDS disposes every endpoint (SEDP) and the
+//! participant while its event loop still runs. Fast DDS discards those
+//! disposes (they carry no key hash, see [`farewell`]), so once the
+//! participant has stopped the node sends its own SPDP dispose with the key
+//! hash, and a Fast DDS peer's graph forgets the participant and all its
+//! endpoints at once instead of after the 50 s participant lease.
 //!
 //! Type hashes: RustDDS 0.15 sends no endpoint USER_DATA, where an rmw puts
 //! `typehash=RIHS01_...;` (peers see the hash as invalid; ROS 2 Kilted
@@ -49,6 +52,7 @@
 
 mod config;
 mod dds;
+mod farewell;
 mod node;
 mod sitl;
 

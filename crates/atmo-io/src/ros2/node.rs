@@ -188,7 +188,7 @@ impl NodeThread {
         })
     }
 
-    fn run(mut self) {
+    fn run(mut self) -> Result<()> {
         let period = Duration::from_millis(self.config.diagnostics_period_ms);
         let mut next_diagnostics = Instant::now() + period;
         while !self.stop.load(Ordering::Relaxed) {
@@ -220,7 +220,7 @@ impl NodeThread {
             estimate,
             drive,
             pilot,
-        ));
+        ))
     }
 
     fn publish(&self, message: Outgoing) {

@@ -247,7 +247,7 @@ impl SitlThread {
         })
     }
 
-    fn run(self) {
+    fn run(self) -> Result<()> {
         while !self.stop.load(Ordering::Relaxed) {
             publish_queued(&self.out_rx, |m| self.publish(m));
             self.take_status();
@@ -259,7 +259,7 @@ impl SitlThread {
             _dds: dds,
             ..
         } = self;
-        dds.shut_down((estimate, pilot, status));
+        dds.shut_down((estimate, pilot, status))
     }
 
     fn publish(&self, message: Outgoing) {
