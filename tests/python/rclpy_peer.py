@@ -12,6 +12,9 @@ Checks, each printed PASS/FAIL with its numbers, then `N passed, M failed`
   and with sensor-data QoS (best effort), nearly every tick;
 - 120 Hz odometry (reliable and best-effort publishers) is accepted and
   shows in the status converted ENU -> NED; a pilot input is echoed exactly;
+- a ground height on /atmo/ground (PointStamped, ENU) sets status.height,
+  which falls back to the config's ground_z once the topic is silent for
+  longer than ground_timeout_ms;
 - header stamps are within 0.1 s of this machine's wall clock;
 - the RIHS01 type hashes the daemon computes equal rclpy's;
 - after SIGTERM the daemon exits 0, logs no RustDDS removal errors, and no
@@ -39,9 +42,12 @@ TOPICS = {
     "/atmo/mocap/odom": "nav_msgs/msg/Odometry",
     "/atmo/pilot": "atmo_msgs/msg/PilotInput",
     "/atmo/cmd_drive": "geometry_msgs/msg/Twist",
+    "/atmo/ground": "geometry_msgs/msg/PointStamped",
 }
 STAMP_TOLERANCE_S = 0.1
 GHOST_DEADLINE_S = 2.0
+GROUND_ENU_Z = 1.0     # m, the ground height the peer publishes
+GROUND_TIMEOUT_S = 1.0  # config/daemon.toml ground_timeout_ms
 
 
 # Checks known to fail, with why; a failure of one is reported as XFAIL and
@@ -90,6 +96,19 @@ def daemon_config(tmp: Path, tag: str) -> Path:
     return path
 
 
+def odom_now(Odometry, yaw_enu):
+    """The test's odometry: ENU position (1, 2, 3), yaw `yaw_enu`, stamped now."""
+    odom = Odometry()
+    odom.header.stamp.sec, odom.header.stamp.nanosec = divmod(time.time_ns(), 1_000_000_000)
+    odom.header.frame_id = "odom"
+    odom.child_frame_id = "base_link"
+    odom.pose.pose.position.x, odom.pose.pose.position.y = 1.0, 2.0
+    odom.pose.pose.position.z = 3.0
+    odom.pose.pose.orientation.z = math.sin(yaw_enu / 2)
+    odom.pose.pose.orientation.w = math.cos(yaw_enu / 2)
+    return odom
+
+
 def stamp_s(stamp):
     return stamp.sec + stamp.nanosec * 1e-9
 
@@ -106,7 +125,7 @@ def main():
     from rclpy.executors import SingleThreadedExecutor
     from rclpy.qos import QoSProfile, qos_profile_sensor_data
     from diagnostic_msgs.msg import DiagnosticArray
-    from geometry_msgs.msg import Twist
+    from geometry_msgs.msg import PointStamped, Twist
     from nav_msgs.msg import Odometry
     from atmo_msgs.msg import MpcStatus, PilotInput
 
@@ -155,6 +174,7 @@ def main():
                                              qos_profile_sensor_data)
     pilot_pub = node.create_publisher(PilotInput, "/atmo/pilot", default_qos)
     node.create_publisher(Twist, "/atmo/cmd_drive", default_qos)  # for its type hash
+    ground_pub = node.create_publisher(PointStamped, "/atmo/ground", default_qos)
 
     started = time.monotonic()
     daemon = subprocess.Popen(
@@ -163,7 +183,8 @@ def main():
         stdout=open(tmp / "daemon.stdout", "w"), stderr=open(stderr_path, "w"))
     try:
         run_checks(c, node, spin_for, got, daemon, started, stderr_path,
-                   odom_reliable, odom_best_effort, pilot_pub, Odometry, PilotInput)
+                   odom_reliable, odom_best_effort, pilot_pub, Odometry, PilotInput,
+                   ground_pub, PointStamped)
     finally:
         if daemon.poll() is None:
             daemon.kill()
@@ -205,7 +226,8 @@ def own_type_hashes(node):
 
 
 def run_checks(c, node, spin_for, got, daemon, started, stderr_path,
-               odom_reliable, odom_best_effort, pilot_pub, Odometry, PilotInput):
+               odom_reliable, odom_best_effort, pilot_pub, Odometry, PilotInput,
+               ground_pub, PointStamped):
     # --- graph: node, topics, type names.
     def graph_complete():
         names = {n for n, _ in node.get_node_names_and_namespaces()}
@@ -237,18 +259,22 @@ def run_checks(c, node, spin_for, got, daemon, started, stderr_path,
     for key in got:
         got[key].clear()
     t_window = time.time()
+    # The ground (ENU z = 1 m, up) from the window's second half on.
+    ground_from = time.monotonic() + 1.5
+    next_ground = ground_from
+    ground = PointStamped()
+    ground.header.frame_id = "odom"
+    ground.point.x, ground.point.y, ground.point.z = 1.0, 2.0, GROUND_ENU_Z
+    first_ground_wall = None
     while time.monotonic() < send_end:
         now = time.monotonic()
+        if now >= next_ground:
+            ground.header.stamp.sec, ground.header.stamp.nanosec = divmod(time.time_ns(), 10**9)
+            ground_pub.publish(ground)
+            first_ground_wall = first_ground_wall or time.time()
+            next_ground += 0.05
         if now >= next_odom:
-            odom = Odometry()
-            wall = time.time_ns()
-            odom.header.stamp.sec, odom.header.stamp.nanosec = divmod(wall, 1_000_000_000)
-            odom.header.frame_id = "odom"
-            odom.child_frame_id = "base_link"
-            odom.pose.pose.position.x, odom.pose.pose.position.y = 1.0, 2.0
-            odom.pose.pose.position.z = 3.0
-            odom.pose.pose.orientation.z = math.sin(yaw_enu / 2)
-            odom.pose.pose.orientation.w = math.cos(yaw_enu / 2)
+            odom = odom_now(Odometry, yaw_enu)
             (odom_reliable if k % 2 == 0 else odom_best_effort).publish(odom)
             k += 1
             next_odom += period
@@ -257,6 +283,7 @@ def run_checks(c, node, spin_for, got, daemon, started, stderr_path,
             next_pilot += 0.02
         node.executor.spin_once(timeout_sec=0.001)
     window = time.time() - t_window
+    last_ground_wall = time.time()
 
     # --- status and diagnostics, both QoS.
     diag_values = {}  # the node's own counters, from its last diagnostics
@@ -306,6 +333,16 @@ def run_checks(c, node, spin_for, got, daemon, started, stderr_path,
             pilot.arm, pilot.offboard, pilot.mpc_enabled)
     c.check(echoed == sent, "pilot input echoed exactly in status.pilot", f"{echoed}")
 
+    # --- ground height: NED z -3 over ground_z 0 is 3 m; over the topic's
+    # ground (ENU z 1) 2 m; the config again once the topic is stale.
+    before = [m.height for recv, m in got["status_reliable"]
+              if recv < first_ground_wall and abs(m.state[2] + 3.0) < 1e-9]
+    c.check(bool(before) and all(abs(h - 3.0) < 1e-9 for h in before)
+            and abs(last.height - (3.0 - GROUND_ENU_Z)) < 1e-9,
+            "ground height from /atmo/ground (ENU) in status.height",
+            f"before the topic {sorted(set(round(h, 6) for h in before))}, "
+            f"with it {last.height:.6f}, want 3.0 then {3.0 - GROUND_ENU_Z}")
+
     # --- stamps: ROS time (wall clock) within 0.1 s of reception.
     offsets = [recv - stamp_s(m.header.stamp) for recv, m in got["status_reliable"]]
     diag_offsets = [recv - stamp_s(m.header.stamp)
@@ -327,6 +364,20 @@ def run_checks(c, node, spin_for, got, daemon, started, stderr_path,
     c.check(all(b > a for a, b in zip(ticks_clock, ticks_clock[1:])) and ticks_clock[0] < 600e9,
             "status.clock_ns is the stack's monotonic clock",
             f"{ticks_clock[0] * 1e-9:.3f} .. {ticks_clock[-1] * 1e-9:.3f} s since start")
+
+    # --- ground height again, once its topic is stale.
+    stale_heights = []
+    keep_odom_until = time.monotonic() + GROUND_TIMEOUT_S + 0.5
+    got["status_reliable"].clear()
+    while time.monotonic() < keep_odom_until:
+        odom_reliable.publish(odom_now(Odometry, yaw_enu))
+        spin_for(period)
+    stale_heights = [m.height for recv, m in got["status_reliable"]
+                     if recv > last_ground_wall + GROUND_TIMEOUT_S + 0.1]
+    c.check(bool(stale_heights) and all(abs(h - 3.0) < 1e-9 for h in stale_heights),
+            f"status.height back on the config's ground_z {GROUND_TIMEOUT_S:.0f} s after "
+            "the ground topic went silent",
+            f"{sorted(set(round(h, 6) for h in stale_heights))} over {len(stale_heights)} statuses")
 
     # --- type hashes: the daemon's (diagnostics) against rclpy's own.
     rclpy_hashes = own_type_hashes(node)

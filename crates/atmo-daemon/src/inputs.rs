@@ -19,8 +19,10 @@
 //!   yaw rate while the stack is in [`Mode::Drive`].
 //! - Encoder, contact, driver liveness: the newest reading holds.
 //! - Ground height: the NED z of the ground under the robot, from a source
-//!   (a terrain map, a rangefinder, a topic) or, until one has spoken, the
-//!   configured constant.
+//!   (a terrain map, a rangefinder, a topic): the newest wins while it is
+//!   younger than `ground_timeout`; before a source has spoken, and when it
+//!   has been silent longer than that (counted as stale), the configured
+//!   constant.
 
 use std::time::Duration;
 
@@ -31,12 +33,17 @@ use crate::modes::Mode;
 
 /// The pilot and drive timeouts when a config names none, ms.
 pub const DEFAULT_INPUT_TIMEOUT_MS: u64 = 500;
+/// The ground-height timeout when a config names none, ms (the ground
+/// changes slowly; a terrain source may speak a few times a second).
+pub const DEFAULT_GROUND_TIMEOUT_MS: u64 = 1000;
 
 /// How the latch turns arrivals into inputs.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct InputSettings {
-    /// NED z of the ground until a ground-height source speaks, m.
+    /// NED z of the ground when no ground-height source is fresh, m.
     pub ground_z: f64,
+    /// Age after which a ground height is replaced by `ground_z`.
+    pub ground_timeout: Duration,
     /// Pilot stream silence after which its commands go to zero.
     pub pilot_timeout: Duration,
     /// Age after which a drive command is ignored.
@@ -64,6 +71,9 @@ pub struct Assembled {
     pub pilot_stale: bool,
     /// No estimate young enough to fly on.
     pub estimate_stale: bool,
+    /// A ground-height source spoke, but too long ago: the tick uses the
+    /// configured ground height.
+    pub ground_stale: bool,
 }
 
 /// The newest value of every source, and the rules that make a tick's
@@ -78,7 +88,8 @@ pub struct InputLatch {
     tilt_counts: Option<f64>,
     contact: bool,
     drivers_alive: bool,
-    ground_z: f64,
+    /// The newest ground height and when it arrived (tick clock).
+    ground: Option<(f64, u64)>,
     mode: Mode,
 }
 
@@ -93,6 +104,7 @@ impl InputSettings {
         let timeout = Duration::from_millis(DEFAULT_INPUT_TIMEOUT_MS);
         Self {
             ground_z,
+            ground_timeout: Duration::from_millis(DEFAULT_GROUND_TIMEOUT_MS),
             pilot_timeout: timeout,
             drive_timeout: timeout,
             estimate_timeout,
@@ -114,7 +126,7 @@ impl InputLatch {
             tilt_counts: None,
             contact: false,
             drivers_alive: true,
-            ground_z: settings.ground_z,
+            ground: None,
             mode: Mode::Disarmed,
         }
     }
@@ -154,9 +166,10 @@ impl InputLatch {
         self.drivers_alive = alive;
     }
 
-    /// A ground height arrived: NED z of the ground under the robot, m.
-    pub fn ground_z(&mut self, z: f64) {
-        self.ground_z = z;
+    /// A ground height arrived at `received_ns`: NED z of the ground under
+    /// the robot, m.
+    pub fn ground_z(&mut self, z: f64, received_ns: u64) {
+        self.ground = Some((z, received_ns));
     }
 
     /// The mode the last tick ended in (drive commands count only in
@@ -179,6 +192,9 @@ impl InputLatch {
             now_ns.saturating_sub(e.stamp_ns) as f64 * 1e-9 <= self.settings.estimate_timeout
         });
         let yaw = self.estimate.map_or(0.0, |e| e.state[idx::YAW]);
+        let fresh_ground = self
+            .ground
+            .filter(|&(_, at)| now_ns.saturating_sub(at) <= ns(self.settings.ground_timeout));
         Assembled {
             inputs: StepInputs {
                 now_ns,
@@ -186,11 +202,12 @@ impl InputLatch {
                 tilt_counts: self.tilt_counts,
                 pilot: self.pilot_now(now_ns, yaw, pilot_stale),
                 ground_contact: self.contact,
-                ground_z: self.ground_z,
+                ground_z: fresh_ground.map_or(self.settings.ground_z, |(z, _)| z),
                 driver_lost: !self.drivers_alive,
             },
             pilot_stale,
             estimate_stale,
+            ground_stale: self.ground.is_some() && fresh_ground.is_none(),
         }
     }
 
@@ -225,6 +242,7 @@ mod tests {
     fn latch() -> InputLatch {
         InputLatch::new(InputSettings {
             ground_z: -0.5,
+            ground_timeout: Duration::from_secs(1),
             pilot_timeout: Duration::from_millis(500),
             drive_timeout: Duration::from_millis(300),
             estimate_timeout: 0.1,
@@ -289,11 +307,18 @@ mod tests {
     }
 
     #[test]
-    fn ground_height_is_the_constant_until_a_source_speaks() {
+    fn ground_height_is_the_constant_unless_a_source_is_fresh() {
         let mut l = latch();
-        assert_eq!(l.assemble(0).inputs.ground_z, -0.5);
-        l.ground_z(-0.2);
-        assert_eq!(l.assemble(0).inputs.ground_z, -0.2);
+        let before = l.assemble(0);
+        assert_eq!(before.inputs.ground_z, -0.5);
+        assert!(!before.ground_stale, "no source yet is not stale");
+        l.ground_z(-0.2, 100 * MS);
+        let fresh = l.assemble(1100 * MS);
+        assert_eq!((fresh.inputs.ground_z, fresh.ground_stale), (-0.2, false));
+        let stale = l.assemble(1101 * MS);
+        assert_eq!((stale.inputs.ground_z, stale.ground_stale), (-0.5, true));
+        l.ground_z(-0.3, 1200 * MS);
+        assert_eq!(l.assemble(1200 * MS).inputs.ground_z, -0.3, "back");
     }
 
     #[test]

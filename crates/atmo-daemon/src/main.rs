@@ -221,6 +221,7 @@ fn run(arg: &DaemonConfigArg, log_path: Option<PathBuf>, duration: Option<f64>) 
         records = written.written,
         dropped = written.dropped,
         pilot_stale_ticks = shared.pilot_stale_ticks.load(Ordering::Relaxed),
+        ground_stale_ticks = shared.ground_stale_ticks.load(Ordering::Relaxed),
         port_send_errors = shared.port_send_errors.load(Ordering::Relaxed),
         "atmo-daemon stopped"
     );

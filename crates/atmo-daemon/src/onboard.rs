@@ -16,8 +16,9 @@
 //!
 //! Clocks: the stack runs on its own monotonic clock (from 0 at start;
 //! `MpcStatus.clock_ns`, `estimate_age`), and stamps its status with ROS
-//! time, the wall clock read when the tick gathers its inputs
-//! (`MpcStatus.header.stamp`). `/clock` (`use_sim_time`) is not followed.
+//! time read when the tick gathers its inputs (`MpcStatus.header.stamp`):
+//! the wall clock, or with `[ros2] use_sim_time` the newest `/clock`
+//! ([`atmo_io::ros2::Ros2Inputs::ros_time_ns`]).
 //!
 //! Input semantics (the shared [`crate::inputs::InputLatch`]): the estimate's
 //! age is measured from when the ROS 2 thread accepted it (message stamps
@@ -25,8 +26,9 @@
 //! pilot stream goes stale after `pilot_timeout_ms`, a drive command counts
 //! for `drive_timeout_ms`; a required driver not heard from within the
 //! driver ports' liveness timeout sets `driver_lost`: failsafe in the air,
-//! no take-off. The ground height is the config's `ground_z` (a ground
-//! height topic would feed [`crate::inputs::InputLatch::ground_z`]).
+//! no take-off. The ground height comes from the ground topic
+//! (`[ros2.topics] ground`, [`atmo_io::ros2::GroundHeight`]) while it is
+//! younger than `ground_timeout_ms`, else from the config's `ground_z`.
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -57,9 +59,14 @@ pub struct DaemonConfig {
     pub flight: PathBuf,
     /// MPC settings (config/mpc.toml); the preset is the flight settings'.
     pub mpc: PathBuf,
-    /// NED z of the (flat) ground under the robot, m.
+    /// NED z of the (flat) ground under the robot, m, when the ground topic
+    /// is silent or stale.
     #[serde(default)]
     pub ground_z: f64,
+    /// Age after which a ground height from the topic is replaced by
+    /// `ground_z`, ms.
+    #[serde(default = "default_ground_timeout_ms")]
+    pub ground_timeout_ms: u64,
     /// Pilot stream silence after which its commands go to zero, ms.
     #[serde(default = "default_input_timeout_ms")]
     pub pilot_timeout_ms: u64,
@@ -80,6 +87,10 @@ pub struct DaemonConfig {
 
 fn default_input_timeout_ms() -> u64 {
     crate::inputs::DEFAULT_INPUT_TIMEOUT_MS
+}
+
+fn default_ground_timeout_ms() -> u64 {
+    crate::inputs::DEFAULT_GROUND_TIMEOUT_MS
 }
 
 /// `[log]`: the MCAP flight log.
@@ -145,6 +156,12 @@ impl ConfigFile for DaemonConfig {
                 .fail("ground_z", "a finite height, m", self.ground_z)
                 .into());
         }
+        c.range(
+            "ground_timeout_ms",
+            self.ground_timeout_ms,
+            10..=60_000,
+            "ms",
+        )?;
         c.range("pilot_timeout_ms", self.pilot_timeout_ms, 10..=10_000, "ms")?;
         c.range("drive_timeout_ms", self.drive_timeout_ms, 10..=10_000, "ms")?;
         let log = &self.log;
@@ -188,6 +205,9 @@ pub struct OnboardShared {
     pub pilot_stale_ticks: AtomicU64,
     /// Ticks with no estimate fresh enough to fly on (age > timeout).
     pub estimates_stale_ticks: AtomicU64,
+    /// Ticks on the configured ground height because the ground topic had
+    /// spoken but was older than its timeout.
+    pub ground_stale_ticks: AtomicU64,
     /// Driver-port sends refused.
     pub port_send_errors: AtomicU64,
     /// Status records the logger dropped (queue full).
@@ -200,6 +220,7 @@ pub struct OnboardShared {
 #[derive(Debug, Clone, Copy)]
 pub struct OnboardSettings {
     pub ground_z: f64,
+    pub ground_timeout: Duration,
     pub pilot_timeout: Duration,
     pub drive_timeout: Duration,
     pub px4_offboard: bool,
@@ -212,6 +233,7 @@ impl OnboardSettings {
     pub fn inputs(&self) -> InputSettings {
         InputSettings {
             ground_z: self.ground_z,
+            ground_timeout: self.ground_timeout,
             pilot_timeout: self.pilot_timeout,
             drive_timeout: self.drive_timeout,
             estimate_timeout: self.estimate_timeout,
@@ -221,6 +243,7 @@ impl OnboardSettings {
     pub fn new(config: &DaemonConfig, estimate_timeout: f64) -> Self {
         Self {
             ground_z: config.ground_z,
+            ground_timeout: Duration::from_millis(config.ground_timeout_ms),
             pilot_timeout: Duration::from_millis(config.pilot_timeout_ms),
             drive_timeout: Duration::from_millis(config.drive_timeout_ms),
             px4_offboard: config.px4_offboard,
@@ -243,9 +266,9 @@ pub struct OnboardIo {
     latch: InputLatch,
     health: Option<DriverHealth>,
     tick: u64,
-    /// ROS time (the wall clock) when this tick's inputs were gathered: the
-    /// status's header stamp (ROS tools show real dates, and a peer can
-    /// compare it with its own clock).
+    /// ROS time (the wall clock, or `/clock` with `use_sim_time`) when this
+    /// tick's inputs were gathered: the status's header stamp (ROS tools
+    /// show real dates, and a peer can compare it with its own clock).
     tick_ros_ns: u64,
 }
 
@@ -302,13 +325,17 @@ impl OnboardIo {
 
 impl TickIo for OnboardIo {
     fn gather(&mut self, deadline_ns: u64) -> Option<StepInputs> {
-        self.tick_ros_ns = atmo_io::wall_clock_ns();
+        self.tick_ros_ns = self.ros_in.ros_time_ns();
         while let Some(e) = self.ros_in.latest_estimate() {
             // Age from acceptance (see the module doc), on the tick's clock.
             self.latch.estimate(Estimate {
                 stamp_ns: stamp_on_tick_clock(deadline_ns, e.received),
                 state: e.state,
             });
+        }
+        if let Some(g) = self.ros_in.latest_ground() {
+            let received = stamp_on_tick_clock(deadline_ns, g.received);
+            self.latch.ground_z(g.z, received);
         }
         while let Some(p) = self.ros_in.latest_pilot() {
             let received = stamp_on_tick_clock(deadline_ns, p.received);
@@ -340,6 +367,11 @@ impl TickIo for OnboardIo {
         if assembled.estimate_stale {
             self.shared
                 .estimates_stale_ticks
+                .fetch_add(1, Ordering::Relaxed);
+        }
+        if assembled.ground_stale {
+            self.shared
+                .ground_stale_ticks
                 .fetch_add(1, Ordering::Relaxed);
         }
         Some(assembled.inputs)

@@ -79,6 +79,7 @@ fn onboard_tick_io_allocates_nothing_of_its_own() {
     let shared = Arc::new(OnboardShared::default());
     let settings = OnboardSettings {
         ground_z: 0.0,
+        ground_timeout: Duration::from_secs(1),
         pilot_timeout: Duration::from_millis(500),
         drive_timeout: Duration::from_millis(500),
         px4_offboard: true, // exercise every output

@@ -14,7 +14,10 @@ use std::time::{Duration, Instant};
 use atmo_core::ConfigFile;
 use atmo_core::model::State;
 use atmo_io::msg::frames::{odometry_to_state, state_to_odometry};
-use atmo_io::msg::{DiagnosticArray, MpcStatus, Odometry, Time, Twist, Vector3, VehicleOdometry};
+use atmo_io::msg::{
+    Clock, DiagnosticArray, MpcStatus, Odometry, Point, PointStamped, Time, Twist, Vector3,
+    VehicleOdometry,
+};
 use atmo_io::ros2::{
     Ros2Config, Ros2Counters, Ros2Node, Ros2StartOptions, TopicConfig, domain_id_from_env,
 };
@@ -393,6 +396,94 @@ fn px4_vehicle_odometry_as_the_estimate() {
         1.0, 2.0, -3.0, 0.0, 0.0, 0.0, 0.5, 0.0, -0.25, 0.0, 0.0, 0.125,
     ];
     assert_eq!(e.state.as_slice(), &want);
+    thread.stop().unwrap();
+}
+
+/// `use_sim_time`: ROS time is 0 until a `/clock` arrives, then the newest
+/// one (also when it jumps back); an invalid time is rejected and counted.
+/// The ground topic's heights (ENU, up) come out as NED z; a NaN height is
+/// rejected and counted.
+#[test]
+fn sim_time_follows_clock_and_ground_heights_come_out_ned() {
+    let domain = domain() + 3;
+    let config = Ros2Config {
+        use_sim_time: true,
+        ..Ros2Config::default()
+    };
+    let (_publisher, mut inputs, thread) = Ros2Node::start(
+        &config,
+        Ros2StartOptions {
+            domain_id: Some(domain),
+        },
+    )
+    .unwrap();
+    assert_eq!(inputs.ros_time_ns(), 0, "no /clock yet");
+    let (_peer_context, mut peer) = peer_node(domain, "sim");
+    let qos = QosProfile::subscription_default();
+    let t = peer
+        .create_topic(
+            &topic_name("/clock"),
+            MessageTypeName::new("rosgraph_msgs", "Clock"),
+            &qos,
+        )
+        .unwrap();
+    let clock_pub = peer.create_publisher::<Clock>(&t, None).unwrap();
+    let t = peer
+        .create_topic(
+            &topic_name("/atmo/ground"),
+            MessageTypeName::new("geometry_msgs", "PointStamped"),
+            &qos,
+        )
+        .unwrap();
+    let ground_pub = peer.create_publisher::<PointStamped>(&t, None).unwrap();
+    let clock = |sec, nanosec| Clock {
+        clock: Time { sec, nanosec },
+    };
+    wait_for("ROS time from /clock", Duration::from_secs(10), || {
+        clock_pub.publish(clock(42, 500)).unwrap();
+        inputs.ros_time_ns() == 42_000_000_500
+    });
+    wait_for("the clock going back", Duration::from_secs(5), || {
+        clock_pub.publish(clock(7, 0)).unwrap();
+        inputs.ros_time_ns() == 7_000_000_000
+    });
+    wait_for("an invalid /clock counted", Duration::from_secs(5), || {
+        clock_pub.publish(clock(-1, 0)).unwrap();
+        inputs.counters().clock_rejected > 0
+    });
+    assert_eq!(
+        inputs.ros_time_ns(),
+        7_000_000_000,
+        "invalid times are not used"
+    );
+
+    let ground = |z| PointStamped {
+        point: Point { x: 3.0, y: 4.0, z },
+        ..PointStamped::default()
+    };
+    let mut got = None;
+    wait_for("a ground height", Duration::from_secs(10), || {
+        ground_pub.publish(ground(0.25)).unwrap();
+        got = inputs.latest_ground();
+        got.is_some()
+    });
+    assert_eq!(got.unwrap().z, -0.25, "ENU up -> NED z");
+    wait_for(
+        "a NaN ground height counted",
+        Duration::from_secs(5),
+        || {
+            ground_pub.publish(ground(f64::NAN)).unwrap();
+            inputs.counters().ground_rejected > 0
+        },
+    );
+    std::thread::sleep(Duration::from_millis(50));
+    assert!(
+        inputs.latest_ground().is_none_or(|g| g.z == -0.25),
+        "a NaN height never reaches the control thread"
+    );
+    let c = inputs.counters();
+    assert!(c.ground_received > c.ground_rejected, "the valid height counts too");
+    assert!(c.clock_received >= 3);
     thread.stop().unwrap();
 }
 

@@ -187,7 +187,7 @@ impl TickIo for SimIo {
             });
             // The terrain map, looked up where the robot believes it is.
             let z = terrain_z_below(&self.plane, e.value[idx::X], e.value[idx::Y]);
-            self.latch.ground_z(z);
+            self.latch.ground_z(z, self.stamp(deadline_ns, e.at_ns));
         }
         if let Some(p) = self.pilot.take() {
             self.latch.pilot(p.value, self.stamp(deadline_ns, p.at_ns));

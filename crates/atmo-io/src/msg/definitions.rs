@@ -34,6 +34,14 @@ const DEFINITIONS: &[(&str, &str)] = &[
         include_str!("../../msg/geometry_msgs/Twist.msg"),
     ),
     (
+        "geometry_msgs/PointStamped",
+        include_str!("../../msg/geometry_msgs/PointStamped.msg"),
+    ),
+    (
+        "rosgraph_msgs/Clock",
+        include_str!("../../msg/rosgraph_msgs/Clock.msg"),
+    ),
+    (
         "geometry_msgs/PoseWithCovariance",
         include_str!("../../msg/geometry_msgs/PoseWithCovariance.msg"),
     ),

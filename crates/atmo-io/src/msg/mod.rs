@@ -28,8 +28,8 @@ pub use definitions::{definition, schema_text};
 pub use label::Label;
 pub use px4::{ActuatorMotors, OffboardControlMode, VehicleOdometry};
 pub use standard::{
-    DiagnosticArray, DiagnosticStatus, Header, KeyValue, Odometry, Point, Pose, PoseWithCovariance,
-    Quaternion, Time, Twist, TwistWithCovariance, Vector3,
+    Clock, DiagnosticArray, DiagnosticStatus, Header, KeyValue, Odometry, Point, PointStamped,
+    Pose, PoseWithCovariance, Quaternion, Time, Twist, TwistWithCovariance, Vector3,
 };
 pub use type_hash::{hashed_description, type_hash};
 

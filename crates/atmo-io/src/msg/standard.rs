@@ -1,5 +1,5 @@
 //! Standard ROS 2 types: builtin_interfaces, std_msgs, geometry_msgs,
-//! nav_msgs, diagnostic_msgs.
+//! nav_msgs, diagnostic_msgs, rosgraph_msgs.
 
 use serde::{Deserialize, Serialize};
 
@@ -165,6 +165,20 @@ impl DiagnosticStatus {
     pub const STALE: u8 = 3;
 }
 
+/// `geometry_msgs/msg/PointStamped`: the ground height input (a point on
+/// the ground under the robot, ENU world frame).
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+pub struct PointStamped {
+    pub header: Header,
+    pub point: Point,
+}
+
+/// `rosgraph_msgs/msg/Clock`: ROS time when `use_sim_time` is set.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+pub struct Clock {
+    pub clock: Time,
+}
+
 /// `diagnostic_msgs/msg/DiagnosticArray`.
 #[derive(Debug, Clone, PartialEq, Eq, Default, Serialize, Deserialize)]
 pub struct DiagnosticArray {
@@ -185,3 +199,5 @@ ros_message!(Odometry, "nav_msgs/msg/Odometry");
 ros_message!(KeyValue, "diagnostic_msgs/msg/KeyValue");
 ros_message!(DiagnosticStatus, "diagnostic_msgs/msg/DiagnosticStatus");
 ros_message!(DiagnosticArray, "diagnostic_msgs/msg/DiagnosticArray");
+ros_message!(PointStamped, "geometry_msgs/msg/PointStamped");
+ros_message!(Clock, "rosgraph_msgs/msg/Clock");

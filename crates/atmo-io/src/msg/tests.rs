@@ -463,7 +463,7 @@ fn helpers_for_the_flight_stack() {
 /// RIHS01 hashes as ROS 2 Kilted computes them: `type_hashes` of the
 /// `share/<pkg>/msg/<Type>.json` files of the PyPI wheels ros-builtin-interfaces
 /// 2.3.0, ros-std-msgs / ros-geometry-msgs / ros-nav-msgs /
-/// ros-diagnostic-msgs 5.5.1, and of atmo_msgs built by colcon
+/// ros-diagnostic-msgs 5.5.1, ros-rosgraph-msgs 2.3.0, and of atmo_msgs built by colcon
 /// (scripts/ros2-peer.sh). tests/python/rclpy_peer.py checks every type of
 /// the node against rclpy at run time.
 #[test]
@@ -488,6 +488,14 @@ fn type_hashes_match_ros2() {
         (
             DiagnosticArray::TYPE_NAME,
             "RIHS01_5a8a36efb05fb25070fa0fb3810290c0e6cd4862b54a8fb975a1ee8dc55a333e",
+        ),
+        (
+            "geometry_msgs/msg/PointStamped",
+            "RIHS01_4c0296af86e01e562e9e0405d138a01537247580076c58ea38d7923ac1045897",
+        ),
+        (
+            "rosgraph_msgs/msg/Clock",
+            "RIHS01_692f7a66e93a3c83e71765d033b60349ba68023a8c689a79e48078bcb5c58564",
         ),
         (
             PilotInput::TYPE_NAME,

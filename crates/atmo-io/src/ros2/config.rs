@@ -7,8 +7,8 @@ use serde::Deserialize;
 
 use crate::error::{IoError, Result};
 use crate::msg::{
-    ActuatorMotors, DiagnosticArray, MpcStatus, Odometry, OffboardControlMode, PilotInput,
-    RosMessage, Twist, VehicleOdometry,
+    ActuatorMotors, Clock, DiagnosticArray, MpcStatus, Odometry, OffboardControlMode, PilotInput,
+    PointStamped, RosMessage, Twist, VehicleOdometry,
 };
 
 /// The node's settings: a `[ros2]`-style table (or a whole file).
@@ -26,6 +26,9 @@ pub struct Ros2Config {
     pub diagnostics_period_ms: u64,
     /// Slots of the queue from the control thread to the ROS 2 thread.
     pub publish_queue: usize,
+    /// ROS time is the newest `topics.clock` message (`rosgraph_msgs/Clock`,
+    /// 0 until the first), not the wall clock: ROS 2's `use_sim_time`.
+    pub use_sim_time: bool,
     pub topics: Topics,
 }
 
@@ -62,6 +65,11 @@ pub struct Topics {
     pub offboard_mode: TopicConfig,
     /// Out: health.
     pub diagnostics: TopicConfig,
+    /// In: the ground height (`geometry_msgs/msg/PointStamped`, ENU world
+    /// frame: `point.z` is the height of the ground under the robot, up).
+    pub ground: TopicConfig,
+    /// In, with `use_sim_time` only: ROS time (`rosgraph_msgs/msg/Clock`).
+    pub clock: TopicConfig,
 }
 
 fn topic(name: &str, type_name: &str) -> TopicConfig {
@@ -85,6 +93,8 @@ impl Default for Topics {
                 OffboardControlMode::TYPE_NAME,
             ),
             diagnostics: topic("/diagnostics", DiagnosticArray::TYPE_NAME),
+            ground: topic("/atmo/ground", PointStamped::TYPE_NAME),
+            clock: topic("/clock", Clock::TYPE_NAME),
         }
     }
 }
@@ -97,6 +107,7 @@ impl Default for Ros2Config {
             loopback_only: true,
             diagnostics_period_ms: 1000,
             publish_queue: 64,
+            use_sim_time: false,
             topics: Topics::default(),
         }
     }
@@ -149,7 +160,16 @@ impl ConfigFile for Ros2Config {
         )?;
         c.range("publish_queue", self.publish_queue, 1..=65_536, "slots")?;
         let t = &self.topics;
-        let roles: [(&str, &TopicConfig, &[&str]); 7] = [
+        if self.use_sim_time && !t.clock.enabled {
+            return Err(c
+                .fail(
+                    "topics.clock.enabled",
+                    "true: use_sim_time takes ROS time from it",
+                    false,
+                )
+                .into());
+        }
+        let roles: [(&str, &TopicConfig, &[&str]); 9] = [
             ("topics.status", &t.status, &[MpcStatus::TYPE_NAME]),
             (
                 "topics.estimate",
@@ -177,6 +197,8 @@ impl ConfigFile for Ros2Config {
                 &t.diagnostics,
                 &[DiagnosticArray::TYPE_NAME],
             ),
+            ("topics.ground", &t.ground, &[PointStamped::TYPE_NAME]),
+            ("topics.clock", &t.clock, &[Clock::TYPE_NAME]),
         ];
         let mut names: Vec<&str> = Vec::new();
         for (key, topic, types) in roles {

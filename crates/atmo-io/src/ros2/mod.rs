@@ -43,7 +43,14 @@
 //! fields and stamps that do not increase are rejected. Pilot inputs
 //! (`atmo_msgs/msg/PilotInput`, NED velocity, FRD yaw rate) are accepted
 //! only if every number is finite and the throttle is in [0, 1]. Drive
-//! commands need finite values.
+//! commands need finite values, ground heights (`geometry_msgs/PointStamped`,
+//! ENU: `point.z` up, handed on as NED z) a finite `point.z`.
+//!
+//! ROS time ([`Ros2Inputs::ros_time_ns`], the stamps of the status and the
+//! diagnostics) is the wall clock, or with `use_sim_time` the newest
+//! `rosgraph_msgs/Clock` on `topics.clock` (best effort, keep last 1, like
+//! rclcpp's clock subscription; 0 until the first one, as in ROS 2; a clock
+//! that jumps back, a restarted simulation, is followed).
 //!
 //! [`SitlNode`] is the other side for software-in-the-loop: the plant
 //! server publishes the simulated estimate (as the configured estimate
@@ -115,6 +122,35 @@ pub struct PilotCommand {
     pub received: Instant,
 }
 
+/// A ground height accepted from ROS 2 (`topics.ground`): `point.z`
+/// finite; NED, so the message's ENU `point.z` negated.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct GroundHeight {
+    /// NED z of the ground under the robot, m.
+    pub z: f64,
+    /// When the node thread accepted it.
+    pub received: Instant,
+}
+
+/// ROS time as the node keeps it: the wall clock, or with `use_sim_time`
+/// the newest `/clock` (0 until one arrives, as ROS 2 does). Shared by the
+/// node thread (which writes `/clock`) and the control thread (which reads
+/// it without waiting).
+struct RosClock {
+    use_sim_time: bool,
+    sim_ns: AtomicU64,
+}
+
+impl RosClock {
+    fn now_ns(&self) -> u64 {
+        if self.use_sim_time {
+            self.sim_ns.load(Ordering::Relaxed)
+        } else {
+            crate::wall_clock_ns()
+        }
+    }
+}
+
 /// What the node has seen and done so far (monotonic counters).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct Ros2Counters {
@@ -134,6 +170,14 @@ pub struct Ros2Counters {
     pub pilot_received: u64,
     /// Pilot inputs with a non-finite number or a throttle outside [0, 1].
     pub pilot_rejected: u64,
+    /// Ground heights that decoded, whatever their values.
+    pub ground_received: u64,
+    /// Ground heights with a non-finite `point.z`.
+    pub ground_rejected: u64,
+    /// `/clock` messages that decoded (`use_sim_time` only).
+    pub clock_received: u64,
+    /// `/clock` messages with a negative or invalid time.
+    pub clock_rejected: u64,
     /// Accepted inputs dropped because the control thread's queue was full.
     pub inputs_dropped: u64,
     pub published: u64,
@@ -154,6 +198,10 @@ struct Counters {
     drive_rejected: AtomicU64,
     pilot_received: AtomicU64,
     pilot_rejected: AtomicU64,
+    ground_received: AtomicU64,
+    ground_rejected: AtomicU64,
+    clock_received: AtomicU64,
+    clock_rejected: AtomicU64,
     inputs_dropped: AtomicU64,
     published: AtomicU64,
     publish_dropped: AtomicU64,
@@ -173,6 +221,10 @@ impl Counters {
             drive_rejected: g(&self.drive_rejected),
             pilot_received: g(&self.pilot_received),
             pilot_rejected: g(&self.pilot_rejected),
+            ground_received: g(&self.ground_received),
+            ground_rejected: g(&self.ground_rejected),
+            clock_received: g(&self.clock_received),
+            clock_rejected: g(&self.clock_rejected),
             inputs_dropped: g(&self.inputs_dropped),
             published: g(&self.published),
             publish_dropped: g(&self.publish_dropped),
@@ -232,6 +284,8 @@ pub struct Ros2Inputs {
     estimates: Receiver<RosEstimate>,
     drive: Receiver<DriveCommand>,
     pilot: Receiver<PilotCommand>,
+    ground: Receiver<GroundHeight>,
+    clock: Arc<RosClock>,
     counters: Arc<Counters>,
 }
 
@@ -249,6 +303,18 @@ impl Ros2Inputs {
     /// The newest pilot input accepted since the last call, if any. Never blocks.
     pub fn latest_pilot(&mut self) -> Option<PilotCommand> {
         self.pilot.try_iter().last()
+    }
+
+    /// The newest ground height accepted since the last call, if any.
+    pub fn latest_ground(&mut self) -> Option<GroundHeight> {
+        self.ground.try_iter().last()
+    }
+
+    /// ROS time now, ns since the epoch: the wall clock, or with
+    /// `use_sim_time` the newest `/clock` (0 before the first). An atomic
+    /// read: never blocks, never allocates.
+    pub fn ros_time_ns(&self) -> u64 {
+        self.clock.now_ns()
     }
 
     pub fn counters(&self) -> Ros2Counters {

@@ -16,14 +16,14 @@ use super::dds::{
     reliable_qos, spawn_node_thread, stream_qos, subscription, take_burst,
 };
 use super::{
-    Counters, DriveCommand, Outgoing, PilotCommand, Ros2Config, Ros2Inputs, Ros2Node,
-    Ros2Publisher, Ros2StartOptions, Ros2Thread, RosEstimate, Topics,
+    Counters, DriveCommand, GroundHeight, Outgoing, PilotCommand, Ros2Config, Ros2Inputs, Ros2Node,
+    Ros2Publisher, Ros2StartOptions, Ros2Thread, RosClock, RosEstimate,
 };
 use crate::error::{IoError, Result};
 use crate::msg::frames::{odometry_to_state, vehicle_odometry_to_state};
 use crate::msg::{
-    ActuatorMotors, DiagnosticArray, DiagnosticStatus, KeyValue, MpcStatus, Odometry,
-    OffboardControlMode, PilotInput, RosMessage, Time, Twist, VehicleOdometry,
+    ActuatorMotors, Clock, DiagnosticArray, DiagnosticStatus, KeyValue, MpcStatus, Odometry,
+    OffboardControlMode, PilotInput, PointStamped, RosMessage, Time, Twist, VehicleOdometry,
 };
 
 /// Whether a pilot input may be used: every number finite, throttle in [0, 1].
@@ -47,10 +47,15 @@ struct NodeThread {
     estimate: Option<EstimateSub>,
     drive: Option<Subscription<Twist>>,
     pilot: Option<Subscription<PilotInput>>,
+    ground: Option<Subscription<PointStamped>>,
+    /// `topics.clock`, with `use_sim_time` only.
+    clock_sub: Option<Subscription<Clock>>,
     out_rx: Receiver<Outgoing>,
     estimate_tx: SyncSender<RosEstimate>,
     drive_tx: SyncSender<DriveCommand>,
     pilot_tx: SyncSender<PilotCommand>,
+    ground_tx: SyncSender<GroundHeight>,
+    clock: Arc<RosClock>,
     counters: Arc<Counters>,
     stop: Arc<AtomicBool>,
     last_stamp: Option<u64>,
@@ -61,8 +66,10 @@ struct NodeThread {
     _dds: DdsNode,
 }
 
-/// `type_hash <topic>` = the RIHS01 hash of its type, for each enabled topic.
-fn topic_type_hashes(topics: &Topics) -> Result<Vec<KeyValue>> {
+/// `type_hash <topic>` = the RIHS01 hash of its type, for each topic the
+/// node uses.
+fn topic_type_hashes(config: &Ros2Config) -> Result<Vec<KeyValue>> {
+    let topics = &config.topics;
     let all = [
         &topics.status,
         &topics.estimate,
@@ -71,8 +78,11 @@ fn topic_type_hashes(topics: &Topics) -> Result<Vec<KeyValue>> {
         &topics.actuator_motors,
         &topics.offboard_mode,
         &topics.diagnostics,
+        &topics.ground,
     ];
+    let clock = config.use_sim_time.then_some(&topics.clock);
     all.into_iter()
+        .chain(clock)
         .filter(|t| t.enabled)
         .map(|t| {
             Ok(KeyValue {
@@ -99,11 +109,18 @@ impl Ros2Node {
         let (estimate_tx, estimate_rx) = sync_channel(16);
         let (drive_tx, drive_rx) = sync_channel(16);
         let (pilot_tx, pilot_rx) = sync_channel(16);
+        let (ground_tx, ground_rx) = sync_channel(16);
+        let clock = Arc::new(RosClock {
+            use_sim_time: config.use_sim_time,
+            sim_ns: 0.into(),
+        });
         let channels = NodeChannels {
             out_rx,
             estimate_tx,
             drive_tx,
             pilot_tx,
+            ground_tx,
+            clock: Arc::clone(&clock),
         };
         let thread_counters = Arc::clone(&counters);
         let thread_stop = Arc::clone(&stop);
@@ -122,6 +139,8 @@ impl Ros2Node {
                 estimates: estimate_rx,
                 drive: drive_rx,
                 pilot: pilot_rx,
+                ground: ground_rx,
+                clock,
                 counters,
             },
             thread,
@@ -135,6 +154,8 @@ struct NodeChannels {
     estimate_tx: SyncSender<RosEstimate>,
     drive_tx: SyncSender<DriveCommand>,
     pilot_tx: SyncSender<PilotCommand>,
+    ground_tx: SyncSender<GroundHeight>,
+    clock: Arc<RosClock>,
 }
 
 impl NodeThread {
@@ -159,12 +180,20 @@ impl NodeThread {
         };
         let drive = subscription::<Twist>(node, &t.drive_command)?;
         let pilot = subscription::<PilotInput>(node, &t.pilot)?;
-        let type_hashes = topic_type_hashes(t)?;
+        let ground = subscription::<PointStamped>(node, &t.ground)?;
+        let clock_sub = if config.use_sim_time {
+            subscription::<Clock>(node, &t.clock)?
+        } else {
+            None
+        };
+        let type_hashes = topic_type_hashes(&config)?;
         let NodeChannels {
             out_rx,
             estimate_tx,
             drive_tx,
             pilot_tx,
+            ground_tx,
+            clock,
         } = channels;
         Ok(Self {
             config,
@@ -175,10 +204,14 @@ impl NodeThread {
             estimate,
             drive,
             pilot,
+            ground,
+            clock_sub,
             out_rx,
             estimate_tx,
             drive_tx,
             pilot_tx,
+            ground_tx,
+            clock,
             counters,
             stop,
             last_stamp: None,
@@ -196,6 +229,8 @@ impl NodeThread {
             self.take_estimates();
             self.take_drive();
             self.take_pilot();
+            self.take_ground();
+            self.take_clock();
             if Instant::now() >= next_diagnostics {
                 self.publish(Outgoing::Diagnostics(Box::default()));
                 next_diagnostics = Instant::now() + period;
@@ -209,6 +244,8 @@ impl NodeThread {
             estimate,
             drive,
             pilot,
+            ground,
+            clock_sub,
             _dds: dds,
             ..
         } = self;
@@ -220,6 +257,8 @@ impl NodeThread {
             estimate,
             drive,
             pilot,
+            ground,
+            clock_sub,
         ))
     }
 
@@ -231,7 +270,7 @@ impl NodeThread {
             Outgoing::Diagnostics(mut m) => {
                 m.status.push(self.own_diagnostics());
                 if m.header.stamp == Time::default() {
-                    m.header.stamp = Time::from_ns(crate::wall_clock_ns());
+                    m.header.stamp = Time::from_ns(self.clock.now_ns());
                 }
                 self.diagnostics.as_ref().map(|p| p.publish(*m).is_ok())
             }
@@ -245,9 +284,14 @@ impl NodeThread {
 
     fn own_diagnostics(&self) -> DiagnosticStatus {
         let c = self.counters.snapshot();
-        let rejected =
-            c.malformed + c.invalid + c.stamp_backwards + c.drive_rejected + c.pilot_rejected;
-        let pairs: [(&str, u64); 13] = [
+        let rejected = c.malformed
+            + c.invalid
+            + c.stamp_backwards
+            + c.drive_rejected
+            + c.pilot_rejected
+            + c.ground_rejected
+            + c.clock_rejected;
+        let pairs: [(&str, u64); 17] = [
             ("estimates_received", c.estimates_received),
             ("estimates_accepted", c.estimates_accepted),
             ("malformed", c.malformed),
@@ -257,6 +301,10 @@ impl NodeThread {
             ("drive_rejected", c.drive_rejected),
             ("pilot_received", c.pilot_received),
             ("pilot_rejected", c.pilot_rejected),
+            ("ground_received", c.ground_received),
+            ("ground_rejected", c.ground_rejected),
+            ("clock_received", c.clock_received),
+            ("clock_rejected", c.clock_rejected),
             ("inputs_dropped", c.inputs_dropped),
             ("published", c.published),
             ("publish_dropped", c.publish_dropped),
@@ -390,5 +438,46 @@ impl NodeThread {
                 })
             },
         );
+    }
+
+    fn take_ground(&self) {
+        let Some(sub) = &self.ground else { return };
+        let c = &self.counters;
+        take_burst(
+            sub,
+            &c.malformed,
+            &c.ground_received,
+            &c.inputs_dropped,
+            &self.ground_tx,
+            |ground: PointStamped| {
+                if !ground.point.z.is_finite() {
+                    bump(&c.ground_rejected);
+                    return None;
+                }
+                Some(GroundHeight {
+                    z: -ground.point.z,
+                    received: Instant::now(),
+                })
+            },
+        );
+    }
+
+    /// `use_sim_time`: the newest valid `/clock` is ROS time from now on.
+    fn take_clock(&self) {
+        let Some(sub) = &self.clock_sub else { return };
+        let c = &self.counters;
+        for _ in 0..TAKE_BURST {
+            match sub.take() {
+                Ok(None) => return,
+                Err(_) => bump(&c.malformed),
+                Ok(Some((message, _))) => {
+                    bump(&c.clock_received);
+                    match message.clock.to_ns() {
+                        Some(ns) => self.clock.sim_ns.store(ns, Ordering::Relaxed),
+                        None => bump(&c.clock_rejected),
+                    }
+                }
+            }
+        }
     }
 }
