@@ -14,7 +14,7 @@
 //! | encoder        | iceoryx2 driver port               | the plant's encoder                            |
 //! | contact        | iceoryx2 driver port               | the plant's contact signal                     |
 //! | driver liveness| heartbeats                         | always alive (the simulated drivers answer)    |
-//! | ground height  | config constant                    | the scenario's terrain map at the *estimated* position, with each estimate |
+//! | ground height  | ROS 2 `/atmo/ground` while fresh, else the config constant | the scenario's terrain map at the *estimated* position, with each estimate (same timeout) |
 //!
 //! A source's sample is "accepted" when the runner calls [`SimIo::sense`]
 //! after a plant step; at the tick its age (plant time since acceptance)
