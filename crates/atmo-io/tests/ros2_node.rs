@@ -482,7 +482,10 @@ fn sim_time_follows_clock_and_ground_heights_come_out_ned() {
         "a NaN height never reaches the control thread"
     );
     let c = inputs.counters();
-    assert!(c.ground_received > c.ground_rejected, "the valid height counts too");
+    assert!(
+        c.ground_received > c.ground_rejected,
+        "the valid height counts too"
+    );
     assert!(c.clock_received >= 3);
     thread.stop().unwrap();
 }
