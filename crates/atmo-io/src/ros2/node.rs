@@ -3,13 +3,14 @@
 //! converts and counts every input before it reaches the control thread.
 
 use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::mpsc::{Receiver, SyncSender, sync_channel};
 use std::time::{Duration, Instant};
 
 use atmo_core::ConfigFile;
 use atmo_core::model::State;
 use ros2_client::{Publisher, Subscription};
+use serde::de::DeserializeOwned;
 
 use super::dds::{
     DdsNode, TAKE_BURST, bump, count_publish, dds_node, domain_id, publish_queued, publisher,
@@ -394,22 +395,39 @@ impl NodeThread {
         }
     }
 
-    fn take_drive(&self) {
-        let Some(sub) = &self.drive else { return };
+    /// Takes a burst from the input subscription `sub` (if enabled): each
+    /// decoded message counts `received`, and `check` turns it into what the
+    /// control thread gets, or `None` for a rejected one (counted in
+    /// `rejected`).
+    fn take_input<M: 'static + DeserializeOwned, T>(
+        &self,
+        sub: Option<&Subscription<M>>,
+        received: &AtomicU64,
+        rejected: &AtomicU64,
+        tx: &SyncSender<T>,
+        check: impl Fn(M) -> Option<T>,
+    ) {
+        let Some(sub) = sub else { return };
         let c = &self.counters;
-        take_burst(
-            sub,
-            &c.malformed,
+        take_burst(sub, &c.malformed, received, &c.inputs_dropped, tx, |m| {
+            let accepted = check(m);
+            if accepted.is_none() {
+                bump(rejected);
+            }
+            accepted
+        });
+    }
+
+    fn take_drive(&self) {
+        let c = &self.counters;
+        self.take_input(
+            self.drive.as_ref(),
             &c.drive_received,
-            &c.inputs_dropped,
+            &c.drive_rejected,
             &self.drive_tx,
             |twist: Twist| {
                 let (forward, yaw_rate) = (twist.linear.x, -twist.angular.z);
-                if !forward.is_finite() || !yaw_rate.is_finite() {
-                    bump(&c.drive_rejected);
-                    return None;
-                }
-                Some(DriveCommand {
+                (forward.is_finite() && yaw_rate.is_finite()).then(|| DriveCommand {
                     forward,
                     yaw_rate,
                     received: Instant::now(),
@@ -419,20 +437,14 @@ impl NodeThread {
     }
 
     fn take_pilot(&self) {
-        let Some(sub) = &self.pilot else { return };
         let c = &self.counters;
-        take_burst(
-            sub,
-            &c.malformed,
+        self.take_input(
+            self.pilot.as_ref(),
             &c.pilot_received,
-            &c.inputs_dropped,
+            &c.pilot_rejected,
             &self.pilot_tx,
             |input: PilotInput| {
-                if !pilot_is_valid(&input) {
-                    bump(&c.pilot_rejected);
-                    return None;
-                }
-                Some(PilotCommand {
+                pilot_is_valid(&input).then(|| PilotCommand {
                     input,
                     received: Instant::now(),
                 })
@@ -441,20 +453,14 @@ impl NodeThread {
     }
 
     fn take_ground(&self) {
-        let Some(sub) = &self.ground else { return };
         let c = &self.counters;
-        take_burst(
-            sub,
-            &c.malformed,
+        self.take_input(
+            self.ground.as_ref(),
             &c.ground_received,
-            &c.inputs_dropped,
+            &c.ground_rejected,
             &self.ground_tx,
             |ground: PointStamped| {
-                if !ground.point.z.is_finite() {
-                    bump(&c.ground_rejected);
-                    return None;
-                }
-                Some(GroundHeight {
+                ground.point.z.is_finite().then(|| GroundHeight {
                     z: -ground.point.z,
                     received: Instant::now(),
                 })
