@@ -1,0 +1,376 @@
+//! The RTI controller: plan, preparation, feedback, fallback.
+//!
+//! `outcome`: what a tick reports; `tick`: the preparation and feedback
+//! phases; here: the controller, its parameters and their checks.
+
+mod outcome;
+mod tick;
+
+use std::f64::consts::{PI, TAU};
+use std::time::Duration;
+
+use atmo_core::model::{Input, Model, State, idx};
+use clarabel::solver::SolverStatus;
+
+use crate::error::{MpcError, Result};
+use crate::homotopy::HomotopyStop;
+use crate::qp::{LinearizedHorizon, QpBackend, SolveReport};
+use crate::settings::{FeedbackMethod, Formulation, MpcSettings};
+
+pub use outcome::{
+    AlphaSchedule, DegradedCause, FailureCause, FeedbackPath, HomotopyFallback, Outcome, SqpReport,
+    TickOutput, TickTimings,
+};
+
+/// Wraps an angle to (-pi, pi].
+pub fn wrap_angle(a: f64) -> f64 {
+    let w = a.rem_euclid(TAU);
+    if w > PI { w - TAU } else { w }
+}
+
+/// The RTI NMPC.
+///
+/// Per tick: [`Mpc::prepare`] (before the estimate arrives), then
+/// [`Mpc::feedback`] with the estimate. Horizon parameters (reference,
+/// tilt sequence, alpha) are set before `prepare`.
+pub struct Mpc {
+    model: Model,
+    settings: MpcSettings,
+    steps: usize,
+    stage_dt: f64,
+    /// Fraction of a stage the plan moves per tick.
+    shift_fraction: f64,
+    plan_x: Vec<State>,
+    plan_u: Vec<Input>,
+    x_ref: Vec<State>,
+    u_ref: Vec<Input>,
+    varphi: Vec<f64>,
+    alpha: f64,
+    lin: LinearizedHorizon,
+    qp: QpBackend,
+    dx: Vec<State>,
+    du: Vec<Input>,
+    prepared: bool,
+    preparation_ok: bool,
+    /// The last preparation met a non-finite linearization.
+    plan_diverged: bool,
+    preparation_time: Duration,
+    preparation_solve: SolveReport,
+    /// The `dx_0` the last preparation solved at.
+    predicted_e0: State,
+    /// The preparation's exact solution at the predicted state, when the
+    /// homotopy is in use: `Ok` (ready) or why it is not.
+    prepared_solution: Option<std::result::Result<(), HomotopyStop>>,
+    /// The last finite estimate and the command flown after it (the model predictor's start).
+    last_applied: Option<(State, Input)>,
+    /// Feedback phases that fell back from the homotopy to Clarabel.
+    homotopy_fallbacks: u64,
+    failed_ticks: u32,
+    /// Estimated disturbance wrench the predictions include (offset-free MPC).
+    disturbance: nalgebra::Vector6<f64>,
+}
+
+impl Mpc {
+    /// Builds the controller and its solver (the only allocations), with the
+    /// plan at hover at the origin, level, varphi = 0.
+    pub fn new(model: Model, settings: MpcSettings) -> Result<Self> {
+        let steps = settings.horizon.steps;
+        let stage_dt = settings.stage_dt();
+        let shift_fraction = settings.horizon.tick_period / stage_dt;
+        let hover = model.at_tilt(0.0).hover_trim().map(|u| u.clamp(0.0, 1.0));
+        let mut lin = LinearizedHorizon::new(steps);
+        Self::start_up_linearization(&model, &settings, &hover, &mut lin);
+        let qp = QpBackend::new(&lin, &settings.solver)?;
+        Ok(Self {
+            model,
+            steps,
+            stage_dt,
+            shift_fraction,
+            plan_x: vec![State::zeros(); steps + 1],
+            plan_u: vec![hover; steps],
+            x_ref: vec![State::zeros(); steps + 1],
+            u_ref: vec![hover; steps],
+            varphi: vec![0.0; steps + 1],
+            alpha: 1.0,
+            lin,
+            qp,
+            dx: vec![State::zeros(); steps + 1],
+            du: vec![Input::zeros(); steps],
+            prepared: false,
+            preparation_ok: false,
+            plan_diverged: false,
+            preparation_time: Duration::ZERO,
+            preparation_solve: SolveReport {
+                status: SolverStatus::Unsolved,
+                iterations: 0,
+                solve_time: 0.0,
+            },
+            prepared_solution: None,
+            predicted_e0: State::zeros(),
+            last_applied: None,
+            homotopy_fallbacks: 0,
+            failed_ticks: 0,
+            disturbance: nalgebra::Vector6::zeros(),
+            settings,
+        })
+    }
+
+    /// A representative linearization (hover at varphi = 0, with a small
+    /// attitude and rate so that no Jacobian entry is accidentally zero) to
+    /// build the solver and its equilibration from.
+    fn start_up_linearization(
+        model: &Model,
+        settings: &MpcSettings,
+        hover: &Input,
+        lin: &mut LinearizedHorizon,
+    ) {
+        let body = model.at_tilt(0.0);
+        let mut x = State::zeros();
+        x[idx::PITCH] = 0.05;
+        x[idx::ROLL] = -0.05;
+        x[idx::WX] = 0.1;
+        x[idx::WY] = -0.1;
+        x[idx::WZ] = 0.05;
+        let dt = settings.stage_dt();
+        let q = settings.weights.state_weight(1.0);
+        for k in 0..settings.horizon.steps {
+            let s = body.rk4_step_sensitivity(&x, hover, dt);
+            lin.a[k] = s.a;
+            lin.b[k] = s.b;
+            lin.defect[k] = State::zeros();
+            lin.q_diag[k] = q;
+            lin.u_bar[k] = *hover;
+            lin.u_err[k] = Input::zeros();
+        }
+        lin.q_diag[settings.horizon.steps] = q * settings.cost.terminal_scale;
+        lin.r_diag = settings.weights.input_weight(1.0);
+    }
+
+    pub fn settings(&self) -> &MpcSettings {
+        &self.settings
+    }
+
+    pub fn model(&self) -> &Model {
+        &self.model
+    }
+
+    pub fn formulation(&self) -> Formulation {
+        self.qp.formulation()
+    }
+
+    /// N.
+    pub fn steps(&self) -> usize {
+        self.steps
+    }
+
+    pub fn stage_dt(&self) -> f64 {
+        self.stage_dt
+    }
+
+    /// The linearization along the plan of the last preparation.
+    pub fn linearization(&self) -> &LinearizedHorizon {
+        &self.lin
+    }
+
+    /// Predicted states `x_0..x_N` of the current plan.
+    pub fn plan_states(&self) -> &[State] {
+        &self.plan_x
+    }
+
+    /// Planned inputs `u_0..u_{N-1}`.
+    pub fn plan_inputs(&self) -> &[Input] {
+        &self.plan_u
+    }
+
+    /// Input reference per stage (hover trim at the stage tilt, clamped to [0, 1]).
+    pub fn input_reference(&self) -> &[Input] {
+        &self.u_ref
+    }
+
+    pub fn alpha(&self) -> f64 {
+        self.alpha
+    }
+
+    pub fn tilt_sequence(&self) -> &[f64] {
+        &self.varphi
+    }
+
+    /// Consecutive ticks without a fresh solution.
+    pub fn failed_ticks(&self) -> u32 {
+        self.failed_ticks
+    }
+
+    /// Feedback phases so far that fell back from the homotopy to a full
+    /// Clarabel solve ([`FeedbackPath::is_fallback`]).
+    pub fn homotopy_fallbacks(&self) -> u64 {
+        self.homotopy_fallbacks
+    }
+
+    /// The deviation `x_pred - xbar_0` the last preparation solved the QP at
+    /// (zero without the homotopy).
+    pub fn predicted_deviation_of_last_preparation(&self) -> State {
+        self.predicted_e0
+    }
+
+    /// True when the feedback uses the homotopy (configured, condensed QP).
+    pub fn uses_homotopy(&self) -> bool {
+        self.settings.feedback.method == FeedbackMethod::Homotopy
+            && self.formulation() == Formulation::Condensed
+    }
+
+    /// Starts the plan at `x0` (held over the horizon) with hover-trim
+    /// inputs at the current tilt sequence. Call once before the first tick
+    /// and after a `NonFiniteLinearization`.
+    pub fn reset(&mut self, x0: &State) -> Result<()> {
+        check_finite("reset state", 0, x0.as_slice())?;
+        self.restart_plan(x0);
+        self.failed_ticks = 0;
+        self.prepared = false;
+        self.last_applied = None;
+        Ok(())
+    }
+
+    /// Plan held at `x0` with hover-trim inputs at the stage tilts.
+    fn restart_plan(&mut self, x0: &State) {
+        self.refresh_input_reference();
+        for x in &mut self.plan_x {
+            *x = *x0;
+        }
+        self.plan_u.copy_from_slice(&self.u_ref);
+        self.plan_diverged = false;
+    }
+
+    /// Sets the same state reference for every stage.
+    pub fn set_reference_constant(&mut self, x_ref: &State) -> Result<()> {
+        check_finite("state reference", 0, x_ref.as_slice())?;
+        for r in &mut self.x_ref {
+            *r = *x_ref;
+        }
+        Ok(())
+    }
+
+    /// Sets the state reference per stage (N + 1 entries).
+    pub fn set_reference(&mut self, x_ref: &[State]) -> Result<()> {
+        check_len("state reference", self.steps + 1, x_ref.len())?;
+        for (k, r) in x_ref.iter().enumerate() {
+            check_finite("state reference", k, r.as_slice())?;
+        }
+        self.x_ref.copy_from_slice(x_ref);
+        Ok(())
+    }
+
+    /// Sets the tilt per stage (N + 1 entries, rad).
+    pub fn set_tilt_sequence(&mut self, varphi: &[f64]) -> Result<()> {
+        check_len("tilt sequence", self.steps + 1, varphi.len())?;
+        for (k, v) in varphi.iter().enumerate() {
+            check_finite("tilt sequence", k, &[*v])?;
+            check_tilt(*v)?;
+        }
+        self.varphi.copy_from_slice(varphi);
+        Ok(())
+    }
+
+    /// The paper's tilt parameter: `varphi_k = clamp(varphi_now + rate t_k, min, max)`
+    /// with `t_k = k T / N`.
+    pub fn set_tilt_ramp(&mut self, varphi_now: f64, rate: f64, min: f64, max: f64) -> Result<()> {
+        for (what, v) in [
+            ("tilt", varphi_now),
+            ("tilt rate", rate),
+            ("tilt min", min),
+            ("tilt max", max),
+        ] {
+            check_finite(what, 0, &[v])?;
+        }
+        check_tilt(min)?;
+        check_tilt(max)?;
+        if min > max {
+            return Err(MpcError::OutOfRange {
+                what: "tilt min",
+                value: min,
+                min: 0.0,
+                max,
+            });
+        }
+        for (k, v) in self.varphi.iter_mut().enumerate() {
+            *v = (varphi_now + rate * self.stage_dt * k as f64).clamp(min, max);
+        }
+        Ok(())
+    }
+
+    /// Sets the cost blend alpha (in [0, 1]) for the next preparations.
+    pub fn set_alpha(&mut self, alpha: f64) -> Result<()> {
+        if !(alpha.is_finite() && (0.0..=1.0).contains(&alpha)) {
+            return Err(MpcError::OutOfRange {
+                what: "alpha",
+                value: alpha,
+                min: 0.0,
+                max: 1.0,
+            });
+        }
+        self.alpha = alpha;
+        Ok(())
+    }
+
+    /// Sets the disturbance wrench (body force, torque about B) that the
+    /// predictions and the input reference include from the next preparation.
+    pub fn set_disturbance(&mut self, wrench: &nalgebra::Vector6<f64>) -> Result<()> {
+        if let Some(bad) = wrench.iter().find(|v| !v.is_finite()) {
+            return Err(MpcError::OutOfRange {
+                what: "disturbance wrench",
+                value: *bad,
+                min: f64::MIN,
+                max: f64::MAX,
+            });
+        }
+        self.disturbance = *wrench;
+        Ok(())
+    }
+
+    /// The disturbance wrench in use.
+    pub fn disturbance(&self) -> nalgebra::Vector6<f64> {
+        self.disturbance
+    }
+
+    fn refresh_input_reference(&mut self) {
+        for k in 0..self.steps {
+            self.u_ref[k] = self
+                .model
+                .at_tilt(self.varphi[k])
+                .with_disturbance(self.disturbance)
+                .hover_trim()
+                .map(|u| u.clamp(0.0, 1.0));
+        }
+    }
+}
+
+fn check_finite(what: &'static str, stage: usize, values: &[f64]) -> Result<()> {
+    match values.iter().position(|v| !v.is_finite()) {
+        None => Ok(()),
+        Some(entry) => Err(MpcError::NonFiniteParameter { what, stage, entry }),
+    }
+}
+
+fn check_len(what: &'static str, expected: usize, got: usize) -> Result<()> {
+    if expected == got {
+        Ok(())
+    } else {
+        Err(MpcError::HorizonLength {
+            what,
+            expected,
+            got,
+        })
+    }
+}
+
+fn check_tilt(v: f64) -> Result<()> {
+    if (0.0..=std::f64::consts::FRAC_PI_2 + 1e-9).contains(&v) {
+        Ok(())
+    } else {
+        Err(MpcError::OutOfRange {
+            what: "tilt",
+            value: v,
+            min: 0.0,
+            max: std::f64::consts::FRAC_PI_2,
+        })
+    }
+}
