@@ -12,6 +12,8 @@
 //! - [`model`]: the 7-body dynamics `x_dot = f(x, u, varphi)` (composite rigid
 //!   body at fixed tilt, see the module docs for the equations), analytic
 //!   Jacobians, RK4 with exact sensitivities, hover trim.
+//! - [`ground_effect`]: the model above a ground plane, rotor thrust times
+//!   `1 + g(h_i, varphi)` with its exact Jacobians (the surface is a trait).
 //! - [`limits`]: critical angle `cos varphi_c = m g / T_max`, largest tilt for a
 //!   thrust reserve, the tilt where the hover trim saturates.
 //! - [`control`]: the paper's blending `alpha = f(h) cos varphi`, the tilt
@@ -26,6 +28,7 @@ pub mod config;
 pub mod config_file;
 pub mod control;
 pub mod error;
+pub mod ground_effect;
 pub mod limits;
 pub mod linkage;
 pub mod model;

@@ -546,42 +546,13 @@ impl TiltedBody {
 
     /// One classical RK4 step of length `dt` with u held constant.
     pub fn rk4_step(&self, x: &State, u: &Input, dt: f64) -> State {
-        let k1 = self.dynamics(x, u);
-        let k2 = self.dynamics(&(x + k1 * (0.5 * dt)), u);
-        let k3 = self.dynamics(&(x + k2 * (0.5 * dt)), u);
-        let k4 = self.dynamics(&(x + k3 * dt), u);
-        x + (k1 + k2 * 2.0 + k3 * 2.0 + k4) * (dt / 6.0)
+        rk4_step(self, x, u, dt)
     }
 
     /// One RK4 step with its exact sensitivities dx+/dx and dx+/du
     /// (the derivative of the discrete map, not of the continuous flow).
     pub fn rk4_step_sensitivity(&self, x: &State, u: &Input, dt: f64) -> StepSensitivity {
-        let h = dt;
-        let l1 = self.linearize(x, u);
-        let s1x = l1.dfdx;
-        let s1u = l1.dfdu;
-
-        let x2 = x + l1.xdot * (0.5 * h);
-        let l2 = self.linearize(&x2, u);
-        let s2x = l2.dfdx * (StateJacobian::identity() + s1x * (0.5 * h));
-        let s2u = l2.dfdx * (s1u * (0.5 * h)) + l2.dfdu;
-
-        let x3 = x + l2.xdot * (0.5 * h);
-        let l3 = self.linearize(&x3, u);
-        let s3x = l3.dfdx * (StateJacobian::identity() + s2x * (0.5 * h));
-        let s3u = l3.dfdx * (s2u * (0.5 * h)) + l3.dfdu;
-
-        let x4 = x + l3.xdot * h;
-        let l4 = self.linearize(&x4, u);
-        let s4x = l4.dfdx * (StateJacobian::identity() + s3x * h);
-        let s4u = l4.dfdx * (s3u * h) + l4.dfdu;
-
-        let w = h / 6.0;
-        StepSensitivity {
-            next: x + (l1.xdot + l2.xdot * 2.0 + l3.xdot * 2.0 + l4.xdot) * w,
-            a: StateJacobian::identity() + (s1x + s2x * 2.0 + s3x * 2.0 + s4x) * w,
-            b: (s1u + s2u * 2.0 + s3u * 2.0 + s4u) * w,
-        }
+        rk4_step_sensitivity(self, x, u, dt)
     }
 
     /// Level hover trim: the rotor commands that hold zero acceleration at
@@ -607,5 +578,65 @@ impl TiltedBody {
         a.lu()
             .solve(&rhs)
             .expect("hover allocation matrix is regular")
+    }
+}
+
+/// Something RK4 can step: `x_dot` and its Jacobians.
+pub trait Dynamics {
+    fn dynamics(&self, x: &State, u: &Input) -> State;
+    fn linearize(&self, x: &State, u: &Input) -> Linearization;
+}
+
+impl Dynamics for TiltedBody {
+    fn dynamics(&self, x: &State, u: &Input) -> State {
+        TiltedBody::dynamics(self, x, u)
+    }
+    fn linearize(&self, x: &State, u: &Input) -> Linearization {
+        TiltedBody::linearize(self, x, u)
+    }
+}
+
+/// One classical RK4 step of length `dt` with u held constant.
+pub fn rk4_step<D: Dynamics + ?Sized>(f: &D, x: &State, u: &Input, dt: f64) -> State {
+    let k1 = f.dynamics(x, u);
+    let k2 = f.dynamics(&(x + k1 * (0.5 * dt)), u);
+    let k3 = f.dynamics(&(x + k2 * (0.5 * dt)), u);
+    let k4 = f.dynamics(&(x + k3 * dt), u);
+    x + (k1 + k2 * 2.0 + k3 * 2.0 + k4) * (dt / 6.0)
+}
+
+/// One RK4 step with its exact sensitivities dx+/dx and dx+/du
+/// (the derivative of the discrete map, not of the continuous flow).
+pub fn rk4_step_sensitivity<D: Dynamics + ?Sized>(
+    f: &D,
+    x: &State,
+    u: &Input,
+    dt: f64,
+) -> StepSensitivity {
+    let h = dt;
+    let l1 = f.linearize(x, u);
+    let s1x = l1.dfdx;
+    let s1u = l1.dfdu;
+
+    let x2 = x + l1.xdot * (0.5 * h);
+    let l2 = f.linearize(&x2, u);
+    let s2x = l2.dfdx * (StateJacobian::identity() + s1x * (0.5 * h));
+    let s2u = l2.dfdx * (s1u * (0.5 * h)) + l2.dfdu;
+
+    let x3 = x + l2.xdot * (0.5 * h);
+    let l3 = f.linearize(&x3, u);
+    let s3x = l3.dfdx * (StateJacobian::identity() + s2x * (0.5 * h));
+    let s3u = l3.dfdx * (s2u * (0.5 * h)) + l3.dfdu;
+
+    let x4 = x + l3.xdot * h;
+    let l4 = f.linearize(&x4, u);
+    let s4x = l4.dfdx * (StateJacobian::identity() + s3x * h);
+    let s4u = l4.dfdx * (s3u * h) + l4.dfdu;
+
+    let w = h / 6.0;
+    StepSensitivity {
+        next: x + (l1.xdot + l2.xdot * 2.0 + l3.xdot * 2.0 + l4.xdot) * w,
+        a: StateJacobian::identity() + (s1x + s2x * 2.0 + s3x * 2.0 + s4x) * w,
+        b: (s1u + s2u * 2.0 + s3u * 2.0 + s4u) * w,
     }
 }

@@ -24,6 +24,7 @@
 use std::path::Path;
 
 use atmo_core::config_file::{Checker, default_true};
+use atmo_core::ground_effect::{GainPartials, ThrustGainSurface};
 use serde::Deserialize;
 
 use crate::error::Result;
@@ -345,5 +346,108 @@ impl GroundEffect {
     pub fn from_config(config: &GroundEffectConfig, file: &Path) -> Result<Self> {
         config.validate(&Checker::new(file), "effects.ground_effect")?;
         Ok(Self::new(config))
+    }
+}
+
+/// `(i, w, slope)`: [`bracket`] and `dw/dx` (zero where x is clamped).
+#[inline(never)] // not step code (the controller's model)
+fn bracket_with_slope(xs: &[f64], x: f64) -> (usize, f64, f64) {
+    let (i, w) = bracket(xs, x);
+    let inside = x > xs[0] && x < xs[xs.len() - 1];
+    let slope = if inside {
+        1.0 / (xs[i + 1] - xs[i])
+    } else {
+        0.0
+    };
+    (i, w, slope)
+}
+
+/// `cheeseman_bennett(r, z)` and its derivative in z (zero where z is held).
+#[inline(never)] // not step code
+fn cheeseman_bennett_with_slope(r: f64, z: f64) -> (f64, f64) {
+    let r2 = r * r;
+    if z <= 0.5 * r {
+        return (cheeseman_bennett(r, z), 0.0);
+    }
+    let den = 16.0 * z * z - r2;
+    (r2 / den, -32.0 * z * r2 / (den * den))
+}
+
+impl GroundEffect {
+    /// The mean gain and its exact partials in h and varphi (of the piece
+    /// of the surface that holds the point): what the controller's model
+    /// linearizes. The same value as [`GroundEffect::gain`]'s mean.
+    #[inline(never)] // not step code
+    pub fn mean_with_partials(&self, h: f64, varphi: f64) -> GainPartials {
+        let cos = varphi.cos();
+        let (inv_cos, d_inv_cos) = if cos > 0.05 {
+            (1.0 / cos, varphi.sin() / (cos * cos))
+        } else {
+            (1.0 / 0.05, 0.0)
+        };
+        let (cb, cb_z) = cheeseman_bennett_with_slope(self.rotor_radius, h * inv_cos);
+        let classical = GainPartials {
+            gain: cb,
+            d_height: cb_z * inv_cos,
+            d_tilt: cb_z * h * d_inv_cos,
+        };
+        let (w, dw) = if varphi <= self.classical_below {
+            (1.0, 0.0)
+        } else if varphi >= self.table_from {
+            (0.0, 0.0)
+        } else {
+            let span = self.table_from - self.classical_below;
+            (1.0 - (varphi - self.classical_below) / span, -1.0 / span)
+        };
+        if w >= 1.0 {
+            return classical;
+        }
+        let (i, wt, dwt) = bracket_with_slope(&self.tilts, varphi);
+        let (j, wh, dwh) = bracket_with_slope(&self.heights, h);
+        let t = &self.gain;
+        let a = t[i][j] * (1.0 - wh) + t[i][j + 1] * wh;
+        let b = t[i + 1][j] * (1.0 - wh) + t[i + 1][j + 1] * wh;
+        let da_dh = (t[i][j + 1] - t[i][j]) * dwh;
+        let db_dh = (t[i + 1][j + 1] - t[i + 1][j]) * dwh;
+        let table = GainPartials {
+            gain: a * (1.0 - wt) + b * wt,
+            d_height: da_dh * (1.0 - wt) + db_dh * wt,
+            d_tilt: (b - a) * dwt,
+        };
+        GainPartials {
+            gain: w * classical.gain + (1.0 - w) * table.gain,
+            d_height: w * classical.d_height + (1.0 - w) * table.d_height,
+            d_tilt: w * classical.d_tilt
+                + (1.0 - w) * table.d_tilt
+                + dw * (classical.gain - table.gain),
+        }
+    }
+
+    /// The same surface with the table's mean gains scaled by `scale` (the
+    /// classical law below 30 deg and the spreads unchanged) and the tilt axis
+    /// shifted by `tilt_shift` rad (the table is read at `varphi - shift`):
+    /// a plant that differs from the controller's surface (Monte Carlo).
+    #[inline(never)] // start-up
+    #[must_use]
+    pub fn perturbed(&self, scale: f64, tilt_shift: f64) -> Self {
+        let mut out = Self::clone(self);
+        for row in &mut out.gain {
+            for v in row.iter_mut() {
+                *v *= scale;
+            }
+        }
+        for t in &mut out.tilts {
+            *t += tilt_shift;
+        }
+        out.table_from += tilt_shift;
+        out.classical_below += tilt_shift;
+        out
+    }
+}
+
+impl ThrustGainSurface for GroundEffect {
+    #[inline(never)] // not step code
+    fn gain_partials(&self, height: f64, varphi: f64) -> GainPartials {
+        self.mean_with_partials(height, varphi)
     }
 }

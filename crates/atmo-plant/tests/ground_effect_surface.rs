@@ -135,3 +135,62 @@ fn a_custom_table_is_used_as_given() {
     let s = GroundEffect::new(&cfg);
     assert!((s.gain(0.25, 50f64.to_radians()).mean - 0.30).abs() < 1e-15);
 }
+
+/// The controller's model linearizes the mean surface: its partials are the
+/// exact derivatives of the piece that holds the point (checked by central
+/// differences away from the table's kinks), and its value is the plant's mean.
+#[test]
+fn mean_partials_match_finite_differences() {
+    let ge = GroundEffect::default_surface();
+    let eps = 1e-7;
+    // (h m, varphi deg): classical, blend, table, beyond the table's heights.
+    let points = [
+        (0.4, 10.0),
+        (0.3, 25.0),
+        (0.3, 33.0),
+        (0.3, 37.0),
+        (0.3, 44.0),
+        (0.4, 52.0),
+        (0.5, 63.0),
+        (0.28, 67.0),
+        (0.6, 58.0),
+        (0.2, 55.0),
+        (0.9, 45.0),
+    ];
+    for (h, deg) in points {
+        let deg: f64 = deg;
+        let v = deg.to_radians();
+        let p = ge.mean_with_partials(h, v);
+        assert!((p.gain - ge.gain(h, v).mean).abs() < 1e-15, "({h}, {deg})");
+        let dh = (ge.gain(h + eps, v).mean - ge.gain(h - eps, v).mean) / (2.0 * eps);
+        let dv = (ge.gain(h, v + eps).mean - ge.gain(h, v - eps).mean) / (2.0 * eps);
+        assert!(
+            (p.d_height - dh).abs() < 1e-6,
+            "dg/dh at ({h}, {deg}): {} vs {dh}",
+            p.d_height
+        );
+        assert!(
+            (p.d_tilt - dv).abs() < 1e-6,
+            "dg/dvarphi at ({h}, {deg}): {} vs {dv}",
+            p.d_tilt
+        );
+    }
+    // Something to check: the surface is not flat at the landing's heights.
+    assert!(ge.mean_with_partials(0.3, 50f64.to_radians()).d_height < -0.5);
+}
+
+/// The Monte Carlo's plant surface: the table scaled, the tilt axis shifted.
+#[test]
+fn perturbed_surface_is_scaled_and_shifted() {
+    let ge = GroundEffect::default_surface();
+    let shift = 3f64.to_radians();
+    let other = ge.perturbed(1.2, shift);
+    for (h, deg) in [(0.3, 50.0f64), (0.5, 60.0), (0.25, 68.0)] {
+        let v: f64 = deg.to_radians();
+        let want = 1.2 * ge.gain(h, v).mean;
+        assert!(
+            (other.gain(h, v + shift).mean - want).abs() < 1e-12,
+            "({h}, {deg})"
+        );
+    }
+}

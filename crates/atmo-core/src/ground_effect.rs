@@ -1,0 +1,240 @@
+//! Ground effect in the controller's model: the rotor thrust gain
+//! `1 + g(h_i, varphi)` over a horizontal ground plane.
+//!
+//! Rotor i's hub is at `p_i = p + R(theta) r_i(varphi)` (NED); above a ground
+//! plane at NED height `z_g` its height is `h_i = z_g - p_i,z`. The thrust of
+//! rotor i is `kT u_i (1 + g(h_i, varphi))`, so with `u_eff,i = u_i (1 + g_i)`
+//! the dynamics are atmo-core's at `u_eff` and, with `f` the nominal dynamics,
+//!
+//! ```text
+//! df/du   = f_u(x, u_eff) diag(1 + g_i)
+//! df/dx   = f_x(x, u_eff) + f_u(x, u_eff) diag(u_i) dg/dx
+//! dg_i/dx = g_h(h_i, varphi) dh_i/dx,   dh_i/dz = -1,
+//! dh_i/dpitch = -(dR/dpitch r_i)_z,  dh_i/droll = -(dR/droll r_i)_z  (yaw: 0)
+//! ```
+//!
+//! The surface `g` itself lives with the plant (atmo-plant's
+//! `GroundEffect`, the same table and law the simulator flies through); this
+//! module needs only its value and partials, through [`ThrustGainSurface`].
+//! RK4 and its exact sensitivities are shared with the nominal body
+//! (atmo-core's `rk4_step` and `rk4_step_sensitivity` over [`Dynamics`]).
+
+use std::fmt::Debug;
+
+use nalgebra::Vector3;
+
+use crate::model::{
+    Dynamics, Input, InputJacobian, Linearization, State, TiltedBody, idx, sin_cos,
+};
+
+/// `g(h, varphi)` and its partials, at one point.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct GainPartials {
+    /// `T / T_inf - 1`.
+    pub gain: f64,
+    /// `dg/dh`, 1/m.
+    pub d_height: f64,
+    /// `dg/dvarphi`, 1/rad.
+    pub d_tilt: f64,
+}
+
+/// A mean thrust-gain surface over hub height above ground (m) and tilt (rad).
+/// Piecewise-smooth surfaces give the partials of the piece that holds the
+/// point (one-sided at a kink).
+pub trait ThrustGainSurface: Debug + Send + Sync {
+    fn gain_partials(&self, height: f64, varphi: f64) -> GainPartials;
+}
+
+/// A tilted body above a horizontal ground plane with a thrust-gain surface.
+#[derive(Debug, Clone, Copy)]
+pub struct GroundedBody<'a, S: ThrustGainSurface + ?Sized> {
+    pub body: TiltedBody,
+    pub surface: &'a S,
+    /// NED z of the ground plane, m.
+    pub ground_z: f64,
+}
+
+/// Per rotor: the gain and `dg_i/d(z, pitch, roll)`.
+struct RotorGains {
+    gain: [f64; 4],
+    d_z: [f64; 4],
+    d_pitch: [f64; 4],
+    d_roll: [f64; 4],
+}
+
+impl<S: ThrustGainSurface + ?Sized> GroundedBody<'_, S> {
+    /// Hub height of rotor i above the ground plane, m.
+    pub fn hub_height(&self, x: &State, rotor: usize) -> f64 {
+        let r = &self.body.rotor_position[rotor];
+        let (sp, cp) = sin_cos(x[idx::PITCH]);
+        let (sr, cr) = sin_cos(x[idx::ROLL]);
+        // Third row of R(yaw, pitch, roll): (-sp, cp sr, cp cr).
+        let down = -sp * r.x + cp * sr * r.y + cp * cr * r.z;
+        self.ground_z - (x[idx::Z] + down)
+    }
+
+    fn rotor_gains(&self, x: &State) -> RotorGains {
+        let (sp, cp) = sin_cos(x[idx::PITCH]);
+        let (sr, cr) = sin_cos(x[idx::ROLL]);
+        let mut out = RotorGains {
+            gain: [0.0; 4],
+            d_z: [0.0; 4],
+            d_pitch: [0.0; 4],
+            d_roll: [0.0; 4],
+        };
+        for i in 0..4 {
+            let r: &Vector3<f64> = &self.body.rotor_position[i];
+            let down = -sp * r.x + cp * sr * r.y + cp * cr * r.z;
+            let h = self.ground_z - (x[idx::Z] + down);
+            let g = self.surface.gain_partials(h, self.body.varphi);
+            out.gain[i] = g.gain;
+            // dh/dz = -1; dh/dpitch = -d(down)/dpitch; dh/droll = -d(down)/droll.
+            out.d_z[i] = -g.d_height;
+            out.d_pitch[i] = -g.d_height * (-cp * r.x - sp * sr * r.y - sp * cr * r.z);
+            out.d_roll[i] = -g.d_height * (cp * cr * r.y - cp * sr * r.z);
+        }
+        out
+    }
+
+    /// The gains `g_i` at state x (for logs and tests).
+    pub fn gains(&self, x: &State) -> [f64; 4] {
+        self.rotor_gains(x).gain
+    }
+}
+
+impl<S: ThrustGainSurface + ?Sized> Dynamics for GroundedBody<'_, S> {
+    fn dynamics(&self, x: &State, u: &Input) -> State {
+        let g = self.rotor_gains(x).gain;
+        let u_eff = Input::from_fn(|i, _| u[i] * (1.0 + g[i]));
+        self.body.dynamics(x, &u_eff)
+    }
+
+    fn linearize(&self, x: &State, u: &Input) -> Linearization {
+        let g = self.rotor_gains(x);
+        let u_eff = Input::from_fn(|i, _| u[i] * (1.0 + g.gain[i]));
+        let nominal = self.body.linearize(x, &u_eff);
+        let mut dfdx = nominal.dfdx;
+        let mut dfdu = InputJacobian::zeros();
+        for i in 0..4 {
+            let column = nominal.dfdu.column(i);
+            dfdu.set_column(i, &(column * (1.0 + g.gain[i])));
+            for (col, dg) in [
+                (idx::Z, g.d_z[i]),
+                (idx::PITCH, g.d_pitch[i]),
+                (idx::ROLL, g.d_roll[i]),
+            ] {
+                let mut target = dfdx.column_mut(col);
+                target += column * (u[i] * dg);
+            }
+        }
+        Linearization {
+            xdot: nominal.xdot,
+            dfdx,
+            dfdu,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)] // reason: test set-up
+
+    use super::*;
+    use crate::ConfigFile as _;
+    use crate::config::RobotConfig;
+    use crate::model::Model;
+    use crate::model::{rk4_step, rk4_step_sensitivity};
+
+    /// A smooth test surface, `g = a exp(-h / l) (1 + b varphi)`.
+    #[derive(Debug)]
+    struct Smooth;
+    impl ThrustGainSurface for Smooth {
+        fn gain_partials(&self, h: f64, varphi: f64) -> GainPartials {
+            let (a, l, b) = (0.3, 0.2, 0.5);
+            let e = a * (-h / l).exp();
+            GainPartials {
+                gain: e * (1.0 + b * varphi),
+                d_height: -e / l * (1.0 + b * varphi),
+                d_tilt: e * b,
+            }
+        }
+    }
+
+    fn model() -> Model {
+        let text = include_str!("../../../config/atmo.toml");
+        Model::new(&RobotConfig::from_toml_str(text, "config/atmo.toml").unwrap())
+    }
+
+    #[test]
+    fn linearization_matches_finite_differences() {
+        let model = model();
+        let surface = Smooth;
+        let body = GroundedBody {
+            body: model.at_tilt(0.9),
+            surface: &surface,
+            ground_z: 0.1,
+        };
+        let mut x = State::zeros();
+        x[idx::Z] = -0.15;
+        x[idx::PITCH] = 0.08;
+        x[idx::ROLL] = -0.06;
+        x[idx::YAW] = 0.3;
+        x[idx::VZ] = 0.2;
+        x[idx::WX] = 0.1;
+        x[idx::WY] = -0.2;
+        let u = Input::new(0.6, 0.7, 0.8, 0.65);
+        let lin = body.linearize(&x, &u);
+        let eps = 1e-6;
+        for j in 0..12 {
+            let mut xp = x;
+            let mut xm = x;
+            xp[j] += eps;
+            xm[j] -= eps;
+            let fd = (body.dynamics(&xp, &u) - body.dynamics(&xm, &u)) / (2.0 * eps);
+            let err = (fd - lin.dfdx.column(j)).amax();
+            assert!(err < 1e-6, "df/dx column {j}: {err}");
+        }
+        for j in 0..4 {
+            let mut up = u;
+            let mut um = u;
+            up[j] += eps;
+            um[j] -= eps;
+            let fd = (body.dynamics(&x, &up) - body.dynamics(&x, &um)) / (2.0 * eps);
+            let err = (fd - lin.dfdu.column(j)).amax();
+            assert!(err < 1e-6, "df/du column {j}: {err}");
+        }
+        // The ground effect enters: height and attitude columns differ from
+        // the nominal body's at the same effective input.
+        let nominal = model.at_tilt(0.9).linearize(&x, &u);
+        assert!((lin.dfdx.column(idx::Z) - nominal.dfdx.column(idx::Z)).amax() > 1e-2);
+        let step = rk4_step_sensitivity(&body, &x, &u, 0.1);
+        for j in 0..12 {
+            let mut xp = x;
+            let mut xm = x;
+            xp[j] += eps;
+            xm[j] -= eps;
+            let fd = (rk4_step(&body, &xp, &u, 0.1) - rk4_step(&body, &xm, &u, 0.1)) / (2.0 * eps);
+            let err = (fd - step.a.column(j)).amax();
+            assert!(err < 1e-6, "RK4 A column {j}: {err}");
+        }
+    }
+
+    #[test]
+    fn hub_height_is_the_ground_distance_of_the_hub() {
+        let model = model();
+        let surface = Smooth;
+        let body = GroundedBody {
+            body: model.at_tilt(0.5),
+            surface: &surface,
+            ground_z: 0.0,
+        };
+        let mut x = State::zeros();
+        x[idx::Z] = -1.0;
+        x[idx::PITCH] = 0.2;
+        let r = crate::model::rotation(0.0, 0.2, 0.0);
+        for i in 0..4 {
+            let hub = Vector3::new(0.0, 0.0, -1.0) + r * body.body.rotor_position[i];
+            assert!((body.hub_height(&x, i) + hub.z).abs() < 1e-12);
+        }
+    }
+}
