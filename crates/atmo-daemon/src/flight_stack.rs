@@ -17,6 +17,7 @@ use atmo_mpc::{AlphaSchedule, Mpc, MpcSettings, Outcome};
 use nalgebra::Vector3;
 
 use crate::error::{DaemonError, Result};
+use crate::ground_model::ground_surface;
 use crate::modes::{Conditions, Mode, Thresholds, next_mode};
 use crate::observer::{DisturbanceObserver, ObserverSettings};
 use crate::settings::FlightSettings;
@@ -206,7 +207,9 @@ impl FlightStack {
     ) -> Result<Self> {
         let model = Model::new(robot);
         let linkage = Linkage::from_config(&robot.linkage, robot.limits.tilt_max())?;
-        let mpc = Mpc::new(model.clone(), mpc_settings)?;
+        let surface = ground_surface(&mpc_settings.model.ground_effect)?;
+        let mut mpc = Mpc::new(model.clone(), mpc_settings)?;
+        mpc.set_ground_effect(surface);
         let steps = mpc.steps();
         let stage_dt = mpc.stage_dt();
         let alpha = AlphaSchedule::new(mpc.settings().cost.alpha_refresh_ticks);
@@ -709,6 +712,7 @@ impl FlightStack {
             .set_tilt_ramp(tilt, self.tilt_command, 0.0, limit.max(tilt));
         let _ = self.mpc.set_alpha(alpha);
         let _ = self.mpc.set_disturbance(&self.observer.wrench());
+        let _ = self.mpc.set_ground_height(self.last_ground_z);
     }
 
     /// The RTI preparation phase for the next tick. Call after the outputs

@@ -5,6 +5,7 @@
 //!   clock is an input): input validation, mode machine, tilt law with limits,
 //!   MPC feedback (thrusters), drive controller (wheels), failsafes, status.
 //! - [`observer`]: disturbance observer that makes the MPC offset-free.
+//! - [`ground_model`]: the ground-effect surface of the MPC's model, from its settings.
 //! - [`control_loop`]: the one tick (gather -> step -> emit -> prepare)
 //!   with absolute deadlines and per-tick timing, and the 150 Hz control
 //!   thread that runs it; the simulator runs the same tick.
@@ -26,6 +27,7 @@ pub mod cli;
 pub mod control_loop;
 pub mod error;
 pub mod flight_stack;
+pub mod ground_model;
 pub mod inputs;
 pub mod modes;
 pub mod observer;

@@ -23,6 +23,37 @@ pub struct MpcFile {
     pub solver: SolverSettings,
     pub feedback: FeedbackSettings,
     pub failure: FailureSettings,
+    pub model: ModelSettings,
+}
+
+/// Which thrust-gain surface the prediction model carries near the ground.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum GroundEffectSource {
+    /// The nominal model: no ground effect.
+    None,
+    /// The plant's documented default surface (docs/ground_effect.md).
+    PlantDefault,
+    /// `[effects.ground_effect]` of a plant file, e.g. the
+    /// `fitted_effects.toml` that `atmo-sim explain` writes.
+    File(std::path::PathBuf),
+}
+
+impl<'de> Deserialize<'de> for GroundEffectSource {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> std::result::Result<Self, D::Error> {
+        let text = String::deserialize(d)?;
+        Ok(match text.as_str() {
+            "none" => Self::None,
+            "default" => Self::PlantDefault,
+            path => Self::File(path.into()),
+        })
+    }
+}
+
+#[derive(Debug, Clone, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct ModelSettings {
+    /// `"none"`, `"default"` or the path of a plant file.
+    pub ground_effect: GroundEffectSource,
 }
 
 #[derive(Debug, Clone, Copy, Deserialize, PartialEq)]
@@ -150,6 +181,7 @@ pub struct MpcSettings {
     pub solver: SolverSettings,
     pub feedback: FeedbackSettings,
     pub failure: FailureSettings,
+    pub model: ModelSettings,
 }
 
 impl MpcSettings {
@@ -264,6 +296,7 @@ impl MpcFile {
             solver: self.solver,
             feedback: self.feedback,
             failure: self.failure,
+            model: self.model.clone(),
         })
     }
 }

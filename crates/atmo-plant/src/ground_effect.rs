@@ -116,6 +116,25 @@ impl Default for GroundEffectConfig {
 }
 
 impl GroundEffectConfig {
+    /// The same surface with the table's mean gains scaled by `scale` (the
+    /// classical law below 30 deg and the spreads unchanged) and the tilt
+    /// axis shifted by `shift_deg` (the table read at `varphi - shift`): a
+    /// plant that differs from the controller's surface (the Monte Carlo).
+    #[must_use]
+    pub fn perturbed(&self, scale: f64, shift_deg: f64) -> Self {
+        let mut out = self.clone();
+        for row in &mut out.gain {
+            for g in row.iter_mut() {
+                *g *= scale;
+            }
+        }
+        for t in &mut out.tilts_deg {
+            *t += shift_deg;
+        }
+        out.classical_below_deg += shift_deg;
+        out
+    }
+
     /// Checks the table's shape and values; `prefix` is the key of the section.
     pub fn validate(&self, c: &Checker<'_>, prefix: &str) -> Result<()> {
         c.within(
@@ -421,27 +440,6 @@ impl GroundEffect {
                 + (1.0 - w) * table.d_tilt
                 + dw * (classical.gain - table.gain),
         }
-    }
-
-    /// The same surface with the table's mean gains scaled by `scale` (the
-    /// classical law below 30 deg and the spreads unchanged) and the tilt axis
-    /// shifted by `tilt_shift` rad (the table is read at `varphi - shift`):
-    /// a plant that differs from the controller's surface (Monte Carlo).
-    #[inline(never)] // start-up
-    #[must_use]
-    pub fn perturbed(&self, scale: f64, tilt_shift: f64) -> Self {
-        let mut out = Self::clone(self);
-        for row in &mut out.gain {
-            for v in row.iter_mut() {
-                *v *= scale;
-            }
-        }
-        for t in &mut out.tilts {
-            *t += tilt_shift;
-        }
-        out.table_from += tilt_shift;
-        out.classical_below += tilt_shift;
-        out
     }
 }
 

@@ -184,7 +184,7 @@ fn mean_partials_match_finite_differences() {
 fn perturbed_surface_is_scaled_and_shifted() {
     let ge = GroundEffect::default_surface();
     let shift = 3f64.to_radians();
-    let other = ge.perturbed(1.2, shift);
+    let other = GroundEffect::new(&GroundEffectConfig::default().perturbed(1.2, 3.0));
     for (h, deg) in [(0.3, 50.0f64), (0.5, 60.0), (0.25, 68.0)] {
         let v: f64 = deg.to_radians();
         let want = 1.2 * ge.gain(h, v).mean;

@@ -3,35 +3,128 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
+use atmo_mpc::settings::GroundEffectSource;
 use atmo_sim::closed_loop::{ControllerConfig, TickRecord, fly_logged, trace_of};
 use atmo_sim::figure::{Markers, write_landing_figure};
-use atmo_sim::monte_carlo;
+use atmo_sim::monte_carlo::{self, MonteCarloReport};
 use atmo_sim::scenario::Scenario;
 use indicatif::{ProgressBar, ProgressStyle};
+
+/// Which prediction model the MPC flies with (`--controller`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum ControllerChoice {
+    /// config/mpc.toml's `[model] ground_effect`.
+    Config,
+    /// No ground effect in the model (the controller before issue 17).
+    Nominal,
+    /// The ground-effect surface in the model.
+    GroundEffect,
+    /// Both, on the same scenario and seeds.
+    Both,
+}
+
+/// `--runs`, `--seed`, `--jobs`.
+#[derive(Debug, Clone, Copy)]
+pub struct MonteCarloArgs {
+    pub count: Option<usize>,
+    pub seed: u64,
+    pub jobs: Option<usize>,
+}
 
 pub fn run(
     scenario_path: &Path,
     out: &Path,
-    runs: Option<usize>,
-    seed: u64,
-    jobs: Option<usize>,
+    runs: MonteCarloArgs,
+    choice: ControllerChoice,
+    surface: Option<PathBuf>,
 ) -> Result<()> {
     let scenario = Scenario::load(scenario_path).with_context(|| "loading the scenario")?;
-    let controller = ControllerConfig::atmo()?.deterministic();
+    let base = ControllerConfig::atmo()?.deterministic();
+    let ground_effect = surface.map_or(GroundEffectSource::PlantDefault, GroundEffectSource::File);
+    let with = |source: GroundEffectSource| {
+        let mut c = base.clone();
+        c.mpc.model.ground_effect = source;
+        c
+    };
+    let controllers: Vec<(&str, ControllerConfig)> = match choice {
+        ControllerChoice::Config => vec![("", base.clone())],
+        ControllerChoice::Nominal => vec![("nominal", with(GroundEffectSource::None))],
+        ControllerChoice::GroundEffect => vec![("ground-effect", with(ground_effect))],
+        ControllerChoice::Both => vec![
+            ("nominal", with(GroundEffectSource::None)),
+            ("ground-effect", with(ground_effect)),
+        ],
+    };
     let dir: PathBuf = out.join(&scenario.file.name);
+    if runs.count == Some(0) {
+        bail!("--runs must be at least 1");
+    }
+    let mut all_ok = true;
+    let mut reports = Vec::new();
     // Staged: a run that fails leaves an earlier run's folder as it was.
     let staged = atmo_io::output_dir::StagedDir::new(&dir)?;
-    let succeeded = match runs {
-        None => single(&scenario, &controller, staged.path())?,
-        Some(0) => bail!("--runs must be at least 1"),
-        Some(n) => many(&scenario, &controller, staged.path(), n, seed, jobs)?,
-    };
+    for (name, controller) in &controllers {
+        let dir = staged.path().join(name);
+        std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
+        if !name.is_empty() {
+            println!("controller        {name}");
+        }
+        match runs.count {
+            None => all_ok &= single(&scenario, controller, &dir)?,
+            Some(n) => reports.push((*name, many(&scenario, controller, &dir, n, &runs)?)),
+        }
+    }
+    if reports.len() > 1 {
+        print_comparison(&reports);
+    }
     let dir = staged.commit()?;
     println!("wrote             {}", dir.display());
-    if !succeeded {
+    if !all_ok {
         std::process::exit(1);
     }
     Ok(())
+}
+
+/// One table, a column per controller, the same seeds.
+fn print_comparison(reports: &[(&str, MonteCarloReport)]) {
+    let row = |label: &str, cell: &dyn Fn(&MonteCarloReport) -> String| {
+        let cells: Vec<String> = reports
+            .iter()
+            .map(|(_, r)| format!("{:>16}", cell(r)))
+            .collect();
+        println!("| {label:<34} |{} |", cells.join(" |"));
+    };
+    let names: Vec<String> = reports.iter().map(|(n, _)| format!("{n:>16}")).collect();
+    println!("| {:<34} |{} |", "same seeds", names.join(" |"));
+    let dist = |d: &Option<monte_carlo::Distribution>,
+                f: &dyn Fn(&monte_carlo::Distribution) -> f64,
+                p: usize| {
+        d.as_ref()
+            .map_or("-".to_string(), |d| format!("{:.p$}", f(d)))
+    };
+    row("success", &|r| format!("{}/{}", r.successes, r.runs));
+    row("crashes", &|r| r.crashes.to_string());
+    row("touchdown tilt median (deg)", &|r| {
+        dist(&r.touchdown_tilt_deg, &|d| d.median, 1)
+    });
+    row("touchdown tilt p05 (deg)", &|r| {
+        dist(&r.touchdown_tilt_deg, &|d| d.p05, 1)
+    });
+    row("impact speed median (m/s)", &|r| {
+        dist(&r.impact_speed_mps, &|d| d.median, 2)
+    });
+    row("impact speed p95 (m/s)", &|r| {
+        dist(&r.impact_speed_mps, &|d| d.p95, 2)
+    });
+    row("impact speed max (m/s)", &|r| {
+        dist(&r.impact_speed_mps, &|d| d.max, 2)
+    });
+    row("max mean thrust median", &|r| {
+        dist(&r.max_mean_thrust, &|d| d.median, 3)
+    });
+    row("tilt >= 64, impact <= 0.4, no crash", &|r| {
+        format!("{}/{}", r.landed_past_64_deg, r.runs)
+    });
 }
 
 /// One flight, its outputs written into `dir`; whether it succeeded.
@@ -99,10 +192,11 @@ fn many(
     controller: &ControllerConfig,
     dir: &Path,
     runs: usize,
-    seed: u64,
-    jobs: Option<usize>,
-) -> Result<bool> {
-    let threads = jobs
+    opts: &MonteCarloArgs,
+) -> Result<MonteCarloReport> {
+    let seed = opts.seed;
+    let threads = opts
+        .jobs
         .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, std::num::NonZero::get));
     let bar = ProgressBar::new(runs as u64);
     bar.set_style(
@@ -143,5 +237,5 @@ fn many(
         );
     }
     println!("outputs           monte_carlo.json");
-    Ok(true)
+    Ok(report)
 }

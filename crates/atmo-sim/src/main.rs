@@ -56,6 +56,18 @@ enum Command {
         /// Threads for the Monte Carlo (default: all cores).
         #[arg(long)]
         jobs: Option<usize>,
+        /// The MPC's prediction model: `nominal` (no ground effect),
+        /// `ground-effect` (the plant's documented default surface), `both`
+        /// (fly each on the same scenario and seeds, into OUT/<scenario
+        /// name>/<controller>/, and print one table), or `config` (what
+        /// config/mpc.toml's [model] says).
+        #[arg(long, value_enum, default_value_t = fly::ControllerChoice::Config)]
+        controller: fly::ControllerChoice,
+        /// With `--controller ground-effect` or `both`: the surface from
+        /// `[effects.ground_effect]` of this plant file instead (e.g. the
+        /// fitted_effects.toml of `atmo-sim explain`).
+        #[arg(long)]
+        ground_surface: Option<PathBuf>,
     },
     // The help text is the doc comment of `atmo_explain::cli::Args` (a doc
     // comment here would replace it).
@@ -121,7 +133,15 @@ fn main() -> Result<()> {
             runs,
             seed,
             jobs,
-        } => fly::run(&scenario.scenario, &out, runs, seed, jobs),
+            controller,
+            ground_surface,
+        } => fly::run(
+            &scenario.scenario,
+            &out,
+            fly::Runs { runs, seed, jobs },
+            controller,
+            ground_surface,
+        ),
         Command::Serve {
             scenario,
             config,

@@ -7,9 +7,13 @@ mod outcome;
 mod tick;
 
 use std::f64::consts::{PI, TAU};
+use std::sync::Arc;
 use std::time::Duration;
 
-use atmo_core::model::{Input, Model, State, idx};
+use atmo_core::ground_effect::{GroundedBody, ThrustGainSurface};
+use atmo_core::model::{
+    Input, Model, State, StepSensitivity, TiltedBody, idx, rk4_step, rk4_step_sensitivity,
+};
 use clarabel::solver::SolverStatus;
 
 use crate::error::{MpcError, Result};
@@ -68,6 +72,10 @@ pub struct Mpc {
     failed_ticks: u32,
     /// Estimated disturbance wrench the predictions include (offset-free MPC).
     disturbance: nalgebra::Vector6<f64>,
+    /// Thrust-gain surface near the ground (`None`: the nominal model).
+    ground_effect: Option<Arc<dyn ThrustGainSurface>>,
+    /// NED z of the ground plane, m.
+    ground_z: f64,
 }
 
 impl Mpc {
@@ -111,6 +119,8 @@ impl Mpc {
             homotopy_fallbacks: 0,
             failed_ticks: 0,
             disturbance: nalgebra::Vector6::zeros(),
+            ground_effect: None,
+            ground_z: 0.0,
             settings,
         })
     }
@@ -232,10 +242,10 @@ impl Mpc {
 
     /// Plan held at `x0` with hover-trim inputs at the stage tilts.
     fn restart_plan(&mut self, x0: &State) {
-        self.refresh_input_reference();
         for x in &mut self.plan_x {
             *x = *x0;
         }
+        self.refresh_input_reference();
         self.plan_u.copy_from_slice(&self.u_ref);
         self.plan_diverged = false;
     }
@@ -333,13 +343,68 @@ impl Mpc {
 
     fn refresh_input_reference(&mut self) {
         for k in 0..self.steps {
-            self.u_ref[k] = self
-                .model
-                .at_tilt(self.varphi[k])
-                .with_disturbance(self.disturbance)
-                .hover_trim()
-                .map(|u| u.clamp(0.0, 1.0));
+            let body = self.stage_body(self.varphi[k]);
+            self.u_ref[k] = self.input_reference_at(&body, &self.plan_x[k]);
         }
+    }
+
+    /// Sets the thrust-gain surface of the prediction model (`None`: the
+    /// nominal model). Start-up only: the surface is shared, not copied.
+    pub fn set_ground_effect(&mut self, surface: Option<Arc<dyn ThrustGainSurface>>) {
+        self.ground_effect = surface;
+    }
+
+    /// Whether the prediction model carries a ground effect.
+    pub fn has_ground_effect(&self) -> bool {
+        self.ground_effect.is_some()
+    }
+
+    /// Sets the NED z of the (horizontal) ground plane the ground effect is
+    /// measured from, for the next preparations.
+    pub fn set_ground_height(&mut self, ground_z: f64) -> Result<()> {
+        check_finite("ground height", 0, &[ground_z])?;
+        self.ground_z = ground_z;
+        Ok(())
+    }
+
+    /// The nominal body at a stage's tilt, with the disturbance wrench.
+    fn stage_body(&self, varphi: f64) -> TiltedBody {
+        self.model
+            .at_tilt(varphi)
+            .with_disturbance(self.disturbance)
+    }
+
+    fn grounded<'a>(&'a self, body: TiltedBody) -> Option<GroundedBody<'a, dyn ThrustGainSurface>> {
+        self.ground_effect.as_deref().map(|surface| GroundedBody {
+            body,
+            surface,
+            ground_z: self.ground_z,
+        })
+    }
+
+    /// One RK4 step of the prediction model.
+    fn step(&self, body: TiltedBody, x: &State, u: &Input, dt: f64) -> State {
+        match self.grounded(body) {
+            Some(grounded) => rk4_step(&grounded, x, u, dt),
+            None => rk4_step(&body, x, u, dt),
+        }
+    }
+
+    /// One RK4 step of the prediction model with its exact sensitivities.
+    fn step_sensitivity(&self, body: TiltedBody, x: &State, u: &Input, dt: f64) -> StepSensitivity {
+        match self.grounded(body) {
+            Some(grounded) => rk4_step_sensitivity(&grounded, x, u, dt),
+            None => rk4_step_sensitivity(&body, x, u, dt),
+        }
+    }
+
+    /// The input reference at a stage: the level hover trim, divided by the
+    /// rotor's ground-effect gain at the plan's state (the thrust that the
+    /// trim asks for), clamped to [0, 1].
+    fn input_reference_at(&self, body: &TiltedBody, x: &State) -> Input {
+        let trim = body.hover_trim();
+        let gains = self.grounded(*body).map_or([0.0; 4], |g| g.gains(x));
+        Input::from_fn(|i, _| (trim[i] / (1.0 + gains[i]).max(0.1)).clamp(0.0, 1.0))
     }
 }
 

@@ -36,12 +36,9 @@ impl Mpc {
         let r = weights.input_weight(self.alpha);
         let dt = self.stage_dt;
         for k in 0..self.steps {
-            let body = self
-                .model
-                .at_tilt(self.varphi[k])
-                .with_disturbance(self.disturbance);
-            self.u_ref[k] = body.hover_trim().map(|u| u.clamp(0.0, 1.0));
-            let s = body.rk4_step_sensitivity(&self.plan_x[k], &self.plan_u[k], dt);
+            let body = self.stage_body(self.varphi[k]);
+            self.u_ref[k] = self.input_reference_at(&body, &self.plan_x[k]);
+            let s = self.step_sensitivity(body, &self.plan_x[k], &self.plan_u[k], dt);
             let defect = s.next - self.plan_x[k + 1];
             if !(s.a.iter().all(|v| v.is_finite())
                 && s.b.iter().all(|v| v.is_finite())
@@ -94,11 +91,12 @@ impl Mpc {
         let predicted = match (shifted, self.settings.feedback.predictor) {
             (false, _) => x,
             (true, Predictor::Plan) => return State::zeros(),
-            (true, Predictor::Model) => self
-                .model
-                .at_tilt(self.varphi[0])
-                .with_disturbance(self.disturbance)
-                .rk4_step(&x, &u, self.settings.horizon.tick_period),
+            (true, Predictor::Model) => self.step(
+                self.stage_body(self.varphi[0]),
+                &x,
+                &u,
+                self.settings.horizon.tick_period,
+            ),
         };
         let mut e0 = predicted - self.plan_x[0];
         e0[idx::YAW] = wrap_angle(e0[idx::YAW]);
@@ -115,11 +113,12 @@ impl Mpc {
     fn shift_plan(&mut self) {
         let s = self.shift_fraction;
         let n = self.steps;
-        let last = self
-            .model
-            .at_tilt(self.varphi[n])
-            .with_disturbance(self.disturbance)
-            .rk4_step(&self.plan_x[n], &self.plan_u[n - 1], self.stage_dt);
+        let last = self.step(
+            self.stage_body(self.varphi[n]),
+            &self.plan_x[n],
+            &self.plan_u[n - 1],
+            self.stage_dt,
+        );
         for k in 0..n {
             self.plan_x[k] = self.plan_x[k] * (1.0 - s) + self.plan_x[k + 1] * s;
         }

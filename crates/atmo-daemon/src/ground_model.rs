@@ -1,0 +1,34 @@
+//! The MPC's ground-effect surface, from `[model] ground_effect` of the MPC
+//! settings: none (the nominal model), the plant's documented default
+//! surface, or `[effects.ground_effect]` of a plant file (the format of
+//! `config/plant.toml` and of the `fitted_effects.toml` that `atmo-sim
+//! explain` writes). Start-up only.
+
+use std::sync::Arc;
+
+use atmo_core::ConfigFile as _;
+use atmo_core::ground_effect::ThrustGainSurface;
+use atmo_mpc::settings::GroundEffectSource;
+use atmo_plant::config::PlantConfig;
+use atmo_plant::ground_effect::GroundEffect;
+
+use crate::error::{DaemonError, Result};
+
+/// The surface `source` names, loaded and checked.
+pub fn ground_surface(source: &GroundEffectSource) -> Result<Option<Arc<dyn ThrustGainSurface>>> {
+    Ok(match source {
+        GroundEffectSource::None => None,
+        GroundEffectSource::PlantDefault => Some(Arc::new(GroundEffect::default_surface())),
+        GroundEffectSource::File(path) => {
+            let plant = PlantConfig::load(path)
+                .map_err(|e| DaemonError::Setup(format!("model.ground_effect: {e}")))?;
+            let Some(config) = plant.effects.ground_effect.filter(|g| g.enabled) else {
+                return Err(DaemonError::Setup(format!(
+                    "model.ground_effect: {} has no enabled [effects.ground_effect]",
+                    path.display()
+                )));
+            };
+            Some(Arc::new(GroundEffect::new(&config)))
+        }
+    })
+}
