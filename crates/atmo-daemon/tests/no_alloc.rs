@@ -18,6 +18,7 @@ use atmo_daemon::{
     Estimate, FlightSettings, FlightStack, Mode, PilotInput, SolverState, StepInputs, StepOutputs,
 };
 use atmo_mpc::MpcSettings;
+use atmo_mpc::settings::GroundEffectSource;
 
 #[global_allocator]
 static GLOBAL: atmo_core::alloc_counter::CountingAllocator =
@@ -45,14 +46,22 @@ fn clarabel_allocations_per_solve() -> usize {
 
 #[test]
 fn flight_stack_step_does_not_allocate_after_start_up() {
+    flight_stack_allocations(GroundEffectSource::None);
+}
+
+/// The same with the ground effect in the MPC's model (its surface is read
+/// at start-up; each preparation evaluates it 16 times per stage).
+#[test]
+fn flight_stack_step_with_ground_effect_model_does_not_allocate() {
+    flight_stack_allocations(GroundEffectSource::PlantDefault);
+}
+
+fn flight_stack_allocations(ground_effect: GroundEffectSource) {
     let robot = RobotConfig::atmo();
     let settings = FlightSettings::atmo();
-    let mut stack = FlightStack::new(
-        &robot,
-        deterministic(MpcSettings::atmo(&settings.mpc_preset).unwrap()),
-        settings,
-    )
-    .unwrap();
+    let mut mpc = deterministic(MpcSettings::atmo(&settings.mpc_preset).unwrap());
+    mpc.model.ground_effect = ground_effect;
+    let mut stack = FlightStack::new(&robot, mpc, settings).unwrap();
     let model = Model::new(&robot);
     let linkage = Linkage::from_config(&robot.linkage, robot.limits.tilt_max()).unwrap();
     let mut x = State::zeros();

@@ -13,6 +13,14 @@
 //! Q_N = terminal_scale * Q(alpha),  u_ref,k = clamp(hover_trim(varphi_k), 0, 1)
 //! ```
 //!
+//! With a ground-effect surface ([`Mpc::set_ground_effect`], from `[model]
+//! ground_effect` in `config/mpc.toml`), `f` is atmo-core's
+//! `GroundedBody`: rotor i's thrust times `1 + g(h_i, varphi_k)`, h_i its hub
+//! height above the ground plane [`Mpc::set_ground_height`], linearized
+//! exactly (height through position and attitude). `"none"` is the nominal
+//! model and the default (measured better with the tilt on the paper's ramp:
+//! docs/ground_effect.md).
+//!
 //! The yaw entry of `x - r` is the wrapped difference (in (-pi, pi]), so a
 //! reference at +179 deg and a state at -179 deg are 2 deg apart.
 //!

