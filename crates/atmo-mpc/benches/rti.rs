@@ -8,11 +8,13 @@
 mod scenarios;
 
 use std::hint::black_box;
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use atmo_core::RobotConfig;
 use atmo_core::model::{Model, idx};
 use atmo_mpc::{FeedbackMethod, Formulation, Mpc, Outcome, QpSnapshot};
+use atmo_plant::ground_effect::GroundEffect;
 use clarabel::solver::IPSolver;
 use criterion::{Criterion, criterion_group, criterion_main};
 use scenarios::{NAMES, scenario};
@@ -83,6 +85,35 @@ fn rti_feedback(c: &mut Criterion) {
             "rti_feedback/{name}: {not_solved} of {i} ticks not Solved, {fallbacks} fell back to \
              Clarabel, {changed} changed the active set"
         );
+    }
+    group.finish();
+}
+
+/// `rti_tick` with the ground effect in the prediction model (the plant's
+/// default surface, the ground 0.3 m under the start so that every hub is
+/// inside the surface's 0.72 m reach): the preparation evaluates the surface
+/// and its partials 16 times per stage.
+fn rti_tick_ground_effect(c: &mut Criterion) {
+    let mut group = c.benchmark_group("rti_tick_ground_effect");
+    for name in NAMES {
+        let sc = scenario(name);
+        let settings = scenarios::settings(formulation());
+        let mut mpc = Mpc::new(Model::new(&RobotConfig::atmo()), settings).unwrap();
+        mpc.set_ground_effect(Some(Arc::new(GroundEffect::default_surface())));
+        mpc.set_ground_height(sc.start[idx::Z] + 0.3).unwrap();
+        let (mut mpc, estimates) = sc.warmed_up_from(mpc, RECORDED_TICKS);
+        let mut i = 0;
+        let mut not_solved = 0;
+        group.bench_function(name, |b| {
+            b.iter(|| {
+                sc.apply(&mut mpc);
+                let out = mpc.tick(black_box(&estimates[i % RECORDED_TICKS])).unwrap();
+                i += 1;
+                not_solved += usize::from(out.outcome != Outcome::Solved);
+                black_box(out.u)
+            });
+        });
+        eprintln!("rti_tick_ground_effect/{name}: {not_solved} of {i} ticks not Solved");
     }
     group.finish();
 }
@@ -260,6 +291,7 @@ fn qp_solver_compare(c: &mut Criterion) {
 criterion_group!(
     benches,
     rti_tick,
+    rti_tick_ground_effect,
     rti_feedback,
     rti_feedback_fallback,
     formulation_compare,

@@ -138,7 +138,11 @@ fn main() -> Result<()> {
         } => fly::run(
             &scenario.scenario,
             &out,
-            fly::Runs { runs, seed, jobs },
+            fly::MonteCarloArgs {
+                count: runs,
+                seed,
+                jobs,
+            },
             controller,
             ground_surface,
         ),

@@ -97,7 +97,12 @@ impl Scenario {
 
     /// [`Self::warmed_up`] with the given settings.
     pub fn warmed_up_with(&self, settings: MpcSettings, ticks: usize) -> (Mpc, Vec<State>) {
-        let mut mpc = Mpc::new(Model::new(&RobotConfig::atmo()), settings).unwrap();
+        let mpc = Mpc::new(Model::new(&RobotConfig::atmo()), settings).unwrap();
+        self.warmed_up_from(mpc, ticks)
+    }
+
+    /// [`Self::warmed_up`] from a controller as given (e.g. with a ground effect).
+    pub fn warmed_up_from(&self, mut mpc: Mpc, ticks: usize) -> (Mpc, Vec<State>) {
         self.apply(&mut mpc);
         mpc.reset(&self.start).unwrap();
         let h = mpc.settings().horizon.tick_period / 7.0;

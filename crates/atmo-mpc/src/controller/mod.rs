@@ -344,7 +344,7 @@ impl Mpc {
     fn refresh_input_reference(&mut self) {
         for k in 0..self.steps {
             let body = self.stage_body(self.varphi[k]);
-            self.u_ref[k] = self.input_reference_at(&body, &self.plan_x[k]);
+            self.u_ref[k] = hover_reference(&body);
         }
     }
 
@@ -374,39 +374,45 @@ impl Mpc {
             .with_disturbance(self.disturbance)
     }
 
-    fn grounded<'a>(&'a self, body: TiltedBody) -> Option<GroundedBody<'a, dyn ThrustGainSurface>> {
+    fn grounded(&self, body: &TiltedBody) -> Option<GroundedBody<'_, dyn ThrustGainSurface>> {
         self.ground_effect.as_deref().map(|surface| GroundedBody {
-            body,
+            body: *body,
             surface,
             ground_z: self.ground_z,
         })
     }
 
     /// One RK4 step of the prediction model.
-    fn step(&self, body: TiltedBody, x: &State, u: &Input, dt: f64) -> State {
+    fn step(&self, body: &TiltedBody, x: &State, u: &Input, dt: f64) -> State {
         match self.grounded(body) {
             Some(grounded) => rk4_step(&grounded, x, u, dt),
-            None => rk4_step(&body, x, u, dt),
+            None => rk4_step(body, x, u, dt),
         }
     }
 
     /// One RK4 step of the prediction model with its exact sensitivities.
-    fn step_sensitivity(&self, body: TiltedBody, x: &State, u: &Input, dt: f64) -> StepSensitivity {
+    fn step_sensitivity(
+        &self,
+        body: &TiltedBody,
+        x: &State,
+        u: &Input,
+        dt: f64,
+    ) -> StepSensitivity {
         match self.grounded(body) {
             Some(grounded) => rk4_step_sensitivity(&grounded, x, u, dt),
-            None => rk4_step_sensitivity(&body, x, u, dt),
+            None => rk4_step_sensitivity(body, x, u, dt),
         }
     }
+}
 
-    /// The input reference at a stage: the level hover trim of the nominal
-    /// body, clamped to [0, 1], with or without the ground effect in the
-    /// model. (Dividing it by the rotors' gain at the plan's state, the
-    /// thrust that hovers in ground effect, measured the same in the
-    /// 20-run Monte Carlo of the wheel landing: impact median 0.38 m/s,
-    /// touchdown median 62.6-62.7 deg; the simpler reference stays.)
-    fn input_reference_at(&self, body: &TiltedBody, _x: &State) -> Input {
-        body.hover_trim().map(|u| u.clamp(0.0, 1.0))
-    }
+/// The input reference at a stage: the level hover trim of the nominal
+/// body, clamped to [0, 1], with or without the ground effect in the model.
+/// (Dividing it by the rotors' gain at the plan's state, the thrust that
+/// hovers in ground effect, measured the same in the 20-run Monte Carlo of
+/// the wheel landing: impact median 0.38 m/s, touchdown median 62.6-62.7
+/// deg; the simpler reference stays.)
+fn hover_reference(body: &TiltedBody) -> Input {
+    body.hover_trim().map(|u| u.clamp(0.0, 1.0))
 }
 
 fn check_finite(what: &'static str, stage: usize, values: &[f64]) -> Result<()> {

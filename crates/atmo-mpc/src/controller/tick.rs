@@ -11,7 +11,7 @@ use super::outcome::{
     DegradedCause, FailureCause, FeedbackPath, HomotopyFallback, Outcome, SqpReport, TickOutput,
     TickTimings,
 };
-use super::{Mpc, wrap_angle};
+use super::{Mpc, hover_reference, wrap_angle};
 use crate::error::{MpcError, Result};
 use crate::qp::{QpSnapshot, SolveReport};
 use crate::settings::Predictor;
@@ -37,8 +37,8 @@ impl Mpc {
         let dt = self.stage_dt;
         for k in 0..self.steps {
             let body = self.stage_body(self.varphi[k]);
-            self.u_ref[k] = self.input_reference_at(&body, &self.plan_x[k]);
-            let s = self.step_sensitivity(body, &self.plan_x[k], &self.plan_u[k], dt);
+            self.u_ref[k] = hover_reference(&body);
+            let s = self.step_sensitivity(&body, &self.plan_x[k], &self.plan_u[k], dt);
             let defect = s.next - self.plan_x[k + 1];
             if !(s.a.iter().all(|v| v.is_finite())
                 && s.b.iter().all(|v| v.is_finite())
@@ -92,7 +92,7 @@ impl Mpc {
             (false, _) => x,
             (true, Predictor::Plan) => return State::zeros(),
             (true, Predictor::Model) => self.step(
-                self.stage_body(self.varphi[0]),
+                &self.stage_body(self.varphi[0]),
                 &x,
                 &u,
                 self.settings.horizon.tick_period,
@@ -114,7 +114,7 @@ impl Mpc {
         let s = self.shift_fraction;
         let n = self.steps;
         let last = self.step(
-            self.stage_body(self.varphi[n]),
+            &self.stage_body(self.varphi[n]),
             &self.plan_x[n],
             &self.plan_u[n - 1],
             self.stage_dt,
