@@ -13,6 +13,8 @@
 //!   driver liveness, ground height), shared by every `TickIo`.
 //! - [`onboard`]: the onboard binary's I/O (ROS 2, iceoryx2 driver ports,
 //!   MCAP log) around the control thread, and `config/daemon.toml`.
+//! - [`flight_log`]: what a flight log holds for a replay (per-tick inputs
+//!   and status, the configuration files) and how it is written.
 //! - [`telemetry`]: the tick's status as the `atmo_msgs/MpcStatus` message.
 //! - [`settings`], read from `config/flight.toml`.
 //!
@@ -25,6 +27,7 @@
 pub mod cli;
 pub mod control_loop;
 pub mod error;
+pub mod flight_log;
 pub mod flight_stack;
 pub mod inputs;
 pub mod modes;

@@ -6,9 +6,10 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result, bail};
-use atmo_core::{ConfigFile, RobotConfig};
+use atmo_core::RobotConfig;
 use atmo_daemon::cli::DaemonConfigArg;
 use atmo_daemon::control_loop::ControlThread;
+use atmo_daemon::flight_log::{FlightConfig, FlightConfigFiles, TickChannels};
 use atmo_daemon::onboard::{DaemonConfig, OnboardIo, OnboardSettings, OnboardShared};
 use atmo_daemon::{FlightSettings, FlightStack, Mode};
 use atmo_io::mcap_log::McapLogger;
@@ -80,6 +81,8 @@ fn main() {
 /// Everything loaded and validated before anything starts.
 struct Loaded {
     config: DaemonConfig,
+    /// The exact texts the flight stack is built from (logged at start).
+    files: FlightConfigFiles,
     robot: RobotConfig,
     flight: FlightSettings,
     mpc: atmo_mpc::MpcSettings,
@@ -87,19 +90,11 @@ struct Loaded {
 
 fn load(arg: &DaemonConfigArg) -> Result<Loaded> {
     let config = arg.load()?;
-    let robot = RobotConfig::load(&config.robot)?;
-    let flight = FlightSettings::load(&config.flight)?;
-    let mpc = atmo_mpc::MpcFile::load(&config.mpc)?
-        .settings(&flight.mpc_preset)
-        .with_context(|| {
-            format!(
-                "{}: preset of {}",
-                config.mpc.display(),
-                config.flight.display()
-            )
-        })?;
+    let files = FlightConfigFiles::read(&config.robot, &config.flight, &config.mpc)?;
+    let FlightConfig { robot, flight, mpc } = files.parse()?;
     Ok(Loaded {
         config,
+        files,
         robot,
         flight,
         mpc,
@@ -152,7 +147,10 @@ fn run(arg: &DaemonConfigArg, log_path: Option<PathBuf>, duration: Option<f64>) 
     }
     let (log, log_thread) = McapLogger::spawn(&log_path, l.config.log.options())
         .with_context(|| format!("opening the log {}", log_path.display()))?;
-    let status_channel = log.channel(&l.config.ros2.topics.status.name)?;
+    let channels = TickChannels::register(&log, &l.config.ros2.topics.status.name)?;
+    l.files
+        .log_to(&log, 0)
+        .context("storing the configuration in the log")?;
     let (ros_out, ros_in, ros_thread) =
         Ros2Node::start(&l.config.ros2, Ros2StartOptions::default()).context("ROS 2 node")?;
 
@@ -167,7 +165,7 @@ fn run(arg: &DaemonConfigArg, log_path: Option<PathBuf>, duration: Option<f64>) 
             ros_in,
             thread_ros_out,
             thread_log,
-            status_channel,
+            channels,
             settings,
             thread_shared,
         )

@@ -17,7 +17,9 @@ use std::time::Instant;
 use atmo_core::RobotConfig;
 use atmo_core::model::{State, idx};
 use atmo_daemon::control_loop::{TickTiming, tick_period};
+use atmo_daemon::flight_log::{FlightConfigFiles, TickChannels};
 use atmo_daemon::inputs::InputSettings;
+use atmo_io::msg::{MpcStatus, SimTruth};
 use atmo_daemon::{FlightSettings, FlightStack, Mode, StepInputs, StepOutputs};
 use atmo_mpc::MpcSettings;
 use nalgebra::Vector3;
@@ -97,6 +99,9 @@ impl Summary {
 /// flight settings and MPC settings.
 #[derive(Debug, Clone)]
 pub struct ControllerConfig {
+    /// The texts `robot`, `flight` and `mpc` were parsed from (stored in a
+    /// flight log, so that `atmo-daemon replay` rebuilds the same stack).
+    pub files: FlightConfigFiles,
     pub robot: RobotConfig,
     pub flight: FlightSettings,
     pub mpc: MpcSettings,
@@ -113,6 +118,7 @@ impl ControllerConfig {
             MpcSettings::atmo(&flight.mpc_preset).map_err(|e| SimError::Setup(e.to_string()))?;
         let inputs = InputSettings::defaults(0.0, flight.failsafe.estimate_timeout);
         Ok(Self {
+            files: FlightConfigFiles::shipped(),
             robot: RobotConfig::atmo(),
             flight,
             mpc,
@@ -247,7 +253,30 @@ fn record(tick: &SimTick, plant: &Plant) -> TickRecord {
 pub fn fly(
     scenario: &Scenario,
     controller: &ControllerConfig,
+    on_tick: impl FnMut(&TickRecord),
+) -> Result<Summary> {
+    fly_observed(scenario, controller, on_tick, |_| {})
+}
+
+/// The plant's truth now, as logged.
+pub fn truth_of(plant: &Plant) -> SimTruth {
+    let state = plant.state();
+    SimTruth {
+        time: plant.time(),
+        state: MpcStatus::array(&state),
+        tilt: plant.tilt(),
+        height: terrain_z_below(plant.plane(), state[idx::X], state[idx::Y]) - state[idx::Z],
+        contact: plant.contact_signal(),
+    }
+}
+
+/// [`fly`], with `on_plant` seeing the plant's truth at the start and after
+/// every plant step.
+pub fn fly_observed(
+    scenario: &Scenario,
+    controller: &ControllerConfig,
     mut on_tick: impl FnMut(&TickRecord),
+    mut on_plant: impl FnMut(&SimTruth),
 ) -> Result<Summary> {
     let wall = Instant::now();
     let mut plant = scenario.build_plant()?;
@@ -268,6 +297,7 @@ pub fn fly(
     let io = SimIo::new(inputs, *plant.plane());
     let mut control = SimControl::new(tick_period(stack.period()), io);
     control.io.sense(&plant, scenario);
+    on_plant(&truth_of(&plant));
 
     while plant.time() < duration - 1e-9 {
         if let Some(tick) = control.tick_if_due(&plant, &mut stack) {
@@ -291,6 +321,7 @@ pub fn fly(
         let was_grounded = plant.contact_signal();
         plant.step(control.io.command())?;
         control.io.sense(&plant, scenario);
+        on_plant(&truth_of(&plant));
         tracker.after_plant_step(&plant, was_grounded);
         if plant.crash().is_some() {
             break;
@@ -328,6 +359,24 @@ pub fn trace_of(records: &[TickRecord]) -> crate::figure::FlightTrace {
 
 /// The topic of the per-tick status in the flight log.
 pub const STATUS_TOPIC: &str = "/atmo/status";
+/// The topic of the plant's truth (after every plant step) in the flight log.
+pub const TRUTH_TOPIC: &str = "/atmo/sim/truth";
+/// The metadata record of a simulated flight: scenario, seed, crash, and
+/// whether the controller ran with exactly its logged configuration files.
+pub const SIM_METADATA: &str = "atmo.sim";
+
+impl ControllerConfig {
+    /// Whether the controller's settings are the ones its files parse to
+    /// (up to the MPC time limit, which [`Self::deterministic`] lifts and a
+    /// replay lifts too): then a replay rebuilds the same flight stack.
+    pub fn matches_files(&self) -> bool {
+        self.files.parse().is_ok_and(|parsed| {
+            let mut mpc = parsed.mpc;
+            mpc.solver.time_limit = self.mpc.solver.time_limit;
+            parsed.robot == self.robot && parsed.flight == self.flight && mpc == self.mpc
+        })
+    }
+}
 
 /// Flies `scenario` and logs every tick's `atmo_msgs/MpcStatus` to the MCAP
 /// file `path` (ROS 2 profile: Foxglove plots every field). Errors if the
@@ -346,18 +395,38 @@ pub fn fly_logged(
         ..LoggerOptions::default()
     };
     let (log, thread) = McapLogger::spawn(path, options).map_err(io)?;
-    let channel = log
-        .channel::<atmo_io::msg::MpcStatus>(STATUS_TOPIC)
-        .map_err(io)?;
+    let channels = TickChannels::register(&log, STATUS_TOPIC).map_err(io)?;
+    let truth = log.channel::<SimTruth>(TRUTH_TOPIC).map_err(io)?;
+    controller.files.log_to(&log, 0).map_err(io)?;
     let mut tick = 0;
-    let summary = fly(scenario, controller, |r| {
-        let message =
-            atmo_daemon::telemetry::status_message(tick, &r.inputs, &r.outputs, &r.timing);
-        // Counted if dropped (queue full): reported as an error below.
-        log.try_log(channel, r.inputs.now_ns, &message);
-        tick += 1;
-        on_tick(r);
-    });
+    let mut crash = None;
+    let summary = fly_observed(
+        scenario,
+        controller,
+        |r| {
+            let message =
+                atmo_daemon::telemetry::status_message(tick, &r.inputs, &r.outputs, &r.timing);
+            // Counted if dropped (queue full): reported as an error below.
+            channels.log_tick(&log, tick, &r.inputs, &message);
+            tick += 1;
+            on_tick(r);
+        },
+        |t| {
+            log.try_log(truth, (t.time * 1e9).round() as u64, t);
+        },
+    );
+    if let Ok(s) = &summary {
+        crash.clone_from(&s.crash_reason);
+    }
+    let mut meta = std::collections::BTreeMap::new();
+    meta.insert("scenario".to_string(), scenario.file.name.clone());
+    meta.insert("seed".to_string(), scenario.file.seed.to_string());
+    meta.insert("crash".to_string(), crash.unwrap_or_default());
+    meta.insert(
+        "controller_matches_files".to_string(),
+        controller.matches_files().to_string(),
+    );
+    log.metadata(SIM_METADATA, meta).map_err(io)?;
     log.finish();
     let written = thread.join().map_err(io)?;
     let summary = summary?;
