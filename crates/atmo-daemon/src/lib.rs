@@ -15,6 +15,10 @@
 //!   MCAP log) around the control thread, and `config/daemon.toml`.
 //! - [`flight_log`]: what a flight log holds for a replay (per-tick inputs
 //!   and status, the configuration files) and how it is written.
+//! - [`replay`]: a flight log's inputs through a rebuilt flight stack,
+//!   every output compared bit for bit with the logged one (and what-if).
+//! - [`whatif`]: a what-if replay's per-tick comparison (CSV, PNG overlay,
+//!   largest differences).
 //! - [`telemetry`]: the tick's status as the `atmo_msgs/MpcStatus` message.
 //! - [`settings`], read from `config/flight.toml`.
 //!
@@ -33,8 +37,10 @@ pub mod inputs;
 pub mod modes;
 pub mod observer;
 pub mod onboard;
+pub mod replay;
 pub mod settings;
 pub mod telemetry;
+pub mod whatif;
 
 pub use error::{DaemonError, Result};
 pub use flight_stack::{

@@ -19,11 +19,10 @@ use atmo_core::model::{State, idx};
 use atmo_daemon::control_loop::{TickTiming, tick_period};
 use atmo_daemon::flight_log::{FlightConfigFiles, TickChannels};
 use atmo_daemon::inputs::InputSettings;
-use atmo_io::msg::{MpcStatus, SimTruth};
+use atmo_io::msg::{Mode as ModeMsg, MpcStatus, SimTruth};
+use atmo_io::review::figure::FlightTrace;
 use atmo_daemon::{FlightSettings, FlightStack, Mode, StepInputs, StepOutputs};
 use atmo_mpc::MpcSettings;
-use nalgebra::Vector3;
-use serde::Serialize;
 
 use crate::error::{Result, SimError};
 use crate::scenario::{Scenario, SuccessConfig};
@@ -45,53 +44,44 @@ pub struct TickRecord {
     pub truth_height: f64,
 }
 
-/// The landing, in numbers (`summary.json`).
-#[derive(Debug, Clone, Serialize, PartialEq)]
-pub struct Summary {
-    pub scenario: String,
-    pub seed: u64,
-    /// Tilt when the wheels first carried load, deg (null if never).
-    pub touchdown_tilt_deg: Option<f64>,
-    /// Vertical speed at first wheel contact, m/s (positive = downwards).
-    pub impact_speed_mps: Option<f64>,
-    pub touchdown_time_s: Option<f64>,
-    /// Max over the transition of the mean normalized thrust command.
-    pub max_mean_thrust: f64,
-    pub crashed: bool,
-    pub crash_reason: Option<String>,
-    /// Ground distance travelled after touchdown, m.
-    pub drive_distance_m: f64,
-    /// Modes in the order they were entered.
-    pub mode_sequence: Vec<String>,
-    /// Ticks whose MPC command did not come from a fresh solve.
-    pub mpc_failures: u64,
-    /// Inputs rejected by the flight stack (estimate, tilt, pilot, ground).
-    pub rejected_inputs: [u64; 4],
-    pub sim_time_s: f64,
-    pub wall_time_s: f64,
-    /// Median and max MPC feedback time, s.
-    pub feedback_time_median_s: f64,
-    pub feedback_time_max_s: f64,
-}
+pub use atmo_io::review::landing::{LandingTracker, RunEnd, Summary};
 
-impl Summary {
-    /// Whether the run met the scenario's `[success]` criteria: a wheel
-    /// landing with no crash, enough tilt, a soft impact and a drive on; or,
-    /// for a flight, no crash and no ground contact.
-    pub fn succeeded(&self, c: &SuccessConfig) -> bool {
+impl SuccessConfig {
+    /// Whether `summary` meets these `[success]` criteria: a wheel landing
+    /// with no crash, enough tilt, a soft impact and a drive on; or, for a
+    /// flight, no crash and no ground contact.
+    pub fn met_by(&self, summary: &Summary) -> bool {
+        let c = self;
         if c.landing {
-            !self.crashed
-                && self
+            !summary.crashed
+                && summary
                     .touchdown_tilt_deg
                     .is_some_and(|t| t >= c.min_touchdown_tilt_deg)
-                && self
+                && summary
                     .impact_speed_mps
                     .is_some_and(|v| v <= c.max_impact_speed)
-                && self.drive_distance_m >= c.min_drive_distance
+                && summary.drive_distance_m >= c.min_drive_distance
         } else {
-            !self.crashed && self.touchdown_time_s.is_none()
+            !summary.crashed && summary.touchdown_time_s.is_none()
         }
     }
+}
+
+/// How a run of `scenario` on `plant` ended (for [`LandingTracker::summary`]).
+pub fn run_end(scenario: &Scenario, plant: &Plant, wall_time_s: f64) -> RunEnd {
+    RunEnd {
+        scenario: scenario.file.name.clone(),
+        seed: scenario.file.seed,
+        crash_reason: plant
+            .crash()
+            .map(|e| format!("{:?} at t = {:.3} s", e.kind, e.time)),
+        wall_time_s: Some(wall_time_s),
+    }
+}
+
+/// The daemon's mode as the log's.
+pub fn mode_message(mode: Mode) -> ModeMsg {
+    ModeMsg::from_code(mode.code()).unwrap_or_default()
 }
 
 /// The controller side of a closed-loop run: the robot model it believes
@@ -133,104 +123,6 @@ impl ControllerConfig {
     pub fn deterministic(mut self) -> Self {
         self.mpc.solver.time_limit = 10.0;
         self
-    }
-}
-
-/// The landing's bookkeeping, shared by the in-process runner ([`fly`])
-/// and the SITL plant server (`atmo-sim serve`): what the controller did
-/// each tick, and what the plant did each step.
-#[derive(Debug, Clone, Default)]
-pub struct LandingTracker {
-    modes: Vec<Mode>,
-    has_flown: bool,
-    max_mean_thrust: f64,
-    mpc_failures: u64,
-    rejected: [u64; 4],
-    feedback_times: Vec<f64>,
-    /// Time, tilt and vertical speed at the first wheel contact after flying.
-    touchdown: Option<(f64, f64, f64)>,
-    last_ground_xy: Option<Vector3<f64>>,
-    drive_distance: f64,
-}
-
-impl LandingTracker {
-    /// Room for `expected_ticks` feedback times (no reallocation in the loop).
-    pub fn new(expected_ticks: usize) -> Self {
-        Self {
-            feedback_times: Vec::with_capacity(expected_ticks),
-            ..Self::default()
-        }
-    }
-
-    /// One control tick: its mode, thrust commands, MPC feedback time
-    /// (`None` if the MPC did not run) and the controller's counters.
-    pub fn on_control_tick(
-        &mut self,
-        mode: Mode,
-        thrust: &[f64; 4],
-        feedback_time: Option<f64>,
-        mpc_failures_total: u64,
-        rejected: [u64; 4],
-    ) {
-        if self.modes.last() != Some(&mode) {
-            self.modes.push(mode);
-        }
-        self.has_flown |= matches!(mode, Mode::Flight | Mode::Morphing | Mode::Transition);
-        if mode == Mode::Transition {
-            let mean = thrust.iter().sum::<f64>() / 4.0;
-            self.max_mean_thrust = self.max_mean_thrust.max(mean);
-        }
-        if let Some(t) = feedback_time {
-            self.feedback_times.push(t);
-        }
-        self.mpc_failures = mpc_failures_total;
-        self.rejected = rejected;
-    }
-
-    /// After one plant step; `was_grounded` is the contact signal before it.
-    pub fn after_plant_step(&mut self, plant: &Plant, was_grounded: bool) {
-        let state = plant.state();
-        // The landing is the first wheel contact after flying (a scenario may
-        // start on the ground, and then take off).
-        if self.touchdown.is_none() && self.has_flown && !was_grounded && plant.contact_signal() {
-            self.touchdown = Some((plant.time(), plant.tilt(), state[idx::VZ]));
-        }
-        if self.touchdown.is_some() {
-            let xy = Vector3::new(state[idx::X], state[idx::Y], 0.0);
-            if let Some(last) = self.last_ground_xy {
-                self.drive_distance += (xy - last).norm();
-            }
-            self.last_ground_xy = Some(xy);
-        }
-    }
-
-    /// The summary of the run so far.
-    pub fn summary(&self, scenario: &Scenario, plant: &Plant, wall_time_s: f64) -> Summary {
-        let mut feedback_times = self.feedback_times.clone();
-        feedback_times.sort_by(f64::total_cmp);
-        let crash = plant.crash().copied();
-        let touchdown = self.touchdown;
-        Summary {
-            scenario: scenario.file.name.clone(),
-            seed: scenario.file.seed,
-            touchdown_tilt_deg: touchdown.map(|(_, tilt, _)| tilt.to_degrees()),
-            impact_speed_mps: touchdown.map(|(_, _, vz)| vz),
-            touchdown_time_s: touchdown.map(|(t, _, _)| t),
-            max_mean_thrust: self.max_mean_thrust,
-            crashed: crash.is_some(),
-            crash_reason: crash.map(|e| format!("{:?} at t = {:.3} s", e.kind, e.time)),
-            drive_distance_m: self.drive_distance,
-            mode_sequence: self.modes.iter().map(|m| m.name().to_string()).collect(),
-            mpc_failures: self.mpc_failures,
-            rejected_inputs: self.rejected,
-            sim_time_s: plant.time(),
-            wall_time_s,
-            feedback_time_median_s: feedback_times
-                .get(feedback_times.len() / 2)
-                .copied()
-                .unwrap_or(0.0),
-            feedback_time_max_s: feedback_times.last().copied().unwrap_or(0.0),
-        }
     }
 }
 
@@ -303,7 +195,7 @@ pub fn fly_observed(
         if let Some(tick) = control.tick_if_due(&plant, &mut stack) {
             let s = &tick.outputs.status;
             tracker.on_control_tick(
-                s.mode,
+                mode_message(s.mode),
                 &tick.outputs.thrust,
                 (s.solver != atmo_daemon::SolverState::Idle).then_some(s.feedback_time),
                 s.mpc_failures_total,
@@ -321,49 +213,41 @@ pub fn fly_observed(
         let was_grounded = plant.contact_signal();
         plant.step(control.io.command())?;
         control.io.sense(&plant, scenario);
-        on_plant(&truth_of(&plant));
-        tracker.after_plant_step(&plant, was_grounded);
+        let truth = truth_of(&plant);
+        on_plant(&truth);
+        tracker.after_plant_step(&truth, was_grounded);
         if plant.crash().is_some() {
             break;
         }
     }
-    Ok(tracker.summary(scenario, &plant, wall.elapsed().as_secs_f64()))
+    Ok(tracker.summary(&run_end(
+        scenario,
+        &plant,
+        wall.elapsed().as_secs_f64(),
+    )))
 }
 
-/// The per-tick series of the paper's Fig. 5A.
-pub fn trace_of(records: &[TickRecord]) -> crate::figure::FlightTrace {
-    use crate::figure::Phase;
-    let mut trace = crate::figure::FlightTrace::default();
+/// The per-tick series of the paper's Fig. 5A (the plant's truth height
+/// and tilt, the flight stack's mode, alpha and thrust).
+pub fn trace_of(records: &[TickRecord]) -> FlightTrace {
+    let mut trace = FlightTrace::default();
     for r in records {
         let s = &r.outputs.status;
-        trace.time.push(r.time);
-        trace.height.push(r.truth_height);
-        trace.tilt_deg.push(r.truth_tilt.to_degrees());
-        trace.alpha.push(if s.mode.is_airborne_mode() {
-            s.alpha
-        } else {
-            0.0
-        });
-        trace
-            .mean_thrust
-            .push(r.outputs.thrust.iter().sum::<f64>() / 4.0);
-        trace.phase.push(match s.mode {
-            Mode::Morphing => Phase::Morphing,
-            Mode::Transition => Phase::Transition,
-            Mode::Touchdown | Mode::Drive => Phase::Ground,
-            _ => Phase::Air,
-        });
+        trace.push(
+            r.time,
+            r.truth_height,
+            r.truth_tilt,
+            mode_message(s.mode),
+            s.alpha,
+            &r.outputs.thrust,
+        );
     }
     trace
 }
 
 /// The topic of the per-tick status in the flight log.
 pub const STATUS_TOPIC: &str = "/atmo/status";
-/// The topic of the plant's truth (after every plant step) in the flight log.
-pub const TRUTH_TOPIC: &str = "/atmo/sim/truth";
-/// The metadata record of a simulated flight: scenario, seed, crash, and
-/// whether the controller ran with exactly its logged configuration files.
-pub const SIM_METADATA: &str = "atmo.sim";
+pub use atmo_io::review::log::{SIM_METADATA, TRUTH_TOPIC};
 
 impl ControllerConfig {
     /// Whether the controller's settings are the ones its files parse to
