@@ -46,7 +46,8 @@ fn bench(c: &mut Criterion) {
     let mut records = Vec::new();
     let log_path = landing_log(&mut records);
 
-    let queue_path = std::env::temp_dir().join(format!("atmo-log-tick-bench-{}.mcap", std::process::id()));
+    let queue_path =
+        std::env::temp_dir().join(format!("atmo-log-tick-bench-{}.mcap", std::process::id()));
     let (log, thread) = McapLogger::spawn(&queue_path, LoggerOptions::default()).unwrap();
     let channels = TickChannels::register(&log, STATUS_TOPIC).unwrap();
     let statuses: Vec<_> = records

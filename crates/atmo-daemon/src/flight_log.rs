@@ -55,13 +55,7 @@ impl TickChannels {
 
     /// Queues one tick's inputs and status, both stamped with the tick's
     /// clock. Never blocks, never allocates; a full queue drops and counts.
-    pub fn log_tick(
-        &self,
-        log: &LoggerHandle,
-        tick: u64,
-        inputs: &StepInputs,
-        status: &MpcStatus,
-    ) {
+    pub fn log_tick(&self, log: &LoggerHandle, tick: u64, inputs: &StepInputs, status: &MpcStatus) {
         log.try_log(
             self.inputs,
             inputs.now_ns,
@@ -82,10 +76,12 @@ pub struct ConfigText {
 impl ConfigText {
     /// SHA-256 of the text, lower-case hex.
     pub fn sha256(&self) -> String {
-        Sha256::digest(self.text.as_bytes())
-            .iter()
-            .map(|b| format!("{b:02x}"))
-            .collect()
+        use std::fmt::Write as _;
+        let mut hex = String::with_capacity(64);
+        for byte in Sha256::digest(self.text.as_bytes()) {
+            let _ = write!(hex, "{byte:02x}");
+        }
+        hex
     }
 
     fn read(path: &Path) -> Result<Self> {
@@ -201,10 +197,7 @@ impl FlightConfigFiles {
                 log_time_ns,
                 file.text.as_bytes().to_vec(),
             )?;
-            entries.insert(
-                format!("{role}.source"),
-                file.source.display().to_string(),
-            );
+            entries.insert(format!("{role}.source"), file.source.display().to_string());
             entries.insert(format!("{role}.sha256"), file.sha256());
         }
         log.metadata(CONFIG_METADATA, entries)
@@ -255,7 +248,11 @@ impl FlightConfigFiles {
             texts.push(config);
         }
         let mut texts = texts.into_iter();
-        let mut next = || texts.next().ok_or_else(|| fail("internal: role count".into()));
+        let mut next = || {
+            texts
+                .next()
+                .ok_or_else(|| fail("internal: role count".into()))
+        };
         Ok(Self {
             robot: next()?,
             flight: next()?,
@@ -272,11 +269,7 @@ impl FlightConfigFiles {
     /// replaces nothing (named, with the names that would match).
     pub fn override_with(&mut self, path: &Path) -> Result<Vec<PathBuf>> {
         let mut replaced = Vec::new();
-        let names: Vec<String> = self
-            .files()
-            .iter()
-            .map(|f| file_name(&f.source))
-            .collect();
+        let names: Vec<String> = self.files().iter().map(|f| file_name(&f.source)).collect();
         for (file, name) in self.files_mut().into_iter().zip(&names) {
             let candidate = if path.is_dir() {
                 path.join(name)

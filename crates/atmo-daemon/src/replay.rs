@@ -66,8 +66,8 @@ fn read_channel<M: RosMessage>(
     topic: &str,
     tick_of: impl Fn(&M) -> u64,
 ) -> Result<Vec<M>> {
-    let (messages, integrity): (Vec<(u64, M)>, Integrity) = read_topic_lossy(path, topic)
-        .map_err(|e| match e {
+    let (messages, integrity): (Vec<(u64, M)>, Integrity) =
+        read_topic_lossy(path, topic).map_err(|e| match e {
             IoError::LogChannel { reason, .. } => {
                 log_error(path, format!("channel `{topic}`: {reason}"))
             }
@@ -266,7 +266,10 @@ pub fn compared_fields(s: &MpcStatus) -> Vec<(String, Value)> {
         ("rejected_pilot", s.rejected_pilot),
         ("rejected_ground", s.rejected_ground),
         ("ground_contact", u64::from(s.ground_contact)),
-        ("pilot.switches", u64::from(p.arm) | u64::from(p.offboard) << 1 | u64::from(p.mpc_enabled) << 2),
+        (
+            "pilot.switches",
+            u64::from(p.arm) | u64::from(p.offboard) << 1 | u64::from(p.mpc_enabled) << 2,
+        ),
     ] {
         out.push((name.into(), Value::Count(v)));
     }
@@ -322,7 +325,12 @@ impl ReplayReport {
 }
 
 /// The first differing field of a tick, if any.
-pub fn first_difference(tick: u64, time_s: f64, logged: &MpcStatus, replayed: &MpcStatus) -> Option<Difference> {
+pub fn first_difference(
+    tick: u64,
+    time_s: f64,
+    logged: &MpcStatus,
+    replayed: &MpcStatus,
+) -> Option<Difference> {
     compared_fields(logged)
         .into_iter()
         .zip(compared_fields(replayed))

@@ -4,8 +4,8 @@
 
 use atmo_core::model::State;
 use atmo_io::msg::{
-    IoHealth, Label, Mode as ModeMsg, MpcStatus, PilotInput as PilotMsg, SolverStatus,
-    TickInputs, TickTiming as TimingMsg,
+    IoHealth, Label, Mode as ModeMsg, MpcStatus, PilotInput as PilotMsg, SolverStatus, TickInputs,
+    TickTiming as TimingMsg,
 };
 
 use crate::control_loop::TickTiming;

@@ -146,7 +146,8 @@ impl WhatIfTable {
     /// # Errors
     /// A file that cannot be written, or too few ticks to plot.
     pub fn write(&self, dir: &Path) -> Result<()> {
-        let write_err = |file: &Path, e: std::io::Error| DaemonError::Setup(format!("{}: {e}", file.display()));
+        let write_err =
+            |file: &Path, e: std::io::Error| DaemonError::Setup(format!("{}: {e}", file.display()));
         std::fs::create_dir_all(dir).map_err(|e| write_err(dir, e))?;
         let csv = dir.join("whatif.csv");
         std::fs::write(&csv, self.csv()).map_err(|e| write_err(&csv, e))?;

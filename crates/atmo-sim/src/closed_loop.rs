@@ -19,9 +19,9 @@ use atmo_core::model::{State, idx};
 use atmo_daemon::control_loop::{TickTiming, tick_period};
 use atmo_daemon::flight_log::{FlightConfigFiles, TickChannels};
 use atmo_daemon::inputs::InputSettings;
+use atmo_daemon::{FlightSettings, FlightStack, Mode, StepInputs, StepOutputs};
 use atmo_io::msg::{Mode as ModeMsg, MpcStatus, SimTruth};
 use atmo_io::review::figure::FlightTrace;
-use atmo_daemon::{FlightSettings, FlightStack, Mode, StepInputs, StepOutputs};
 use atmo_mpc::MpcSettings;
 
 use crate::error::{Result, SimError};
@@ -220,11 +220,7 @@ pub fn fly_observed(
             break;
         }
     }
-    Ok(tracker.summary(&run_end(
-        scenario,
-        &plant,
-        wall.elapsed().as_secs_f64(),
-    )))
+    Ok(tracker.summary(&run_end(scenario, &plant, wall.elapsed().as_secs_f64())))
 }
 
 /// The per-tick series of the paper's Fig. 5A (the plant's truth height

@@ -34,8 +34,7 @@ fn dir() -> PathBuf {
 fn landing() -> &'static (PathBuf, Summary) {
     static LANDING: OnceLock<(PathBuf, Summary)> = OnceLock::new();
     LANDING.get_or_init(|| {
-        let scenario =
-            Scenario::load(repo().join("config/scenarios/wheel_landing.toml")).unwrap();
+        let scenario = Scenario::load(repo().join("config/scenarios/wheel_landing.toml")).unwrap();
         let controller = ControllerConfig::atmo().unwrap().deterministic();
         let path = dir().join("wheel_landing.mcap");
         let (summary, _) = fly_logged(&scenario, &controller, &path, |_| {}).unwrap();
@@ -79,7 +78,10 @@ fn one_changed_mpc_weight_reports_the_first_differing_tick_and_field() {
     assert!(!first.logged.identical(&first.replayed));
     assert!(report.differing_ticks > 0 && report.differing_ticks <= report.ticks);
     let text = first.to_string();
-    assert!(text.contains("tick 0") && text.contains("thrust[0]"), "{text}");
+    assert!(
+        text.contains("tick 0") && text.contains("thrust[0]"),
+        "{text}"
+    );
 }
 
 #[test]
@@ -112,15 +114,13 @@ fn a_log_cut_mid_flight_replays_to_its_last_complete_tick() {
 
 /// Copies `input` to `output`, passing each message through `edit`
 /// (`None` drops it), keeping attachments and metadata.
-fn rewrite(
-    input: &Path,
-    output: &Path,
-    edit: impl Fn(&str, &[u8]) -> Option<Vec<u8>>,
-) {
+fn rewrite(input: &Path, output: &Path, edit: impl Fn(&str, &[u8]) -> Option<Vec<u8>>) {
     let bytes = std::fs::read(input).unwrap();
     let mut writer = mcap::WriteOptions::new()
         .profile("ros2")
-        .create(std::io::BufWriter::new(std::fs::File::create(output).unwrap()))
+        .create(std::io::BufWriter::new(
+            std::fs::File::create(output).unwrap(),
+        ))
         .unwrap();
     let summary = mcap::Summary::read(&bytes).unwrap().unwrap();
     for index in &summary.attachment_indexes {
@@ -169,8 +169,7 @@ fn rewrite(
 
 fn replay_error(log: &Path) -> String {
     RecordedFlight::read(log, STATUS_TOPIC)
-        .err()
-        .expect("the log must be refused")
+        .expect_err("the log must be refused")
         .to_string()
 }
 
@@ -239,13 +238,18 @@ fn a_changed_configuration_attachment_is_refused_by_its_hash() {
     let summary = mcap::Summary::read(&bytes).unwrap().unwrap();
     let out = dir().join("edited_config.mcap");
     let mut writer = mcap::WriteOptions::new()
-        .create(std::io::BufWriter::new(std::fs::File::create(&out).unwrap()))
+        .create(std::io::BufWriter::new(
+            std::fs::File::create(&out).unwrap(),
+        ))
         .unwrap();
     for index in &summary.attachment_indexes {
         let mut a = mcap::read::attachment(&bytes, index).unwrap();
         if a.name == "config/mpc" {
             let text = String::from_utf8(a.data.to_vec()).unwrap();
-            a.data = Cow::Owned(text.replacen("max_iter = 40", "max_iter = 41", 1).into_bytes());
+            a.data = Cow::Owned(
+                text.replacen("max_iter = 40", "max_iter = 41", 1)
+                    .into_bytes(),
+            );
         }
         writer.attach(&a).unwrap();
     }
@@ -263,10 +267,7 @@ fn a_changed_configuration_attachment_is_refused_by_its_hash() {
 fn the_review_of_the_log_reproduces_the_landing_summary() {
     let (log, flown) = landing();
     let review = atmo_io::review::log::review_log(log, STATUS_TOPIC).unwrap();
-    assert_eq!(
-        review.truth,
-        atmo_io::review::log::TruthSource::Simulation
-    );
+    assert_eq!(review.truth, atmo_io::review::log::TruthSource::Simulation);
     let mut expected = flown.clone();
     // Not in the log: how long the simulation took on this machine.
     assert!(expected.wall_time_s.is_some());

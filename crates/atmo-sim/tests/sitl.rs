@@ -426,7 +426,11 @@ fn a_sitl_flight_replays_bit_for_bit_from_the_daemon_log() {
     assert_ne!(unlimited, mpc);
     std::fs::write(dir.join("mpc.toml"), unlimited).unwrap();
     let text = std::fs::read_to_string(&config).unwrap();
-    let shipped_mpc = repo().join("config").canonicalize().unwrap().join("mpc.toml");
+    let shipped_mpc = repo()
+        .join("config")
+        .canonicalize()
+        .unwrap()
+        .join("mpc.toml");
     let text = text.replace(
         &format!("mpc = \"{}\"", shipped_mpc.display()),
         &format!("mpc = \"{}\"", dir.join("mpc.toml").display()),

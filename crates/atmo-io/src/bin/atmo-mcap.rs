@@ -109,7 +109,11 @@ fn main() -> ExitCode {
 }
 
 /// `summary`: the review's summary.json and figure.png in `out`.
-fn summary(log: &std::path::Path, out: &std::path::Path, status_topic: &str) -> atmo_io::Result<()> {
+fn summary(
+    log: &std::path::Path,
+    out: &std::path::Path,
+    status_topic: &str,
+) -> atmo_io::Result<()> {
     use atmo_io::review::figure::write_landing_figure;
     use atmo_io::review::log::{TruthSource, review_log};
     let review = review_log(log, status_topic)?;
@@ -133,7 +137,11 @@ fn summary(log: &std::path::Path, out: &std::path::Path, status_topic: &str) -> 
     println!("touchdown tilt    {}", fmt(s.touchdown_tilt_deg, "deg"));
     println!("impact speed      {}", fmt(s.impact_speed_mps, "m/s"));
     println!("max mean thrust   {:.3}", s.max_mean_thrust);
-    println!("wrote             {} and {}", summary_path.display(), figure_path.display());
+    println!(
+        "wrote             {} and {}",
+        summary_path.display(),
+        figure_path.display()
+    );
     Ok(())
 }
 

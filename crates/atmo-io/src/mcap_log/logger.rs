@@ -15,8 +15,8 @@ use super::{MESSAGE_ENCODING, PROFILE, SCHEMA_ENCODING};
 use crate::error::{IoError, Result};
 use crate::msg::{
     ActuatorMotors, DiagnosticArray, DiagnosticStatus, Header, KeyValue, MpcStatus, Odometry,
-    OffboardControlMode, PilotInput, RosMessage, SimTruth, TickInputs, TickTiming, Time, Twist, VehicleOdometry, encode,
-    schema_text,
+    OffboardControlMode, PilotInput, RosMessage, SimTruth, TickInputs, TickTiming, Time, Twist,
+    VehicleOdometry, encode, schema_text,
 };
 
 /// Topic of the logger's own health (dropped and written counts).

@@ -129,6 +129,7 @@ pub struct TickTiming {
 /// consumed (see the `.msg`). `Copy` and allocation-free: built on the
 /// control thread, serialized elsewhere.
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+#[allow(clippy::struct_excessive_bools)] // the wire layout: presence flags and two signals
 pub struct TickInputs {
     pub tick: u64,
     /// The tick's clock value, ns.

@@ -285,7 +285,9 @@ pub fn write_overlay_figure(path: &Path, overlay: &Overlay) -> Result<()> {
     let height = u32::try_from(rows).unwrap_or(4) * 300 + 60;
     let root = BitMapBackend::new(path, (1100, height)).into_drawing_area();
     root.fill(&WHITE).map_err(plot_err)?;
-    let root = root.titled(overlay.title, ("sans-serif", 22)).map_err(plot_err)?;
+    let root = root
+        .titled(overlay.title, ("sans-serif", 22))
+        .map_err(plot_err)?;
     for (area, panel) in root.split_evenly((rows, 1)).iter().zip(&overlay.panels) {
         let finite = || {
             panel

@@ -127,9 +127,7 @@ pub fn review_log(path: impl AsRef<Path>, status_topic: &str) -> Result<LogRevie
         .file_stem()
         .map_or_else(String::new, |s| s.to_string_lossy().into_owned());
     let end = RunEnd {
-        scenario: sim
-            .and_then(|m| m.get("scenario").cloned())
-            .unwrap_or(stem),
+        scenario: sim.and_then(|m| m.get("scenario").cloned()).unwrap_or(stem),
         seed: sim
             .and_then(|m| m.get("seed"))
             .and_then(|s| s.parse().ok())
