@@ -10,6 +10,15 @@ pub enum DaemonError {
     Mpc(#[from] atmo_mpc::MpcError),
     #[error("{0}")]
     Setup(String),
+    #[error(transparent)]
+    Io(#[from] atmo_io::IoError),
+    /// A flight log that cannot be replayed; names the file and what is
+    /// missing or wrong (channel, tick, attachment).
+    #[error("{file}: {reason}")]
+    Log {
+        file: std::path::PathBuf,
+        reason: String,
+    },
 }
 
 pub type Result<T> = std::result::Result<T, DaemonError>;

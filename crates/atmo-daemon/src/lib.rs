@@ -14,6 +14,12 @@
 //!   driver liveness, ground height), shared by every `TickIo`.
 //! - [`onboard`]: the onboard binary's I/O (ROS 2, iceoryx2 driver ports,
 //!   MCAP log) around the control thread, and `config/daemon.toml`.
+//! - [`flight_log`]: what a flight log holds for a replay (per-tick inputs
+//!   and status, the configuration files) and how it is written.
+//! - [`replay`]: a flight log's inputs through a rebuilt flight stack,
+//!   every output compared bit for bit with the logged one (and what-if).
+//! - [`whatif`]: a what-if replay's per-tick comparison (CSV, PNG overlay,
+//!   largest differences).
 //! - [`telemetry`]: the tick's status as the `atmo_msgs/MpcStatus` message.
 //! - [`settings`], read from `config/flight.toml`.
 //!
@@ -26,14 +32,17 @@
 pub mod cli;
 pub mod control_loop;
 pub mod error;
+pub mod flight_log;
 pub mod flight_stack;
 pub mod ground_model;
 pub mod inputs;
 pub mod modes;
 pub mod observer;
 pub mod onboard;
+pub mod replay;
 pub mod settings;
 pub mod telemetry;
+pub mod whatif;
 
 pub use error::{DaemonError, Result};
 pub use flight_stack::{

@@ -6,9 +6,10 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result, bail};
-use atmo_core::{ConfigFile, RobotConfig};
+use atmo_core::RobotConfig;
 use atmo_daemon::cli::DaemonConfigArg;
 use atmo_daemon::control_loop::ControlThread;
+use atmo_daemon::flight_log::{FlightConfig, FlightConfigFiles, TickChannels};
 use atmo_daemon::onboard::{DaemonConfig, OnboardIo, OnboardSettings, OnboardShared};
 use atmo_daemon::{FlightSettings, FlightStack, Mode};
 use atmo_io::mcap_log::McapLogger;
@@ -51,6 +52,30 @@ enum Command {
         #[command(flatten)]
         config: DaemonConfigArg,
     },
+    /// Replay a flight log: rebuild the flight stack from the configuration
+    /// stored in LOG, feed it the logged inputs tick by tick with the logged
+    /// clock, and compare every output with the logged one bit for bit.
+    /// Exit 0: identical; 1: a difference (the first is printed: tick, time,
+    /// field, logged, replayed); 2: the log cannot be replayed.
+    ///
+    /// With --config (what-if) the inputs go through a changed flight stack
+    /// and --out gets a per-tick comparison (whatif.csv, whatif.png) and the
+    /// largest differences; that replay is open loop w.r.t. the plant.
+    Replay {
+        /// The flight log (`atmo-daemon run`, `atmo-sim fly`; a log cut by a
+        /// crash after `atmo-mcap recover`).
+        log: PathBuf,
+        /// What-if: a config file replacing the logged file of the same name
+        /// (e.g. mpc.toml), or a folder whose files replace those.
+        #[arg(long, value_name = "DIR_OR_FILE")]
+        config: Option<PathBuf>,
+        /// Where a what-if writes its comparison.
+        #[arg(long, value_name = "DIR", default_value = "whatif")]
+        out: PathBuf,
+        /// The status topic of the log (the daemon config's ros2.topics.status).
+        #[arg(long, default_value = "/atmo/status")]
+        status_topic: String,
+    },
 }
 
 fn main() {
@@ -70,6 +95,16 @@ fn main() {
             duration,
         } => run(&config, log, duration),
         Command::Check { config } => check(&config),
+        Command::Replay {
+            log,
+            config,
+            out,
+            status_topic,
+        } => match replay_command(&log, config.as_deref(), &out, &status_topic) {
+            Ok(true) => Ok(()),
+            Ok(false) => std::process::exit(1),
+            Err(e) => Err(e),
+        },
     };
     if let Err(e) = result {
         eprintln!("atmo-daemon: {e:#}");
@@ -77,9 +112,67 @@ fn main() {
     }
 }
 
+/// `replay`: true when every output is identical.
+fn replay_command(
+    log: &std::path::Path,
+    what_if: Option<&std::path::Path>,
+    out: &std::path::Path,
+    status_topic: &str,
+) -> Result<bool> {
+    use atmo_daemon::replay::{RecordedFlight, replay};
+    let flight = RecordedFlight::read(log, status_topic)?;
+    let mut files = flight.files.clone();
+    if let Some(path) = what_if {
+        for replaced in files.override_with(path)? {
+            println!("what-if: {}", replaced.display());
+        }
+    }
+    let config = RecordedFlight::config(&files)?;
+    let started = Instant::now();
+    let mut table = atmo_daemon::whatif::WhatIfTable::default();
+    let report = replay(&flight, &config, |pair| {
+        if what_if.is_some() {
+            table.push(pair);
+        }
+    })?;
+    let wall = started.elapsed().as_secs_f64();
+    println!(
+        "{}: {} ticks ({:.2} s of flight) replayed in {:.3} s ({:.0}x real time)",
+        log.display(),
+        report.ticks,
+        report.duration_s,
+        wall,
+        report.duration_s / wall.max(1e-9)
+    );
+    let (inputs_left, status_left) = flight.incomplete_tail;
+    if inputs_left + status_left > 0 {
+        println!(
+            "  the log ends mid-tick: replayed to its last complete tick ({inputs_left} inputs and {status_left} status records after it)"
+        );
+    }
+    match &report.first_difference {
+        None => println!("identical: every output of every tick, bit for bit"),
+        Some(d) => println!(
+            "{} of {} ticks differ; first: {d}",
+            report.differing_ticks, report.ticks
+        ),
+    }
+    if what_if.is_some() {
+        table.write(out)?;
+        println!("{}", atmo_daemon::whatif::OPEN_LOOP_NOTE);
+        for line in table.largest_differences() {
+            println!("  {line}");
+        }
+        println!("wrote {}", out.display());
+    }
+    Ok(report.identical())
+}
+
 /// Everything loaded and validated before anything starts.
 struct Loaded {
     config: DaemonConfig,
+    /// The exact texts the flight stack is built from (logged at start).
+    files: FlightConfigFiles,
     robot: RobotConfig,
     flight: FlightSettings,
     mpc: atmo_mpc::MpcSettings,
@@ -87,19 +180,11 @@ struct Loaded {
 
 fn load(arg: &DaemonConfigArg) -> Result<Loaded> {
     let config = arg.load()?;
-    let robot = RobotConfig::load(&config.robot)?;
-    let flight = FlightSettings::load(&config.flight)?;
-    let mpc = atmo_mpc::MpcFile::load(&config.mpc)?
-        .settings(&flight.mpc_preset)
-        .with_context(|| {
-            format!(
-                "{}: preset of {}",
-                config.mpc.display(),
-                config.flight.display()
-            )
-        })?;
+    let files = FlightConfigFiles::read(&config.robot, &config.flight, &config.mpc)?;
+    let FlightConfig { robot, flight, mpc } = files.parse()?;
     Ok(Loaded {
         config,
+        files,
         robot,
         flight,
         mpc,
@@ -152,7 +237,10 @@ fn run(arg: &DaemonConfigArg, log_path: Option<PathBuf>, duration: Option<f64>) 
     }
     let (log, log_thread) = McapLogger::spawn(&log_path, l.config.log.options())
         .with_context(|| format!("opening the log {}", log_path.display()))?;
-    let status_channel = log.channel(&l.config.ros2.topics.status.name)?;
+    let channels = TickChannels::register(&log, &l.config.ros2.topics.status.name)?;
+    l.files
+        .log_to(&log, 0)
+        .context("storing the configuration in the log")?;
     let (ros_out, ros_in, ros_thread) =
         Ros2Node::start(&l.config.ros2, Ros2StartOptions::default()).context("ROS 2 node")?;
 
@@ -167,7 +255,7 @@ fn run(arg: &DaemonConfigArg, log_path: Option<PathBuf>, duration: Option<f64>) 
             ros_in,
             thread_ros_out,
             thread_log,
-            status_channel,
+            channels,
             settings,
             thread_shared,
         )

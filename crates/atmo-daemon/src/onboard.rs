@@ -37,13 +37,14 @@ use std::time::{Duration, Instant};
 
 use atmo_core::config_file::{Checker, ConfigFile};
 use atmo_io::drivers::{DriverHealth, DriverPortsConfig, FlightPorts, monotonic_ns};
-use atmo_io::mcap_log::{Channel, Compression, LoggerHandle, LoggerOptions};
-use atmo_io::msg::{ActuatorMotors, IoHealth, MpcStatus, OffboardControlMode};
+use atmo_io::mcap_log::{Compression, LoggerHandle, LoggerOptions};
+use atmo_io::msg::{ActuatorMotors, IoHealth, OffboardControlMode};
 use atmo_io::ros2::{Ros2Config, Ros2Inputs, Ros2Publisher};
 use serde::Deserialize;
 
 use crate::control_loop::{TickIo, TickTiming};
 use crate::error::{DaemonError, Result};
+use crate::flight_log::TickChannels;
 use crate::flight_stack::{Estimate, StepInputs, StepOutputs};
 use crate::inputs::{DriveCommand, InputLatch, InputSettings};
 use crate::telemetry::pilot_from_message;
@@ -259,7 +260,7 @@ pub struct OnboardIo {
     ros_in: Ros2Inputs,
     ros_out: Ros2Publisher,
     log: LoggerHandle,
-    status_channel: Channel<MpcStatus>,
+    channels: TickChannels,
     px4_offboard: bool,
     shared: Arc<OnboardShared>,
     started: Instant,
@@ -287,7 +288,7 @@ impl OnboardIo {
         ros_in: Ros2Inputs,
         ros_out: Ros2Publisher,
         log: LoggerHandle,
-        status_channel: Channel<MpcStatus>,
+        channels: TickChannels,
         settings: OnboardSettings,
         shared: Arc<OnboardShared>,
     ) -> atmo_io::Result<Self> {
@@ -296,7 +297,7 @@ impl OnboardIo {
             ros_in,
             ros_out,
             log,
-            status_channel,
+            channels,
             px4_offboard: settings.px4_offboard,
             shared,
             started: Instant::now(),
@@ -399,8 +400,8 @@ impl TickIo for OnboardIo {
         status.ros_stamp_ns = self.tick_ros_ns;
         // Both drop and count when full; neither blocks.
         self.ros_out.try_publish_status(&status);
-        self.log
-            .try_log(self.status_channel, inputs.now_ns, &status);
+        self.channels
+            .log_tick(&self.log, self.tick, inputs, &status);
         self.latch.mode(outputs.status.mode);
         self.tick += 1;
         let alive = status

@@ -2,13 +2,50 @@
 //! goes to ROS 2 and the MCAP log. Copies fixed-size data only: safe on the
 //! control thread.
 
+use atmo_core::model::State;
 use atmo_io::msg::{
-    IoHealth, Label, Mode as ModeMsg, MpcStatus, PilotInput as PilotMsg, SolverStatus,
+    IoHealth, Label, Mode as ModeMsg, MpcStatus, PilotInput as PilotMsg, SolverStatus, TickInputs,
     TickTiming as TimingMsg,
 };
 
 use crate::control_loop::TickTiming;
-use crate::flight_stack::{PilotInput, StepInputs, StepOutputs};
+use crate::flight_stack::{Estimate, PilotInput, StepInputs, StepOutputs};
+
+/// The tick's inputs as the `atmo_msgs/TickInputs` message (every field of
+/// [`StepInputs`], bit for bit).
+pub fn inputs_message(tick: u64, inputs: &StepInputs) -> TickInputs {
+    let estimate = inputs.estimate;
+    TickInputs {
+        tick,
+        clock_ns: inputs.now_ns,
+        has_estimate: estimate.is_some(),
+        estimate_received_ns: estimate.map_or(0, |e| e.stamp_ns),
+        estimate: estimate.map_or([0.0; 12], |e| MpcStatus::array(&e.state)),
+        has_tilt_counts: inputs.tilt_counts.is_some(),
+        tilt_counts: inputs.tilt_counts.unwrap_or(0.0),
+        pilot: pilot_message(&inputs.pilot),
+        ground_contact: inputs.ground_contact,
+        ground_z: inputs.ground_z,
+        driver_lost: inputs.driver_lost,
+    }
+}
+
+/// The `atmo_msgs/TickInputs` message as the flight stack's inputs (the
+/// inverse of [`inputs_message`]).
+pub fn inputs_from_message(m: &TickInputs) -> StepInputs {
+    StepInputs {
+        now_ns: m.clock_ns,
+        estimate: m.has_estimate.then(|| Estimate {
+            stamp_ns: m.estimate_received_ns,
+            state: State::from_column_slice(&m.estimate),
+        }),
+        tilt_counts: m.has_tilt_counts.then_some(m.tilt_counts),
+        pilot: pilot_from_message(&m.pilot),
+        ground_contact: m.ground_contact,
+        ground_z: m.ground_z,
+        driver_lost: m.driver_lost,
+    }
+}
 
 /// The pilot input as the `atmo_msgs/PilotInput` message (same fields, same
 /// frames: NED velocity, FRD yaw rate).

@@ -269,3 +269,61 @@ fn control_loop_tick_does_not_allocate_after_start_up() {
         "ControlLoop::tick allocated {allocations} times; Clarabel's solves account for at most {allowed}"
     );
 }
+
+/// Issue 19: logging a tick (its `TickInputs` and `MpcStatus` records, as
+/// `OnboardIo::emit` and the simulator do) allocates nothing on the
+/// control thread. Counted on this thread only: the logger's writer thread
+/// encodes and compresses (and allocates) off the control thread.
+#[test]
+fn logging_a_tick_does_not_allocate() {
+    use atmo_daemon::flight_log::{INPUTS_TOPIC, TickChannels};
+    use atmo_io::mcap_log::{LoggerOptions, McapLogger, read_topic};
+    use atmo_io::msg::TickInputs;
+    let dir = std::path::PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("issue19");
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("no_alloc_tick_log.mcap");
+    let ticks = 2000u64;
+    let options = LoggerOptions {
+        queue_capacity: 2 * ticks as usize + 16,
+        ..LoggerOptions::default()
+    };
+    let (log, thread) = McapLogger::spawn(&path, options).unwrap();
+    let channels = TickChannels::register(&log, "/atmo/status").unwrap();
+    let flight = FlightSettings::atmo();
+    let mut stack = FlightStack::new(
+        &RobotConfig::atmo(),
+        deterministic(MpcSettings::atmo(&flight.mpc_preset).unwrap()),
+        flight,
+    )
+    .unwrap();
+    let mut state = State::zeros();
+    state[idx::Z] = -1.0;
+    let mut inputs = StepInputs {
+        now_ns: 1_000_000,
+        estimate: Some(Estimate { stamp_ns: 0, state }),
+        tilt_counts: Some(12.0),
+        pilot: PilotInput::default(),
+        ground_contact: false,
+        ground_z: 0.0,
+        driver_lost: false,
+    };
+    let outputs = stack.step(&inputs);
+    let timing = TickTiming::default();
+    let before = thread_allocations();
+    for tick in 0..ticks {
+        inputs.now_ns += 6_666_666;
+        let status = atmo_daemon::telemetry::status_message(tick, &inputs, &outputs, &timing);
+        channels.log_tick(&log, tick, &inputs, &status);
+    }
+    let allocations = thread_allocations() - before;
+    log.finish();
+    let written = thread.join().unwrap();
+    assert_eq!(written.dropped, 0);
+    let logged = read_topic::<TickInputs>(&path, INPUTS_TOPIC).unwrap();
+    assert_eq!(logged.len() as u64, ticks, "every tick's inputs in the log");
+    assert_eq!(logged[7].1.clock_ns, 1_000_000 + 8 * 6_666_666);
+    assert_eq!(
+        allocations, 0,
+        "allocations logging {ticks} ticks on the control thread"
+    );
+}

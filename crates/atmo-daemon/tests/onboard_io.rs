@@ -21,11 +21,12 @@ use atmo_core::RobotConfig;
 use atmo_core::alloc_counter::thread_allocations;
 use atmo_core::model::{State, idx};
 use atmo_daemon::control_loop::{TickIo, TickTiming};
+use atmo_daemon::flight_log::{INPUTS_TOPIC, TickChannels};
 use atmo_daemon::onboard::{OnboardIo, OnboardSettings, OnboardShared};
 use atmo_daemon::{Estimate, FlightSettings, FlightStack, PilotInput, StepInputs};
 use atmo_io::drivers::{DriverEndpoint, DriverId, DriverPortsConfig};
 use atmo_io::mcap_log::{LoggerOptions, McapLogger};
-use atmo_io::msg::{MpcStatus, PilotInput as PilotMsg};
+use atmo_io::msg::{PilotInput as PilotMsg, TickInputs};
 use atmo_io::ros2::{Ros2Config, Ros2Node, Ros2StartOptions, SitlNode};
 use atmo_mpc::MpcSettings;
 
@@ -75,7 +76,7 @@ fn onboard_tick_io_allocates_nothing_of_its_own() {
     let log_path =
         std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("onboard_io_no_alloc.mcap");
     let (log, log_thread) = McapLogger::spawn(&log_path, LoggerOptions::default()).unwrap();
-    let status_channel = log.channel::<MpcStatus>("/atmo/status").unwrap();
+    let channels = TickChannels::register(&log, "/atmo/status").unwrap();
     let shared = Arc::new(OnboardShared::default());
     let settings = OnboardSettings {
         ground_z: 0.0,
@@ -90,7 +91,7 @@ fn onboard_tick_io_allocates_nothing_of_its_own() {
         ros_in,
         ros_out,
         log.clone(),
-        status_channel,
+        channels,
         settings,
         Arc::clone(&shared),
     )
@@ -193,7 +194,11 @@ fn onboard_tick_io_allocates_nothing_of_its_own() {
     log.finish();
     let written = log_thread.join().unwrap();
     assert_eq!(written.dropped, 0);
-    assert!(written.written >= warm_up + measured);
+    // Every tick's inputs and status (issue 19: the log replays).
+    assert!(written.written >= 2 * (warm_up + measured));
+    let inputs = atmo_io::mcap_log::read_topic::<TickInputs>(&log_path, INPUTS_TOPIC).unwrap();
+    assert_eq!(inputs.len() as u64, warm_up + measured);
+    assert_eq!(inputs.last().unwrap().1.tilt_counts, 1234.0);
     ros_thread.stop().unwrap();
     peer_thread.stop().unwrap();
 }

@@ -60,6 +60,9 @@ pub enum IoError {
         topic: String,
         reason: String,
     },
+    /// A review output (figure, summary) could not be made or written.
+    #[error("{0}")]
+    Output(String),
     /// The logger was used wrongly (bad topic, too many channels, closed).
     #[error("MCAP logger: {0}")]
     Logger(String),

@@ -11,6 +11,8 @@
 //!   pilot inputs in, PX4 offboard outputs, diagnostics), never blocking the
 //!   control thread, and its SITL peer for the plant server.
 //! - [`output_dir`]: output folders written whole or not at all.
+//! - [`review`] (feature `review`): a flight's landing summary and Fig. 5A,
+//!   as the simulator makes them and from any log.
 //!
 //! Conventions: NED world, FRD body, Euler ZYX, the 12-state order of
 //! `atmo_core::model::idx`; time in u64 nanoseconds.
@@ -21,6 +23,8 @@ pub mod error;
 pub mod mcap_log;
 pub mod msg;
 pub mod output_dir;
+#[cfg(feature = "review")]
+pub mod review;
 #[cfg(feature = "ros2")]
 pub mod ros2;
 

@@ -17,11 +17,12 @@ use std::time::Instant;
 use atmo_core::RobotConfig;
 use atmo_core::model::{State, idx};
 use atmo_daemon::control_loop::{TickTiming, tick_period};
+use atmo_daemon::flight_log::{FlightConfigFiles, TickChannels};
 use atmo_daemon::inputs::InputSettings;
 use atmo_daemon::{FlightSettings, FlightStack, Mode, StepInputs, StepOutputs};
+use atmo_io::msg::{Mode as ModeMsg, MpcStatus, SimTruth};
+use atmo_io::review::figure::FlightTrace;
 use atmo_mpc::MpcSettings;
-use nalgebra::Vector3;
-use serde::Serialize;
 
 use crate::error::{Result, SimError};
 use crate::scenario::{Scenario, SuccessConfig};
@@ -43,53 +44,44 @@ pub struct TickRecord {
     pub truth_height: f64,
 }
 
-/// The landing, in numbers (`summary.json`).
-#[derive(Debug, Clone, Serialize, PartialEq)]
-pub struct Summary {
-    pub scenario: String,
-    pub seed: u64,
-    /// Tilt when the wheels first carried load, deg (null if never).
-    pub touchdown_tilt_deg: Option<f64>,
-    /// Vertical speed at first wheel contact, m/s (positive = downwards).
-    pub impact_speed_mps: Option<f64>,
-    pub touchdown_time_s: Option<f64>,
-    /// Max over the transition of the mean normalized thrust command.
-    pub max_mean_thrust: f64,
-    pub crashed: bool,
-    pub crash_reason: Option<String>,
-    /// Ground distance travelled after touchdown, m.
-    pub drive_distance_m: f64,
-    /// Modes in the order they were entered.
-    pub mode_sequence: Vec<String>,
-    /// Ticks whose MPC command did not come from a fresh solve.
-    pub mpc_failures: u64,
-    /// Inputs rejected by the flight stack (estimate, tilt, pilot, ground).
-    pub rejected_inputs: [u64; 4],
-    pub sim_time_s: f64,
-    pub wall_time_s: f64,
-    /// Median and max MPC feedback time, s.
-    pub feedback_time_median_s: f64,
-    pub feedback_time_max_s: f64,
-}
+pub use atmo_io::review::landing::{LandingTracker, RunEnd, Summary};
 
-impl Summary {
-    /// Whether the run met the scenario's `[success]` criteria: a wheel
-    /// landing with no crash, enough tilt, a soft impact and a drive on; or,
-    /// for a flight, no crash and no ground contact.
-    pub fn succeeded(&self, c: &SuccessConfig) -> bool {
+impl SuccessConfig {
+    /// Whether `summary` meets these `[success]` criteria: a wheel landing
+    /// with no crash, enough tilt, a soft impact and a drive on; or, for a
+    /// flight, no crash and no ground contact.
+    pub fn met_by(&self, summary: &Summary) -> bool {
+        let c = self;
         if c.landing {
-            !self.crashed
-                && self
+            !summary.crashed
+                && summary
                     .touchdown_tilt_deg
                     .is_some_and(|t| t >= c.min_touchdown_tilt_deg)
-                && self
+                && summary
                     .impact_speed_mps
                     .is_some_and(|v| v <= c.max_impact_speed)
-                && self.drive_distance_m >= c.min_drive_distance
+                && summary.drive_distance_m >= c.min_drive_distance
         } else {
-            !self.crashed && self.touchdown_time_s.is_none()
+            !summary.crashed && summary.touchdown_time_s.is_none()
         }
     }
+}
+
+/// How a run of `scenario` on `plant` ended (for [`LandingTracker::summary`]).
+pub fn run_end(scenario: &Scenario, plant: &Plant, wall_time_s: f64) -> RunEnd {
+    RunEnd {
+        scenario: scenario.file.name.clone(),
+        seed: scenario.file.seed,
+        crash_reason: plant
+            .crash()
+            .map(|e| format!("{:?} at t = {:.3} s", e.kind, e.time)),
+        wall_time_s: Some(wall_time_s),
+    }
+}
+
+/// The daemon's mode as the log's.
+pub fn mode_message(mode: Mode) -> ModeMsg {
+    ModeMsg::from_code(mode.code()).unwrap_or_default()
 }
 
 /// The controller side of a closed-loop run: the robot model it believes
@@ -97,6 +89,9 @@ impl Summary {
 /// flight settings and MPC settings.
 #[derive(Debug, Clone)]
 pub struct ControllerConfig {
+    /// The texts `robot`, `flight` and `mpc` were parsed from (stored in a
+    /// flight log, so that `atmo-daemon replay` rebuilds the same stack).
+    pub files: FlightConfigFiles,
     pub robot: RobotConfig,
     pub flight: FlightSettings,
     pub mpc: MpcSettings,
@@ -113,6 +108,7 @@ impl ControllerConfig {
             MpcSettings::atmo(&flight.mpc_preset).map_err(|e| SimError::Setup(e.to_string()))?;
         let inputs = InputSettings::defaults(0.0, flight.failsafe.estimate_timeout);
         Ok(Self {
+            files: FlightConfigFiles::shipped(),
             robot: RobotConfig::atmo(),
             flight,
             mpc,
@@ -127,104 +123,6 @@ impl ControllerConfig {
     pub fn deterministic(mut self) -> Self {
         self.mpc.solver.time_limit = 10.0;
         self
-    }
-}
-
-/// The landing's bookkeeping, shared by the in-process runner ([`fly`])
-/// and the SITL plant server (`atmo-sim serve`): what the controller did
-/// each tick, and what the plant did each step.
-#[derive(Debug, Clone, Default)]
-pub struct LandingTracker {
-    modes: Vec<Mode>,
-    has_flown: bool,
-    max_mean_thrust: f64,
-    mpc_failures: u64,
-    rejected: [u64; 4],
-    feedback_times: Vec<f64>,
-    /// Time, tilt and vertical speed at the first wheel contact after flying.
-    touchdown: Option<(f64, f64, f64)>,
-    last_ground_xy: Option<Vector3<f64>>,
-    drive_distance: f64,
-}
-
-impl LandingTracker {
-    /// Room for `expected_ticks` feedback times (no reallocation in the loop).
-    pub fn new(expected_ticks: usize) -> Self {
-        Self {
-            feedback_times: Vec::with_capacity(expected_ticks),
-            ..Self::default()
-        }
-    }
-
-    /// One control tick: its mode, thrust commands, MPC feedback time
-    /// (`None` if the MPC did not run) and the controller's counters.
-    pub fn on_control_tick(
-        &mut self,
-        mode: Mode,
-        thrust: &[f64; 4],
-        feedback_time: Option<f64>,
-        mpc_failures_total: u64,
-        rejected: [u64; 4],
-    ) {
-        if self.modes.last() != Some(&mode) {
-            self.modes.push(mode);
-        }
-        self.has_flown |= matches!(mode, Mode::Flight | Mode::Morphing | Mode::Transition);
-        if mode == Mode::Transition {
-            let mean = thrust.iter().sum::<f64>() / 4.0;
-            self.max_mean_thrust = self.max_mean_thrust.max(mean);
-        }
-        if let Some(t) = feedback_time {
-            self.feedback_times.push(t);
-        }
-        self.mpc_failures = mpc_failures_total;
-        self.rejected = rejected;
-    }
-
-    /// After one plant step; `was_grounded` is the contact signal before it.
-    pub fn after_plant_step(&mut self, plant: &Plant, was_grounded: bool) {
-        let state = plant.state();
-        // The landing is the first wheel contact after flying (a scenario may
-        // start on the ground, and then take off).
-        if self.touchdown.is_none() && self.has_flown && !was_grounded && plant.contact_signal() {
-            self.touchdown = Some((plant.time(), plant.tilt(), state[idx::VZ]));
-        }
-        if self.touchdown.is_some() {
-            let xy = Vector3::new(state[idx::X], state[idx::Y], 0.0);
-            if let Some(last) = self.last_ground_xy {
-                self.drive_distance += (xy - last).norm();
-            }
-            self.last_ground_xy = Some(xy);
-        }
-    }
-
-    /// The summary of the run so far.
-    pub fn summary(&self, scenario: &Scenario, plant: &Plant, wall_time_s: f64) -> Summary {
-        let mut feedback_times = self.feedback_times.clone();
-        feedback_times.sort_by(f64::total_cmp);
-        let crash = plant.crash().copied();
-        let touchdown = self.touchdown;
-        Summary {
-            scenario: scenario.file.name.clone(),
-            seed: scenario.file.seed,
-            touchdown_tilt_deg: touchdown.map(|(_, tilt, _)| tilt.to_degrees()),
-            impact_speed_mps: touchdown.map(|(_, _, vz)| vz),
-            touchdown_time_s: touchdown.map(|(t, _, _)| t),
-            max_mean_thrust: self.max_mean_thrust,
-            crashed: crash.is_some(),
-            crash_reason: crash.map(|e| format!("{:?} at t = {:.3} s", e.kind, e.time)),
-            drive_distance_m: self.drive_distance,
-            mode_sequence: self.modes.iter().map(|m| m.name().to_string()).collect(),
-            mpc_failures: self.mpc_failures,
-            rejected_inputs: self.rejected,
-            sim_time_s: plant.time(),
-            wall_time_s,
-            feedback_time_median_s: feedback_times
-                .get(feedback_times.len() / 2)
-                .copied()
-                .unwrap_or(0.0),
-            feedback_time_max_s: feedback_times.last().copied().unwrap_or(0.0),
-        }
     }
 }
 
@@ -247,7 +145,30 @@ fn record(tick: &SimTick, plant: &Plant) -> TickRecord {
 pub fn fly(
     scenario: &Scenario,
     controller: &ControllerConfig,
+    on_tick: impl FnMut(&TickRecord),
+) -> Result<Summary> {
+    fly_observed(scenario, controller, on_tick, |_| {})
+}
+
+/// The plant's truth now, as logged.
+pub fn truth_of(plant: &Plant) -> SimTruth {
+    let state = plant.state();
+    SimTruth {
+        time: plant.time(),
+        state: MpcStatus::array(&state),
+        tilt: plant.tilt(),
+        height: terrain_z_below(plant.plane(), state[idx::X], state[idx::Y]) - state[idx::Z],
+        contact: plant.contact_signal(),
+    }
+}
+
+/// [`fly`], with `on_plant` seeing the plant's truth at the start and after
+/// every plant step.
+pub fn fly_observed(
+    scenario: &Scenario,
+    controller: &ControllerConfig,
     mut on_tick: impl FnMut(&TickRecord),
+    mut on_plant: impl FnMut(&SimTruth),
 ) -> Result<Summary> {
     let wall = Instant::now();
     let mut plant = scenario.build_plant()?;
@@ -268,12 +189,13 @@ pub fn fly(
     let io = SimIo::new(inputs, *plant.plane());
     let mut control = SimControl::new(tick_period(stack.period()), io);
     control.io.sense(&plant, scenario);
+    on_plant(&truth_of(&plant));
 
     while plant.time() < duration - 1e-9 {
         if let Some(tick) = control.tick_if_due(&plant, &mut stack) {
             let s = &tick.outputs.status;
             tracker.on_control_tick(
-                s.mode,
+                mode_message(s.mode),
                 &tick.outputs.thrust,
                 (s.solver != atmo_daemon::SolverState::Idle).then_some(s.feedback_time),
                 s.mpc_failures_total,
@@ -291,43 +213,50 @@ pub fn fly(
         let was_grounded = plant.contact_signal();
         plant.step(control.io.command())?;
         control.io.sense(&plant, scenario);
-        tracker.after_plant_step(&plant, was_grounded);
+        let truth = truth_of(&plant);
+        on_plant(&truth);
+        tracker.after_plant_step(&truth, was_grounded);
         if plant.crash().is_some() {
             break;
         }
     }
-    Ok(tracker.summary(scenario, &plant, wall.elapsed().as_secs_f64()))
+    Ok(tracker.summary(&run_end(scenario, &plant, wall.elapsed().as_secs_f64())))
 }
 
-/// The per-tick series of the paper's Fig. 5A.
-pub fn trace_of(records: &[TickRecord]) -> crate::figure::FlightTrace {
-    use crate::figure::Phase;
-    let mut trace = crate::figure::FlightTrace::default();
+/// The per-tick series of the paper's Fig. 5A (the plant's truth height
+/// and tilt, the flight stack's mode, alpha and thrust).
+pub fn trace_of(records: &[TickRecord]) -> FlightTrace {
+    let mut trace = FlightTrace::default();
     for r in records {
         let s = &r.outputs.status;
-        trace.time.push(r.time);
-        trace.height.push(r.truth_height);
-        trace.tilt_deg.push(r.truth_tilt.to_degrees());
-        trace.alpha.push(if s.mode.is_airborne_mode() {
-            s.alpha
-        } else {
-            0.0
-        });
-        trace
-            .mean_thrust
-            .push(r.outputs.thrust.iter().sum::<f64>() / 4.0);
-        trace.phase.push(match s.mode {
-            Mode::Morphing => Phase::Morphing,
-            Mode::Transition => Phase::Transition,
-            Mode::Touchdown | Mode::Drive => Phase::Ground,
-            _ => Phase::Air,
-        });
+        trace.push(
+            r.time,
+            r.truth_height,
+            r.truth_tilt,
+            mode_message(s.mode),
+            s.alpha,
+            &r.outputs.thrust,
+        );
     }
     trace
 }
 
 /// The topic of the per-tick status in the flight log.
 pub const STATUS_TOPIC: &str = "/atmo/status";
+pub use atmo_io::review::log::{SIM_METADATA, TRUTH_TOPIC};
+
+impl ControllerConfig {
+    /// Whether the controller's settings are the ones its files parse to
+    /// (up to the MPC time limit, which [`Self::deterministic`] lifts and a
+    /// replay lifts too): then a replay rebuilds the same flight stack.
+    pub fn matches_files(&self) -> bool {
+        self.files.parse().is_ok_and(|parsed| {
+            let mut mpc = parsed.mpc;
+            mpc.solver.time_limit = self.mpc.solver.time_limit;
+            parsed.robot == self.robot && parsed.flight == self.flight && mpc == self.mpc
+        })
+    }
+}
 
 /// Flies `scenario` and logs every tick's `atmo_msgs/MpcStatus` to the MCAP
 /// file `path` (ROS 2 profile: Foxglove plots every field). Errors if the
@@ -346,18 +275,38 @@ pub fn fly_logged(
         ..LoggerOptions::default()
     };
     let (log, thread) = McapLogger::spawn(path, options).map_err(io)?;
-    let channel = log
-        .channel::<atmo_io::msg::MpcStatus>(STATUS_TOPIC)
-        .map_err(io)?;
+    let channels = TickChannels::register(&log, STATUS_TOPIC).map_err(io)?;
+    let truth = log.channel::<SimTruth>(TRUTH_TOPIC).map_err(io)?;
+    controller.files.log_to(&log, 0).map_err(io)?;
     let mut tick = 0;
-    let summary = fly(scenario, controller, |r| {
-        let message =
-            atmo_daemon::telemetry::status_message(tick, &r.inputs, &r.outputs, &r.timing);
-        // Counted if dropped (queue full): reported as an error below.
-        log.try_log(channel, r.inputs.now_ns, &message);
-        tick += 1;
-        on_tick(r);
-    });
+    let mut crash = None;
+    let summary = fly_observed(
+        scenario,
+        controller,
+        |r| {
+            let message =
+                atmo_daemon::telemetry::status_message(tick, &r.inputs, &r.outputs, &r.timing);
+            // Counted if dropped (queue full): reported as an error below.
+            channels.log_tick(&log, tick, &r.inputs, &message);
+            tick += 1;
+            on_tick(r);
+        },
+        |t| {
+            log.try_log(truth, (t.time * 1e9).round() as u64, t);
+        },
+    );
+    if let Ok(s) = &summary {
+        crash.clone_from(&s.crash_reason);
+    }
+    let mut meta = std::collections::BTreeMap::new();
+    meta.insert("scenario".to_string(), scenario.file.name.clone());
+    meta.insert("seed".to_string(), scenario.file.seed.to_string());
+    meta.insert("crash".to_string(), crash.unwrap_or_default());
+    meta.insert(
+        "controller_matches_files".to_string(),
+        controller.matches_files().to_string(),
+    );
+    log.metadata(SIM_METADATA, meta).map_err(io)?;
     log.finish();
     let written = thread.join().map_err(io)?;
     let summary = summary?;

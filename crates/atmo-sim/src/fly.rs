@@ -154,7 +154,7 @@ fn single(scenario: &Scenario, controller: &ControllerConfig, dir: &Path) -> Res
             scenario.file.name, scenario.file.seed
         ),
     )?;
-    let ok = summary.succeeded(&scenario.file.success);
+    let ok = scenario.file.success.met_by(&summary);
     let fmt = |v: Option<f64>, unit: &str| v.map_or("-".to_string(), |v| format!("{v:.2} {unit}"));
     println!("scenario          {}", scenario.file.name);
     println!("modes             {}", summary.mode_sequence.join(" -> "));
@@ -173,8 +173,8 @@ fn single(scenario: &Scenario, controller: &ControllerConfig, dir: &Path) -> Res
     println!(
         "time              {:.1} s simulated in {:.2} s ({:.0}x real time)",
         summary.sim_time_s,
-        summary.wall_time_s,
-        summary.sim_time_s / summary.wall_time_s.max(1e-9)
+        summary.wall_time_s.unwrap_or(0.0),
+        summary.sim_time_s / summary.wall_time_s.unwrap_or(0.0).max(1e-9)
     );
     println!(
         "outputs           summary.json, figure.png and flight.mcap ({} messages)",

@@ -15,7 +15,8 @@
 
 pub mod closed_loop;
 pub mod error;
-pub mod figure;
+/// Fig. 5A (shared with `atmo-mcap summary`: atmo-io's review module).
+pub use atmo_io::review::figure;
 pub mod monte_carlo;
 pub mod scenario;
 pub mod sim_io;

@@ -188,11 +188,11 @@ pub fn run(
     }
     let successes = summaries
         .iter()
-        .filter(|(_, _, s)| s.succeeded(&criteria))
+        .filter(|(_, _, s)| criteria.met_by(s))
         .count();
     let failures = summaries
         .iter()
-        .filter(|(_, _, s)| !s.succeeded(&criteria))
+        .filter(|(_, _, s)| !criteria.met_by(s))
         .map(|(i, seed, s)| Failure {
             run: *i,
             seed: *seed,

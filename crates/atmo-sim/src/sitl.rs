@@ -271,11 +271,9 @@ pub fn serve(
                 right: c.rates[1],
             };
         }
-        if let Some(s) = links.take_status()
-            && let Some(mode) = mode_of(&s)
-        {
+        if let Some(s) = links.take_status() {
             tracker.on_control_tick(
-                mode,
+                s.mode,
                 &s.thrust,
                 (s.solver_iterations > 0).then_some(s.feedback_time),
                 s.mpc_failures_total,
@@ -292,7 +290,7 @@ pub fn serve(
         plant.set_external_wrench(force, torque)?;
         let was_grounded = plant.contact_signal();
         plant.step(&command)?;
-        tracker.after_plant_step(&plant, was_grounded);
+        tracker.after_plant_step(&crate::closed_loop::truth_of(&plant), was_grounded);
         links.publish(&plant, &pilot_msg(scenario, plant.time()), stamp);
         step += 1;
         if step % 50 == 0 {
@@ -300,6 +298,10 @@ pub fn serve(
         }
     }
     drop(ros_thread);
-    let summary = tracker.summary(scenario, &plant, start.elapsed().as_secs_f64());
+    let summary = tracker.summary(&crate::closed_loop::run_end(
+        scenario,
+        &plant,
+        start.elapsed().as_secs_f64(),
+    ));
     Ok((summary, links.counters))
 }

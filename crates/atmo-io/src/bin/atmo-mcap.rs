@@ -3,6 +3,7 @@
 //! ```text
 //! atmo-mcap recover <truncated.mcap> <out.mcap>   make a killed writer's log valid
 //! atmo-mcap info <log.mcap>                        messages per topic and time span
+//! atmo-mcap summary <log.mcap> --out DIR           summary.json + figure.png (Fig. 5A)
 //! ```
 //!
 //! Both check every chunk's CRC and report the corrupt chunks they skipped.
@@ -49,6 +50,24 @@ enum Command {
         /// The log to read.
         log: PathBuf,
     },
+    /// Review a flight from its log alone: write DIR/summary.json (touchdown
+    /// tilt, impact speed, max mean thrust, mode sequence...) and
+    /// DIR/figure.png (the paper's Fig. 5A), as `atmo-sim fly` does.
+    ///
+    /// A simulated flight's log carries the plant's truth: the values are
+    /// then those of `atmo-sim fly` (the wall time excepted, null here). A
+    /// real flight's are the flight stack's own view (estimate, encoder,
+    /// contact signal). The log must be finished (else `recover` it first).
+    Summary {
+        /// The flight log.
+        log: PathBuf,
+        /// Output folder (created).
+        #[arg(long, value_name = "DIR")]
+        out: PathBuf,
+        /// The status topic (the daemon config's ros2.topics.status).
+        #[arg(long, default_value = "/atmo/status")]
+        status_topic: String,
+    },
 }
 
 fn main() -> ExitCode {
@@ -74,6 +93,11 @@ fn main() -> ExitCode {
             }
             print_topics(&messages);
         }),
+        Command::Summary {
+            log,
+            out,
+            status_topic,
+        } => summary(&log, &out, &status_topic),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
@@ -82,6 +106,43 @@ fn main() -> ExitCode {
             ExitCode::FAILURE
         }
     }
+}
+
+/// `summary`: the review's summary.json and figure.png in `out`.
+fn summary(
+    log: &std::path::Path,
+    out: &std::path::Path,
+    status_topic: &str,
+) -> atmo_io::Result<()> {
+    use atmo_io::review::figure::write_landing_figure;
+    use atmo_io::review::log::{TruthSource, review_log};
+    let review = review_log(log, status_topic)?;
+    let output = |e: String| atmo_io::IoError::Output(format!("{}: {e}", out.display()));
+    std::fs::create_dir_all(out).map_err(|e| output(e.to_string()))?;
+    let json = serde_json::to_string_pretty(&review.summary).map_err(|e| output(e.to_string()))?;
+    let summary_path = out.join("summary.json");
+    std::fs::write(&summary_path, json + "\n").map_err(|e| output(e.to_string()))?;
+    let figure_path = out.join("figure.png");
+    write_landing_figure(&figure_path, &review.trace, &review.markers, &review.title)?;
+    let s = &review.summary;
+    let fmt = |v: Option<f64>, unit: &str| v.map_or("-".to_string(), |v| format!("{v:.2} {unit}"));
+    println!(
+        "measured on       {}",
+        match review.truth {
+            TruthSource::Simulation => "the simulator's truth (logged)",
+            TruthSource::FlightStack => "the flight stack's view (estimate, encoder, contact)",
+        }
+    );
+    println!("modes             {}", s.mode_sequence.join(" -> "));
+    println!("touchdown tilt    {}", fmt(s.touchdown_tilt_deg, "deg"));
+    println!("impact speed      {}", fmt(s.impact_speed_mps, "m/s"));
+    println!("max mean thrust   {:.3}", s.max_mean_thrust);
+    println!(
+        "wrote             {} and {}",
+        summary_path.display(),
+        figure_path.display()
+    );
+    Ok(())
 }
 
 /// One line per topic: type, message count, first and last log time.

@@ -15,8 +15,8 @@ use super::{MESSAGE_ENCODING, PROFILE, SCHEMA_ENCODING};
 use crate::error::{IoError, Result};
 use crate::msg::{
     ActuatorMotors, DiagnosticArray, DiagnosticStatus, Header, KeyValue, MpcStatus, Odometry,
-    OffboardControlMode, PilotInput, RosMessage, TickTiming, Time, Twist, VehicleOdometry, encode,
-    schema_text,
+    OffboardControlMode, PilotInput, RosMessage, SimTruth, TickInputs, TickTiming, Time, Twist,
+    VehicleOdometry, encode, schema_text,
 };
 
 /// Topic of the logger's own health (dropped and written counts).
@@ -66,6 +66,8 @@ pub enum LogPayload {
     MpcStatus(MpcStatus),
     PilotInput(PilotInput),
     TickTiming(TickTiming),
+    TickInputs(TickInputs),
+    SimTruth(SimTruth),
     VehicleOdometry(VehicleOdometry),
     ActuatorMotors(ActuatorMotors),
     OffboardControlMode(OffboardControlMode),
@@ -80,6 +82,8 @@ impl LogPayload {
             Self::MpcStatus(m) => encode(m, out),
             Self::PilotInput(m) => encode(m, out),
             Self::TickTiming(m) => encode(m, out),
+            Self::TickInputs(m) => encode(m, out),
+            Self::SimTruth(m) => encode(m, out),
             Self::VehicleOdometry(m) => encode(m, out),
             Self::ActuatorMotors(m) => encode(m, out),
             Self::OffboardControlMode(m) => encode(m, out),
@@ -115,6 +119,8 @@ macro_rules! loggable {
 loggable!(MpcStatus);
 loggable!(PilotInput);
 loggable!(TickTiming);
+loggable!(TickInputs);
+loggable!(SimTruth);
 loggable!(VehicleOdometry);
 loggable!(ActuatorMotors);
 loggable!(OffboardControlMode);
@@ -152,6 +158,18 @@ enum Command {
         log_time: u64,
         publish_time: u64,
         payload: LogPayload,
+    },
+    /// A file stored whole in the log (the configuration at start-up).
+    Attach {
+        name: String,
+        media_type: String,
+        log_time: u64,
+        data: Vec<u8>,
+    },
+    /// A named map of strings (what the attachments are, their hashes).
+    Metadata {
+        name: String,
+        entries: BTreeMap<String, String>,
     },
     Finish,
 }
@@ -316,6 +334,40 @@ impl LoggerHandle {
             id,
             _type: PhantomData,
         })
+    }
+
+    /// Stores `data` whole in the log as an MCAP attachment named `name`
+    /// (e.g. a config file's text with `media_type` `application/toml`),
+    /// stamped `log_time_ns`. Call at start-up: it may block until the
+    /// writer has room, and allocates.
+    pub fn attach(
+        &self,
+        name: &str,
+        media_type: &str,
+        log_time_ns: u64,
+        data: Vec<u8>,
+    ) -> Result<()> {
+        self.send_setup(Command::Attach {
+            name: name.to_string(),
+            media_type: media_type.to_string(),
+            log_time: log_time_ns,
+            data,
+        })
+    }
+
+    /// Writes an MCAP metadata record `name` with `entries`. Start-up only
+    /// (may block, allocates).
+    pub fn metadata(&self, name: &str, entries: BTreeMap<String, String>) -> Result<()> {
+        self.send_setup(Command::Metadata {
+            name: name.to_string(),
+            entries,
+        })
+    }
+
+    fn send_setup(&self, command: Command) -> Result<()> {
+        self.tx
+            .send(command)
+            .map_err(|_| IoError::Logger("the writer thread has stopped".into()))
     }
 
     /// Queues `message` for `channel`, stamped `log_time_ns` (also the
@@ -485,6 +537,33 @@ impl WriterLoop {
                 self.write(channel, log_time, publish_time)?;
                 self.shared.processed.fetch_add(1, Ordering::Relaxed);
                 Ok(Some(log_time))
+            }
+            Command::Attach {
+                name,
+                media_type,
+                log_time,
+                data,
+            } => {
+                let attachment = mcap::Attachment {
+                    log_time,
+                    create_time: log_time,
+                    name,
+                    media_type,
+                    data: std::borrow::Cow::Owned(data),
+                };
+                self.writer
+                    .attach(&attachment)
+                    .map_err(|e| self.mcap_err(e))?;
+                Ok(None)
+            }
+            Command::Metadata { name, entries } => {
+                self.writer
+                    .write_metadata(&mcap::records::Metadata {
+                        name,
+                        metadata: entries,
+                    })
+                    .map_err(|e| self.mcap_err(e))?;
+                Ok(None)
             }
             Command::Finish => Ok(None),
         }

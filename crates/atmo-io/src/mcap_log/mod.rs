@@ -10,17 +10,22 @@
 //!   flushed) at least every `flush_period` (<= 1 s), so a killed process
 //!   loses at most that much. Drops are written to the log itself on
 //!   [`LOGGER_TOPIC`] as a `diagnostic_msgs/DiagnosticArray`.
+//! - [`LoggerHandle::attach`] / [`LoggerHandle::metadata`] store files (the
+//!   configuration) and string maps at start-up; [`read_extras`] reads them
+//!   back, from truncated logs too, and `recover` keeps them.
 //! - [`recover`]: turns a truncated log (killed writer) into a valid one.
 //! - [`read_log`] / [`read_topic`]: decode a log back into Rust types. Every
 //!   chunk's CRC is checked before its messages are used; a corrupt chunk or
 //!   an undecodable message is skipped and counted ([`Integrity`]), an error
 //!   for the strict readers, a count for the `*_lossy` ones and `recover`.
 
+mod attachments;
 mod logger;
 mod reader;
 mod recover;
 mod scan;
 
+pub use attachments::{LogAttachment, LogExtras, read_extras};
 pub use logger::{
     Channel, Compression, LOGGER_TOPIC, LogPayload, LogSummary, Loggable, LoggerHandle,
     LoggerOptions, LoggerThread, McapLogger,

@@ -7,7 +7,7 @@ use super::{MESSAGE_ENCODING, SCHEMA_ENCODING};
 use crate::error::{IoError, Result};
 use crate::msg::{
     ActuatorMotors, DiagnosticArray, MpcStatus, Odometry, OffboardControlMode, PilotInput,
-    RosMessage, TickTiming, Twist, VehicleOdometry, decode,
+    RosMessage, SimTruth, TickInputs, TickTiming, Twist, VehicleOdometry, decode,
 };
 
 /// A decoded message of any type this crate knows. Serializes (serde) as
@@ -18,6 +18,8 @@ pub enum AnyMessage {
     MpcStatus(MpcStatus),
     PilotInput(PilotInput),
     TickTiming(TickTiming),
+    TickInputs(TickInputs),
+    SimTruth(SimTruth),
     VehicleOdometry(VehicleOdometry),
     ActuatorMotors(ActuatorMotors),
     OffboardControlMode(OffboardControlMode),
@@ -38,7 +40,7 @@ pub struct LoggedMessage {
     pub message: AnyMessage,
 }
 
-fn read_file(path: &Path) -> Result<Vec<u8>> {
+pub(super) fn read_file(path: &Path) -> Result<Vec<u8>> {
     std::fs::read(path).map_err(|source| IoError::File {
         file: path.to_path_buf(),
         source,
@@ -50,6 +52,8 @@ fn decode_any(topic: &str, type_name: &str, data: &[u8]) -> Result<Option<AnyMes
         MpcStatus::TYPE_NAME => AnyMessage::MpcStatus(decode(topic, data)?),
         PilotInput::TYPE_NAME => AnyMessage::PilotInput(decode(topic, data)?),
         TickTiming::TYPE_NAME => AnyMessage::TickTiming(decode(topic, data)?),
+        TickInputs::TYPE_NAME => AnyMessage::TickInputs(decode(topic, data)?),
+        SimTruth::TYPE_NAME => AnyMessage::SimTruth(decode(topic, data)?),
         VehicleOdometry::TYPE_NAME => AnyMessage::VehicleOdometry(decode(topic, data)?),
         ActuatorMotors::TYPE_NAME => AnyMessage::ActuatorMotors(decode(topic, data)?),
         OffboardControlMode::TYPE_NAME => AnyMessage::OffboardControlMode(decode(topic, data)?),

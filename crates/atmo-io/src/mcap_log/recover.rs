@@ -6,6 +6,7 @@ use std::io::BufWriter;
 use std::path::{Path, PathBuf};
 
 use super::PROFILE;
+use super::attachments::{extras_of, write_extras};
 use super::reader::check_magic;
 use super::scan::{Integrity, scan};
 use crate::error::{IoError, Result};
@@ -27,7 +28,7 @@ pub struct RecoverReport {
 
 /// Copies every complete message of `input` (a log whose writer was killed:
 /// no summary, no footer, maybe half a chunk) into a new, finished log at
-/// `output` with the same schemas and channels. Messages of the chunk being
+/// `output` with the same schemas and channels, attachments and metadata. Messages of the chunk being
 /// written at the kill are lost; with the logger's periodic flush that is at
 /// most the last flush period. A valid log is copied whole. A chunk whose CRC
 /// does not match is skipped and counted in [`RecoverReport::skipped`]. Input
@@ -59,6 +60,7 @@ pub fn recover(input: impl AsRef<Path>, output: impl AsRef<Path>) -> Result<Reco
         .compression_threads(0)
         .create(BufWriter::new(out))
         .map_err(mcap_err(output))?;
+    write_extras(&mut writer, &extras_of(&bytes), output)?;
 
     // Input channel id -> output channel id.
     let mut channels: BTreeMap<u16, u16> = BTreeMap::new();

@@ -125,6 +125,41 @@ pub struct TickTiming {
     pub skipped_total: u64,
 }
 
+/// `atmo_msgs/msg/TickInputs`: everything one tick of the flight stack
+/// consumed (see the `.msg`). `Copy` and allocation-free: built on the
+/// control thread, serialized elsewhere.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+#[allow(clippy::struct_excessive_bools)] // the wire layout: presence flags and two signals
+pub struct TickInputs {
+    pub tick: u64,
+    /// The tick's clock value, ns.
+    pub clock_ns: u64,
+    pub has_estimate: bool,
+    /// When the estimate was accepted, ns on the tick's clock.
+    pub estimate_received_ns: u64,
+    pub estimate: [f64; 12],
+    pub has_tilt_counts: bool,
+    pub tilt_counts: f64,
+    pub pilot: PilotInput,
+    pub ground_contact: bool,
+    /// NED z of the ground, m.
+    pub ground_z: f64,
+    pub driver_lost: bool,
+}
+
+/// `atmo_msgs/msg/SimTruth`: the simulator's truth after a plant step.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+pub struct SimTruth {
+    /// Plant time, s.
+    pub time: f64,
+    pub state: [f64; 12],
+    /// rad.
+    pub tilt: f64,
+    /// Above the terrain, m.
+    pub height: f64,
+    pub contact: bool,
+}
+
 /// `atmo_msgs/msg/IoHealth`: counters of the edges (see the `.msg`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 pub struct IoHealth {
@@ -344,6 +379,12 @@ impl<'de> Deserialize<'de> for MpcStatus {
 
 impl RosMessage for PilotInput {
     const TYPE_NAME: &'static str = "atmo_msgs/msg/PilotInput";
+}
+impl RosMessage for SimTruth {
+    const TYPE_NAME: &'static str = "atmo_msgs/msg/SimTruth";
+}
+impl RosMessage for TickInputs {
+    const TYPE_NAME: &'static str = "atmo_msgs/msg/TickInputs";
 }
 impl RosMessage for TickTiming {
     const TYPE_NAME: &'static str = "atmo_msgs/msg/TickTiming";

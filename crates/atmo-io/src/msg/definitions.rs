@@ -82,6 +82,14 @@ const DEFINITIONS: &[(&str, &str)] = &[
         include_str!("../../../../ros2/atmo_msgs/msg/PilotInput.msg"),
     ),
     (
+        "atmo_msgs/SimTruth",
+        include_str!("../../../../ros2/atmo_msgs/msg/SimTruth.msg"),
+    ),
+    (
+        "atmo_msgs/TickInputs",
+        include_str!("../../../../ros2/atmo_msgs/msg/TickInputs.msg"),
+    ),
+    (
         "atmo_msgs/TickTiming",
         include_str!("../../../../ros2/atmo_msgs/msg/TickTiming.msg"),
     ),

@@ -23,7 +23,9 @@ mod px4;
 mod standard;
 mod type_hash;
 
-pub use atmo::{IoHealth, Mode, MpcStatus, PilotInput, SolverStatus, TickTiming};
+pub use atmo::{
+    IoHealth, Mode, MpcStatus, PilotInput, SimTruth, SolverStatus, TickInputs, TickTiming,
+};
 pub use definitions::{definition, schema_text};
 pub use label::Label;
 pub use px4::{ActuatorMotors, OffboardControlMode, VehicleOdometry};

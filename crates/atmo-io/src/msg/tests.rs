@@ -540,3 +540,75 @@ fn type_descriptions_follow_rosidl() {
         Err(IoError::UnknownType { .. })
     ));
 }
+
+#[test]
+fn tick_inputs_and_sim_truth_layouts() {
+    // The .msg fields and the Rust fields agree in order and width:
+    // bools are one byte, each uint64/float64 aligned to 8.
+    let mut m = TickInputs {
+        tick: 3,
+        clock_ns: 20_000_000,
+        has_estimate: true,
+        estimate_received_ns: 19_000_000,
+        has_tilt_counts: true,
+        tilt_counts: 1234.5,
+        ground_contact: true,
+        ground_z: -0.25,
+        driver_lost: false,
+        ..TickInputs::default()
+    };
+    m.estimate[2] = -1.5;
+    m.pilot.throttle = 0.5;
+    m.pilot.arm = true;
+    let mut body = Vec::new();
+    body.extend(3u64.to_le_bytes());
+    body.extend(20_000_000u64.to_le_bytes());
+    body.push(1);
+    body.extend([0; 7]);
+    body.extend(19_000_000u64.to_le_bytes());
+    body.extend(f64s(&m.estimate));
+    body.push(1);
+    body.extend([0; 7]);
+    body.extend(f64s(&[1234.5]));
+    body.extend(f64s(&[0.0, 0.0, 0.0, 0.0, 0.5]));
+    body.extend([1, 0, 0]);
+    body.push(1);
+    body.extend([0; 4]);
+    body.extend(f64s(&[-0.25]));
+    body.push(0);
+    round_trip(&m, &body);
+    assert_eq!(
+        super::definitions::fields("atmo_msgs", definition(TickInputs::TYPE_NAME).unwrap())
+            .iter()
+            .map(|f| f.name.as_str())
+            .collect::<Vec<_>>(),
+        [
+            "tick",
+            "clock_ns",
+            "has_estimate",
+            "estimate_received_ns",
+            "estimate",
+            "has_tilt_counts",
+            "tilt_counts",
+            "pilot",
+            "ground_contact",
+            "ground_z",
+            "driver_lost"
+        ]
+    );
+    let truth = SimTruth {
+        time: 0.5,
+        state: [1.0; 12],
+        tilt: 0.25,
+        height: 0.125,
+        contact: true,
+    };
+    let mut body = f64s(&[0.5]);
+    body.extend(f64s(&[1.0; 12]));
+    body.extend(f64s(&[0.25, 0.125]));
+    body.push(1);
+    round_trip(&truth, &body);
+    let schema = schema_text(TickInputs::TYPE_NAME).unwrap();
+    assert!(schema.contains("MSG: atmo_msgs/PilotInput\n"));
+    schema_text(SimTruth::TYPE_NAME).unwrap();
+}

@@ -1,13 +1,15 @@
-//! The paper's Fig. 5A for a simulated flight: altitude, tilt angle, alpha
-//! and mean normalized thrust against time, with the morphing, transition
-//! and ground phases shaded, z_varphi and z* marked on the altitude panel
-//! and the touchdown marked on every panel. PNG via plotters.
+//! The paper's Fig. 5A for a flight: altitude, tilt angle, alpha and mean
+//! normalized thrust against time, with the morphing, transition and
+//! ground phases shaded, z_varphi and z* marked on the altitude panel and
+//! the touchdown marked on every panel; and the what-if overlay of a
+//! replay (logged vs changed flight stack). PNG via plotters.
 
 use std::path::Path;
 
 use plotters::prelude::*;
 
-use crate::error::{Result, SimError};
+use crate::error::{IoError, Result};
+use crate::msg::Mode;
 
 /// Which phase of the landing a sample belongs to (for shading).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -42,8 +44,39 @@ pub struct Markers {
     pub touchdown: Option<f64>,
 }
 
-fn plot_err(e: impl std::fmt::Display) -> SimError {
-    SimError::Output(format!("figure: {e}"))
+fn plot_err(e: impl std::fmt::Display) -> IoError {
+    IoError::Output(format!("figure: {e}"))
+}
+
+impl FlightTrace {
+    /// Adds the sample of one control tick: the height and tilt (the
+    /// simulator's truth, or the flight stack's view for a real flight),
+    /// and what the flight stack did (alpha counts in the air only).
+    pub fn push(
+        &mut self,
+        time: f64,
+        height: f64,
+        tilt: f64,
+        mode: Mode,
+        alpha: f64,
+        thrust: &[f64; 4],
+    ) {
+        let airborne = matches!(
+            mode,
+            Mode::Takeoff | Mode::Flight | Mode::Morphing | Mode::Transition | Mode::Failsafe
+        );
+        self.time.push(time);
+        self.height.push(height);
+        self.tilt_deg.push(tilt.to_degrees());
+        self.alpha.push(if airborne { alpha } else { 0.0 });
+        self.mean_thrust.push(thrust.iter().sum::<f64>() / 4.0);
+        self.phase.push(match mode {
+            Mode::Morphing => Phase::Morphing,
+            Mode::Transition => Phase::Transition,
+            Mode::Touchdown | Mode::Drive => Phase::Ground,
+            _ => Phase::Air,
+        });
+    }
 }
 
 /// Spans `[t0, t1)` of consecutive samples in `phase`.
@@ -74,7 +107,7 @@ pub fn write_landing_figure(
     title: &str,
 ) -> Result<()> {
     if trace.time.len() < 2 {
-        return Err(SimError::Output(
+        return Err(IoError::Output(
             "figure: fewer than two samples to plot".into(),
         ));
     }
@@ -217,6 +250,107 @@ pub fn write_landing_figure(
                 .draw()
                 .map_err(plot_err)?;
         }
+    }
+    root.present().map_err(plot_err)?;
+    Ok(())
+}
+
+/// One panel of a what-if overlay: the logged and the replayed series.
+#[derive(Debug, Clone)]
+pub struct OverlayPanel {
+    pub label: &'static str,
+    pub logged: Vec<f64>,
+    pub replayed: Vec<f64>,
+}
+
+/// A what-if overlay: panels against a common time axis.
+#[derive(Debug, Clone)]
+pub struct Overlay {
+    pub title: &'static str,
+    pub time: Vec<f64>,
+    pub panels: Vec<OverlayPanel>,
+}
+
+/// Writes `overlay` to `path` (PNG): one panel per series, logged in
+/// blue, what-if in dashed red.
+pub fn write_overlay_figure(path: &Path, overlay: &Overlay) -> Result<()> {
+    if overlay.time.len() < 2 || overlay.panels.is_empty() {
+        return Err(IoError::Output(
+            "figure: fewer than two samples to plot".into(),
+        ));
+    }
+    let t0 = overlay.time[0];
+    let t1 = *overlay.time.last().unwrap_or(&t0);
+    let rows = overlay.panels.len();
+    let height = u32::try_from(rows).unwrap_or(4) * 300 + 60;
+    let root = BitMapBackend::new(path, (1100, height)).into_drawing_area();
+    root.fill(&WHITE).map_err(plot_err)?;
+    let root = root
+        .titled(overlay.title, ("sans-serif", 22))
+        .map_err(plot_err)?;
+    for (area, panel) in root.split_evenly((rows, 1)).iter().zip(&overlay.panels) {
+        let finite = || {
+            panel
+                .logged
+                .iter()
+                .chain(&panel.replayed)
+                .copied()
+                .filter(|v| v.is_finite())
+        };
+        let lo = finite().fold(f64::INFINITY, f64::min);
+        let hi = finite().fold(f64::NEG_INFINITY, f64::max);
+        let (lo, hi) = if lo.is_finite() && hi > lo {
+            let pad = 0.05 * (hi - lo);
+            (lo - pad, hi + pad)
+        } else if lo.is_finite() {
+            (lo - 1.0, lo + 1.0)
+        } else {
+            (0.0, 1.0)
+        };
+        let mut chart = ChartBuilder::on(area)
+            .margin(8)
+            .x_label_area_size(34)
+            .y_label_area_size(70)
+            .build_cartesian_2d(t0..t1, lo..hi)
+            .map_err(plot_err)?;
+        chart
+            .configure_mesh()
+            .x_desc("time [s]")
+            .y_desc(panel.label)
+            .light_line_style(WHITE)
+            .draw()
+            .map_err(plot_err)?;
+        let points = |values: &[f64]| -> Vec<(f64, f64)> {
+            overlay
+                .time
+                .iter()
+                .copied()
+                .zip(values.iter().copied())
+                .filter(|(_, v)| v.is_finite())
+                .collect()
+        };
+        chart
+            .draw_series(LineSeries::new(points(&panel.logged), BLUE.stroke_width(2)))
+            .map_err(plot_err)?
+            .label("logged")
+            .legend(|(x, y)| PathElement::new([(x, y), (x + 16, y)], BLUE.stroke_width(2)));
+        chart
+            .draw_series(DashedLineSeries::new(
+                points(&panel.replayed),
+                6,
+                4,
+                RED.stroke_width(2),
+            ))
+            .map_err(plot_err)?
+            .label("what-if")
+            .legend(|(x, y)| PathElement::new([(x, y), (x + 16, y)], RED.stroke_width(2)));
+        chart
+            .configure_series_labels()
+            .background_style(WHITE.mix(0.85))
+            .border_style(BLACK)
+            .position(SeriesLabelPosition::UpperRight)
+            .draw()
+            .map_err(plot_err)?;
     }
     root.present().map_err(plot_err)?;
     Ok(())
