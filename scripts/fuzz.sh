@@ -42,7 +42,12 @@ if ! compgen -G "$XDG_DATA_HOME/afl.rs/*/*/afl/bin/afl-fuzz" >/dev/null; then
 fi
 
 echo "fuzz: building the targets (cargo afl build --release --features afl)"
-(cd fuzz && cargo afl build --release --features afl --bins --locked)
+# An explicit --target keeps the instrumentation off build scripts and proc
+# macros; the wrapper keeps it to the crates that read the fuzzed bytes.
+host=$(rustc -vV | sed -n 's/^host: //p')
+(cd fuzz && RUSTC_WRAPPER=$root/fuzz/rustc-wrapper.sh \
+    cargo afl build --release --features afl --bins --locked --target "$host")
+bin_dir=$CARGO_TARGET_DIR/$host/release
 
 # A shared machine and CI: no core binding, no CPU governor or core-dump
 # checks, no screen UI; the targets' scratch files under target/.
@@ -68,7 +73,7 @@ for t in "${targets[@]}"; do
     [ -z "$execs" ] || args+=(-E "$execs")
     start=$(date +%s)
     rc=0
-    cargo afl fuzz "${args[@]}" "$CARGO_TARGET_DIR/release/$t" >"$out/afl.log" 2>&1 || rc=$?
+    cargo afl fuzz "${args[@]}" "$bin_dir/$t" >"$out/afl.log" 2>&1 || rc=$?
     elapsed=$(($(date +%s) - start))
     stats=$out/default/fuzzer_stats
     if [ ! -f "$stats" ]; then

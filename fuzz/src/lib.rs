@@ -30,8 +30,11 @@ use atmo_core::ConfigFile as _;
 use atmo_io::mcap_log::{read_log, read_log_lossy, read_topic_lossy, recover};
 use atmo_io::msg::{self, RosMessage};
 
+/// A fuzz target: panics (or aborts) on a finding.
+pub type Target = fn(&[u8]);
+
 /// Every target by name (the binaries, the corpus folders, scripts/fuzz.sh).
-pub const TARGETS: [(&str, fn(&[u8])); 5] = [
+pub const TARGETS: [(&str, Target); 5] = [
     ("recording_csv", recording_csv),
     ("config_toml", config_toml),
     ("cdr_decode", cdr_decode),
@@ -44,7 +47,7 @@ const INPUT_NAME: &str = "fuzz-input";
 
 /// Runs `target` under AFL++ (feature `afl`) or over the files named in the
 /// arguments.
-pub fn run(target: fn(&[u8])) {
+pub fn run(target: Target) {
     #[cfg(feature = "afl")]
     afl::fuzz(true, target);
     #[cfg(not(feature = "afl"))]
