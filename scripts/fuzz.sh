@@ -46,7 +46,7 @@ echo "fuzz: building the targets (cargo afl build --release --features afl)"
 # macros; the wrapper keeps it to the crates that read the fuzzed bytes.
 host=$(rustc -vV | sed -n 's/^host: //p')
 (cd fuzz && RUSTC_WRAPPER=$root/fuzz/rustc-wrapper.sh \
-    cargo afl build --release --features afl --bins --locked --target "$host")
+    cargo afl build --release --features afl --bins --target "$host")
 bin_dir=$CARGO_TARGET_DIR/$host/release
 
 # A shared machine and CI: no core binding, no CPU governor or core-dump
