@@ -168,3 +168,43 @@ fn recover_refuses_input_that_is_not_mcap() {
         );
     }
 }
+
+/// Found by fuzzing (fuzz/, target `mcap_read`): a chunk header claiming
+/// 2^56 bytes uncompressed made the decompressor reserve them, and the
+/// process aborted. It is a corrupt chunk, skipped and counted like a bad CRC.
+#[test]
+fn a_chunk_claiming_a_huge_uncompressed_size_is_skipped_not_an_abort() {
+    for (compression, codec, name) in [
+        (Compression::Lz4, "lz4", "huge_lz4"),
+        (Compression::Zstd, "zstd", "huge_zstd"),
+        (Compression::None, "", "huge_plain"),
+    ] {
+        let log = write_log(&format!("{name}.mcap"), compression);
+        let original = read_log(&log).unwrap();
+        let mut bytes = std::fs::read(&log).unwrap();
+        // The second chunk's header: start, end, uncompressed size, crc,
+        // compression, records length, then its records.
+        let records = chunk_payloads(&bytes)[1].start;
+        let size_at = records - 8 - codec.len() - 4 - 4 - 8;
+        bytes[size_at + 7] = 0x01;
+        let bad = corruption_dir().join(format!("{name}_sized.mcap"));
+        std::fs::write(&bad, bytes).unwrap();
+
+        let err = read_log(&bad).unwrap_err();
+        assert!(matches!(err, IoError::LogCorrupt { .. }), "{err}");
+        assert!(err.to_string().contains("uncompressed size"), "{err}");
+        let (messages, integrity) = read_log_lossy(&bad).unwrap();
+        assert_eq!(integrity.corrupt_chunks, 1, "{name}: {integrity}");
+        assert_eq!(
+            messages.len() as u64 + integrity.messages_in_corrupt_chunks,
+            original.len() as u64,
+            "{name}: {integrity}"
+        );
+        let report = recover(
+            &bad,
+            corruption_dir().join(format!("{name}_sized_recovered.mcap")),
+        )
+        .unwrap();
+        assert_eq!(report.skipped.corrupt_chunks, 1, "{name}: {report:?}");
+    }
+}

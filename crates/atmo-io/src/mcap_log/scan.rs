@@ -7,7 +7,10 @@
 //! the uncompressed bytes at the chunk's end) before any of its messages is
 //! handed on: a corrupt chunk is skipped and counted, with the number of
 //! messages it held (from the message index records that follow it), and
-//! reading goes on with the next chunk.
+//! reading goes on with the next chunk. A chunk header that claims more than
+//! [`MAX_CHUNK_BYTES`] uncompressed is corrupt too: the decompressor reserves
+//! the claimed size first, so one flipped bit there aborted the process
+//! (found by fuzzing, fuzz/ target `mcap_read`).
 
 use std::borrow::Cow;
 
@@ -15,6 +18,10 @@ pub use crate::error::Integrity;
 use mcap::McapError;
 use mcap::read::{ChannelAccumulator, ChunkReader, LinearReader, Options};
 use mcap::records::Record;
+
+/// Largest uncompressed chunk read, bytes (the logger closes its chunks at
+/// 1 MiB; other writers' defaults are smaller still).
+const MAX_CHUNK_BYTES: u64 = 256 << 20;
 
 /// How a scan ended.
 pub(super) struct ScanEnd {
@@ -66,8 +73,17 @@ pub(super) fn scan<E>(
         match record {
             Record::Chunk { header, data } => {
                 chunk_number += 1;
-                let inner: Result<Vec<Record<'_>>, McapError> =
-                    ChunkReader::new(header, &data).and_then(Iterator::collect);
+                let inner: Result<Vec<Record<'_>>, String> =
+                    if header.uncompressed_size > MAX_CHUNK_BYTES {
+                        Err(format!(
+                            "uncompressed size {} bytes, over the {MAX_CHUNK_BYTES}-byte limit",
+                            header.uncompressed_size
+                        ))
+                    } else {
+                        ChunkReader::new(header, &data)
+                            .and_then(Iterator::collect)
+                            .map_err(|e| e.to_string())
+                    };
                 match inner {
                     Ok(inner) => {
                         after_corrupt_chunk = false;

@@ -1,0 +1,5 @@
+//! Fuzz target `cdr_decode` (see the crate docs).
+
+fn main() {
+    atmo_fuzz::run(atmo_fuzz::cdr_decode);
+}

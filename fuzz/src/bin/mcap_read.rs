@@ -1,0 +1,5 @@
+//! Fuzz target `mcap_read` (see the crate docs).
+
+fn main() {
+    atmo_fuzz::run(atmo_fuzz::mcap_read);
+}
