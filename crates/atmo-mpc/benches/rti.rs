@@ -32,22 +32,34 @@ fn rti_tick(c: &mut Criterion) {
     let mut group = c.benchmark_group("rti_tick");
     for name in NAMES {
         let sc = scenario(name);
-        let (mut mpc, estimates) = sc.warmed_up(formulation(), RECORDED_TICKS);
-        let mut i = 0;
-        let mut not_solved = 0;
-        group.bench_function(name, |b| {
-            b.iter(|| {
-                sc.apply(&mut mpc);
-                let out = mpc.tick(black_box(&estimates[i % RECORDED_TICKS])).unwrap();
-                i += 1;
-                not_solved += usize::from(out.outcome != Outcome::Solved);
-                black_box(out.u)
-            });
-        });
-        // Timing a solver that gave up early would flatter it: say so.
-        eprintln!("rti_tick/{name}: {not_solved} of {i} ticks not Solved");
+        let (mpc, estimates) = sc.warmed_up(formulation(), RECORDED_TICKS);
+        time_full_ticks(&mut group, "rti_tick", name, &sc, mpc, &estimates);
     }
     group.finish();
+}
+
+/// Times `Mpc::tick` (preparation + feedback) over the replayed estimates.
+fn time_full_ticks(
+    group: &mut criterion::BenchmarkGroup<'_, criterion::measurement::WallTime>,
+    group_name: &str,
+    name: &str,
+    sc: &scenarios::Scenario,
+    mut mpc: Mpc,
+    estimates: &[atmo_core::State],
+) {
+    let mut i = 0;
+    let mut not_solved = 0;
+    group.bench_function(name, |b| {
+        b.iter(|| {
+            sc.apply(&mut mpc);
+            let out = mpc.tick(black_box(&estimates[i % RECORDED_TICKS])).unwrap();
+            i += 1;
+            not_solved += usize::from(out.outcome != Outcome::Solved);
+            black_box(out.u)
+        });
+    });
+    // Timing a solver that gave up early would flatter it: say so.
+    eprintln!("{group_name}/{name}: {not_solved} of {i} ticks not Solved");
 }
 
 fn rti_feedback(c: &mut Criterion) {
@@ -101,19 +113,15 @@ fn rti_tick_ground_effect(c: &mut Criterion) {
         let mut mpc = Mpc::new(Model::new(&RobotConfig::atmo()), settings).unwrap();
         mpc.set_ground_effect(Some(Arc::new(GroundEffect::default_surface())));
         mpc.set_ground_height(sc.start[idx::Z] + 0.3).unwrap();
-        let (mut mpc, estimates) = sc.warmed_up_from(mpc, RECORDED_TICKS);
-        let mut i = 0;
-        let mut not_solved = 0;
-        group.bench_function(name, |b| {
-            b.iter(|| {
-                sc.apply(&mut mpc);
-                let out = mpc.tick(black_box(&estimates[i % RECORDED_TICKS])).unwrap();
-                i += 1;
-                not_solved += usize::from(out.outcome != Outcome::Solved);
-                black_box(out.u)
-            });
-        });
-        eprintln!("rti_tick_ground_effect/{name}: {not_solved} of {i} ticks not Solved");
+        let (mpc, estimates) = sc.warmed_up_from(mpc, RECORDED_TICKS);
+        time_full_ticks(
+            &mut group,
+            "rti_tick_ground_effect",
+            name,
+            &sc,
+            mpc,
+            &estimates,
+        );
     }
     group.finish();
 }
