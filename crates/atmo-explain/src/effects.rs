@@ -268,6 +268,8 @@ struct Row<'a> {
     sample: &'a Sample,
     /// Thrust (commands, lagged by the knobs' tau).
     thrust: &'a Input,
+    /// The commands the model is evaluated with ([`Prepared::u_eff`]).
+    command: &'a Input,
     body: TiltedBody,
     /// `M^-1 [A_F; A_T]` of the row.
     act: &'a Matrix6x4<f64>,
@@ -299,8 +301,7 @@ pub fn build_columns(prep: &Prepared, rec: &Recording, knobs: &Knobs, accel: &[f
     let layout = Layout::all();
     let n = prep.n;
     let samples = &rec.samples;
-    let u: Vec<Input> = samples.iter().map(|s| s.u).collect();
-    let thrust = crate::data::lagged_commands(&prep.t, &u, knobs.tau);
+    let thrust = crate::data::lagged_commands(&prep.t, &prep.u_eff, knobs.tau);
     // Smoothed part (through S) and direct part (already filtered).
     let mut raw: Vec<Vec<f64>> = vec![vec![0.0; 6 * n]; layout.total];
     // Direct parts of the 4 mass-property columns (mass, inertia, com x, com y).
@@ -323,6 +324,7 @@ pub fn build_columns(prep: &Prepared, rec: &Recording, knobs: &Knobs, accel: &[f
             k,
             sample,
             thrust: &thrust[k],
+            command: &prep.u_eff[k],
             body: prep.table.at(sample.varphi),
             act: &prep.act[k],
             rot: &prep.rot[k],
@@ -347,7 +349,7 @@ fn push_thrust_terms(
     let bt = row.act * row.thrust;
     push6(&mut raw[at.thrust_scale], row.k, &bt);
     push6(&mut raw[at.battery], row.k, &(-bt * energy));
-    push6(lag_raw, row.k, &(row.act * (row.thrust - row.sample.u)));
+    push6(lag_raw, row.k, &(row.act * (row.thrust - row.command)));
 }
 
 /// Ground effect: each rotor's basis at its hub height, times its thrust.
@@ -511,10 +513,10 @@ fn filter_columns(
 }
 
 /// The motor-lag column alone for a time constant (commands as thrust).
-pub fn lag_column(prep: &Prepared, rec: &Recording, tau: f64) -> Vec<f64> {
+pub fn lag_column(prep: &Prepared, tau: f64) -> Vec<f64> {
     let n = prep.n;
-    let u: Vec<Input> = rec.samples.iter().map(|s| s.u).collect();
-    let thrust = crate::data::lagged_commands(&prep.t, &u, tau);
+    let u = &prep.u_eff;
+    let thrust = crate::data::lagged_commands(&prep.t, u, tau);
     let mut raw = vec![0.0; 6 * n];
     for k in 0..n {
         let g = prep.act[k] * (thrust[k] - u[k]);

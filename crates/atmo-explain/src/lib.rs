@@ -39,6 +39,7 @@ pub mod data;
 pub mod effects;
 mod explanation;
 pub mod locate;
+mod noise;
 
 pub mod output;
 mod physical;
@@ -184,7 +185,7 @@ pub fn explain_with_progress(
     let res = t.step("residuals", || Residuals::new(rec, robot))?;
     let mismatch = t.step("locate", || locate_mismatch(&res));
     let base = t.step("regressors", || BaseRegressors::new(&res, rec));
-    let lag = t.step("motor lag profile", || profile_motor_lag(&res, rec, &base));
+    let lag = t.step("motor lag profile", || profile_motor_lag(&res, &base));
     drop(base);
     let selection = t.step("selection", || select_effects(&res, rec, lag.tau));
     let steps = selection.steps.clone();

@@ -9,7 +9,7 @@
 use std::sync::OnceLock;
 
 use atmo_core::control::WheelRates;
-use atmo_core::model::{Model, State, idx};
+use atmo_core::model::{Input, Model, State, idx};
 use atmo_core::{ConfigFile as _, RobotConfig};
 use atmo_plant::config::{EffectsConfig, MassErrorConfig, PlantConfig, TerrainConfig};
 use atmo_plant::plant::{Command, InitialState, Plant};
@@ -64,11 +64,17 @@ fn hover(mass_scale: f64) -> (RobotConfig, Recording) {
     };
     let every = (0.01 / plant.dt()).round() as usize;
     let steps = (SECONDS / plant.dt()).round() as usize;
-    let mut samples = Vec::new();
+    let mut samples: Vec<Sample> = Vec::new();
+    let mut applied_sum = Input::zeros();
     for step in 0..steps {
         let t = plant.time();
         let u = command(t);
         if step % every == 0 {
+            // The previous row's commands: the mean of what its steps applied.
+            if let Some(last) = samples.last_mut() {
+                last.applied = applied_sum / every as f64;
+            }
+            applied_sum = Input::zeros();
             let mut x = plant.state();
             for i in [idx::VX, idx::VY, idx::VZ, idx::WX, idx::WY, idx::WZ] {
                 x[i] += rng.random_range(-NOISE..NOISE);
@@ -77,6 +83,7 @@ fn hover(mass_scale: f64) -> (RobotConfig, Recording) {
                 t,
                 x,
                 u,
+                applied: u,
                 varphi: plant.tilt(),
                 ground_z: 0.0,
                 battery_v: None,
@@ -91,6 +98,7 @@ fn hover(mass_scale: f64) -> (RobotConfig, Recording) {
             },
         };
         plant.step(&cmd).unwrap();
+        applied_sum += u;
     }
     (robot, Recording::from_samples("open-loop hover", samples))
 }
@@ -113,7 +121,7 @@ fn run(mass_scale: f64) -> Run {
     let res = Residuals::new(&rec, &robot).unwrap();
     let mismatch = locate_mismatch(&res);
     let base = BaseRegressors::new(&res, &rec);
-    let lag = profile_motor_lag(&res, &rec, &base);
+    let lag = profile_motor_lag(&res, &base);
     let sel = select_effects(&res, &rec, lag.tau);
     let chosen_by_selection = sel.chosen.clone();
     let steps = sel.steps.clone();
