@@ -9,6 +9,7 @@
 //! | `drag` | rotor drag k_r, body Cd A (x, y, z) | `-sum_i t_i P_i v_i` at the hubs, `-rho/2 \|v_k\| v_k` |
 //! | `wind` | steady wind (x, y) | `k_r sum_i t_i P_i R^T e_j` |
 //! | `thrust_scale` | s | `A t` |
+//! | `thrust_curve` | f, thrust `(1 - f) t + f t^2` | `A (t^2 - t)` (per rotor) |
 //! | `battery_sag` | thrust loss per energy | `-E(t) A t` |
 //! | `com_offset` | d_x, d_y | first-order change of `M` and gravity torque |
 //! | `inertia_error` | inertia scale - 1 | `-[0; I w_dot + w x I w]` |
@@ -41,6 +42,7 @@ pub enum Effect {
     Drag,
     Wind,
     ThrustScale,
+    ThrustCurve,
     BatterySag,
     ComOffset,
     InertiaError,
@@ -48,12 +50,13 @@ pub enum Effect {
 }
 
 impl Effect {
-    pub const ALL: [Effect; 9] = [
+    pub const ALL: [Effect; 10] = [
         Effect::GroundEffect,
         Effect::MotorLag,
         Effect::Drag,
         Effect::Wind,
         Effect::ThrustScale,
+        Effect::ThrustCurve,
         Effect::BatterySag,
         Effect::ComOffset,
         Effect::InertiaError,
@@ -67,6 +70,7 @@ impl Effect {
             Effect::Drag => "drag",
             Effect::Wind => "wind",
             Effect::ThrustScale => "thrust_scale",
+            Effect::ThrustCurve => "thrust_curve",
             Effect::BatterySag => "battery_sag",
             Effect::ComOffset => "com_offset",
             Effect::InertiaError => "inertia_error",
@@ -82,11 +86,24 @@ impl Effect {
             Effect::Drag => "linear rotor drag in the disc plane, quadratic body drag",
             Effect::Wind => "steady wind: drag acts on the air-relative velocity",
             Effect::ThrustScale => "thrust coefficient kT off by a constant factor",
+            Effect::ThrustCurve => {
+                "command-to-thrust curve not linear: (1 - f) u + f u^2 of full thrust"
+            }
             Effect::BatterySag => "thrust scale falling with the energy drawn",
             Effect::ComOffset => "centre of mass shifted in the body x-y plane",
             Effect::InertiaError => "inertia about B off by a factor",
             Effect::MassError => "mass (and first moment) off by a factor",
         }
+    }
+
+    /// Part of the nominal calibration of an approximate robot file (what
+    /// every flight pins down: hover thrust, inertia, the command-to-thrust
+    /// curve, mass), reported apart from the physics found after it.
+    pub fn is_calibration(self) -> bool {
+        matches!(
+            self,
+            Effect::ThrustScale | Effect::ThrustCurve | Effect::InertiaError | Effect::MassError
+        )
     }
 
     /// Number of linear coefficients.
@@ -121,6 +138,7 @@ impl Effect {
             ],
             Effect::Wind => vec!["rotor_drag * wind_x".into(), "rotor_drag * wind_y".into()],
             Effect::ThrustScale => vec!["thrust scale - 1".into()],
+            Effect::ThrustCurve => vec!["quadratic share f of the thrust curve".into()],
             Effect::BatterySag => vec!["thrust loss per unit energy, 1/s".into()],
             Effect::ComOffset => vec!["offset_x, m".into(), "offset_y, m".into()],
             Effect::InertiaError => vec!["inertia scale - 1".into()],
@@ -239,6 +257,7 @@ struct Starts {
     drag: usize,
     wind: usize,
     thrust_scale: usize,
+    thrust_curve: usize,
     battery: usize,
     com: usize,
     inertia: usize,
@@ -254,6 +273,7 @@ impl Starts {
             drag: at(Effect::Drag),
             wind: at(Effect::Wind),
             thrust_scale: at(Effect::ThrustScale),
+            thrust_curve: at(Effect::ThrustCurve),
             battery: at(Effect::BatterySag),
             com: at(Effect::ComOffset),
             inertia: at(Effect::InertiaError),
@@ -337,7 +357,7 @@ pub fn build_columns(prep: &Prepared, rec: &Recording, knobs: &Knobs, accel: &[f
     filter_columns(prep, &layout, &at, raw, &lag_raw, &direct)
 }
 
-/// Thrust scale, battery sag (thrust times the energy drawn so far) and
+/// Thrust scale, thrust curve, battery sag (thrust times the energy drawn so far) and
 /// motor lag (difference of thrust and command) for the current tau.
 fn push_thrust_terms(
     raw: &mut [Vec<f64>],
@@ -348,6 +368,8 @@ fn push_thrust_terms(
 ) {
     let bt = row.act * row.thrust;
     push6(&mut raw[at.thrust_scale], row.k, &bt);
+    let curve = row.thrust.map(|t| t * t - t);
+    push6(&mut raw[at.thrust_curve], row.k, &(row.act * curve));
     push6(&mut raw[at.battery], row.k, &(-bt * energy));
     push6(lag_raw, row.k, &(row.act * (row.thrust - row.command)));
 }

@@ -32,6 +32,12 @@ pub struct EffectReport {
     pub parameters: Vec<Parameter>,
     /// Effects this one cannot be told apart from with this data.
     pub indistinguishable_from: Vec<String>,
+    /// Which test decided and its numbers (physical range and
+    /// identifiability, held-out residual, 0.5 s prediction).
+    pub decided_by: String,
+    /// Part of the nominal calibration stage (thrust scale, thrust curve,
+    /// inertia, mass), not physics.
+    pub calibration: bool,
 }
 
 /// One point of the ground-effect gain grid.

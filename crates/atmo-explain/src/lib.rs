@@ -57,8 +57,8 @@ use atmo_core::RobotConfig;
 pub use explanation::{EffectReport, Explanation, GridPoint, Parameter, RmsTable, Series};
 use recording::Recording;
 use stages::{
-    BaseRegressors, Findings, Residuals, fit_effects, locate_mismatch, profile_motor_lag, report,
-    select_effects, validate,
+    BaseRegressors, Findings, Residuals, accept_effects, fit_effects, locate_mismatch,
+    profile_motor_lag, report, select_effects, validate,
 };
 
 /// What can stop the analysis.
@@ -124,7 +124,7 @@ pub struct Progress {
 
 /// The progress steps of [`explain_with_progress`], in order; also the
 /// names of the timings in `explain.json`.
-pub const STEPS: [&str; 9] = [
+pub const STEPS: [&str; 10] = [
     "residuals",
     "locate",
     "regressors",
@@ -132,6 +132,7 @@ pub const STEPS: [&str; 9] = [
     "selection",
     "stability",
     "final fit",
+    "acceptance",
     "validate",
     "report",
 ];
@@ -191,6 +192,9 @@ pub fn explain_with_progress(
     let steps = selection.steps.clone();
     let confidence = t.step("stability", || selection.stability(opts.seed));
     let fit = t.step("final fit", || fit_effects(&res, rec, selection));
+    let (fit, decisions) = t.step("acceptance", || {
+        accept_effects(rec, robot, &res, fit, opts.max_replay_starts)
+    })?;
     let validation = t.step("validate", || {
         validate(rec, robot, &res, &mismatch, &fit, opts.max_replay_starts)
     })?;
@@ -202,6 +206,7 @@ pub fn explain_with_progress(
         steps: &steps,
         confidence: &confidence,
         fit: &fit,
+        decisions: &decisions,
         validation: &validation,
     };
     let mut ex = t.step("report", || report(&findings));

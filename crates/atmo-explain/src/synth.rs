@@ -286,8 +286,7 @@ pub fn record(robot: &RobotConfig, plant_cfg: &PlantConfig, flight: &Flight) -> 
     for k in 0..samples.len().saturating_sub(1) {
         let (a, b) = (steps_at[k] + 1, steps_at[k + 1] + 1);
         if b > a && b <= cmd_hist.len() {
-            samples[k].applied =
-                cmd_hist[a..b].iter().sum::<Input>() / (b - a) as f64;
+            samples[k].applied = cmd_hist[a..b].iter().sum::<Input>() / (b - a) as f64;
         }
     }
     // Samples can share an instant at the start (latency not yet filled).

@@ -49,6 +49,7 @@ pub struct PlantConfig {
 pub struct EffectsConfig {
     pub ground_effect: Option<GroundEffectConfig>,
     pub motor_lag: Option<MotorLagConfig>,
+    pub thrust_curve: Option<ThrustCurveConfig>,
     pub tilt_mechanism: Option<TiltMechanismConfig>,
     pub drag: Option<DragConfig>,
     pub wind: Option<WindConfig>,
@@ -60,9 +61,10 @@ pub struct EffectsConfig {
 }
 
 /// Names of every effect, as written in `[effects.<name>]`.
-pub const EFFECT_NAMES: [&str; 10] = [
+pub const EFFECT_NAMES: [&str; 11] = [
     "ground_effect",
     "motor_lag",
+    "thrust_curve",
     "tilt_mechanism",
     "drag",
     "wind",
@@ -105,6 +107,19 @@ impl Default for MotorLagConfig {
             curve: 0.0,
         }
     }
+}
+
+/// `[effects.thrust_curve]`: the command-to-thrust curve of the motor
+/// model, `c(u) = (1 - f) u + f u^2` (f = `curve`, 0 = linear as in the
+/// controller's model), with or without a motor lag (with one it replaces
+/// `[effects.motor_lag].curve`, which must then be 0). Off by default.
+#[derive(Debug, Clone, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct ThrustCurveConfig {
+    #[serde(default = "default_true")]
+    pub enabled: bool,
+    /// f in [-1, 1] (the curve stays monotonic on [0, 1]).
+    pub curve: f64,
 }
 
 /// `[effects.tilt_mechanism]`: the self-locking screw linkage.
@@ -580,6 +595,8 @@ impl EffectsConfig {
         Self {
             ground_effect: Some(GroundEffectConfig::default()),
             motor_lag: Some(MotorLagConfig::default()),
+            // Linear: the same plant as without the section.
+            thrust_curve: None,
             tilt_mechanism: Some(TiltMechanismConfig::default()),
             drag: Some(DragConfig::default()),
             wind: Some(WindConfig::default()),
@@ -600,6 +617,7 @@ impl EffectsConfig {
         Self {
             ground_effect: pick(self.ground_effect.as_ref(), over.ground_effect.as_ref()),
             motor_lag: pick(self.motor_lag.as_ref(), over.motor_lag.as_ref()),
+            thrust_curve: pick(self.thrust_curve.as_ref(), over.thrust_curve.as_ref()),
             tilt_mechanism: pick(self.tilt_mechanism.as_ref(), over.tilt_mechanism.as_ref()),
             drag: pick(self.drag.as_ref(), over.drag.as_ref()),
             wind: pick(self.wind.as_ref(), over.wind.as_ref()),
@@ -616,6 +634,7 @@ impl EffectsConfig {
         let on = [
             self.ground_effect.as_ref().is_some_and(|e| e.enabled),
             self.motor_lag.as_ref().is_some_and(|e| e.enabled),
+            self.thrust_curve.as_ref().is_some_and(|e| e.enabled),
             self.tilt_mechanism.as_ref().is_some_and(|e| e.enabled),
             self.drag.as_ref().is_some_and(|e| e.enabled),
             self.wind.as_ref().is_some_and(|e| e.enabled),
@@ -642,6 +661,19 @@ impl EffectsConfig {
             let p = format!("{prefix}.motor_lag");
             c.within(&format!("{p}.time_constant"), e.time_constant, 1e-4, 1.0)?;
             c.within(&format!("{p}.curve"), e.curve, 0.0, 1.0)?;
+        }
+        if let Some(e) = &self.thrust_curve {
+            let p = format!("{prefix}.thrust_curve");
+            c.within(&format!("{p}.curve"), e.curve, -1.0, 1.0)?;
+            if let Some(m) = &self.motor_lag {
+                // One curve: with [effects.thrust_curve] the lag's must be 0.
+                c.within(
+                    &format!("{prefix}.motor_lag.curve (0 when [{p}] gives the curve)"),
+                    m.curve,
+                    0.0,
+                    0.0,
+                )?;
+            }
         }
         if let Some(rate) = self.tilt_mechanism.as_ref().and_then(|e| e.rate_max) {
             c.positive(&format!("{prefix}.tilt_mechanism.rate_max"), rate)?;

@@ -272,7 +272,10 @@ impl Recording {
             .collect();
         let ground = find("ground_z");
         let battery = find("battery_v");
-        let means: Vec<usize> = MEAN_COMMAND_COLUMNS.iter().filter_map(|c| find(c)).collect();
+        let means: Vec<usize> = MEAN_COMMAND_COLUMNS
+            .iter()
+            .filter_map(|c| find(c))
+            .collect();
         if !means.is_empty() && means.len() != 4 {
             return Err(fail(format!(
                 "columns {}: give all four or none (header has: {})",

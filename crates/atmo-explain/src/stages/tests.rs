@@ -127,6 +127,7 @@ fn run(mass_scale: f64) -> Run {
     let steps = sel.steps.clone();
     let confidence = sel.stability(1);
     let fit = fit_effects(&res, &rec, sel);
+    let (fit, decisions) = super::accept_effects(&rec, &robot, &res, fit, 240).unwrap();
     let validation = validate(&rec, &robot, &res, &mismatch, &fit, 240).unwrap();
     let explanation = report(&Findings {
         rec: &rec,
@@ -136,6 +137,7 @@ fn run(mass_scale: f64) -> Run {
         steps: &steps,
         confidence: &confidence,
         fit: &fit,
+        decisions: &decisions,
         validation: &validation,
     });
     Run {
@@ -244,7 +246,7 @@ fn select_finds_a_mass_property_or_thrust_effect_only_when_there_is_one() {
     assert!(heavy.lag.points.len() == 13 && heavy.lag.tau > 0.0);
     // Two segments only: random halves hold one segment, too few to select
     // on, so the confidences are 0 here.
-    assert_eq!(heavy.confidence.len(), 9);
+    assert_eq!(heavy.confidence.len(), Effect::ALL.len());
 }
 
 #[test]
@@ -288,8 +290,12 @@ fn report_states_the_verdict_and_ranks_selected_effects_first() {
         "{}",
         ex.verdict
     );
-    let first_rejected = ex.effects.iter().position(|e| !e.selected).unwrap_or(9);
+    let first_rejected = ex
+        .effects
+        .iter()
+        .position(|e| !e.selected)
+        .unwrap_or(Effect::ALL.len());
     assert!(ex.effects[first_rejected..].iter().all(|e| !e.selected));
-    assert_eq!(ex.effects.len(), 9);
+    assert_eq!(ex.effects.len(), Effect::ALL.len());
     assert_eq!(ex.ground_effect_gain_grid.len(), 20);
 }
