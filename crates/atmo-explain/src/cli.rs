@@ -190,7 +190,13 @@ fn summary(ex: &crate::Explanation, out: &Path, elapsed: f64) -> String {
             .parameters
             .iter()
             .take(if e.name == "ground_effect" { 0 } else { 4 })
-            .map(|p| format!("{} = {:.4}", p.name, p.value))
+            .map(|p| {
+                if p.identified {
+                    format!("{} = {:.4}", p.name, p.value)
+                } else {
+                    format!("{} not identified", p.name)
+                }
+            })
             .collect();
         let _ = writeln!(
             s,

@@ -24,6 +24,9 @@ pub const CHANNELS: [&str; 6] = ["a_x", "a_y", "a_z", "wdot_x", "wdot_y", "wdot_
 /// Units of the channels.
 pub const CHANNEL_UNITS: [&str; 6] = ["m/s^2", "m/s^2", "m/s^2", "rad/s^2", "rad/s^2", "rad/s^2"];
 
+/// Largest ratio of the noise floor to the white-noise floor.
+const WHITE_FLOOR_BOUND: f64 = 2.0;
+
 /// Composite bodies on a tilt grid, interpolated in between (as the plant does).
 #[derive(Debug, Clone)]
 pub struct BodyTable {
@@ -321,7 +324,13 @@ impl Prepared {
                     .collect()
             })
             .collect();
-        let sig = crate::noise::floor_from_velocity_residual(&runs, &self.taps, self.dt);
+        let coloured = crate::noise::floor_from_velocity_residual(&runs, &self.taps, self.dt);
+        let white = self.white_floor(samples);
+        // The structure fit is believed between the white floor and twice
+        // it: a large model error can take the noise's place (or pass for
+        // correlated noise) in the fit.
+        let sig: [f64; 6] =
+            std::array::from_fn(|c| coloured[c].clamp(white[c], WHITE_FLOOR_BOUND * white[c]));
         // Command timing: the trapezoid of the effective commands leaves
         // the local error `h/4 G (applied_k - applied_{k-1})` in the
         // integrated model (not accumulated), seen through the taps.
@@ -349,6 +358,34 @@ impl Prepared {
             floor[c] = (sig[c].powi(2) + cmd / rows * tap_power).sqrt().max(1e-6);
         }
         floor
+    }
+
+    /// The floor of white sensor noise alone: robust second differences of
+    /// the recorded velocity and rates through the taps (linear channels
+    /// pooled).
+    fn white_floor(&self, samples: &[Sample]) -> [f64; 6] {
+        let gain = self.taps.iter().map(|h| h * h).sum::<f64>().sqrt();
+        let cols = [idx::VX, idx::VY, idx::VZ, idx::WX, idx::WY, idx::WZ];
+        let mut sig = [0.0; 6];
+        let mut d2: Vec<f64> = Vec::with_capacity(self.n);
+        for (c, &col) in cols.iter().enumerate() {
+            d2.clear();
+            for &(s, e) in &self.runs {
+                for k in s + 1..e.saturating_sub(1) {
+                    let x = |j: usize| samples[j].x[col];
+                    d2.push((x(k + 1) - 2.0 * x(k) + x(k - 1)).abs());
+                }
+            }
+            if d2.is_empty() {
+                continue;
+            }
+            let mid = d2.len() / 2;
+            let (_, med, _) = d2.select_nth_unstable_by(mid, f64::total_cmp);
+            sig[c] = 1.4826 * *med / 6.0_f64.sqrt() * gain;
+        }
+        let lin = ((sig[0] * sig[0] + sig[1] * sig[1] + sig[2] * sig[2]) / 3.0).sqrt();
+        sig[..3].fill(lin);
+        sig
     }
 
     /// Indices of the rows used for fitting.

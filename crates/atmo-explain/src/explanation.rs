@@ -16,6 +16,10 @@ pub struct Parameter {
     /// One standard deviation (delete-a-fold jackknife; null if unknown).
     pub std: Option<f64>,
     pub unit: String,
+    /// Inside its physical range (not at a bound) with an uncertainty below
+    /// its value (docs/explain.md, physical ranges); false: the value is
+    /// not a finding.
+    pub identified: bool,
 }
 
 /// A candidate effect's verdict.

@@ -2,15 +2,19 @@
 //!
 //! `e_k` = recorded velocity (world) and body rates minus the nominal
 //! model integrated along the run (the same trapezoid as [`crate::data`]).
-//! Its structure function `D(L) = E[(e_{k+L} - e_k)^2]` over lags of up to
-//! the filter's window is modelled as
+//! Its structure function `D(L) = E[(e_{k+L} - e_k)^2]` over lags from one
+//! sample to [`MAX_LAG_S`] (log-spaced) is modelled as
 //!
-//! `D(L) = 2 s_w^2 + 2 s_g^2 (1 - exp(-L h / tau)) + c (L h)^2`:
+//! `D(L) = 2 s_w^2 + 2 s_g^2 (1 - exp(-L h / tau)) + q L h + c (L h)^2`:
 //!
 //! white noise `s_w`, Gauss-Markov noise `s_g` with correlation time `tau`
-//! (motion-capture velocities are often filtered: white alone misses it),
-//! and the quadratic growth of any model error (an acceleration error `a`
-//! adds `a^2 (L h)^2` at short lags; fitted out, never counted as noise).
+//! (motion-capture velocities are often filtered: white alone misses it;
+//! it saturates within the lags), a random walk `q` (an acceleration error
+//! that changes faster than the lags: process noise, or a model error
+//! driven by a command dither) and the quadratic growth of a slow model
+//! error (an acceleration error `a` adds `a^2 (L h)^2`). Only the sensor
+//! part (`s_w`, `s_g`) is the floor: `q` and `c` are what a model can
+//! explain, never counted as noise.
 //! Robust: `D(L)` is the median of the squared differences over
 //! `0.4549` (the median of chi-square with one degree of freedom), so
 //! tracking glitches do not set the floor. The floor is the noise part's
@@ -18,15 +22,32 @@
 //! `sum_ij g_i g_j R(|i - j|)`, `R(0) = s_w^2 + s_g^2`,
 //! `R(m) = s_g^2 exp(-m h / tau)`.
 
-/// Correlation times tried for the Gauss-Markov part (s). The upper end
-/// stays at 2.5 filter windows: slower "noise" is indistinguishable from
-/// a model error and is left to the model.
-fn taus(dt: f64, window: f64) -> Vec<f64> {
+/// Longest lag of the structure function (s).
+pub const MAX_LAG_S: f64 = 0.5;
+
+/// Correlation times tried for the Gauss-Markov part (s): up to half the
+/// longest lag, so that it saturates within the lags (slower "noise" is
+/// indistinguishable from a model error and is left to the model).
+fn taus(dt: f64) -> Vec<f64> {
     let mut out = Vec::new();
     let mut tau = 2.0 * dt;
-    while tau <= 2.5 * window {
+    while tau <= 0.5 * MAX_LAG_S {
         out.push(tau);
-        tau *= 1.5;
+        tau *= 1.4;
+    }
+    out
+}
+
+/// Log-spaced lags (samples) from 1 to `max_lag`.
+fn lags(max_lag: usize) -> Vec<usize> {
+    let mut out: Vec<usize> = Vec::new();
+    let mut x = 1.0_f64;
+    while (x.round() as usize) <= max_lag {
+        let l = x.round() as usize;
+        if out.last() != Some(&l) {
+            out.push(l);
+        }
+        x *= 1.3;
     }
     out
 }
@@ -34,13 +55,12 @@ fn taus(dt: f64, window: f64) -> Vec<f64> {
 /// Median of chi-square with one degree of freedom.
 const CHI2_1_MEDIAN: f64 = 0.4549;
 
-/// Robust structure function of each channel for lags `1..=max_lag`
-/// (linear channels pooled over x, y, z).
-fn structure(runs: &[Vec<[f64; 6]>], max_lag: usize) -> Vec<[f64; 6]> {
-    let mut out = vec![[0.0; 6]; max_lag];
+/// Robust structure function of each channel at the `lags` (linear
+/// channels pooled over x, y, z).
+fn structure(runs: &[Vec<[f64; 6]>], lags: &[usize]) -> Vec<[f64; 6]> {
+    let mut out = vec![[0.0; 6]; lags.len()];
     let mut buf: Vec<f64> = Vec::new();
-    for (l, row) in out.iter_mut().enumerate() {
-        let lag = l + 1;
+    for (row, &lag) in out.iter_mut().zip(lags) {
         for c in 0..6 {
             buf.clear();
             for run in runs {
@@ -62,13 +82,17 @@ fn structure(runs: &[Vec<[f64; 6]>], max_lag: usize) -> Vec<[f64; 6]> {
     out
 }
 
+/// Bases of the structure-function model: constant, Gauss-Markov, random
+/// walk, quadratic.
+const BASES: usize = 4;
+
 /// Non-negative least squares of `d ~ sum_j x_j basis_j` (relative errors)
-/// over every subset of the three bases; returns the coefficients and the
+/// over every subset of the bases; returns the coefficients and the
 /// squared error.
-fn fit_nonnegative(d: &[f64], basis: &[[f64; 3]]) -> ([f64; 3], f64) {
-    let mut best = ([0.0; 3], f64::INFINITY);
-    for mask in 1u8..8 {
-        let on: Vec<usize> = (0..3).filter(|j| mask & (1 << j) != 0).collect();
+fn fit_nonnegative(d: &[f64], basis: &[[f64; BASES]]) -> ([f64; BASES], f64) {
+    let mut best = ([0.0; BASES], f64::INFINITY);
+    for mask in 1u8..(1 << BASES) {
+        let on: Vec<usize> = (0..BASES).filter(|j| mask & (1 << j) != 0).collect();
         let m = on.len();
         let mut ata = nalgebra::DMatrix::<f64>::zeros(m, m);
         let mut atb = nalgebra::DVector::<f64>::zeros(m);
@@ -87,7 +111,7 @@ fn fit_nonnegative(d: &[f64], basis: &[[f64; 3]]) -> ([f64; 3], f64) {
         if x.iter().any(|v| *v < 0.0) {
             continue;
         }
-        let mut coef = [0.0; 3];
+        let mut coef = [0.0; BASES];
         for (i, &j) in on.iter().enumerate() {
             coef[j] = x[i];
         }
@@ -95,7 +119,7 @@ fn fit_nonnegative(d: &[f64], basis: &[[f64; 3]]) -> ([f64; 3], f64) {
             .iter()
             .enumerate()
             .map(|(l, b)| {
-                let p: f64 = (0..3).map(|j| coef[j] * b[j]).sum();
+                let p: f64 = (0..BASES).map(|j| coef[j] * b[j]).sum();
                 ((p - d[l]) / d[l].max(1e-30)).powi(2)
             })
             .sum();
@@ -110,9 +134,10 @@ fn fit_nonnegative(d: &[f64], basis: &[[f64; 3]]) -> ([f64; 3], f64) {
 /// second) for each channel, from the velocity residual `runs` (one series
 /// per run, at spacing `dt`).
 pub fn floor_from_velocity_residual(runs: &[Vec<[f64; 6]>], taps: &[f64], dt: f64) -> [f64; 6] {
-    let max_lag = taps.len().max(3);
-    let d = structure(runs, max_lag);
-    let window = dt * (taps.len() - 1) as f64;
+    let longest = runs.iter().map(Vec::len).max().unwrap_or(0) / 2;
+    let max_lag = ((MAX_LAG_S / dt).round() as usize).min(longest).max(3);
+    let lags = lags(max_lag);
+    let d = structure(runs, &lags);
     let mut floor = [0.0; 6];
     for c in 0..6 {
         let dc: Vec<f64> = d.iter().map(|r| r[c]).collect();
@@ -120,11 +145,12 @@ pub fn floor_from_velocity_residual(runs: &[Vec<[f64; 6]>], taps: &[f64], dt: f6
             continue;
         }
         let mut best = (0.0, 0.0, 0.0, f64::INFINITY);
-        for tau in taus(dt, window) {
-            let basis: Vec<[f64; 3]> = (1..=max_lag)
-                .map(|l| {
+        for tau in taus(dt) {
+            let basis: Vec<[f64; BASES]> = lags
+                .iter()
+                .map(|&l| {
                     let s = l as f64 * dt;
-                    [1.0, 1.0 - (-s / tau).exp(), s * s]
+                    [1.0, 1.0 - (-s / tau).exp(), s, s * s]
                 })
                 .collect();
             let (x, err) = fit_nonnegative(&dc, &basis);

@@ -268,9 +268,16 @@ fn report_physics(s: &mut String, ex: &Explanation) {
             .parameters
             .iter()
             .take(if e.name == "ground_effect" { 0 } else { 8 })
-            .map(|p| match p.std {
-                Some(sd) => format!("{} = {:.4} +- {:.4} {}", p.name, p.value, sd, p.unit),
-                None => format!("{} = {:.4} {}", p.name, p.value, p.unit),
+            .map(|p| {
+                let value = match p.std {
+                    Some(sd) => format!("{} = {:.4} +- {:.4} {}", p.name, p.value, sd, p.unit),
+                    None => format!("{} = {:.4} {}", p.name, p.value, p.unit),
+                };
+                if p.identified {
+                    value
+                } else {
+                    format!("{value} (not identified)")
+                }
             })
             .collect();
         let params = if e.name == "ground_effect" {

@@ -263,12 +263,35 @@ pub fn accept_effects(
         decisions.push((Effect::Drag, d));
     }
     if !rejected.is_empty() {
-        let kept: Vec<Effect> = chosen
+        let mut kept: Vec<Effect> = chosen
             .iter()
             .copied()
             .filter(|e| !rejected.contains(e))
             .collect();
         fit.restrict(&kept);
+        // The refit moves the kept effects' values: their ranges are
+        // checked again until none fails (the prediction test is not
+        // repeated).
+        while let Some((e, reason)) = kept.iter().find_map(|&e| {
+            identification_failure(&fit, e)
+                .or_else(|| wind_failure(&fit, e))
+                .map(|r| (e, r))
+        }) {
+            let gone: Vec<Effect> = if e == Effect::Wind || (e == Effect::Drag && kept.contains(&Effect::Wind)) {
+                vec![Effect::Wind, Effect::Drag]
+            } else {
+                vec![e]
+            };
+            for g in &gone {
+                let reason = format!("after the refit without the rejected effects, {reason}");
+                match decisions.iter_mut().find(|d| d.0 == *g) {
+                    Some(d) => d.1 = Decision::NotIdentified { reason },
+                    None => decisions.push((*g, Decision::NotIdentified { reason })),
+                }
+            }
+            kept.retain(|k| !gone.contains(k));
+            fit.restrict(&kept);
+        }
     }
     Ok((fit, decisions))
 }

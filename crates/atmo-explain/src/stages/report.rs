@@ -90,7 +90,15 @@ pub fn effect_reports(
             selected,
             confidence: conf,
             heldout_gain: gain,
-            parameters: effect_parameters(fit, e, selected),
+            parameters: effect_parameters(fit, e, selected)
+                .into_iter()
+                .map(|mut p| {
+                    let range = crate::stages::range_of(e.name(), &p.name);
+                    p.identified = crate::stages::param_status(p.value, p.std, range)
+                        == crate::stages::ParamStatus::Identified;
+                    p
+                })
+                .collect(),
             indistinguishable_from: indist,
         });
     }
@@ -120,6 +128,7 @@ pub(crate) fn effect_parameters(fit: &Fit, e: Effect, selected: bool) -> Vec<Par
             .map_or((0.0, 0.0), |p| (ptheta[p], psd[p]))
     };
     let param = |name: String, (value, std): (f64, f64), unit: &str| Parameter {
+        identified: true,
         name,
         value,
         std: Some(std),
@@ -129,6 +138,7 @@ pub(crate) fn effect_parameters(fit: &Fit, e: Effect, selected: bool) -> Vec<Par
     match e {
         Effect::MotorLag => vec![
             Parameter {
+                identified: true,
                 name: "time_constant".into(),
                 value: fit.knobs.tau,
                 std: None,
@@ -156,6 +166,7 @@ pub(crate) fn effect_parameters(fit: &Fit, e: Effect, selected: bool) -> Vec<Par
                         (0.0, f64::NAN)
                     };
                     Parameter {
+                        identified: true,
                         name: format!("steady_{axis}"),
                         value: v,
                         std: s.is_finite().then_some(s),
