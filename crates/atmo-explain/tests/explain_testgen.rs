@@ -5,6 +5,7 @@
 //! simulator and controller did not make.
 #![allow(clippy::unwrap_used)] // reason: test code
 
+use std::fmt::Write as _;
 use std::path::Path;
 
 use atmo_core::{ConfigFile as _, RobotConfig};
@@ -33,15 +34,20 @@ fn analyse(fx: &Concealed, seed: u64) -> Explanation {
 
 fn summary(ex: &Explanation) -> String {
     let mut s = format!("verdict: {}\n", ex.verdict);
-    for e in ex.effects.iter().filter(|e| e.confidence > 0.0 || e.selected) {
+    for e in ex
+        .effects
+        .iter()
+        .filter(|e| e.confidence > 0.0 || e.selected)
+    {
         let p: Vec<String> = e
             .parameters
             .iter()
             .take(4)
             .map(|p| format!("{}={:.4}", p.name, p.value))
             .collect();
-        s += &format!(
-            "  {} sel={} conf={:.2} {} [{}]\n",
+        let _ = writeln!(
+            s,
+            "  {} sel={} conf={:.2} {} [{}]",
             e.name,
             e.selected,
             e.confidence,
@@ -57,8 +63,7 @@ fn param(ex: &Explanation, effect: &str, name: &str) -> f64 {
         .iter()
         .find(|e| e.name == effect)
         .and_then(|e| e.parameters.iter().find(|p| p.name == name))
-        .map(|p| p.value)
-        .unwrap_or(f64::NAN)
+        .map_or(f64::NAN, |p| p.value)
 }
 
 fn within(ex: &Explanation, effect: &str, name: &str, truth: f64) {
@@ -94,7 +99,11 @@ fn assert_named(ex: &Explanation, concealed: &[&str]) {
         ex.multistep_before.velocity_norm(),
         ex.multistep_after.velocity_norm(),
     );
-    assert!(ex.multistep_after.starts > 0 && a <= 0.5 * b, "0.5 s velocity error {b} -> {a}: {}", summary(ex));
+    assert!(
+        ex.multistep_after.starts > 0 && a <= 0.5 * b,
+        "0.5 s velocity error {b} -> {a}: {}",
+        summary(ex)
+    );
 }
 
 #[test]

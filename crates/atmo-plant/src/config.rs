@@ -15,6 +15,7 @@ use serde::Deserialize;
 
 use crate::error::{PlantError, Result};
 use crate::ground_effect::GroundEffectConfig;
+pub use crate::motor::ThrustCurveConfig;
 fn default_dt() -> f64 {
     0.001
 }
@@ -107,19 +108,6 @@ impl Default for MotorLagConfig {
             curve: 0.0,
         }
     }
-}
-
-/// `[effects.thrust_curve]`: the command-to-thrust curve of the motor
-/// model, `c(u) = (1 - f) u + f u^2` (f = `curve`, 0 = linear as in the
-/// controller's model), with or without a motor lag (with one it replaces
-/// `[effects.motor_lag].curve`, which must then be 0). Off by default.
-#[derive(Debug, Clone, Deserialize, PartialEq)]
-#[serde(deny_unknown_fields)]
-pub struct ThrustCurveConfig {
-    #[serde(default = "default_true")]
-    pub enabled: bool,
-    /// f in [-1, 1] (the curve stays monotonic on [0, 1]).
-    pub curve: f64,
 }
 
 /// `[effects.tilt_mechanism]`: the self-locking screw linkage.
@@ -595,7 +583,6 @@ impl EffectsConfig {
         Self {
             ground_effect: Some(GroundEffectConfig::default()),
             motor_lag: Some(MotorLagConfig::default()),
-            // Linear: the same plant as without the section.
             thrust_curve: None,
             tilt_mechanism: Some(TiltMechanismConfig::default()),
             drag: Some(DragConfig::default()),
@@ -663,17 +650,7 @@ impl EffectsConfig {
             c.within(&format!("{p}.curve"), e.curve, 0.0, 1.0)?;
         }
         if let Some(e) = &self.thrust_curve {
-            let p = format!("{prefix}.thrust_curve");
-            c.within(&format!("{p}.curve"), e.curve, -1.0, 1.0)?;
-            if let Some(m) = &self.motor_lag {
-                // One curve: with [effects.thrust_curve] the lag's must be 0.
-                c.within(
-                    &format!("{prefix}.motor_lag.curve (0 when [{p}] gives the curve)"),
-                    m.curve,
-                    0.0,
-                    0.0,
-                )?;
-            }
+            e.validate(c, prefix, self.motor_lag.as_ref())?;
         }
         if let Some(rate) = self.tilt_mechanism.as_ref().and_then(|e| e.rate_max) {
             c.positive(&format!("{prefix}.tilt_mechanism.rate_max"), rate)?;

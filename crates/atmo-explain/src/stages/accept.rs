@@ -80,7 +80,7 @@ pub fn param_status(value: f64, std: Option<f64>, range: Option<(f64, f64)>) -> 
             return ParamStatus::NotIdentified;
         }
     }
-    if std.is_some() && !(sd < value.abs()) {
+    if std.is_some() && sd.partial_cmp(&value.abs()) != Some(std::cmp::Ordering::Less) {
         return ParamStatus::NotIdentified;
     }
     ParamStatus::Identified
@@ -277,11 +277,12 @@ pub fn accept_effects(
                 .or_else(|| wind_failure(&fit, e))
                 .map(|r| (e, r))
         }) {
-            let gone: Vec<Effect> = if e == Effect::Wind || (e == Effect::Drag && kept.contains(&Effect::Wind)) {
-                vec![Effect::Wind, Effect::Drag]
-            } else {
-                vec![e]
-            };
+            let gone: Vec<Effect> =
+                if e == Effect::Wind || (e == Effect::Drag && kept.contains(&Effect::Wind)) {
+                    vec![Effect::Wind, Effect::Drag]
+                } else {
+                    vec![e]
+                };
             for g in &gone {
                 let reason = format!("after the refit without the rejected effects, {reason}");
                 match decisions.iter_mut().find(|d| d.0 == *g) {

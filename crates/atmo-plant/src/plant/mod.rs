@@ -447,7 +447,9 @@ impl Plant {
         if self.motor_lag.is_some() {
             self.ext.fixed_rows::<4>(THRUST).into_owned()
         } else if let Some(f) = self.thrust_curve {
-            self.command.rotors.map(|u| (1.0 - f) * u + f * u * u)
+            self.command
+                .rotors
+                .map(|u| crate::motor::ThrustCurveConfig::thrust(f, u))
         } else {
             self.command.rotors
         }

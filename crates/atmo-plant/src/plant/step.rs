@@ -610,7 +610,7 @@ impl Plant {
                 d[THRUST + i] = (target - t[i]) / tau;
             }
         } else if let Some(f) = self.thrust_curve {
-            t = t.map(|u| (1.0 - f) * u + f * u * u);
+            t = t.map(|u| crate::motor::ThrustCurveConfig::thrust(f, u));
         }
         let mut u_eff = t;
         if let Some(b) = &self.battery {
