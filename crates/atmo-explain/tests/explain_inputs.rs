@@ -239,7 +239,7 @@ fn write_mcap(rec: &Recording, path: &std::path::Path) {
         let Some(next) = rec.samples.get(k + 1) else {
             continue;
         };
-        let mid_ns = (((s.t + next.t) / 2.0) * 1e9).round() as u64;
+        let mid_ns = (f64::midpoint(s.t, next.t) * 1e9).round() as u64;
         let second_half = s.applied * 2.0 - s.u;
         let mid = MpcStatus {
             stamp_ns: mid_ns,
