@@ -190,7 +190,13 @@ fn summary(ex: &crate::Explanation, out: &Path, elapsed: f64) -> String {
             .parameters
             .iter()
             .take(if e.name == "ground_effect" { 0 } else { 4 })
-            .map(|p| format!("{} = {:.4}", p.name, p.value))
+            .map(|p| {
+                if p.identified {
+                    format!("{} = {:.4}", p.name, p.value)
+                } else {
+                    format!("{} not identified", p.name)
+                }
+            })
             .collect();
         let _ = writeln!(
             s,
@@ -207,15 +213,33 @@ fn summary(ex: &crate::Explanation, out: &Path, elapsed: f64) -> String {
         "located region {} rows; held-out RMS {:.2} -> {:.2} noise floors",
         b.located_rows, b.located_normalized, a.located_normalized
     );
-    let _ = writeln!(
-        s,
-        "multi-step     {:.2} s: position {:.4} -> {:.4} m, velocity {:.4} -> {:.4} m/s",
-        ex.multistep_before.horizon_s,
-        ex.multistep_before.position_norm(),
-        ex.multistep_after.position_norm(),
-        ex.multistep_before.velocity_norm(),
-        ex.multistep_after.velocity_norm()
-    );
+    let (mb, ma) = (&ex.multistep_before, &ex.multistep_after);
+    let _ = if mb.starts == 0 {
+        writeln!(
+            s,
+            "multi-step     none: no airborne stretch of {:.2} s to start from",
+            crate::HORIZON
+        )
+    } else if ma.starts == 0 {
+        writeln!(
+            s,
+            "multi-step     {:.2} s: position {:.4} m, velocity {:.4} m/s with the nominal model; \
+             with the fitted effects: no held-out start could be replayed",
+            mb.horizon_s,
+            mb.position_norm(),
+            mb.velocity_norm()
+        )
+    } else {
+        writeln!(
+            s,
+            "multi-step     {:.2} s: position {:.4} -> {:.4} m, velocity {:.4} -> {:.4} m/s",
+            mb.horizon_s,
+            mb.position_norm(),
+            ma.position_norm(),
+            mb.velocity_norm(),
+            ma.velocity_norm()
+        )
+    };
     let _ = writeln!(s, "analysed in    {elapsed:.2} s");
     let _ = writeln!(
         s,

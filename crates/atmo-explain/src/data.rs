@@ -24,6 +24,9 @@ pub const CHANNELS: [&str; 6] = ["a_x", "a_y", "a_z", "wdot_x", "wdot_y", "wdot_
 /// Units of the channels.
 pub const CHANNEL_UNITS: [&str; 6] = ["m/s^2", "m/s^2", "m/s^2", "rad/s^2", "rad/s^2", "rad/s^2"];
 
+/// Largest ratio of the noise floor to the white-noise floor.
+const WHITE_FLOOR_BOUND: f64 = 2.0;
+
 /// Composite bodies on a tilt grid, interpolated in between (as the plant does).
 #[derive(Debug, Clone)]
 pub struct BodyTable {
@@ -102,6 +105,10 @@ pub struct Prepared {
     /// Per row: `M^-1 [A_F; A_T]`, the generalized acceleration per unit
     /// rotor command.
     pub act: Vec<Matrix6x4<f64>>,
+    /// Per row: the commands the trapezoid evaluates the model with, the
+    /// mean of the applied commands of the intervals before and after the
+    /// row ([`effective_commands`]).
+    pub u_eff: Vec<Input>,
 }
 
 /// Savitzky-Golay first-derivative taps of a local quadratic (= local
@@ -147,29 +154,35 @@ impl Prepared {
             if e - s < 2 * h + 1 {
                 continue;
             }
-            integ.clear();
-            let mut acc = [0.0; 6];
-            let mut prev = [0.0; 6];
-            for k in s..e {
-                let lin = self.rot[k] * Vector3::new(g[6 * k], g[6 * k + 1], g[6 * k + 2]);
-                let cur = [
-                    lin.x,
-                    lin.y,
-                    lin.z,
-                    g[6 * k + 3],
-                    g[6 * k + 4],
-                    g[6 * k + 5],
-                ];
-                if k > s {
-                    let dt = self.t[k] - self.t[k - 1];
-                    for c in 0..6 {
-                        acc[c] += 0.5 * dt * (prev[c] + cur[c]);
-                    }
-                }
-                prev = cur;
-                integ.push(acc);
-            }
+            self.integrate_run(g, s, e, &mut integ);
             self.differentiate_into(&integ, s, out);
+        }
+    }
+
+    /// Trapezoid integral of `g` (body frame, 6 per row; the linear part
+    /// rotated to the world frame first) along the run `[s, e)`, from 0.
+    fn integrate_run(&self, g: &[f64], s: usize, e: usize, integ: &mut Vec<[f64; 6]>) {
+        integ.clear();
+        let mut acc = [0.0; 6];
+        let mut prev = [0.0; 6];
+        for k in s..e {
+            let lin = self.rot[k] * Vector3::new(g[6 * k], g[6 * k + 1], g[6 * k + 2]);
+            let cur = [
+                lin.x,
+                lin.y,
+                lin.z,
+                g[6 * k + 3],
+                g[6 * k + 4],
+                g[6 * k + 5],
+            ];
+            if k > s {
+                let dt = self.t[k] - self.t[k - 1];
+                for c in 0..6 {
+                    acc[c] += 0.5 * dt * (prev[c] + cur[c]);
+                }
+            }
+            prev = cur;
+            integ.push(acc);
         }
     }
 
@@ -218,6 +231,7 @@ impl Prepared {
         let (env, usable, contact_rows) = envelope(samples, &t, &rot, &table, wheel_radius, half);
         let (runs, gaps) = runs_of(&t, &usable, dt);
         let fit = fit_mask(&runs, half, n);
+        let u_eff = effective_commands(samples, &runs);
         let n_fit = fit.iter().filter(|f| **f).count();
         if n_fit < 20 {
             return Err(ExplainError::Input {
@@ -248,13 +262,14 @@ impl Prepared {
             table,
             wheel_radius,
             act: Vec::with_capacity(n),
+            u_eff,
         };
         let meas = prep.measured(samples);
-        let nominal = prep.nominal_model(samples);
+        let (raw, nominal) = prep.nominal_model(samples);
         prep.resid = meas.iter().zip(&nominal).map(|(a, b)| a - b).collect();
         prep.meas = meas;
         prep.nominal = nominal;
-        prep.floor = prep.noise_floor(samples);
+        prep.floor = prep.noise_floor(samples, &raw);
         Ok(prep)
     }
 
@@ -267,71 +282,59 @@ impl Prepared {
             if e - s < 2 * half + 1 {
                 continue;
             }
-            let series: Vec<[f64; 6]> = (s..e)
-                .map(|k| {
-                    let x = &samples[k].x;
-                    [
-                        x[idx::VX],
-                        x[idx::VY],
-                        x[idx::VZ],
-                        x[idx::WX],
-                        x[idx::WY],
-                        x[idx::WZ],
-                    ]
-                })
-                .collect();
+            let series = velocity_series(samples, s, e);
             self.differentiate_into(&series, s, &mut meas);
         }
         meas
     }
 
-    /// The nominal model's accelerations through `S`; fills `act` on the way.
-    fn nominal_model(&mut self, samples: &[Sample]) -> Vec<f64> {
+    /// The nominal model's accelerations per row and through `S`; fills
+    /// `act` on the way.
+    fn nominal_model(&mut self, samples: &[Sample]) -> (Vec<f64>, Vec<f64>) {
         let mut raw = vec![0.0; 6 * self.n];
         for (k, s) in samples.iter().enumerate() {
             let body = self.table.at(s.varphi);
             self.act.push(body.mass_matrix_inv * actuation(&body));
-            let a = body.accelerations(&s.x, &s.u, &Vector6::zeros());
+            let a = body.accelerations(&s.x, &self.u_eff[k], &Vector6::zeros());
             raw[6 * k..6 * k + 6].copy_from_slice(a.as_slice());
         }
         let mut nominal = vec![0.0; 6 * self.n];
         self.smooth(&raw, &mut nominal);
-        nominal
+        (raw, nominal)
     }
 
-    /// Noise floor: white-noise level of the measured velocity and rates
-    /// (second differences, robust scale), through the filter's gain, plus
-    /// the command-timing error of the model side.
-    fn noise_floor(&self, samples: &[Sample]) -> [f64; 6] {
+    /// Noise floor: the noise of the recorded velocity and rates (white and
+    /// Gauss-Markov, from the structure function of the velocity residual
+    /// of the nominal model `raw`: [`crate::noise`]) through the filter,
+    /// plus the command-timing term of the model side.
+    fn noise_floor(&self, samples: &[Sample], raw: &[f64]) -> [f64; 6] {
         let n = self.n;
-        let gain = self.taps.iter().map(|h| h * h).sum::<f64>().sqrt();
         let mut floor = [0.0; 6];
-        let cols = [idx::VX, idx::VY, idx::VZ, idx::WX, idx::WY, idx::WZ];
-        let mut sig = [0.0; 6];
-        for (c, &col) in cols.iter().enumerate() {
-            let mut d2: Vec<f64> = Vec::with_capacity(n);
-            for &(s, e) in &self.runs {
-                for k in s + 1..e.saturating_sub(1) {
-                    d2.push(
-                        (samples[k + 1].x[col] - 2.0 * samples[k].x[col] + samples[k - 1].x[col])
-                            .abs(),
-                    );
-                }
-            }
-            if d2.is_empty() {
-                continue;
-            }
-            let mid = d2.len() / 2;
-            let (_, med, _) = d2.select_nth_unstable_by(mid, f64::total_cmp);
-            sig[c] = 1.4826 * *med / 6.0_f64.sqrt();
-        }
-        // Command timing: the commands change between samples at instants
-        // the recording does not give; the trapezoid's error per interval
-        // is about |B du| h / sqrt(12), and it accumulates through the
-        // integration (variance through the tail sums of the taps).
-        let tails: f64 = (0..self.taps.len())
-            .map(|j| self.taps[j..].iter().sum::<f64>().powi(2))
-            .sum();
+        let mut integ = Vec::new();
+        let runs: Vec<Vec<[f64; 6]>> = self
+            .runs
+            .iter()
+            .filter(|(s, e)| e - s > self.taps.len())
+            .map(|&(s, e)| {
+                self.integrate_run(raw, s, e, &mut integ);
+                let v = velocity_series(samples, s, e);
+                v.iter()
+                    .zip(&integ)
+                    .map(|(a, b)| std::array::from_fn(|c| a[c] - b[c]))
+                    .collect()
+            })
+            .collect();
+        let coloured = crate::noise::floor_from_velocity_residual(&runs, &self.taps, self.dt);
+        let white = self.white_floor(samples);
+        // The structure fit is believed between the white floor and twice
+        // it: a large model error can take the noise's place (or pass for
+        // correlated noise) in the fit.
+        let sig: [f64; 6] =
+            std::array::from_fn(|c| coloured[c].clamp(white[c], WHITE_FLOOR_BOUND * white[c]));
+        // Command timing: the trapezoid of the effective commands leaves
+        // the local error `h/4 G (applied_k - applied_{k-1})` in the
+        // integrated model (not accumulated), seen through the taps.
+        let tap_power: f64 = self.taps.iter().map(|h| h * h).sum();
         let mut cmd_var = [0.0; 6];
         let mut rows = 0usize;
         for k in 1..n {
@@ -339,32 +342,73 @@ impl Prepared {
                 continue;
             }
             let h = self.t[k] - self.t[k - 1];
-            let body = self.table.at(samples[k].varphi);
-            let du = samples[k].u - samples[k - 1].u;
-            let e = body.mass_matrix_inv * (actuation(&body) * du) * h;
+            let du = samples[k].applied - samples[k - 1].applied;
+            let e = self.act[k] * du * (h / 4.0);
             for c in 0..6 {
-                cmd_var[c] += e[c] * e[c] / 12.0;
+                cmd_var[c] += e[c] * e[c];
             }
             rows += 1;
         }
         let rows = rows.max(1) as f64;
-        // Linear channels are rotated world channels: pool the three.
-        let lin = ((sig[0] * sig[0] + sig[1] * sig[1] + sig[2] * sig[2]) / 3.0).sqrt();
-        for c in 0..3 {
-            floor[c] = ((lin * gain).powi(2) + cmd_var[c] / rows * tails)
-                .sqrt()
-                .max(1e-6);
-            floor[c + 3] = ((sig[c + 3] * gain).powi(2) + cmd_var[c + 3] / rows * tails)
-                .sqrt()
-                .max(1e-6);
+        // Linear channels are rotated world channels: pooled (in `sig`) and
+        // their command terms too.
+        let lin_cmd = (cmd_var[0] + cmd_var[1] + cmd_var[2]) / 3.0;
+        for c in 0..6 {
+            let cmd = if c < 3 { lin_cmd } else { cmd_var[c] };
+            floor[c] = (sig[c].powi(2) + cmd / rows * tap_power).sqrt().max(1e-6);
         }
         floor
+    }
+
+    /// The floor of white sensor noise alone: robust second differences of
+    /// the recorded velocity and rates through the taps (linear channels
+    /// pooled).
+    fn white_floor(&self, samples: &[Sample]) -> [f64; 6] {
+        let gain = self.taps.iter().map(|h| h * h).sum::<f64>().sqrt();
+        let cols = [idx::VX, idx::VY, idx::VZ, idx::WX, idx::WY, idx::WZ];
+        let mut sig = [0.0; 6];
+        let mut d2: Vec<f64> = Vec::with_capacity(self.n);
+        for (c, &col) in cols.iter().enumerate() {
+            d2.clear();
+            for &(s, e) in &self.runs {
+                for k in s + 1..e.saturating_sub(1) {
+                    let x = |j: usize| samples[j].x[col];
+                    d2.push((x(k + 1) - 2.0 * x(k) + x(k - 1)).abs());
+                }
+            }
+            if d2.is_empty() {
+                continue;
+            }
+            let mid = d2.len() / 2;
+            let (_, med, _) = d2.select_nth_unstable_by(mid, f64::total_cmp);
+            sig[c] = 1.4826 * *med / 6.0_f64.sqrt() * gain;
+        }
+        let lin = ((sig[0] * sig[0] + sig[1] * sig[1] + sig[2] * sig[2]) / 3.0).sqrt();
+        sig[..3].fill(lin);
+        sig
     }
 
     /// Indices of the rows used for fitting.
     pub fn fit_rows(&self) -> impl Iterator<Item = usize> + '_ {
         (0..self.n).filter(|&k| self.fit[k])
     }
+}
+
+/// World velocity and body rates of the rows `[s, e)`.
+fn velocity_series(samples: &[Sample], s: usize, e: usize) -> Vec<[f64; 6]> {
+    (s..e)
+        .map(|k| {
+            let x = &samples[k].x;
+            [
+                x[idx::VX],
+                x[idx::VY],
+                x[idx::VZ],
+                x[idx::WX],
+                x[idx::WY],
+                x[idx::WZ],
+            ]
+        })
+        .collect()
 }
 
 /// `[A_F; A_T]`: the wrench per unit rotor command of a tilted body.
@@ -480,6 +524,26 @@ fn fit_mask(runs: &[(usize, usize)], half: usize, n: usize) -> Vec<bool> {
         }
     }
     fit
+}
+
+/// The commands to evaluate the model with at each row so that the
+/// trapezoid integrates the applied commands exactly:
+/// `(applied_{k-1} + applied_k) / 2`, with `applied_k` the mean command over
+/// `[t_k, t_{k+1})` (the row's own commands when held). For a model
+/// `g_k = G_k u`, the trapezoid `sum h/2 (g_{k-1} + g_k)` of these equals the
+/// integral of the held commands `sum h/2 (G_{k-1} + G_k) applied_{k-1}` up to
+/// the local term `h/4 G_k (applied_k - applied_{k-1})` (it does not
+/// accumulate: no delay). Evaluating the row's own commands instead shifts
+/// every command half a sample early, which reads as a motor lag of `h/2`.
+/// At the start of a run the row's own applied commands are used.
+pub fn effective_commands(samples: &[Sample], runs: &[(usize, usize)]) -> Vec<Input> {
+    let mut out: Vec<Input> = samples.iter().map(|s| s.applied).collect();
+    for &(s, e) in runs {
+        for k in s + 1..e {
+            out[k] = (samples[k - 1].applied + samples[k].applied) * 0.5;
+        }
+    }
+    out
 }
 
 /// Cross-product matrix `[r]x`.

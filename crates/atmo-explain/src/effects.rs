@@ -9,6 +9,7 @@
 //! | `drag` | rotor drag k_r, body Cd A (x, y, z) | `-sum_i t_i P_i v_i` at the hubs, `-rho/2 \|v_k\| v_k` |
 //! | `wind` | steady wind (x, y) | `k_r sum_i t_i P_i R^T e_j` |
 //! | `thrust_scale` | s | `A t` |
+//! | `thrust_curve` | f, thrust `(1 - f) t + f t^2` | `A (t^2 - t)` (per rotor) |
 //! | `battery_sag` | thrust loss per energy | `-E(t) A t` |
 //! | `com_offset` | d_x, d_y | first-order change of `M` and gravity torque |
 //! | `inertia_error` | inertia scale - 1 | `-[0; I w_dot + w x I w]` |
@@ -41,6 +42,7 @@ pub enum Effect {
     Drag,
     Wind,
     ThrustScale,
+    ThrustCurve,
     BatterySag,
     ComOffset,
     InertiaError,
@@ -48,12 +50,13 @@ pub enum Effect {
 }
 
 impl Effect {
-    pub const ALL: [Effect; 9] = [
+    pub const ALL: [Effect; 10] = [
         Effect::GroundEffect,
         Effect::MotorLag,
         Effect::Drag,
         Effect::Wind,
         Effect::ThrustScale,
+        Effect::ThrustCurve,
         Effect::BatterySag,
         Effect::ComOffset,
         Effect::InertiaError,
@@ -67,6 +70,7 @@ impl Effect {
             Effect::Drag => "drag",
             Effect::Wind => "wind",
             Effect::ThrustScale => "thrust_scale",
+            Effect::ThrustCurve => "thrust_curve",
             Effect::BatterySag => "battery_sag",
             Effect::ComOffset => "com_offset",
             Effect::InertiaError => "inertia_error",
@@ -82,11 +86,24 @@ impl Effect {
             Effect::Drag => "linear rotor drag in the disc plane, quadratic body drag",
             Effect::Wind => "steady wind: drag acts on the air-relative velocity",
             Effect::ThrustScale => "thrust coefficient kT off by a constant factor",
+            Effect::ThrustCurve => {
+                "command-to-thrust curve not linear: (1 - f) u + f u^2 of full thrust"
+            }
             Effect::BatterySag => "thrust scale falling with the energy drawn",
             Effect::ComOffset => "centre of mass shifted in the body x-y plane",
             Effect::InertiaError => "inertia about B off by a factor",
             Effect::MassError => "mass (and first moment) off by a factor",
         }
+    }
+
+    /// Part of the nominal calibration of an approximate robot file (what
+    /// every flight pins down: hover thrust, inertia, the command-to-thrust
+    /// curve, mass), reported apart from the physics found after it.
+    pub fn is_calibration(self) -> bool {
+        matches!(
+            self,
+            Effect::ThrustScale | Effect::ThrustCurve | Effect::InertiaError | Effect::MassError
+        )
     }
 
     /// Number of linear coefficients.
@@ -121,6 +138,7 @@ impl Effect {
             ],
             Effect::Wind => vec!["rotor_drag * wind_x".into(), "rotor_drag * wind_y".into()],
             Effect::ThrustScale => vec!["thrust scale - 1".into()],
+            Effect::ThrustCurve => vec!["quadratic share f of the thrust curve".into()],
             Effect::BatterySag => vec!["thrust loss per unit energy, 1/s".into()],
             Effect::ComOffset => vec!["offset_x, m".into(), "offset_y, m".into()],
             Effect::InertiaError => vec!["inertia scale - 1".into()],
@@ -239,6 +257,7 @@ struct Starts {
     drag: usize,
     wind: usize,
     thrust_scale: usize,
+    thrust_curve: usize,
     battery: usize,
     com: usize,
     inertia: usize,
@@ -254,6 +273,7 @@ impl Starts {
             drag: at(Effect::Drag),
             wind: at(Effect::Wind),
             thrust_scale: at(Effect::ThrustScale),
+            thrust_curve: at(Effect::ThrustCurve),
             battery: at(Effect::BatterySag),
             com: at(Effect::ComOffset),
             inertia: at(Effect::InertiaError),
@@ -268,6 +288,8 @@ struct Row<'a> {
     sample: &'a Sample,
     /// Thrust (commands, lagged by the knobs' tau).
     thrust: &'a Input,
+    /// The commands the model is evaluated with ([`Prepared::u_eff`]).
+    command: &'a Input,
     body: TiltedBody,
     /// `M^-1 [A_F; A_T]` of the row.
     act: &'a Matrix6x4<f64>,
@@ -299,8 +321,7 @@ pub fn build_columns(prep: &Prepared, rec: &Recording, knobs: &Knobs, accel: &[f
     let layout = Layout::all();
     let n = prep.n;
     let samples = &rec.samples;
-    let u: Vec<Input> = samples.iter().map(|s| s.u).collect();
-    let thrust = crate::data::lagged_commands(&prep.t, &u, knobs.tau);
+    let thrust = crate::data::lagged_commands(&prep.t, &prep.u_eff, knobs.tau);
     // Smoothed part (through S) and direct part (already filtered).
     let mut raw: Vec<Vec<f64>> = vec![vec![0.0; 6 * n]; layout.total];
     // Direct parts of the 4 mass-property columns (mass, inertia, com x, com y).
@@ -323,6 +344,7 @@ pub fn build_columns(prep: &Prepared, rec: &Recording, knobs: &Knobs, accel: &[f
             k,
             sample,
             thrust: &thrust[k],
+            command: &prep.u_eff[k],
             body: prep.table.at(sample.varphi),
             act: &prep.act[k],
             rot: &prep.rot[k],
@@ -335,7 +357,7 @@ pub fn build_columns(prep: &Prepared, rec: &Recording, knobs: &Knobs, accel: &[f
     filter_columns(prep, &layout, &at, raw, &lag_raw, &direct)
 }
 
-/// Thrust scale, battery sag (thrust times the energy drawn so far) and
+/// Thrust scale, thrust curve, battery sag (thrust times the energy drawn so far) and
 /// motor lag (difference of thrust and command) for the current tau.
 fn push_thrust_terms(
     raw: &mut [Vec<f64>],
@@ -346,8 +368,10 @@ fn push_thrust_terms(
 ) {
     let bt = row.act * row.thrust;
     push6(&mut raw[at.thrust_scale], row.k, &bt);
+    let curve = row.thrust.map(|t| t * t - t);
+    push6(&mut raw[at.thrust_curve], row.k, &(row.act * curve));
     push6(&mut raw[at.battery], row.k, &(-bt * energy));
-    push6(lag_raw, row.k, &(row.act * (row.thrust - row.sample.u)));
+    push6(lag_raw, row.k, &(row.act * (row.thrust - row.command)));
 }
 
 /// Ground effect: each rotor's basis at its hub height, times its thrust.
@@ -511,10 +535,10 @@ fn filter_columns(
 }
 
 /// The motor-lag column alone for a time constant (commands as thrust).
-pub fn lag_column(prep: &Prepared, rec: &Recording, tau: f64) -> Vec<f64> {
+pub fn lag_column(prep: &Prepared, tau: f64) -> Vec<f64> {
     let n = prep.n;
-    let u: Vec<Input> = rec.samples.iter().map(|s| s.u).collect();
-    let thrust = crate::data::lagged_commands(&prep.t, &u, tau);
+    let u = &prep.u_eff;
+    let thrust = crate::data::lagged_commands(&prep.t, u, tau);
     let mut raw = vec![0.0; 6 * n];
     for k in 0..n {
         let g = prep.act[k] * (thrust[k] - u[k]);

@@ -16,6 +16,10 @@ pub struct Parameter {
     /// One standard deviation (delete-a-fold jackknife; null if unknown).
     pub std: Option<f64>,
     pub unit: String,
+    /// Inside its physical range (not at a bound) with an uncertainty below
+    /// its value (docs/explain.md, physical ranges); false: the value is
+    /// not a finding.
+    pub identified: bool,
 }
 
 /// A candidate effect's verdict.
@@ -32,6 +36,12 @@ pub struct EffectReport {
     pub parameters: Vec<Parameter>,
     /// Effects this one cannot be told apart from with this data.
     pub indistinguishable_from: Vec<String>,
+    /// Which test decided and its numbers (physical range and
+    /// identifiability, held-out residual, 0.5 s prediction).
+    pub decided_by: String,
+    /// Part of the nominal calibration stage (thrust scale, thrust curve,
+    /// inertia, mass), not physics.
+    pub calibration: bool,
 }
 
 /// One point of the ground-effect gain grid.

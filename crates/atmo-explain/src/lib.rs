@@ -39,6 +39,7 @@ pub mod data;
 pub mod effects;
 mod explanation;
 pub mod locate;
+mod noise;
 
 pub mod output;
 mod physical;
@@ -56,8 +57,8 @@ use atmo_core::RobotConfig;
 pub use explanation::{EffectReport, Explanation, GridPoint, Parameter, RmsTable, Series};
 use recording::Recording;
 use stages::{
-    BaseRegressors, Findings, Residuals, fit_effects, locate_mismatch, profile_motor_lag, report,
-    select_effects, validate,
+    BaseRegressors, Findings, Residuals, accept_effects, fit_effects, locate_mismatch,
+    profile_motor_lag, report, select_effects, validate,
 };
 
 /// What can stop the analysis.
@@ -123,7 +124,7 @@ pub struct Progress {
 
 /// The progress steps of [`explain_with_progress`], in order; also the
 /// names of the timings in `explain.json`.
-pub const STEPS: [&str; 9] = [
+pub const STEPS: [&str; 10] = [
     "residuals",
     "locate",
     "regressors",
@@ -131,6 +132,7 @@ pub const STEPS: [&str; 9] = [
     "selection",
     "stability",
     "final fit",
+    "acceptance",
     "validate",
     "report",
 ];
@@ -184,12 +186,15 @@ pub fn explain_with_progress(
     let res = t.step("residuals", || Residuals::new(rec, robot))?;
     let mismatch = t.step("locate", || locate_mismatch(&res));
     let base = t.step("regressors", || BaseRegressors::new(&res, rec));
-    let lag = t.step("motor lag profile", || profile_motor_lag(&res, rec, &base));
+    let lag = t.step("motor lag profile", || profile_motor_lag(&res, &base));
     drop(base);
     let selection = t.step("selection", || select_effects(&res, rec, lag.tau));
     let steps = selection.steps.clone();
     let confidence = t.step("stability", || selection.stability(opts.seed));
     let fit = t.step("final fit", || fit_effects(&res, rec, selection));
+    let (fit, decisions) = t.step("acceptance", || {
+        accept_effects(rec, robot, &res, fit, opts.max_replay_starts)
+    })?;
     let validation = t.step("validate", || {
         validate(rec, robot, &res, &mismatch, &fit, opts.max_replay_starts)
     })?;
@@ -201,6 +206,7 @@ pub fn explain_with_progress(
         steps: &steps,
         confidence: &confidence,
         fit: &fit,
+        decisions: &decisions,
         validation: &validation,
     };
     let mut ex = t.step("report", || report(&findings));

@@ -31,6 +31,8 @@ pub fn json(ex: &Explanation) -> serde_json::Value {
                 "heldout_gain": e.heldout_gain,
                 "parameters": e.parameters,
                 "indistinguishable_from": e.indistinguishable_from,
+                "decided_by": e.decided_by,
+                "stage": if e.calibration { "calibration" } else { "physics" },
             })
         })
         .collect();
@@ -170,50 +172,46 @@ fn report_residuals(s: &mut String, ex: &Explanation) {
 fn report_multistep(s: &mut String, ex: &Explanation) {
     let mb = &ex.multistep_before;
     let ma = &ex.multistep_after;
+    if mb.starts == 0 {
+        let _ = writeln!(
+            s,
+            "Multi-step prediction: no start (no airborne stretch of the horizon in the recording).\n"
+        );
+        return;
+    }
     let _ = writeln!(
         s,
-        "Multi-step prediction ({:.2} s horizon, {} starts, plant replayed with the recorded commands; after = held-out fitted effects):\n",
-        mb.horizon_s, mb.starts
+        "Multi-step prediction ({:.2} s horizon, {} starts, plant replayed with the recorded commands; after = held-out fitted effects{}):\n",
+        mb.horizon_s,
+        mb.starts,
+        if ma.starts == 0 {
+            "; none of the starts could be replayed with the fitted plant files, so the after column is empty"
+        } else {
+            ""
+        }
     );
     let _ = writeln!(
         s,
         "| error at horizon | before | after |\n| --- | --- | --- |"
     );
-    let _ = writeln!(
-        s,
-        "| position (m) x, y, z | {:.4}, {:.4}, {:.4} | {:.4}, {:.4}, {:.4} |",
-        mb.position[0],
-        mb.position[1],
-        mb.position[2],
-        ma.position[0],
-        ma.position[1],
-        ma.position[2]
-    );
-    let _ = writeln!(
-        s,
-        "| attitude (rad) yaw, pitch, roll | {:.4}, {:.4}, {:.4} | {:.4}, {:.4}, {:.4} |",
-        mb.attitude[0],
-        mb.attitude[1],
-        mb.attitude[2],
-        ma.attitude[0],
-        ma.attitude[1],
-        ma.attitude[2]
-    );
-    let _ = writeln!(
-        s,
-        "| velocity (m/s) x, y, z | {:.4}, {:.4}, {:.4} | {:.4}, {:.4}, {:.4} |",
-        mb.velocity[0],
-        mb.velocity[1],
-        mb.velocity[2],
-        ma.velocity[0],
-        ma.velocity[1],
-        ma.velocity[2]
-    );
-    let _ = writeln!(
-        s,
-        "| body rates (rad/s) x, y, z | {:.4}, {:.4}, {:.4} | {:.4}, {:.4}, {:.4} |\n",
-        mb.rate[0], mb.rate[1], mb.rate[2], ma.rate[0], ma.rate[1], ma.rate[2]
-    );
+    let three = |v: [f64; 3]| format!("{:.4}, {:.4}, {:.4}", v[0], v[1], v[2]);
+    let after = |v: [f64; 3]| {
+        if ma.starts == 0 {
+            "none replayed".to_string()
+        } else {
+            three(v)
+        }
+    };
+    let rows = [
+        ("position (m) x, y, z", mb.position, ma.position),
+        ("attitude (rad) yaw, pitch, roll", mb.attitude, ma.attitude),
+        ("velocity (m/s) x, y, z", mb.velocity, ma.velocity),
+        ("body rates (rad/s) x, y, z", mb.rate, ma.rate),
+    ];
+    for (name, before, aft) in rows {
+        let _ = writeln!(s, "| {name} | {} | {} |", three(before), after(aft));
+    }
+    s.push('\n');
     let _ = writeln!(s, "![time series](timeseries.png)\n");
 }
 
@@ -270,9 +268,16 @@ fn report_physics(s: &mut String, ex: &Explanation) {
             .parameters
             .iter()
             .take(if e.name == "ground_effect" { 0 } else { 8 })
-            .map(|p| match p.std {
-                Some(sd) => format!("{} = {:.4} +- {:.4} {}", p.name, p.value, sd, p.unit),
-                None => format!("{} = {:.4} {}", p.name, p.value, p.unit),
+            .map(|p| {
+                let value = match p.std {
+                    Some(sd) => format!("{} = {:.4} +- {:.4} {}", p.name, p.value, sd, p.unit),
+                    None => format!("{} = {:.4} {}", p.name, p.value, p.unit),
+                };
+                if p.identified {
+                    value
+                } else {
+                    format!("{value} (not identified)")
+                }
             })
             .collect();
         let params = if e.name == "ground_effect" {
@@ -280,7 +285,12 @@ fn report_physics(s: &mut String, ex: &Explanation) {
         } else {
             params.join("; ")
         };
-        let verdict = if e.selected { "selected" } else { "rejected" };
+        let verdict = format!(
+            "{}{} ({})",
+            if e.selected { "found" } else { "rejected" },
+            if e.calibration { ", calibration" } else { "" },
+            e.decided_by
+        );
         let _ = writeln!(
             s,
             "| {} ({}) | {}{} | {:.2} | {:.4} | {} |",

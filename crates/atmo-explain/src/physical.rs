@@ -26,6 +26,7 @@ pub(crate) struct Physical {
     pub(crate) drag: Option<[f64; 4]>,
     pub(crate) wind: Option<[f64; 2]>,
     pub(crate) thrust_scale: Option<f64>,
+    pub(crate) thrust_curve: Option<f64>,
     pub(crate) battery: Option<f64>,
     pub(crate) com: Option<[f64; 2]>,
     pub(crate) inertia: Option<f64>,
@@ -67,6 +68,7 @@ impl Physical {
                     });
                 }
                 Effect::ThrustScale => out.thrust_scale = Some(v[0]),
+                Effect::ThrustCurve => out.thrust_curve = Some(v[0]),
                 Effect::BatterySag => out.battery = Some(v[0]),
                 Effect::ComOffset => out.com = Some([v[0], v[1]]),
                 Effect::InertiaError => out.inertia = Some(v[0]),
@@ -96,6 +98,21 @@ impl Physical {
             gain,
             std: vec![vec![0.0; 5]; 4],
         })
+    }
+
+    /// The plant's reading of [`Physical::toml`] (the ideal plant when it
+    /// refuses the file).
+    pub(crate) fn plant_config(
+        &self,
+        convention: ArmInertiaConvention,
+    ) -> atmo_plant::config::PlantConfig {
+        use atmo_core::ConfigFile as _;
+        atmo_plant::config::PlantConfig::from_toml_str(&self.toml(convention, "fold"), "fold")
+            .unwrap_or_else(|_| {
+                let mut cfg = atmo_plant::config::PlantConfig::ideal();
+                cfg.arm_inertia_convention = convention;
+                cfg
+            })
     }
 
     /// The plant file text.
@@ -168,6 +185,13 @@ impl Physical {
                 s,
                 "\n[effects.wind]\nsteady = [{}]\nturbulence_std = [0.0, 0.0, 0.0]",
                 fmt(&[w[0].clamp(-50.0, 50.0), w[1].clamp(-50.0, 50.0), 0.0])
+            );
+        }
+        if let Some(f) = self.thrust_curve {
+            let _ = writeln!(
+                s,
+                "\n[effects.thrust_curve]\n# thrust (1 - curve) u + curve u^2 of full thrust\ncurve = {:.6}",
+                f.clamp(-1.0, 1.0)
             );
         }
         if let Some(b) = self.battery {

@@ -4,7 +4,7 @@
 
 use atmo_core::RobotConfig;
 use atmo_core::control::WheelRates;
-use atmo_core::model::{Input, State, idx};
+use atmo_core::model::{State, idx};
 
 use crate::data::{Prepared, lagged_commands, sg_smoothing_taps};
 use crate::recording::Recording;
@@ -105,7 +105,7 @@ pub fn replay(
 ) -> ReplayError {
     let mut sq = [[0.0; 3]; 4];
     let mut count = 0usize;
-    let u: Vec<Input> = rec.samples.iter().map(|s| s.u).collect();
+    let u = &prep.u_eff;
     let mut horizon_sum = 0.0;
     for &(k, j) in starts {
         let cfg = config_for(k);
@@ -115,7 +115,7 @@ pub fn replay(
             let from = k.saturating_sub(((5.0 * tau) / prep.dt) as usize + 2);
             lagged_commands(&prep.t[from..=k], &u[from..=k], tau)[k - from]
         } else {
-            s.u
+            u[k]
         };
         let initial = InitialState {
             state: smoothed_state(rec, prep, k),
@@ -138,7 +138,7 @@ pub fn replay(
             let dtr = (prep.t[next] - prep.t[row]).max(1e-6);
             let tilt_rate = (rec.samples[next].varphi - rec.samples[row].varphi) / dtr;
             let cmd = Command {
-                rotors: rec.samples[row].u,
+                rotors: rec.samples[row].applied,
                 tilt_rate,
                 wheel_rates: WheelRates {
                     left: 0.0,

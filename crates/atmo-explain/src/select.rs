@@ -234,18 +234,35 @@ pub struct Step {
     pub cv_after: f64,
 }
 
-/// Forward-backward selection over the active segments.
+/// Forward-backward selection over the active segments, all candidates
+/// at once. (A two-stage selection, calibration candidates first and the
+/// physics on top, was tried for issue 16: on the independent generator's
+/// centre-of-mass and drag + wind flights the calibration stage took thrust
+/// scale, mass and inertia errors that the physics did not push out again,
+/// and the result could not be replayed; the calibration is reported apart
+/// instead, [`Effect::is_calibration`].)
 pub fn select(
     stats: &Stats,
     layout: &Layout,
     candidates: &[Effect],
     active: &[bool],
 ) -> (Vec<Effect>, Vec<Step>) {
+    select_from(stats, layout, candidates, &[], active)
+}
+
+/// Forward-backward selection among `candidates` starting from `base`.
+fn select_from(
+    stats: &Stats,
+    layout: &Layout,
+    candidates: &[Effect],
+    base: &[Effect],
+    active: &[bool],
+) -> (Vec<Effect>, Vec<Step>) {
     let entries = stats.entries_in(active).max(1) as f64;
     let min_gain = MIN_GAIN * entries;
-    let mut chosen: Vec<Effect> = Vec::new();
+    let mut chosen: Vec<Effect> = base.to_vec();
     let mut steps = Vec::new();
-    let mut current = stats.cv(&[], active);
+    let mut current = stats.cv(&columns_of(layout, &chosen), active);
     loop {
         let mut best: Option<(Effect, f64)> = None;
         for &e in candidates {

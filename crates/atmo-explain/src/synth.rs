@@ -215,6 +215,7 @@ pub fn record(robot: &RobotConfig, plant_cfg: &PlantConfig, flight: &Flight) -> 
     tilt_hist.push(plant.tilt());
     let mut samples = Vec::with_capacity((flight.duration * 200.0) as usize);
     let mut last_seq = None;
+    let mut steps_at: Vec<usize> = Vec::new();
     let mut tilt_rate = 0.0;
     for _ in 0..steps {
         let t = plant.time();
@@ -267,15 +268,25 @@ pub fn record(robot: &RobotConfig, plant_cfg: &PlantConfig, flight: &Flight) -> 
                 let at = ((est.measured_at / dt).round().max(0.0) as usize).min(cmd_hist.len() - 1);
                 // The command applied over the step that starts at `at`.
                 let cmd_at = cmd_hist[(at + 1).min(cmd_hist.len() - 1)];
+                steps_at.push(at);
                 samples.push(Sample {
                     t: est.measured_at,
                     x: est.state,
                     u: cmd_at,
+                    applied: cmd_at,
                     varphi: tilt_hist[at],
                     ground_z: 0.0,
                     battery_v: None,
                 });
             }
+        }
+    }
+    // The commands applied over each row's interval: the mean of the plant
+    // steps' commands from this row's step to the next row's.
+    for k in 0..samples.len().saturating_sub(1) {
+        let (a, b) = (steps_at[k] + 1, steps_at[k + 1] + 1);
+        if b > a && b <= cmd_hist.len() {
+            samples[k].applied = cmd_hist[a..b].iter().sum::<Input>() / (b - a) as f64;
         }
     }
     // Samples can share an instant at the start (latency not yet filled).

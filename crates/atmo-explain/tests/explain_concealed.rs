@@ -8,6 +8,7 @@
 #![allow(clippy::unwrap_used)]
 
 use atmo_core::{ConfigFile, RobotConfig};
+use atmo_explain::data::{CHANNEL_UNITS, CHANNELS};
 use atmo_explain::synth::{Flight, Profile, record};
 use atmo_explain::{Explanation, Options, explain};
 use atmo_plant::config::{
@@ -84,20 +85,46 @@ fn assert_within(name: &str, value: f64, truth: f64, rel: f64) {
     );
 }
 
-/// Held-out residual RMS in the located region down by at least 60 %.
+/// Held-out residual RMS in the located region down by at least 60 %:
+/// pooled over the located channels in noise floors, and on the located
+/// channel furthest beyond its floor in its own unit
+/// ([`assert_most_affected_improved`]).
 fn assert_improved(ex: &Explanation) {
+    assert_most_affected_improved(ex);
     let b = ex.heldout_rms_before.located_normalized;
     let a = ex.heldout_rms_after.located_normalized;
-    assert!(
-        ex.heldout_rms_before.located_rows > 100,
-        "no located region"
-    );
     assert!(
         a <= 0.4 * b,
         "located-region RMS {b:.3} -> {a:.3} noise floors: less than 60 % lower"
     );
-    // The multi-step prediction gets better too.
+}
+
+/// The located channel furthest beyond its noise floor before the fit:
+/// its held-out RMS in the located region, in m/s^2 or rad/s^2 (no floor
+/// in the measure), down by at least 60 %; and the multi-step prediction
+/// better. Returns the channel's name.
+fn assert_most_affected_improved(ex: &Explanation) -> &'static str {
+    let before = &ex.heldout_rms_before;
+    let after = &ex.heldout_rms_after;
+    assert!(before.located_rows > 100, "no located region");
+    let c = ex
+        .located_channels
+        .iter()
+        .map(|name| CHANNELS.iter().position(|c| c == name).unwrap())
+        .max_by(|&i, &j| {
+            let ratio = |c: usize| before.located_per_channel[c] / ex.noise_floor[c];
+            ratio(i).total_cmp(&ratio(j))
+        })
+        .expect("a located channel");
+    let (b, a) = (before.located_per_channel[c], after.located_per_channel[c]);
+    assert!(
+        a <= 0.4 * b,
+        "{}: located-region RMS {b:.4} -> {a:.4} {}: less than 60 % lower",
+        CHANNELS[c],
+        CHANNEL_UNITS[c]
+    );
     assert!(ex.multistep_after.velocity_norm() < ex.multistep_before.velocity_norm());
+    CHANNELS[c]
 }
 
 /// The fitted gain within 0.03 of the plant's on every covered grid point.
@@ -122,6 +149,15 @@ fn assert_ground_effect_grid(ex: &Explanation) {
     assert_eq!(ex.ground_effect_gain_grid.len(), 20);
 }
 
+/// The plant's ground effect with its thrust fluctuation near the ground
+/// (per rotor, std up to 1.5 % of thrust at 50 deg and 0.25 m, correlation
+/// time 0.05 s: see atmo-plant's ground_effect). The fluctuation is random:
+/// no fitted model removes it, and in the located cells it is most of the
+/// angular residual (wdot_x 0.65 rad/s^2 before and 0.63 after the fit,
+/// against 0.20 of sensor noise). So the pooled measure of
+/// [`assert_improved`] (over a_z and the three angular channels) is judged on
+/// the same flight without the fluctuation
+/// ([`case1_ground_effect_mean_surface`]); here the channel the lift acts on.
 #[test]
 fn case1_ground_effect() {
     let ex = analyse(EffectsConfig {
@@ -130,8 +166,28 @@ fn case1_ground_effect() {
     });
     assert_named(&ex, &["ground_effect"]);
     assert_ground_effect_grid(&ex);
+    assert_eq!(assert_most_affected_improved(&ex), "a_z");
+    assert_ground_effect_located_low(&ex);
+}
+
+/// The ground effect's mean surface alone (the fluctuation's std set to
+/// zero): everything located is explainable, the pooled measure applies.
+#[test]
+fn case1_ground_effect_mean_surface() {
+    let mut ge = GroundEffectConfig::default();
+    ge.std.iter_mut().flatten().for_each(|s| *s = 0.0);
+    let ex = analyse(EffectsConfig {
+        ground_effect: Some(ge),
+        ..EffectsConfig::none()
+    });
+    assert_named(&ex, &["ground_effect"]);
+    assert_ground_effect_grid(&ex);
     assert_improved(&ex);
-    // Located: low, not at altitude.
+    assert_ground_effect_located_low(&ex);
+}
+
+/// Located: low, not at altitude.
+fn assert_ground_effect_located_low(ex: &Explanation) {
     assert!(
         ex.located
             .iter()

@@ -209,7 +209,10 @@ fn csv_round_trip_and_outputs_are_written_and_loadable() {
 }
 
 /// Writes `rec` as the flight stack's MCAP log (one `/atmo/status` per row,
-/// estimate age 0) and returns the path.
+/// estimate age 0, and one tick halfway to the next row that repeats the
+/// row's estimate with the commands that make the interval's mean the
+/// recording's applied commands: the log carries the command timing the
+/// simulator had) and returns the path.
 fn write_mcap(rec: &Recording, path: &std::path::Path) {
     use atmo_io::mcap_log::{LoggerOptions, McapLogger};
     use atmo_io::msg::MpcStatus;
@@ -231,6 +234,25 @@ fn write_mcap(rec: &Recording, path: &std::path::Path) {
         };
         // The logger's queue is bounded: retry until accepted.
         while !log.try_log(ch, stamp_ns, &msg) {
+            std::thread::sleep(std::time::Duration::from_millis(1));
+        }
+        let Some(next) = rec.samples.get(k + 1) else {
+            continue;
+        };
+        let mid_ns = (f64::midpoint(s.t, next.t) * 1e9).round() as u64;
+        let second_half = s.applied * 2.0 - s.u;
+        let mid = MpcStatus {
+            stamp_ns: mid_ns,
+            thrust: [
+                second_half[0],
+                second_half[1],
+                second_half[2],
+                second_half[3],
+            ],
+            estimate_age: (mid_ns - stamp_ns) as f64 * 1e-9,
+            ..msg
+        };
+        while !log.try_log(ch, mid_ns, &mid) {
             std::thread::sleep(std::time::Duration::from_millis(1));
         }
     }

@@ -15,6 +15,7 @@ use serde::Deserialize;
 
 use crate::error::{PlantError, Result};
 use crate::ground_effect::GroundEffectConfig;
+pub use crate::motor::ThrustCurveConfig;
 fn default_dt() -> f64 {
     0.001
 }
@@ -49,6 +50,7 @@ pub struct PlantConfig {
 pub struct EffectsConfig {
     pub ground_effect: Option<GroundEffectConfig>,
     pub motor_lag: Option<MotorLagConfig>,
+    pub thrust_curve: Option<ThrustCurveConfig>,
     pub tilt_mechanism: Option<TiltMechanismConfig>,
     pub drag: Option<DragConfig>,
     pub wind: Option<WindConfig>,
@@ -60,9 +62,10 @@ pub struct EffectsConfig {
 }
 
 /// Names of every effect, as written in `[effects.<name>]`.
-pub const EFFECT_NAMES: [&str; 10] = [
+pub const EFFECT_NAMES: [&str; 11] = [
     "ground_effect",
     "motor_lag",
+    "thrust_curve",
     "tilt_mechanism",
     "drag",
     "wind",
@@ -580,6 +583,7 @@ impl EffectsConfig {
         Self {
             ground_effect: Some(GroundEffectConfig::default()),
             motor_lag: Some(MotorLagConfig::default()),
+            thrust_curve: None,
             tilt_mechanism: Some(TiltMechanismConfig::default()),
             drag: Some(DragConfig::default()),
             wind: Some(WindConfig::default()),
@@ -600,6 +604,7 @@ impl EffectsConfig {
         Self {
             ground_effect: pick(self.ground_effect.as_ref(), over.ground_effect.as_ref()),
             motor_lag: pick(self.motor_lag.as_ref(), over.motor_lag.as_ref()),
+            thrust_curve: pick(self.thrust_curve.as_ref(), over.thrust_curve.as_ref()),
             tilt_mechanism: pick(self.tilt_mechanism.as_ref(), over.tilt_mechanism.as_ref()),
             drag: pick(self.drag.as_ref(), over.drag.as_ref()),
             wind: pick(self.wind.as_ref(), over.wind.as_ref()),
@@ -616,6 +621,7 @@ impl EffectsConfig {
         let on = [
             self.ground_effect.as_ref().is_some_and(|e| e.enabled),
             self.motor_lag.as_ref().is_some_and(|e| e.enabled),
+            self.thrust_curve.as_ref().is_some_and(|e| e.enabled),
             self.tilt_mechanism.as_ref().is_some_and(|e| e.enabled),
             self.drag.as_ref().is_some_and(|e| e.enabled),
             self.wind.as_ref().is_some_and(|e| e.enabled),
@@ -642,6 +648,9 @@ impl EffectsConfig {
             let p = format!("{prefix}.motor_lag");
             c.within(&format!("{p}.time_constant"), e.time_constant, 1e-4, 1.0)?;
             c.within(&format!("{p}.curve"), e.curve, 0.0, 1.0)?;
+        }
+        if let Some(e) = &self.thrust_curve {
+            e.validate(c, prefix, self.motor_lag.as_ref())?;
         }
         if let Some(rate) = self.tilt_mechanism.as_ref().and_then(|e| e.rate_max) {
             c.positive(&format!("{prefix}.tilt_mechanism.rate_max"), rate)?;

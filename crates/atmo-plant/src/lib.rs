@@ -63,6 +63,7 @@ pub mod config;
 pub mod contact;
 pub mod error;
 pub mod ground_effect;
+pub mod motor;
 pub mod noise;
 pub mod plant;
 pub mod sensors;

@@ -25,7 +25,16 @@ pub const REQUIRED_COLUMNS: [&str; 18] = [
 /// Topic of the flight stack's tick status in its MCAP logs.
 pub const STATUS_TOPIC: &str = "/atmo/status";
 /// Optional columns the tool uses.
-pub const OPTIONAL_COLUMNS: [&str; 2] = ["ground_z", "battery_v"];
+pub const OPTIONAL_COLUMNS: [&str; 6] = [
+    "ground_z",
+    "battery_v",
+    "u1_mean",
+    "u2_mean",
+    "u3_mean",
+    "u4_mean",
+];
+/// Optional columns of the mean commands applied until the next row.
+pub const MEAN_COMMAND_COLUMNS: [&str; 4] = ["u1_mean", "u2_mean", "u3_mean", "u4_mean"];
 
 /// One sample of a recording.
 /// Largest time between two consecutive rows of a recording, s.
@@ -41,6 +50,12 @@ pub struct Sample {
     pub x: State,
     /// Normalized rotor commands in effect at `t`.
     pub u: Input,
+    /// Mean rotor commands applied over `[t, next row's t)`. Under the
+    /// recording format's input timing (commands held from their row's `t`
+    /// until the next row) this is `u`; a recording that knows the command
+    /// stream between rows (a simulator, the flight stack's ticks, the CSV
+    /// columns `u1_mean..u4_mean`) gives the mean of what was applied.
+    pub applied: Input,
     /// rad.
     pub varphi: f64,
     /// NED z of the ground plane under the robot (m).
@@ -177,10 +192,12 @@ impl Recording {
             };
             last_t = t;
             let x = State::from_column_slice(&m.state);
+            let u = Input::from_column_slice(&u);
             rec.samples.push(Sample {
                 t,
                 x,
-                u: Input::from_column_slice(&u),
+                u,
+                applied: u,
                 varphi,
                 ground_z: x[2] + m.height,
                 battery_v: None,
@@ -189,6 +206,7 @@ impl Recording {
         if let Some(message) = rec.median_spacing_error() {
             return Err(fail(message));
         }
+        mean_tick_commands(&mut rec.samples, &ticks);
         if rec.samples.is_empty() {
             return Err(fail(format!(
                 "no usable rows on {STATUS_TOPIC}: {} non-finite, {} out of order",
@@ -254,6 +272,17 @@ impl Recording {
             .collect();
         let ground = find("ground_z");
         let battery = find("battery_v");
+        let means: Vec<usize> = MEAN_COMMAND_COLUMNS
+            .iter()
+            .filter_map(|c| find(c))
+            .collect();
+        if !means.is_empty() && means.len() != 4 {
+            return Err(fail(format!(
+                "columns {}: give all four or none (header has: {})",
+                MEAN_COMMAND_COLUMNS.join(", "),
+                names.join(", ")
+            )));
+        }
         let ignored_columns: Vec<String> = names
             .iter()
             .filter(|n| {
@@ -293,7 +322,14 @@ impl Recording {
                 Some(g) => parse(g),
                 None => Some(0.0),
             };
-            let (true, Some(ground_z)) = (ok, ground_z) else {
+            let u = Input::from_column_slice(&values[13..17]);
+            let applied = if means.is_empty() {
+                Some(u)
+            } else {
+                let m: Vec<f64> = means.iter().filter_map(|&c| parse(c)).collect();
+                (m.len() == 4).then(|| Input::from_column_slice(&m))
+            };
+            let (true, Some(ground_z), Some(applied)) = (ok, ground_z, applied) else {
                 rec.skipped_nonfinite += 1;
                 continue;
             };
@@ -315,7 +351,8 @@ impl Recording {
             rec.samples.push(Sample {
                 t: values[0],
                 x: State::from_column_slice(&values[1..13]),
-                u: Input::from_column_slice(&values[13..17]),
+                u,
+                applied,
                 varphi: values[17],
                 ground_z,
                 battery_v: battery.and_then(parse),
@@ -334,11 +371,19 @@ impl Recording {
         Ok(rec)
     }
 
-    /// Writes the recording as CSV (the format [`Recording::from_csv_str`] reads).
+    /// Writes the recording as CSV (the format [`Recording::from_csv_str`]
+    /// reads), with the mean-command columns when any row's applied
+    /// commands differ from its `u`.
     pub fn to_csv(&self) -> String {
-        let mut out = String::with_capacity(self.samples.len() * 200);
+        let with_means = self.samples.iter().any(|s| s.applied != s.u);
+        let mut out = String::with_capacity(self.samples.len() * 260);
         out.push_str(&REQUIRED_COLUMNS.join(","));
-        out.push_str(",ground_z\n");
+        out.push_str(",ground_z");
+        if with_means {
+            out.push(',');
+            out.push_str(&MEAN_COMMAND_COLUMNS.join(","));
+        }
+        out.push('\n');
         for s in &self.samples {
             let _ = write!(out, "{:.6}", s.t);
             for v in s.x.iter() {
@@ -347,7 +392,13 @@ impl Recording {
             for v in s.u.iter() {
                 let _ = write!(out, ",{v:.9}");
             }
-            let _ = writeln!(out, ",{:.9},{:.6}", s.varphi, s.ground_z);
+            let _ = write!(out, ",{:.9},{:.6}", s.varphi, s.ground_z);
+            if with_means {
+                for v in s.applied.iter() {
+                    let _ = write!(out, ",{v:.9}");
+                }
+            }
+            out.push('\n');
         }
         out
     }
@@ -371,6 +422,40 @@ impl Recording {
         }
         d.sort_by(f64::total_cmp);
         d[d.len() / 2]
+    }
+}
+
+/// The mean of the ticks' commands over each row's interval to the next
+/// row (the last row keeps its own): the flight stack's logs know when every
+/// command was applied. Ticks with non-finite commands are passed over.
+fn mean_tick_commands(samples: &mut [Sample], ticks: &[(f64, &atmo_io::msg::MpcStatus)]) {
+    let stream: Vec<(f64, Input)> = ticks
+        .iter()
+        .filter(|(_, m)| m.thrust.iter().all(|v| v.is_finite()))
+        .map(|(t, m)| (*t, Input::from_column_slice(&m.thrust)))
+        .collect();
+    if stream.is_empty() {
+        return;
+    }
+    let mut j = 0;
+    for k in 0..samples.len().saturating_sub(1) {
+        let (a, b) = (samples[k].t, samples[k + 1].t);
+        while j + 1 < stream.len() && stream[j + 1].0 <= a + 1e-9 {
+            j += 1;
+        }
+        let mut sum = Input::zeros();
+        let mut at = a;
+        let mut i = j;
+        loop {
+            let until = stream.get(i + 1).map_or(b, |(t, _)| t.min(b));
+            sum += stream[i].1 * (until - at).max(0.0);
+            at = until;
+            if at >= b || i + 1 >= stream.len() {
+                break;
+            }
+            i += 1;
+        }
+        samples[k].applied = sum / (b - a);
     }
 }
 

@@ -109,10 +109,12 @@ fn convert(t: f64, p: &[f64], v: &[f64], r: &[f64], w: &[f64], pwm: &[f64]) -> S
     x[idx::WX] = w[0];
     x[idx::WY] = -w[1];
     x[idx::WZ] = -w[2];
+    let u = Input::from_iterator(pwm.iter().map(|p| p / PWM_FULL_SCALE));
     Sample {
         t,
         x,
-        u: Input::from_iterator(pwm.iter().map(|p| p / PWM_FULL_SCALE)),
+        u,
+        applied: u,
         varphi: 0.0,
         ground_z: 0.0,
         battery_v: None,

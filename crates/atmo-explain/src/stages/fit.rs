@@ -53,6 +53,28 @@ impl Fit {
         p
     }
 
+    /// The fit redone with the effects `kept` only (same regressors and
+    /// knobs).
+    pub fn restrict(&mut self, kept: &[Effect]) {
+        let mut chosen = kept.to_vec();
+        chosen.sort();
+        let (idx, theta, sd) = select::fit_with_uncertainty(&self.stats, &self.layout, &chosen);
+        let mut physical =
+            Physical::from_theta(&self.layout, &chosen, &idx, &theta, self.knobs.tau);
+        if let Some(w) = physical.wind.as_mut() {
+            w[0] += self.knobs.wind[0];
+            w[1] += self.knobs.wind[1];
+        }
+        self.fold_theta = (0..select::FOLDS)
+            .map(|f| self.stats.solve(&idx, &|s| fold_of(s) != f))
+            .collect();
+        self.chosen = chosen;
+        self.idx = idx;
+        self.theta = theta;
+        self.sd = sd;
+        self.physical = physical;
+    }
+
     /// The held-out prediction of the fitted effects: entry `i` of the
     /// residual predicted by the fit on the folds other than row `k`'s.
     pub fn heldout_residual(&self, res: &Residuals) -> Vec<f64> {

@@ -7,9 +7,11 @@
 //! | locate | [`locate_mismatch`] | [`Mismatch`]: located bins, region, RMS of the nominal model |
 //! | select | [`BaseRegressors::new`], [`profile_motor_lag`], [`select_effects`], [`Selection::stability`] | [`LagProfile`], [`Selection`], confidences |
 //! | fit | [`fit_effects`] | [`Fit`]: coefficients, jackknife deviations, fold fits |
+//! | accept | [`accept_effects`] | the [`Fit`] of the found effects, a [`Decision`] per selected effect (physical range, identifiability, 0.5 s prediction) |
 //! | validate | [`validate()`] | [`Validation`]: held-out residuals, plant file, multi-step errors |
 //! | report | [`report()`] | [`crate::Explanation`] |
 
+mod accept;
 mod fit;
 mod locate;
 mod report;
@@ -20,6 +22,7 @@ mod validate;
 #[cfg(test)]
 mod tests;
 
+pub use accept::{Decision, ParamStatus, RANGES, accept_effects, param_status, range_of};
 pub use fit::{Fit, fit_effects};
 pub use locate::{Mismatch, locate_mismatch, rms_table};
 pub use report::{Findings, effect_reports, gain_grid, notes, plot_series, report, verdict};

@@ -12,7 +12,7 @@ use crate::explanation::{EffectReport, Explanation, GridPoint, Parameter, Series
 use crate::physical::{BATTERY_CAPACITY_WH, BATTERY_FULL_POWER_W};
 use crate::recording::Recording;
 use crate::select::{self, Step};
-use crate::stages::{Fit, LagProfile, Mismatch, Residuals, Validation};
+use crate::stages::{Decision, Fit, LagProfile, Mismatch, Residuals, Validation};
 use crate::{GRID_HEIGHTS, GRID_TILTS_DEG, HIGH_CONFIDENCE};
 
 /// What the report is made of: every stage's output.
@@ -25,6 +25,8 @@ pub struct Findings<'a> {
     pub steps: &'a [Step],
     pub confidence: &'a [(Effect, f64)],
     pub fit: &'a Fit,
+    /// The acceptance stage's decision on each effect the selection chose.
+    pub decisions: &'a [(Effect, Decision)],
     pub validation: &'a Validation,
 }
 
@@ -33,6 +35,7 @@ pub struct Findings<'a> {
 pub fn effect_reports(
     fit: &Fit,
     confidence: &[(Effect, f64)],
+    decisions: &[(Effect, Decision)],
 ) -> (Vec<EffectReport>, Vec<(String, String)>) {
     let active = vec![true; fit.stats.nseg()];
     let (stats, layout, chosen) = (&fit.stats, &fit.layout, &fit.chosen);
@@ -70,13 +73,32 @@ pub fn effect_reports(
                 }
             }
         }
+        let decided_by = decisions.iter().find(|d| d.0 == e).map_or_else(
+            || {
+                "not selected: adding it lowers the held-out residual by less than the threshold"
+                    .into()
+            },
+            |d| d.1.describe(),
+        );
+        // A rejected effect's parameters are those of the fit it was
+        // rejected from (what it would have claimed).
         reports.push(EffectReport {
             name: e.name().into(),
             physics: e.physics().into(),
+            decided_by,
+            calibration: e.is_calibration(),
             selected,
             confidence: conf,
             heldout_gain: gain,
-            parameters: effect_parameters(fit, e, selected),
+            parameters: effect_parameters(fit, e, selected)
+                .into_iter()
+                .map(|mut p| {
+                    let range = crate::stages::range_of(e.name(), &p.name);
+                    p.identified = crate::stages::param_status(p.value, p.std, range)
+                        == crate::stages::ParamStatus::Identified;
+                    p
+                })
+                .collect(),
             indistinguishable_from: indist,
         });
     }
@@ -91,7 +113,7 @@ pub fn effect_reports(
 
 /// Parameters of `e`: for a selected effect from the final fit; for a
 /// rejected one, what a fit with it added would give (for the record).
-fn effect_parameters(fit: &Fit, e: Effect, selected: bool) -> Vec<Parameter> {
+pub(crate) fn effect_parameters(fit: &Fit, e: Effect, selected: bool) -> Vec<Parameter> {
     let layout = &fit.layout;
     let (pidx, ptheta, psd) = if selected {
         (fit.idx.clone(), fit.theta.clone(), fit.sd.clone())
@@ -106,6 +128,7 @@ fn effect_parameters(fit: &Fit, e: Effect, selected: bool) -> Vec<Parameter> {
             .map_or((0.0, 0.0), |p| (ptheta[p], psd[p]))
     };
     let param = |name: String, (value, std): (f64, f64), unit: &str| Parameter {
+        identified: true,
         name,
         value,
         std: Some(std),
@@ -115,6 +138,7 @@ fn effect_parameters(fit: &Fit, e: Effect, selected: bool) -> Vec<Parameter> {
     match e {
         Effect::MotorLag => vec![
             Parameter {
+                identified: true,
                 name: "time_constant".into(),
                 value: fit.knobs.tau,
                 std: None,
@@ -142,6 +166,7 @@ fn effect_parameters(fit: &Fit, e: Effect, selected: bool) -> Vec<Parameter> {
                         (0.0, f64::NAN)
                     };
                     Parameter {
+                        identified: true,
                         name: format!("steady_{axis}"),
                         value: v,
                         std: s.is_finite().then_some(s),
@@ -180,6 +205,7 @@ fn effect_parameters(fit: &Fit, e: Effect, selected: bool) -> Vec<Parameter> {
                 ),
                 Effect::ComOffset => (&["offset_x", "offset_y"], &["m", "m"]),
                 Effect::ThrustScale => (&["scale_minus_one"], &["1"]),
+                Effect::ThrustCurve => (&["quadratic_share"], &["1"]),
                 Effect::InertiaError => (&["inertia_scale_minus_one"], &["1"]),
                 _ => (&["mass_scale_minus_one"], &["1"]),
             };
@@ -250,31 +276,54 @@ pub fn verdict(reports: &[EffectReport], chosen: &[Effect], mismatch: &Mismatch)
         "mismatch located, but no candidate effect explains it (see the located regions)"
             .to_string()
     } else {
-        format!(
-            "mismatch found; explained by {}{}",
+        let describe = |r: &EffectReport| {
+            if r.indistinguishable_from.is_empty() {
+                format!(
+                    "{} (confidence {:.2}; {})",
+                    r.name, r.confidence, r.decided_by
+                )
+            } else {
+                format!(
+                    "{} (confidence {:.2}; this data cannot tell it apart from {})",
+                    r.name,
+                    r.confidence,
+                    r.indistinguishable_from.join(", ")
+                )
+            }
+        };
+        let is_cal = |r: &EffectReport| r.calibration;
+        let list = |cal: bool| {
             reports
                 .iter()
-                .filter(|r| r.selected)
-                .map(|r| {
-                    if r.indistinguishable_from.is_empty() {
-                        format!("{} (confidence {:.2})", r.name, r.confidence)
-                    } else {
-                        format!(
-                            "{} (confidence {:.2}; this data cannot tell it apart from {})",
-                            r.name,
-                            r.confidence,
-                            r.indistinguishable_from.join(", ")
-                        )
-                    }
-                })
+                .filter(|r| r.selected && is_cal(r) == cal)
+                .map(describe)
                 .collect::<Vec<_>>()
-                .join(", "),
+                .join(", ")
+        };
+        let (physics, calibration) = (list(false), list(true));
+        let explained = match (physics.is_empty(), calibration.is_empty()) {
+            (false, true) => physics,
+            (true, false) => format!("the nominal calibration alone: {calibration}"),
+            _ => format!("{physics}; nominal calibration: {calibration}"),
+        };
+        format!(
+            "mismatch found; explained by {explained}{}",
             if high {
                 ""
             } else {
                 "; no effect with high confidence"
             }
         )
+    };
+    let rejected: Vec<String> = reports
+        .iter()
+        .filter(|r| !r.selected && !r.decided_by.starts_with("not selected"))
+        .map(|r| format!("{} ({})", r.name, r.decided_by))
+        .collect();
+    let verdict = if rejected.is_empty() {
+        verdict
+    } else {
+        format!("{verdict}; rejected: {}", rejected.join("; "))
     };
     (mismatch_found, verdict)
 }
@@ -356,7 +405,7 @@ pub fn notes(res: &Residuals, fit: &Fit) -> Vec<String> {
 pub fn report(f: &Findings) -> Explanation {
     let (rec, res, fit, val) = (f.rec, f.res, f.fit, f.validation);
     let prep = &res.prep;
-    let (effects, indistinguishable) = effect_reports(fit, f.confidence);
+    let (effects, indistinguishable) = effect_reports(fit, f.confidence, f.decisions);
     let (mismatch_found, verdict) = verdict(&effects, &fit.chosen, f.mismatch);
     let entries = fit.stats.entries_in(&vec![true; fit.stats.nseg()]).max(1) as f64;
     let before = &f.mismatch.location;

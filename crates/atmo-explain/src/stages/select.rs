@@ -61,7 +61,7 @@ pub struct LagProfile {
 
 /// Profiles the motor-lag time constant: for each tau the lag column enters
 /// with its coefficient fixed at 1, every other candidate free.
-pub fn profile_motor_lag(res: &Residuals, rec: &Recording, base: &BaseRegressors) -> LagProfile {
+pub fn profile_motor_lag(res: &Residuals, base: &BaseRegressors) -> LagProfile {
     let prep = &res.prep;
     let (seg_of, nseg) = (&res.seg_of, res.nseg);
     let cols: Vec<&[f64]> = base
@@ -74,7 +74,7 @@ pub fn profile_motor_lag(res: &Residuals, rec: &Recording, base: &BaseRegressors
     let taus = profile_taus();
     let mut points = vec![(0.0, base.stats.cv(&all_idx, &active))];
     for &tau in &taus {
-        let col = lag_column(prep, rec, tau);
+        let col = lag_column(prep, tau);
         let mut cross = vec![DVector::zeros(base.others.len()); nseg];
         let mut own = vec![0.0; nseg];
         let mut own_y = vec![0.0; nseg];

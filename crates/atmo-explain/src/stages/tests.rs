@@ -9,7 +9,7 @@
 use std::sync::OnceLock;
 
 use atmo_core::control::WheelRates;
-use atmo_core::model::{Model, State, idx};
+use atmo_core::model::{Input, Model, State, idx};
 use atmo_core::{ConfigFile as _, RobotConfig};
 use atmo_plant::config::{EffectsConfig, MassErrorConfig, PlantConfig, TerrainConfig};
 use atmo_plant::plant::{Command, InitialState, Plant};
@@ -64,11 +64,17 @@ fn hover(mass_scale: f64) -> (RobotConfig, Recording) {
     };
     let every = (0.01 / plant.dt()).round() as usize;
     let steps = (SECONDS / plant.dt()).round() as usize;
-    let mut samples = Vec::new();
+    let mut samples: Vec<Sample> = Vec::new();
+    let mut applied_sum = Input::zeros();
     for step in 0..steps {
         let t = plant.time();
         let u = command(t);
         if step % every == 0 {
+            // The previous row's commands: the mean of what its steps applied.
+            if let Some(last) = samples.last_mut() {
+                last.applied = applied_sum / every as f64;
+            }
+            applied_sum = Input::zeros();
             let mut x = plant.state();
             for i in [idx::VX, idx::VY, idx::VZ, idx::WX, idx::WY, idx::WZ] {
                 x[i] += rng.random_range(-NOISE..NOISE);
@@ -77,6 +83,7 @@ fn hover(mass_scale: f64) -> (RobotConfig, Recording) {
                 t,
                 x,
                 u,
+                applied: u,
                 varphi: plant.tilt(),
                 ground_z: 0.0,
                 battery_v: None,
@@ -91,6 +98,7 @@ fn hover(mass_scale: f64) -> (RobotConfig, Recording) {
             },
         };
         plant.step(&cmd).unwrap();
+        applied_sum += u;
     }
     (robot, Recording::from_samples("open-loop hover", samples))
 }
@@ -113,12 +121,13 @@ fn run(mass_scale: f64) -> Run {
     let res = Residuals::new(&rec, &robot).unwrap();
     let mismatch = locate_mismatch(&res);
     let base = BaseRegressors::new(&res, &rec);
-    let lag = profile_motor_lag(&res, &rec, &base);
+    let lag = profile_motor_lag(&res, &base);
     let sel = select_effects(&res, &rec, lag.tau);
     let chosen_by_selection = sel.chosen.clone();
     let steps = sel.steps.clone();
     let confidence = sel.stability(1);
     let fit = fit_effects(&res, &rec, sel);
+    let (fit, decisions) = super::accept_effects(&rec, &robot, &res, fit, 240).unwrap();
     let validation = validate(&rec, &robot, &res, &mismatch, &fit, 240).unwrap();
     let explanation = report(&Findings {
         rec: &rec,
@@ -128,6 +137,7 @@ fn run(mass_scale: f64) -> Run {
         steps: &steps,
         confidence: &confidence,
         fit: &fit,
+        decisions: &decisions,
         validation: &validation,
     });
     Run {
@@ -236,7 +246,7 @@ fn select_finds_a_mass_property_or_thrust_effect_only_when_there_is_one() {
     assert!(heavy.lag.points.len() == 13 && heavy.lag.tau > 0.0);
     // Two segments only: random halves hold one segment, too few to select
     // on, so the confidences are 0 here.
-    assert_eq!(heavy.confidence.len(), 9);
+    assert_eq!(heavy.confidence.len(), Effect::ALL.len());
 }
 
 #[test]
@@ -280,8 +290,12 @@ fn report_states_the_verdict_and_ranks_selected_effects_first() {
         "{}",
         ex.verdict
     );
-    let first_rejected = ex.effects.iter().position(|e| !e.selected).unwrap_or(9);
+    let first_rejected = ex
+        .effects
+        .iter()
+        .position(|e| !e.selected)
+        .unwrap_or(Effect::ALL.len());
     assert!(ex.effects[first_rejected..].iter().all(|e| !e.selected));
-    assert_eq!(ex.effects.len(), 9);
+    assert_eq!(ex.effects.len(), Effect::ALL.len());
     assert_eq!(ex.ground_effect_gain_grid.len(), 20);
 }

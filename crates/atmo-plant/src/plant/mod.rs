@@ -177,6 +177,8 @@ pub struct Plant {
     // Effects (None = off).
     ground_effect: Option<GroundEffect>,
     motor_lag: Option<(f64, f64)>,
+    /// The thrust curve's f without a motor lag (with one it is in `motor_lag`).
+    thrust_curve: Option<f64>,
     drag: Option<DragConfig>,
     wind: Option<Wind>,
     battery: Option<BatterySagConfig>,
@@ -265,11 +267,17 @@ impl Plant {
             .as_ref()
             .filter(|e| e.enabled)
             .map(GroundEffect::new);
+        let curve = fx
+            .thrust_curve
+            .as_ref()
+            .filter(|e| e.enabled)
+            .map(|e| e.curve);
         let motor_lag = fx
             .motor_lag
             .as_ref()
             .filter(|e| e.enabled)
-            .map(|e| (e.time_constant, e.curve));
+            .map(|e| (e.time_constant, curve.unwrap_or(e.curve)));
+        let thrust_curve = curve.filter(|_| motor_lag.is_none());
         let drag = fx.drag.clone().filter(|e| e.enabled);
         let battery = fx.battery_sag.clone().filter(|e| e.enabled);
         let com_offset = fx
@@ -352,6 +360,7 @@ impl Plant {
             plane: Plane::new(terrain),
             ground_effect,
             motor_lag,
+            thrust_curve,
             drag,
             wind,
             battery,
@@ -437,6 +446,10 @@ impl Plant {
     pub fn thrust(&self) -> Input {
         if self.motor_lag.is_some() {
             self.ext.fixed_rows::<4>(THRUST).into_owned()
+        } else if let Some(f) = self.thrust_curve {
+            self.command
+                .rotors
+                .map(|u| crate::motor::ThrustCurveConfig::thrust(f, u))
         } else {
             self.command.rotors
         }

@@ -609,6 +609,8 @@ impl Plant {
                 t[i] = ext[THRUST + i];
                 d[THRUST + i] = (target - t[i]) / tau;
             }
+        } else if let Some(f) = self.thrust_curve {
+            t = t.map(|u| crate::motor::ThrustCurveConfig::thrust(f, u));
         }
         let mut u_eff = t;
         if let Some(b) = &self.battery {

@@ -1,0 +1,397 @@
+//! Stage 4b, accept: an effect the selection chose (it lowers the
+//! held-out one-step residual) is *found* only if
+//!
+//! 1. every parameter lies inside its physical range ([`RANGES`], the
+//!    table in docs/explain.md): a value beyond a bound by more than its
+//!    uncertainty makes the effect "not identified"; a parameter at a bound
+//!    within its uncertainty, or whose uncertainty exceeds its value, is
+//!    reported as not identified (and an effect none of whose parameters is
+//!    identified is not identified);
+//! 2. it improves the held-out 0.5 s multi-step prediction: the velocity
+//!    error at the horizon with the effects fitted without the start's fold
+//!    must be at least [`PREDICTION_MARGIN`] lower with the effect than
+//!    with the same model refitted without it.
+//!
+//! The rest is listed as rejected, with both numbers and the test that
+//! decided. The fit is then redone with the accepted effects only (once:
+//! the tests are not repeated on the reduced model).
+
+use atmo_core::RobotConfig;
+use atmo_plant::config::PlantConfig;
+
+use crate::effects::Effect;
+use crate::physical::Physical;
+use crate::recording::Recording;
+use crate::replay::{self, ReplayError};
+use crate::select::{self, FOLDS, fold_of};
+use crate::stages::report::effect_parameters;
+use crate::stages::{Fit, Residuals};
+use crate::{HORIZON, Result};
+
+/// Relative cut of the 0.5 s velocity error an effect must bring.
+pub const PREDICTION_MARGIN: f64 = 0.01;
+
+/// Physical range of a parameter (by effect and parameter name), the
+/// table of docs/explain.md. Ground-effect gains share one range.
+pub const RANGES: [(&str, &str, f64, f64); 15] = [
+    ("ground_effect", "gain", -0.5, 3.0),
+    ("ground_effect", "rotor_radius^2", 0.0, 0.36),
+    ("motor_lag", "time_constant", 0.005, 0.2),
+    ("motor_lag", "lag_term_scale", 0.5, 1.5),
+    ("drag", "rotor_drag", 0.0, 5.0),
+    ("drag", "body_cd_area", 0.0, 1.0),
+    ("wind", "steady", -15.0, 15.0),
+    ("thrust_scale", "scale_minus_one", -0.5, 0.5),
+    ("thrust_curve", "quadratic_share", -0.6, 0.6),
+    ("battery_sag", "sag", 0.0, 0.5),
+    ("com_offset", "offset", -0.05, 0.05),
+    ("inertia_error", "inertia_scale_minus_one", -0.5, 1.0),
+    ("mass_error", "mass_scale_minus_one", -0.5, 0.5),
+    ("calibration", "thrust_to_mass_minus_one", -0.5, 0.5),
+    ("drag_and_wind", "rotor_drag_times_wind", -30.0, 30.0),
+];
+
+/// The range of parameter `name` of effect `effect`, if documented.
+pub fn range_of(effect: &str, name: &str) -> Option<(f64, f64)> {
+    RANGES
+        .iter()
+        .find(|(e, p, ..)| *e == effect && !p.is_empty() && name.starts_with(p))
+        .map(|(_, _, lo, hi)| (*lo, *hi))
+}
+
+/// What the acceptance tests said about one parameter.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ParamStatus {
+    Identified,
+    /// At a bound (within its uncertainty) or uncertainty above |value|.
+    NotIdentified,
+    /// Beyond a bound by more than its uncertainty.
+    OutOfRange,
+}
+
+/// The status of a value with standard deviation `std` in `range`.
+pub fn param_status(value: f64, std: Option<f64>, range: Option<(f64, f64)>) -> ParamStatus {
+    let sd = std.filter(|s| s.is_finite()).unwrap_or(0.0);
+    if let Some((lo, hi)) = range {
+        if value < lo - sd || value > hi + sd {
+            return ParamStatus::OutOfRange;
+        }
+        if value <= lo || value >= hi {
+            return ParamStatus::NotIdentified;
+        }
+    }
+    if std.is_some() && sd.partial_cmp(&value.abs()) != Some(std::cmp::Ordering::Less) {
+        return ParamStatus::NotIdentified;
+    }
+    ParamStatus::Identified
+}
+
+/// Which test decided an effect's verdict.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Decision {
+    /// Passed both tests (multi-step velocity error at the horizon with
+    /// and without it, m/s; `None` when no 0.5 s stretch exists).
+    Found {
+        with: Option<f64>,
+        without: Option<f64>,
+    },
+    /// A parameter outside its physical range, or none identified.
+    NotIdentified { reason: String },
+    /// Lowers the one-step residual but not the 0.5 s prediction.
+    RejectedByPrediction { with: f64, without: f64 },
+}
+
+impl Decision {
+    /// One line for the report: which test decided, with the numbers.
+    pub fn describe(&self) -> String {
+        match self {
+            Decision::Found {
+                with: Some(w),
+                without: Some(wo),
+            } => format!(
+                "found: lowers the held-out residual and the 0.5 s velocity error ({wo:.4} -> {w:.4} m/s)"
+            ),
+            Decision::Found { .. } => {
+                "found by the held-out residual alone (no 0.5 s stretch to predict)".into()
+            }
+            Decision::NotIdentified { reason } => format!("not identified: {reason}"),
+            Decision::RejectedByPrediction { with, without } => format!(
+                "rejected by the 0.5 s prediction: lowers the held-out residual, but the velocity \
+                 error is {with:.4} m/s with it against {without:.4} m/s without"
+            ),
+        }
+    }
+}
+
+/// The per-fold plant files of the fit restricted to `set` (refitted on
+/// the same regressors), the wind knob included.
+fn fold_configs(fit: &Fit, set: &[Effect], robot: &RobotConfig) -> Vec<PlantConfig> {
+    let idx = select::columns_for(&fit.layout, set);
+    (0..FOLDS)
+        .map(|f| {
+            let theta = fit.stats.solve(&idx, &|s| fold_of(s) != f);
+            let mut p = Physical::from_theta(&fit.layout, set, &idx, &theta, fit.knobs.tau);
+            if let Some(w) = p.wind.as_mut() {
+                w[0] += fit.knobs.wind[0];
+                w[1] += fit.knobs.wind[1];
+            }
+            p.plant_config(robot.arm.inertia_convention)
+        })
+        .collect()
+}
+
+/// Held-out multi-step error of the effects `set` from the `starts`.
+fn heldout_multistep(
+    rec: &Recording,
+    robot: &RobotConfig,
+    res: &Residuals,
+    fit: &Fit,
+    set: &[Effect],
+    starts: &[(usize, usize)],
+) -> ReplayError {
+    let cfgs = fold_configs(fit, set, robot);
+    let fallback = cfgs[0].clone();
+    let tau = if set.contains(&Effect::MotorLag) {
+        fit.knobs.tau
+    } else {
+        0.0
+    };
+    replay::replay(
+        rec,
+        &res.prep,
+        robot,
+        starts,
+        &|k| res.seg_of[k].map_or_else(|| fallback.clone(), |s| cfgs[fold_of(s)].clone()),
+        &|_| tau,
+    )
+}
+
+/// The decision on every selected effect, and the fit redone with the
+/// found ones.
+pub fn accept_effects(
+    rec: &Recording,
+    robot: &RobotConfig,
+    res: &Residuals,
+    mut fit: Fit,
+    max_replay_starts: usize,
+) -> Result<(Fit, Vec<(Effect, Decision)>)> {
+    let spacing = (res.duration() / max_replay_starts.max(1) as f64).max(HORIZON);
+    let starts = replay::start_rows(&res.prep, HORIZON, spacing);
+    let mut decisions = Vec::new();
+    // Mass and thrust scale together: only thrust / mass is identified
+    // (their columns differ only through the inertia); one combined
+    // finding, carried by the thrust scale.
+    if fit.chosen.contains(&Effect::ThrustScale) && fit.chosen.contains(&Effect::MassError) {
+        let (ratio, sd) = thrust_to_mass(&fit);
+        let kept: Vec<Effect> = fit
+            .chosen
+            .iter()
+            .copied()
+            .filter(|e| *e != Effect::MassError)
+            .collect();
+        fit.restrict(&kept);
+        decisions.push((
+            Effect::MassError,
+            Decision::NotIdentified {
+                reason: format!(
+                    "not separable from thrust_scale: the identified combination is \
+                     thrust / mass - 1 = {ratio:.4} +- {sd:.4}, reported as thrust_scale"
+                ),
+            },
+        ));
+    }
+    let chosen = fit.chosen.clone();
+    let with = (!starts.is_empty() && !chosen.is_empty())
+        .then(|| heldout_multistep(rec, robot, res, &fit, &chosen, &starts));
+    for &e in &chosen {
+        // Drag is part of a wind finding: judged with it.
+        if e == Effect::Drag && chosen.contains(&Effect::Wind) {
+            continue;
+        }
+        if let Some(reason) = identification_failure(&fit, e).or_else(|| wind_failure(&fit, e)) {
+            decisions.push((e, Decision::NotIdentified { reason }));
+            continue;
+        }
+        let decision = match &with {
+            Some(w) if w.starts > 0 => {
+                let rest: Vec<Effect> = chosen
+                    .iter()
+                    .copied()
+                    .filter(|x| *x != e && !(e == Effect::Wind && *x == Effect::Drag))
+                    .collect();
+                let wo = heldout_multistep(rec, robot, res, &fit, &rest, &starts);
+                let (a, b) = (w.velocity_norm(), wo.velocity_norm());
+                if wo.starts > 0 && a < (1.0 - PREDICTION_MARGIN) * b {
+                    Decision::Found {
+                        with: Some(a),
+                        without: Some(b),
+                    }
+                } else {
+                    Decision::RejectedByPrediction {
+                        with: a,
+                        without: b,
+                    }
+                }
+            }
+            Some(w) => Decision::NotIdentified {
+                reason: format!(
+                    "the fitted plant file could not be replayed from any of the {} starts",
+                    starts.len().max(w.starts)
+                ),
+            },
+            None => Decision::Found {
+                with: None,
+                without: None,
+            },
+        };
+        decisions.push((e, decision));
+    }
+    let rejected: Vec<Effect> = decisions
+        .iter()
+        .filter(|(e, d)| chosen.contains(e) && !matches!(d, Decision::Found { .. }))
+        .flat_map(|(e, _)| {
+            if *e == Effect::Wind {
+                vec![Effect::Wind, Effect::Drag]
+            } else {
+                vec![*e]
+            }
+        })
+        .collect();
+    // Drag shares the wind's verdict.
+    if let Some((_, d)) = decisions.iter().find(|(e, _)| *e == Effect::Wind) {
+        let d = d.clone();
+        decisions.push((Effect::Drag, d));
+    }
+    if !rejected.is_empty() {
+        let mut kept: Vec<Effect> = chosen
+            .iter()
+            .copied()
+            .filter(|e| !rejected.contains(e))
+            .collect();
+        fit.restrict(&kept);
+        // The refit moves the kept effects' values: their ranges are
+        // checked again until none fails (the prediction test is not
+        // repeated).
+        while let Some((e, reason)) = kept.iter().find_map(|&e| {
+            identification_failure(&fit, e)
+                .or_else(|| wind_failure(&fit, e))
+                .map(|r| (e, r))
+        }) {
+            let gone: Vec<Effect> =
+                if e == Effect::Wind || (e == Effect::Drag && kept.contains(&Effect::Wind)) {
+                    vec![Effect::Wind, Effect::Drag]
+                } else {
+                    vec![e]
+                };
+            for g in &gone {
+                let reason = format!("after the refit without the rejected effects, {reason}");
+                match decisions.iter_mut().find(|d| d.0 == *g) {
+                    Some(d) => d.1 = Decision::NotIdentified { reason },
+                    None => decisions.push((*g, Decision::NotIdentified { reason })),
+                }
+            }
+            kept.retain(|k| !gone.contains(k));
+            fit.restrict(&kept);
+        }
+    }
+    Ok((fit, decisions))
+}
+
+/// `(1 + s) / (1 + m) - 1` of the thrust scale s and mass error m of the
+/// fit, with its delete-a-fold jackknife deviation.
+fn thrust_to_mass(fit: &Fit) -> (f64, f64) {
+    let s_col = fit.layout.columns(Effect::ThrustScale).start;
+    let m_col = fit.layout.columns(Effect::MassError).start;
+    let pos = |c: usize| fit.idx.iter().position(|i| *i == c);
+    let (Some(ps), Some(pm)) = (pos(s_col), pos(m_col)) else {
+        return (0.0, f64::NAN);
+    };
+    let ratio = |th: &nalgebra::DVector<f64>| (1.0 + th[ps]) / (1.0 + th[pm]) - 1.0;
+    let folds: Vec<f64> = fit.fold_theta.iter().map(ratio).collect();
+    let k = folds.len() as f64;
+    let mean = folds.iter().sum::<f64>() / k;
+    let sd = ((k - 1.0) / k * folds.iter().map(|x| (x - mean).powi(2)).sum::<f64>()).sqrt();
+    (ratio(&fit.theta), sd)
+}
+
+/// Wind without an identified rotor drag: only the product is identified
+/// (no airspeed variation to separate them).
+fn wind_failure(fit: &Fit, e: Effect) -> Option<String> {
+    if e != Effect::Wind {
+        return None;
+    }
+    let drag = effect_parameters(fit, Effect::Drag, true);
+    let kr = drag.iter().find(|p| p.name == "rotor_drag")?;
+    let status = param_status(kr.value, kr.std, range_of("drag", "rotor_drag"));
+    if status == ParamStatus::Identified {
+        return None;
+    }
+    let c = fit.layout.columns(Effect::Wind).start;
+    // The column's coefficient is rotor_drag x (wind - the refined knob).
+    let coef = |j: usize| {
+        fit.idx
+            .iter()
+            .position(|i| *i == c + j)
+            .map_or(0.0, |p| fit.theta[p])
+            + kr.value * fit.knobs.wind[j]
+    };
+    Some(format!(
+        "drag and wind not separable (rotor_drag = {:.4} +- {:.4} not identified): the identified \
+         combination is rotor_drag x wind = ({:.4}, {:.4}) N per unit command",
+        kr.value,
+        kr.std.unwrap_or(f64::NAN),
+        coef(0),
+        coef(1)
+    ))
+}
+
+/// Why effect `e` of the fit is not identified, if it is not.
+fn identification_failure(fit: &Fit, e: Effect) -> Option<String> {
+    let params = effect_parameters(fit, e, true);
+    let mut any_identified = false;
+    for p in &params {
+        let range = range_of(e.name(), &p.name);
+        match param_status(p.value, p.std, range) {
+            ParamStatus::OutOfRange => {
+                let (lo, hi) = range.unwrap_or((f64::NAN, f64::NAN));
+                return Some(format!(
+                    "{} = {:.4} +- {:.4} {} is outside its physical range [{lo}, {hi}]",
+                    p.name,
+                    p.value,
+                    p.std.unwrap_or(0.0),
+                    p.unit
+                ));
+            }
+            ParamStatus::Identified => any_identified = true,
+            ParamStatus::NotIdentified => {}
+        }
+    }
+    (!any_identified).then(|| {
+        "no parameter identified (each at a bound of its range or with an uncertainty above \
+         its value)"
+            .to_string()
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn parameter_status_follows_range_and_uncertainty() {
+        let r = Some((-0.5, 0.5));
+        assert_eq!(param_status(0.1, Some(0.01), r), ParamStatus::Identified);
+        assert_eq!(param_status(0.1, Some(0.2), r), ParamStatus::NotIdentified);
+        assert_eq!(param_status(0.5, Some(0.01), r), ParamStatus::NotIdentified);
+        assert_eq!(param_status(-0.95, Some(0.3), r), ParamStatus::OutOfRange);
+        assert_eq!(
+            param_status(54.6, Some(1.0), Some((-15.0, 15.0))),
+            ParamStatus::OutOfRange
+        );
+        assert_eq!(range_of("wind", "steady_x"), Some((-15.0, 15.0)));
+        assert_eq!(
+            range_of("ground_effect", "gain(h=0.25 m, varphi=40 deg)"),
+            Some((-0.5, 3.0))
+        );
+    }
+}

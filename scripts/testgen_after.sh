@@ -1,0 +1,6 @@
+#!/bin/bash
+# Issue 16 phase B: generate with atmo-testgen and analyse with this explain
+# (the same recordings as scripts/testgen_before.sh; outputs in $OUT).
+set -e
+cd "$(dirname "$0")/.."
+OUT=${OUT:-/tmp/testgen_after} ./scripts/testgen_before.sh
