@@ -650,7 +650,7 @@ impl EffectsConfig {
             c.within(&format!("{p}.curve"), e.curve, 0.0, 1.0)?;
         }
         if let Some(e) = &self.thrust_curve {
-            e.validate(c, prefix, self.motor_lag.as_ref())?;
+            e.validate(c, prefix, self.motor_lag.as_ref().map(|m| m.curve))?;
         }
         if let Some(rate) = self.tilt_mechanism.as_ref().and_then(|e| e.rate_max) {
             c.positive(&format!("{prefix}.tilt_mechanism.rate_max"), rate)?;

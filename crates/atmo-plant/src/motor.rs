@@ -8,7 +8,6 @@
 use atmo_core::config_file::{Checker, default_true};
 use serde::Deserialize;
 
-use crate::config::MotorLagConfig;
 use crate::error::Result;
 
 /// `[effects.thrust_curve]`.
@@ -27,19 +26,20 @@ impl ThrustCurveConfig {
         (1.0 - f) * u + f * u * u
     }
 
-    /// Range checks; with a motor lag its own curve must be 0 (one curve).
+    /// Range checks; with a motor lag (`lag_curve`: its
+    /// `[effects.motor_lag].curve`) that curve must be 0 (one curve).
     pub(crate) fn validate(
         &self,
         c: &Checker<'_>,
         prefix: &str,
-        lag: Option<&MotorLagConfig>,
+        lag_curve: Option<f64>,
     ) -> Result<()> {
         let p = format!("{prefix}.thrust_curve");
         c.within(&format!("{p}.curve"), self.curve, -1.0, 1.0)?;
-        if let Some(m) = lag {
+        if let Some(curve) = lag_curve {
             c.within(
                 &format!("{prefix}.motor_lag.curve (0 when [{p}] gives the curve)"),
-                m.curve,
+                curve,
                 0.0,
                 0.0,
             )?;
