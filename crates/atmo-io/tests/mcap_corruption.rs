@@ -215,7 +215,7 @@ fn chunk_size_and_crc_at(records: usize, codec: &str) -> (usize, usize) {
     (crc_at - 8, crc_at)
 }
 
-/// The first input the fuzzer crashed (fuzz/findings/, copied here): an lz4
+/// The first input the fuzzer crashed (fuzz/corpus/mcap/, copied here): an lz4
 /// chunk whose decompressed records claim a length of 2^56 bytes. The
 /// `mcap` chunk reader reserved that length before decompressing
 /// ("memory allocation of 72057594037928710 bytes failed", an abort; the
