@@ -11,17 +11,14 @@
 //! `target/tmp/fuzz-failures/<target>.bin` for `fuzz/`'s replay binaries.
 //! An abort (out of memory) kills the test binary instead, unshrunk.
 //!
-//! `ATMO_FUZZ_CASES` (default [`DEFAULT_CASES`]) sets the cases per target;
+//! `ATMO_FUZZ_CASES` sets the cases per target (by default those of the
+//! tests below: about 2 s of one core each, docs/fuzzing.md);
 //! `ATMO_FUZZ_SEED` (default 0) the random seed: the default run is the same
 //! every time, another seed explores other mutations.
 #![allow(clippy::unwrap_used, reason = "test")]
 
 use proptest::prelude::*;
 use proptest::test_runner::{Config, RngAlgorithm, TestError, TestRng, TestRunner};
-
-/// Cases per target by default: the five targets take about
-/// 10 s in all on one core of the CI machine (BENCHMARKS.md).
-const DEFAULT_CASES: u32 = 3000;
 
 /// Integers at the edges of what parsers check: lengths, counts, sizes.
 const BOUNDARY: [u64; 12] = [
@@ -149,8 +146,9 @@ fn env_or<T: std::str::FromStr>(name: &str, default: T) -> T {
     })
 }
 
-/// Runs `name`'s target on mutated seeds; panics with the shrunk failure.
-fn fuzz(name: &str) {
+/// Runs `name`'s target on `cases` mutated seeds (or `ATMO_FUZZ_CASES`);
+/// panics with the shrunk failure.
+fn fuzz(name: &str, cases: u32) {
     let (_, target) = atmo_fuzz::TARGETS
         .into_iter()
         .find(|(n, _)| *n == name)
@@ -161,7 +159,7 @@ fn fuzz(name: &str) {
         .collect();
     assert!(!seeds.is_empty(), "{name}: no seeds");
     let config = Config {
-        cases: env_or("ATMO_FUZZ_CASES", DEFAULT_CASES),
+        cases: env_or("ATMO_FUZZ_CASES", cases),
         failure_persistence: None,
         ..Config::default()
     };
@@ -200,27 +198,27 @@ fn fuzz(name: &str) {
 
 #[test]
 fn recording_csv_survives_mutated_seeds() {
-    fuzz("recording_csv");
+    fuzz("recording_csv", 20_000);
 }
 
 #[test]
 fn config_toml_survives_mutated_seeds() {
-    fuzz("config_toml");
+    fuzz("config_toml", 20_000);
 }
 
 #[test]
 fn cdr_decode_survives_mutated_seeds() {
-    fuzz("cdr_decode");
+    fuzz("cdr_decode", 50_000);
 }
 
 #[test]
 fn mcap_read_survives_mutated_seeds() {
-    fuzz("mcap_read");
+    fuzz("mcap_read", 3000);
 }
 
 #[test]
 fn mcap_recover_survives_mutated_seeds() {
-    fuzz("mcap_recover");
+    fuzz("mcap_recover", 2000);
 }
 
 /// The mutations do what they say (a mutation that silently did nothing
