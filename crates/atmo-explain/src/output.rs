@@ -400,7 +400,13 @@ fn heat_png(
                 .sum::<f64>()
                 / 6.0)
                 .sqrt();
-            let x = ((r - 1.0) / 4.0).clamp(0.0, 1.0);
+            // Not finite (a cell of 1e200 in the recording overflows the
+            // RMS): the top of the scale. plotters' colormap panics on NaN.
+            let x = if r.is_finite() {
+                ((r - 1.0) / 4.0).clamp(0.0, 1.0)
+            } else {
+                1.0
+            };
             let color = ViridisRGB::get_color(x);
             chart
                 .draw_series(std::iter::once(Rectangle::new(
@@ -440,38 +446,48 @@ fn series_png(path: &Path, ex: &Explanation) -> Result<(), ExplainError> {
     }
     let root = BitMapBackend::new(path, (1100, 500)).into_drawing_area();
     root.fill(&WHITE).map_err(out_err)?;
-    let lo = meas
-        .iter()
-        .chain(nom)
-        .chain(fit)
-        .copied()
-        .fold(f64::INFINITY, f64::min);
-    let hi = meas
-        .iter()
-        .chain(nom)
-        .chain(fit)
-        .copied()
-        .fold(f64::NEG_INFINITY, f64::max);
+    let Some((lo, hi)) = plotted_range(meas.iter().chain(nom).chain(fit).copied()) else {
+        return Ok(()); // no finite value to draw
+    };
     let pad = 0.05 * (hi - lo).max(1e-6);
+    let (y_lo, y_hi) = (lo - pad, hi + pad);
+    let clipped = meas
+        .iter()
+        .chain(nom)
+        .chain(fit)
+        .filter(|v| !(y_lo..=y_hi).contains(*v))
+        .count();
     let mut chart = ChartBuilder::on(&root)
         .caption(
             format!(
-                "{} ({}): recording vs model",
-                CHANNELS[*ch], CHANNEL_UNITS[*ch]
+                "{} ({}): recording vs model{}",
+                CHANNELS[*ch],
+                CHANNEL_UNITS[*ch],
+                if clipped > 0 {
+                    format!(" ({clipped} values outside the range shown, clipped)")
+                } else {
+                    String::new()
+                }
             ),
             ("sans-serif", 20),
         )
         .margin(10)
         .x_label_area_size(35)
         .y_label_area_size(60)
-        .build_cartesian_2d(t[0]..t[t.len() - 1], lo - pad..hi + pad)
+        .build_cartesian_2d(t[0]..t[t.len() - 1], y_lo..y_hi)
         .map_err(out_err)?;
     chart
         .configure_mesh()
         .x_desc("t (s)")
         .draw()
         .map_err(out_err)?;
-    let pts = |v: &Vec<f64>| t.iter().copied().zip(v.iter().copied()).collect::<Vec<_>>();
+    let pts = |v: &Vec<f64>| {
+        t.iter()
+            .zip(v)
+            .filter(|(_, y)| y.is_finite())
+            .map(|(&t, &y)| (t, y.clamp(y_lo, y_hi)))
+            .collect::<Vec<_>>()
+    };
     chart
         .draw_series(LineSeries::new(pts(meas), BLACK.stroke_width(1)))
         .map_err(out_err)?
@@ -495,6 +511,28 @@ fn series_png(path: &Path, ex: &Explanation) -> Result<(), ExplainError> {
         .map_err(out_err)?;
     root.present().map_err(out_err)?;
     Ok(())
+}
+
+/// The y range of a time series: its finite values' full range, unless a
+/// few absurd cells (`u1 = 1e200`) make that more than 1000 times the range
+/// of the 0.5-99.5 % quantiles (or overflow it): then the quantiles, so the
+/// axis stays plottable and the rest of the series is not flattened to a
+/// line. `None` if no value is finite.
+fn plotted_range(values: impl Iterator<Item = f64>) -> Option<(f64, f64)> {
+    let mut finite: Vec<f64> = values.filter(|v| v.is_finite()).collect();
+    if finite.is_empty() {
+        return None;
+    }
+    finite.sort_by(f64::total_cmp);
+    let at = |q: f64| finite[((finite.len() - 1) as f64 * q).round() as usize];
+    let (lo, hi) = (finite[0], finite[finite.len() - 1]);
+    let (q_lo, q_hi) = (at(0.005), at(0.995));
+    let span = hi - lo;
+    if span.is_finite() && span <= 1000.0 * (q_hi - q_lo).max(1e-6) {
+        Some((lo, hi))
+    } else {
+        Some((q_lo, q_hi))
+    }
 }
 
 fn effects_png(path: &Path, ex: &Explanation) -> Result<(), ExplainError> {

@@ -63,6 +63,39 @@ pub fn fold_of(seg: usize) -> usize {
     seg % FOLDS
 }
 
+/// Most sweeps of the SVD fallback of [`bounded_solve`] (nalgebra's own
+/// `pseudo_inverse` iterates until it converges: on a matrix with entries
+/// near 1e200, from one finite but absurd cell such as `vx = 1e100`, it
+/// never did).
+const SVD_MAX_ITERATIONS: usize = 1000;
+
+/// Solves `g theta = b` with a bounded cost: Cholesky (`g` is symmetric
+/// and ridge-stabilized), else an SVD with at most [`SVD_MAX_ITERATIONS`]
+/// sweeps and singular values below 1e-12 of the largest dropped. A system
+/// with a non-finite entry, or whose SVD does not converge, has no solution
+/// here: `theta = 0`, no correction (what an effect that explains nothing
+/// is fitted to), so it cannot enter the model.
+pub(crate) fn bounded_solve(g: DMatrix<f64>, b: &DVector<f64>) -> DVector<f64> {
+    let q = b.len();
+    if !g.iter().chain(b.iter()).all(|v| v.is_finite()) {
+        return DVector::zeros(q);
+    }
+    if let Some(ch) = g.clone().cholesky() {
+        let theta = ch.solve(b);
+        if theta.iter().all(|v| v.is_finite()) {
+            return theta;
+        }
+    }
+    let Some(svd) = g.try_svd(true, true, f64::EPSILON, SVD_MAX_ITERATIONS) else {
+        return DVector::zeros(q);
+    };
+    let largest = svd.singular_values.max();
+    svd.solve(b, 1e-12 * largest)
+        .ok()
+        .filter(|theta| theta.iter().all(|v| v.is_finite()))
+        .unwrap_or_else(|| DVector::zeros(q))
+}
+
 impl Stats {
     /// Accumulates the statistics of `cols` against `y` with a weight per
     /// residual entry (`6 k + channel`, 1 / standard deviation).
@@ -171,12 +204,7 @@ impl Stats {
         for a in 0..q {
             g[(a, a)] += 1e-7 * max_diag + 1e-12;
         }
-        match g.clone().cholesky() {
-            Some(ch) => ch.solve(&b),
-            None => g
-                .pseudo_inverse(1e-12)
-                .map_or_else(|_| DVector::zeros(q), |pi| pi * b),
-        }
+        bounded_solve(g, &b)
     }
 
     /// Weighted squared error of `theta` (columns `idx`) on segment `s`.
@@ -378,4 +406,33 @@ pub fn fit_with_uncertainty(
 /// Columns of a set of effects.
 pub fn columns_for(layout: &Layout, set: &[Effect]) -> Vec<usize> {
     columns_of(layout, set)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn bounded_solve_solves_a_sound_system_and_refuses_absurd_ones() {
+        let g = DMatrix::from_row_slice(2, 2, &[4.0, 1.0, 1.0, 3.0]);
+        let b = DVector::from_row_slice(&[1.0, 2.0]);
+        let theta = bounded_solve(g.clone(), &b);
+        assert!((&g * &theta - &b).norm() < 1e-12, "{theta}");
+        // Singular (Cholesky fails): the SVD's least-norm solution.
+        let singular = DMatrix::from_row_slice(2, 2, &[1.0, 1.0, 1.0, 1.0]);
+        let theta = bounded_solve(singular, &DVector::from_row_slice(&[2.0, 2.0]));
+        assert!(
+            (theta[0] - 1.0).abs() < 1e-9 && (theta[1] - 1.0).abs() < 1e-9,
+            "{theta}"
+        );
+        // What one `vx = 1e100` cell makes of the normal equations: entries
+        // of 1e200 next to ordinary ones, and overflow to inf or NaN.
+        let huge = DMatrix::from_row_slice(2, 2, &[1e200, -1e200, -1e200, 1e-3]);
+        let theta = bounded_solve(huge, &DVector::from_row_slice(&[1e100, 1.0]));
+        assert!(theta.iter().all(|v| v.is_finite()), "{theta}");
+        for bad in [f64::INFINITY, f64::NAN] {
+            let g = DMatrix::from_row_slice(2, 2, &[bad, 0.0, 0.0, 1.0]);
+            assert_eq!(bounded_solve(g, &b), DVector::zeros(2));
+        }
+    }
 }

@@ -46,6 +46,14 @@ pub enum IoError {
         #[source]
         source: mcap::McapError,
     },
+    /// A record of a log cannot be read (truncated, claims more bytes than
+    /// the file holds, does not parse): reading stops there.
+    #[error("{file}: MCAP record at byte {offset}: {reason}")]
+    LogRecord {
+        file: PathBuf,
+        offset: usize,
+        reason: String,
+    },
     /// A log has corrupt chunks or messages (read with the `*_lossy` readers
     /// or `atmo-mcap recover` to keep the sound rest).
     #[error("{file}: corrupt log: {integrity}")]

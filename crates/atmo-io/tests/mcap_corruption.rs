@@ -182,10 +182,8 @@ fn a_chunk_claiming_a_huge_uncompressed_size_is_skipped_not_an_abort() {
         let log = write_log(&format!("{name}.mcap"), compression);
         let original = read_log(&log).unwrap();
         let mut bytes = std::fs::read(&log).unwrap();
-        // The second chunk's header: start, end, uncompressed size, crc,
-        // compression, records length, then its records.
         let records = chunk_payloads(&bytes)[1].start;
-        let size_at = records - 8 - codec.len() - 4 - 4 - 8;
+        let (size_at, _) = chunk_size_and_crc_at(records, codec);
         bytes[size_at + 7] = 0x01;
         let bad = corruption_dir().join(format!("{name}_sized.mcap"));
         std::fs::write(&bad, bytes).unwrap();
@@ -206,5 +204,134 @@ fn a_chunk_claiming_a_huge_uncompressed_size_is_skipped_not_an_abort() {
         )
         .unwrap();
         assert_eq!(report.skipped.corrupt_chunks, 1, "{name}: {report:?}");
+    }
+}
+
+/// The header fields of the chunk whose records start at `records`:
+/// (offset of `uncompressed_size`, offset of `uncompressed_crc`).
+fn chunk_size_and_crc_at(records: usize, codec: &str) -> (usize, usize) {
+    // ... uncompressed size (8), crc (4), compression (4 + len), records length (8)
+    let crc_at = records - 8 - codec.len() - 4 - 4;
+    (crc_at - 8, crc_at)
+}
+
+/// The first input the fuzzer crashed (fuzz/corpus/mcap/, copied here): an lz4
+/// chunk whose decompressed records claim a length of 2^56 bytes. The
+/// `mcap` chunk reader reserved that length before decompressing
+/// ("memory allocation of 72057594037928710 bytes failed", an abort; the
+/// chunk-size check above did not cover it). Now the chunk is decompressed
+/// here into a buffer bounded by its claimed size, fails its lz4 checksum,
+/// and is skipped and counted by offset.
+#[test]
+fn the_fuzzed_mcap_that_aborted_the_reader_is_a_corrupt_chunk() {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/mcap_read_alloc_abort.mcap");
+    let err = read_log(&path).unwrap_err();
+    assert!(matches!(err, IoError::LogCorrupt { .. }), "{err}");
+    let (messages, integrity) = read_log_lossy(&path).unwrap();
+    assert_eq!(
+        (
+            messages.len(),
+            integrity.corrupt_chunks,
+            integrity.messages_in_corrupt_chunks
+        ),
+        (0, 1, 8),
+        "{integrity}"
+    );
+    let note = integrity.first_problem.as_deref().unwrap();
+    assert!(note.starts_with("chunk 1 at byte 42: lz4"), "{note}");
+    let report = recover(&path, corruption_dir().join("fuzz_finding_recovered.mcap")).unwrap();
+    assert_eq!(
+        (report.messages, report.skipped.corrupt_chunks),
+        (0, 1),
+        "{report:?}"
+    );
+    assert!(atmo_io::mcap_log::read_extras(&path).is_ok());
+}
+
+/// The same claim where no checksum catches it first (an uncompressed
+/// chunk with CRC 0, "not computed"): a record inside the chunk claiming
+/// 2^56 bytes is refused against the bytes the chunk holds.
+#[test]
+fn a_record_in_a_chunk_claiming_more_than_the_chunk_holds_is_skipped() {
+    let log = write_log("inner_claim.mcap", Compression::None);
+    let original = read_log(&log).unwrap();
+    let mut bytes = std::fs::read(&log).unwrap();
+    let records = chunk_payloads(&bytes)[1].clone();
+    let (_, crc_at) = chunk_size_and_crc_at(records.start, "");
+    bytes[crc_at..crc_at + 4].fill(0);
+    bytes[records.start + 1..records.start + 9].copy_from_slice(&(1u64 << 56).to_le_bytes());
+    let bad = corruption_dir().join("inner_claim_bad.mcap");
+    std::fs::write(&bad, bytes).unwrap();
+
+    let (messages, integrity) = read_log_lossy(&bad).unwrap();
+    assert_eq!(integrity.corrupt_chunks, 1, "{integrity}");
+    assert_eq!(
+        messages.len() as u64 + integrity.messages_in_corrupt_chunks,
+        original.len() as u64,
+        "{integrity}"
+    );
+    let note = integrity.first_problem.as_deref().unwrap();
+    let claimed = format!(
+        "claims {} bytes, {} are left",
+        1u64 << 56,
+        records.len() - 9
+    );
+    assert!(
+        note.contains("inside the chunk, at byte 0") && note.contains(&claimed),
+        "{note}"
+    );
+    let report = recover(&bad, corruption_dir().join("inner_claim_recovered.mcap")).unwrap();
+    assert_eq!(report.skipped.corrupt_chunks, 1, "{report:?}");
+}
+
+/// File-level records: a length beyond the end of the file, and a string
+/// claiming more than its record (mcap reserves a string's claimed length,
+/// up to 4 GiB, before reading it) stop the read with the record's offset.
+#[test]
+fn a_record_or_string_claiming_more_than_the_file_holds_is_an_error_naming_its_offset() {
+    let log = write_log("outer_claim.mcap", Compression::Zstd);
+    let good = std::fs::read(&log).unwrap();
+    // The header record at byte 8: opcode, length, then the profile string.
+    let cases: [(&str, usize, &[u8], String); 2] = [
+        (
+            "record_length",
+            9,
+            &(1u64 << 56).to_le_bytes(),
+            format!(
+                "header (opcode 0x01) claims {} bytes, {} are left",
+                1u64 << 56,
+                good.len() - 17
+            ),
+        ),
+        (
+            "string_length",
+            17,
+            &0xffff_fff0u32.to_le_bytes(),
+            "a string at byte 0 of the record claims 4294967280 bytes".to_string(),
+        ),
+    ];
+    for (name, at, patch, expected) in cases {
+        let mut bytes = good.clone();
+        bytes[at..at + patch.len()].copy_from_slice(patch);
+        let bad = corruption_dir().join(format!("outer_claim_{name}.mcap"));
+        std::fs::write(&bad, bytes).unwrap();
+        let err = read_log(&bad).unwrap_err();
+        let text = err.to_string();
+        assert!(
+            matches!(err, IoError::LogRecord { offset: 8, .. }) && text.contains(&expected),
+            "{name}: {text}"
+        );
+        assert!(text.contains(&bad.display().to_string()), "{text}");
+        let report = recover(
+            &bad,
+            corruption_dir().join(format!("outer_claim_{name}_rec.mcap")),
+        )
+        .unwrap();
+        let stop = report.stopped_by.unwrap();
+        assert!(
+            stop.starts_with("record at byte 8: ") && stop.contains(&expected),
+            "{stop}"
+        );
+        assert!(atmo_io::mcap_log::read_extras(&bad).is_ok());
     }
 }

@@ -1,5 +1,5 @@
-//! Fuzz target `cdr_decode` (see the crate docs).
+//! Fuzz target `cdr_decode` (see the atmo-fuzz crate docs).
 
 fn main() {
-    atmo_fuzz::run(atmo_fuzz::cdr_decode);
+    atmo_fuzz_afl::run(atmo_fuzz::cdr_decode);
 }

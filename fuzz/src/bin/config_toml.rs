@@ -1,5 +1,5 @@
-//! Fuzz target `config_toml` (see the crate docs).
+//! Fuzz target `config_toml` (see the atmo-fuzz crate docs).
 
 fn main() {
-    atmo_fuzz::run(atmo_fuzz::config_toml);
+    atmo_fuzz_afl::run(atmo_fuzz::config_toml);
 }

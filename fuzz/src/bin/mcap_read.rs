@@ -1,5 +1,5 @@
-//! Fuzz target `mcap_read` (see the crate docs).
+//! Fuzz target `mcap_read` (see the atmo-fuzz crate docs).
 
 fn main() {
-    atmo_fuzz::run(atmo_fuzz::mcap_read);
+    atmo_fuzz_afl::run(atmo_fuzz::mcap_read);
 }

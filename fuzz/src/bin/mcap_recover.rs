@@ -1,5 +1,5 @@
-//! Fuzz target `mcap_recover` (see the crate docs).
+//! Fuzz target `mcap_recover` (see the atmo-fuzz crate docs).
 
 fn main() {
-    atmo_fuzz::run(atmo_fuzz::mcap_recover);
+    atmo_fuzz_afl::run(atmo_fuzz::mcap_recover);
 }

@@ -1,5 +1,5 @@
-//! Fuzz target `recording_csv` (see the crate docs).
+//! Fuzz target `recording_csv` (see the atmo-fuzz crate docs).
 
 fn main() {
-    atmo_fuzz::run(atmo_fuzz::recording_csv);
+    atmo_fuzz_afl::run(atmo_fuzz::recording_csv);
 }

@@ -5,10 +5,10 @@
 use std::collections::BTreeMap;
 use std::path::Path;
 
-use mcap::read::{LinearReader, Options};
 use mcap::records::Record;
 
 use super::reader::{check_magic, read_file};
+use super::records::Records;
 use crate::error::{IoError, Result};
 
 /// A file stored whole in a log.
@@ -47,12 +47,11 @@ impl LogExtras {
 /// first record that does not parse (a truncated log keeps what precedes it).
 pub(super) fn extras_of(bytes: &[u8]) -> LogExtras {
     let mut extras = LogExtras::default();
-    let options = [Options::IgnoreEndMagic].into_iter().collect();
-    let Ok(records) = LinearReader::new_with_options(bytes, options) else {
+    let Ok(records) = Records::of_file(bytes, true) else {
         return extras;
     };
     for record in records {
-        match record {
+        match record.map(|(_, record)| record) {
             Ok(Record::Attachment { header, data, .. }) => {
                 extras.attachments.push(LogAttachment {
                     name: header.name,

@@ -18,10 +18,14 @@
 //!   chunk's CRC is checked before its messages are used; a corrupt chunk or
 //!   an undecodable message is skipped and counted ([`Integrity`]), an error
 //!   for the strict readers, a count for the `*_lossy` ones and `recover`.
+//!   Every length a record claims is checked against the bytes there before
+//!   anything is allocated, so a hostile file takes at most its own size plus
+//!   one chunk of memory (records.rs).
 
 mod attachments;
 mod logger;
 mod reader;
+mod records;
 mod recover;
 mod scan;
 

@@ -120,10 +120,11 @@ fn read_messages<T>(
         }
         Ok::<(), IoError>(())
     })?;
-    if let Some(source) = end.stopped_by {
-        return Err(IoError::Mcap {
+    if let Some(stop) = end.stopped_by {
+        return Err(IoError::LogRecord {
             file: path.to_path_buf(),
-            source,
+            offset: stop.offset,
+            reason: stop.reason,
         });
     }
     let mut integrity = end.integrity;

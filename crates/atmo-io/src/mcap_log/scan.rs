@@ -3,32 +3,27 @@
 //! The `mcap` crate's message streams leave chunk CRCs unchecked by default
 //! and stop at the first error, so a flipped bit inside a compressed chunk
 //! either changes values silently or loses the rest of the log. Here each
-//! chunk is decompressed whole ([`mcap::read::ChunkReader`] checks the CRC of
-//! the uncompressed bytes at the chunk's end) before any of its messages is
-//! handed on: a corrupt chunk is skipped and counted, with the number of
-//! messages it held (from the message index records that follow it), and
-//! reading goes on with the next chunk. A chunk header that claims more than
-//! [`MAX_CHUNK_BYTES`] uncompressed is corrupt too: the decompressor reserves
-//! the claimed size first, so one flipped bit there aborted the process
-//! (found by fuzzing, fuzz/ target `mcap_read`).
+//! chunk is decompressed whole and its CRC checked ([`chunk_records`]) before
+//! any of its messages is handed on: a corrupt chunk is skipped and counted,
+//! with the number of messages it held (from the message index records that
+//! follow it), and reading goes on with the next chunk. Every length a record
+//! claims is checked before it is allocated ([`super::records`]).
 
 use std::borrow::Cow;
 
 pub use crate::error::Integrity;
-use mcap::McapError;
-use mcap::read::{ChannelAccumulator, ChunkReader, LinearReader, Options};
+use mcap::read::ChannelAccumulator;
 use mcap::records::Record;
 
-/// Largest uncompressed chunk read, bytes (the logger closes its chunks at
-/// 1 MiB; other writers' defaults are smaller still).
-const MAX_CHUNK_BYTES: u64 = 256 << 20;
+use super::records::{RecordError, Records, chunk_records, mcap_reason};
 
 /// How a scan ended.
 pub(super) struct ScanEnd {
     pub integrity: Integrity,
-    /// The structural error that stopped the scan (truncation, bad magic),
-    /// if any; the messages before it were delivered.
-    pub stopped_by: Option<McapError>,
+    /// The structural error that stopped the scan (truncation, a record
+    /// claiming more bytes than the file has), if any; the messages before
+    /// it were delivered.
+    pub stopped_by: Option<RecordError>,
 }
 
 /// Calls `on_message` for every message of `bytes` (an MCAP file) whose
@@ -40,12 +35,8 @@ pub(super) fn scan<E>(
     truncated_ok: bool,
     mut on_message: impl FnMut(mcap::Message<'static>) -> Result<(), E>,
 ) -> Result<ScanEnd, E> {
-    let options = truncated_ok
-        .then_some(Options::IgnoreEndMagic)
-        .into_iter()
-        .collect();
     let mut integrity = Integrity::default();
-    let records = match LinearReader::new_with_options(bytes, options) {
+    let records = match Records::of_file(bytes, truncated_ok) {
         Ok(records) => records,
         Err(e) => {
             return Ok(ScanEnd {
@@ -60,7 +51,7 @@ pub(super) fn scan<E>(
     let mut chunk_number = 0u64;
     let mut stopped_by = None;
     for record in records {
-        let record = match record {
+        let (offset, record) = match record {
             Ok(record) => record,
             Err(e) => {
                 stopped_by = Some(e);
@@ -73,29 +64,18 @@ pub(super) fn scan<E>(
         match record {
             Record::Chunk { header, data } => {
                 chunk_number += 1;
-                let inner: Result<Vec<Record<'_>>, String> =
-                    if header.uncompressed_size > MAX_CHUNK_BYTES {
-                        Err(format!(
-                            "uncompressed size {} bytes, over the {MAX_CHUNK_BYTES}-byte limit",
-                            header.uncompressed_size
-                        ))
-                    } else {
-                        ChunkReader::new(header, &data)
-                            .and_then(Iterator::collect)
-                            .map_err(|e| e.to_string())
-                    };
-                match inner {
+                match chunk_records(&header, &data, offset) {
                     Ok(inner) => {
                         after_corrupt_chunk = false;
                         for record in inner {
                             if let Err(e) = dispatch(record, &mut channels, &mut on_message) {
-                                return handled(e, integrity);
+                                return handled(e, offset, integrity);
                             }
                         }
                     }
                     Err(e) => {
                         integrity.corrupt_chunks += 1;
-                        integrity.note(|| format!("chunk {chunk_number}: {e}"));
+                        integrity.note(|| format!("chunk {chunk_number} at byte {offset}: {e}"));
                         after_corrupt_chunk = true;
                     }
                 }
@@ -112,7 +92,7 @@ pub(super) fn scan<E>(
             other => {
                 after_corrupt_chunk = false;
                 if let Err(e) = dispatch(other, &mut channels, &mut on_message) {
-                    return handled(e, integrity);
+                    return handled(e, offset, integrity);
                 }
             }
         }
@@ -125,18 +105,21 @@ pub(super) fn scan<E>(
 
 /// A structural error of a record (bad schema or channel) or the caller's own.
 enum DispatchError<E> {
-    Mcap(McapError),
+    Mcap(mcap::McapError),
     Caller(E),
 }
 
-/// The caller's error aborts; a bad schema or channel record stops the scan
-/// like a truncation.
-fn handled<E>(e: DispatchError<E>, integrity: Integrity) -> Result<ScanEnd, E> {
+/// The caller's error aborts; a bad schema or channel record (at byte
+/// `offset`, or in the chunk there) stops the scan like a truncation.
+fn handled<E>(e: DispatchError<E>, offset: usize, integrity: Integrity) -> Result<ScanEnd, E> {
     match e {
         DispatchError::Caller(e) => Err(e),
         DispatchError::Mcap(e) => Ok(ScanEnd {
             integrity,
-            stopped_by: Some(e),
+            stopped_by: Some(RecordError {
+                offset,
+                reason: mcap_reason(&e),
+            }),
         }),
     }
 }
@@ -153,7 +136,7 @@ fn dispatch<E>(
         Record::Channel(channel) => channels.add_channel(channel).map_err(DispatchError::Mcap),
         Record::Message { header, data } => {
             let channel = channels.get(header.channel_id).ok_or(DispatchError::Mcap(
-                McapError::UnknownChannel(header.sequence, header.channel_id),
+                mcap::McapError::UnknownChannel(header.sequence, header.channel_id),
             ))?;
             on_message(mcap::Message {
                 channel,

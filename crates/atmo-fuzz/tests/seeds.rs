@@ -3,29 +3,37 @@
 //! input, findings included, runs through its target without a crash.
 #![allow(clippy::unwrap_used, reason = "test")]
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 use atmo_core::ConfigFile as _;
-
-fn corpus(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("corpus")
-        .join(name)
-}
+use atmo_fuzz::corpus_dir as corpus;
 
 #[test]
 fn every_committed_input_runs_without_a_crash() {
     for (name, target) in atmo_fuzz::TARGETS {
-        let dir = corpus(if name.starts_with("mcap_") {
-            "mcap"
-        } else {
-            name
-        });
-        let files = atmo_fuzz::corpus_files(&[dir]);
+        let files = atmo_fuzz::corpus_files(&[corpus(name)]);
         assert!(!files.is_empty(), "{name}: no seeds");
         for file in files {
             target(&std::fs::read(&file).unwrap());
         }
+    }
+}
+
+/// The TOML seeds are the shipped config files behind their selector byte
+/// (`cargo run -p atmo-fuzz --example write_seeds` copies them): a seed of
+/// an older format is refused at once and gives the fuzzer nothing.
+#[test]
+fn the_config_seeds_are_the_shipped_config_files() {
+    let config = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../config");
+    for file in atmo_fuzz::corpus_files(&[corpus("config_toml")]) {
+        let name = file.file_name().unwrap().to_str().unwrap();
+        let shipped = config.join(&name[2..]);
+        let seed = std::fs::read(&file).unwrap();
+        assert!(
+            seed[1..] == std::fs::read(&shipped).unwrap()[..],
+            "{name} is not {} any more: run `cargo run -p atmo-fuzz --example write_seeds`",
+            shipped.display()
+        );
     }
 }
 

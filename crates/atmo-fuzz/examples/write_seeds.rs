@@ -1,6 +1,7 @@
-//! Writes the generated seed inputs of `corpus/cdr_decode` and
-//! `corpus/mcap` (the text seeds are written by hand or copied from
-//! `config/`). Run from `fuzz/`: `cargo run --example write_seeds`.
+//! Writes the seed inputs of `fuzz/corpus/`: `config_toml` (the shipped
+//! `config/` files behind their selector byte), `cdr_decode` and `mcap`
+//! (generated; the recording CSV seeds are written by hand):
+//! `cargo run -p atmo-fuzz --example write_seeds`.
 #![allow(
     clippy::unwrap_used,
     reason = "a one-off generator: a failure is a bug to see"
@@ -136,8 +137,30 @@ fn mcap_seeds(dir: &Path) {
     }
 }
 
+/// `corpus/config_toml/K_name.toml`: the selector byte `K` of
+/// `atmo_fuzz::config_toml` (0 robot, 1 plant, 2 flight, 3 daemon, 4 MPC),
+/// then the shipped file.
+fn config_seeds(dir: &Path, config: &Path) {
+    std::fs::create_dir_all(dir).unwrap();
+    let files = [
+        (0, "atmo.toml"),
+        (0, "quadrotor.toml"),
+        (1, "plant.toml"),
+        (2, "flight.toml"),
+        (3, "daemon.toml"),
+        (4, "mpc.toml"),
+    ];
+    for (selector, name) in files {
+        let mut bytes = vec![selector];
+        bytes.extend(std::fs::read(config.join(name)).unwrap());
+        std::fs::write(dir.join(format!("{selector}_{name}")), bytes).unwrap();
+    }
+}
+
 fn main() {
-    let corpus = Path::new(env!("CARGO_MANIFEST_DIR")).join("corpus");
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+    let corpus = root.join("fuzz/corpus");
+    config_seeds(&corpus.join("config_toml"), &root.join("config"));
     cdr_seeds(&corpus.join("cdr_decode"));
     // One folder for both MCAP targets.
     mcap_seeds(&corpus.join("mcap"));
