@@ -23,7 +23,7 @@ use atmo_mpc::{MpcFile, MpcSettings};
 use sha2::{Digest, Sha256};
 
 use crate::error::{DaemonError, Result};
-use crate::flight_stack::{FlightStack, StepInputs};
+use crate::flight_stack::{FlightStack, StepInputs, StepOutputs};
 use crate::settings::FlightSettings;
 
 /// Topic of the per-tick inputs.
@@ -53,13 +53,21 @@ impl TickChannels {
         })
     }
 
-    /// Queues one tick's inputs and status, both stamped with the tick's
-    /// clock. Never blocks, never allocates; a full queue drops and counts.
-    pub fn log_tick(&self, log: &LoggerHandle, tick: u64, inputs: &StepInputs, status: &MpcStatus) {
+    /// Queues one tick's inputs (with the solves the time limit cut,
+    /// `outputs.status.solver_cuts`) and status, both stamped with the
+    /// tick's clock. Never blocks, never allocates; a full queue drops and counts.
+    pub fn log_tick(
+        &self,
+        log: &LoggerHandle,
+        tick: u64,
+        inputs: &StepInputs,
+        outputs: &StepOutputs,
+        status: &MpcStatus,
+    ) {
         log.try_log(
             self.inputs,
             inputs.now_ns,
-            &crate::telemetry::inputs_message(tick, inputs),
+            &crate::telemetry::inputs_message(tick, inputs, &outputs.status.solver_cuts),
         );
         log.try_log(self.status, inputs.now_ns, status);
     }

@@ -119,7 +119,7 @@ fn replay_command(
     out: &std::path::Path,
     status_topic: &str,
 ) -> Result<bool> {
-    use atmo_daemon::replay::{RecordedFlight, replay};
+    use atmo_daemon::replay::{CutReplay, RecordedFlight, replay};
     let flight = RecordedFlight::read(log, status_topic)?;
     let mut files = flight.files.clone();
     if let Some(path) = what_if {
@@ -130,7 +130,13 @@ fn replay_command(
     let config = RecordedFlight::config(&files)?;
     let started = Instant::now();
     let mut table = atmo_daemon::whatif::WhatIfTable::default();
-    let report = replay(&flight, &config, |pair| {
+    // A what-if's solves are other solves: none is cut (see `CutReplay`).
+    let cuts = if what_if.is_some() {
+        CutReplay::None
+    } else {
+        CutReplay::AsLogged
+    };
+    let report = replay(&flight, &config, cuts, |pair| {
         if what_if.is_some() {
             table.push(pair);
         }
@@ -148,6 +154,18 @@ fn replay_command(
     if inputs_left + status_left > 0 {
         println!(
             "  the log ends mid-tick: replayed to its last complete tick ({inputs_left} inputs and {status_left} status records after it)"
+        );
+    }
+    if report.cuts_replayed > 0 {
+        println!(
+            "  {} solves the time limit cut in flight were cut again at their logged iteration",
+            report.cuts_replayed
+        );
+    }
+    if report.cut_overflow_ticks > 0 {
+        println!(
+            "  {} ticks had more time-limit cuts than the log records: they cannot be reproduced",
+            report.cut_overflow_ticks
         );
     }
     match &report.first_difference {

@@ -287,7 +287,7 @@ pub fn fly_logged(
             let message =
                 atmo_daemon::telemetry::status_message(tick, &r.inputs, &r.outputs, &r.timing);
             // Counted if dropped (queue full): reported as an error below.
-            channels.log_tick(&log, tick, &r.inputs, &message);
+            channels.log_tick(&log, tick, &r.inputs, &r.outputs, &message);
             tick += 1;
             on_tick(r);
         },

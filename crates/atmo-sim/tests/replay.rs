@@ -13,7 +13,7 @@ use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
 use atmo_daemon::flight_log::INPUTS_TOPIC;
-use atmo_daemon::replay::{RecordedFlight, replay};
+use atmo_daemon::replay::{CutReplay, RecordedFlight, replay};
 use atmo_sim::closed_loop::{ControllerConfig, STATUS_TOPIC, Summary, fly_logged};
 use atmo_sim::scenario::Scenario;
 
@@ -49,7 +49,7 @@ fn a_simulated_landing_replays_bit_for_bit() {
     assert_eq!(flight.incomplete_tail, (0, 0));
     let config = RecordedFlight::config(&flight.files).unwrap();
     let mut compared = 0;
-    let report = replay(&flight, &config, |_| compared += 1).unwrap();
+    let report = replay(&flight, &config, CutReplay::AsLogged, |_| compared += 1).unwrap();
     assert_eq!(report.first_difference, None, "{report:?}");
     assert_eq!(report.differing_ticks, 0);
     // 14 s at 150 Hz: every tick of the flight.
@@ -69,7 +69,13 @@ fn one_changed_mpc_weight_reports_the_first_differing_tick_and_field() {
         .mpc
         .text
         .replacen(before, "q1 = [1.0, 1.0, 2.0, 10.0, 10.0, 20.0,", 1);
-    let report = replay(&flight, &RecordedFlight::config(&files).unwrap(), |_| {}).unwrap();
+    let report = replay(
+        &flight,
+        &RecordedFlight::config(&files).unwrap(),
+        CutReplay::None,
+        |_| {},
+    )
+    .unwrap();
     let first = report.first_difference.clone().expect("a difference");
     // The stack flies from the first tick: the weight shows at once, in the
     // first compared output, the first thruster command.
@@ -105,11 +111,47 @@ fn a_log_cut_mid_flight_replays_to_its_last_complete_tick() {
     let report = replay(
         &flight,
         &RecordedFlight::config(&flight.files).unwrap(),
+        CutReplay::AsLogged,
         |_| {},
     )
     .unwrap();
     assert_eq!(report.ticks, ticks);
     assert_eq!(report.first_difference, None, "{report:?}");
+}
+
+/// A flight whose solves the wall-clock time limit cut (200 us: most of a
+/// debug build's solves and some of a release build's) replays bit for bit:
+/// the log records each cut solve's iteration and the replay ends the same
+/// solves there. Without repeating the cuts the replay differs.
+#[test]
+fn a_flight_with_solves_cut_by_the_time_limit_replays_bit_for_bit() {
+    let mut scenario = Scenario::load(repo().join("config/scenarios/wheel_landing.toml")).unwrap();
+    scenario.file.duration = 3.0;
+    let mut controller = ControllerConfig::atmo().unwrap();
+    controller.mpc.solver.time_limit = 2e-4;
+    let path = dir().join("time_limited.mcap");
+    fly_logged(&scenario, &controller, &path, |_| {}).unwrap();
+    let flight = RecordedFlight::read(&path, STATUS_TOPIC).unwrap();
+    let cut: usize = flight
+        .inputs
+        .iter()
+        .map(|m| usize::from(m.solver_cut_count))
+        .sum();
+    assert!(cut > 0, "no solve was cut: the test tests nothing");
+    let config = RecordedFlight::config(&flight.files).unwrap();
+    let report = replay(&flight, &config, CutReplay::AsLogged, |_| {}).unwrap();
+    println!(
+        "{} ticks, {cut} solves cut in flight, {} cut again",
+        report.ticks, report.cuts_replayed
+    );
+    assert_eq!(report.first_difference, None, "{report:?}");
+    assert_eq!(report.cuts_replayed, cut);
+    assert_eq!(report.cut_overflow_ticks, 0);
+    let uncut = replay(&flight, &config, CutReplay::None, |_| {}).unwrap();
+    assert!(
+        uncut.first_difference.is_some(),
+        "the cuts made no difference: {uncut:?}"
+    );
 }
 
 /// Copies `input` to `output`, passing each message through `edit`
