@@ -17,7 +17,7 @@ use atmo_mpc::{AlphaSchedule, Mpc, MpcSettings, Outcome, SolverCuts};
 use nalgebra::Vector3;
 
 use crate::error::{DaemonError, Result};
-use crate::ground_model::ground_surface;
+use crate::ground_model::{Surface, ground_surface};
 use crate::modes::{Conditions, Mode, Thresholds, next_mode};
 use crate::observer::{DisturbanceObserver, ObserverSettings};
 use crate::settings::FlightSettings;
@@ -203,15 +203,27 @@ pub struct FlightStack {
 }
 
 impl FlightStack {
-    /// Builds the stack and its MPC (all allocations happen here).
+    /// Builds the stack and its MPC (all allocations happen here); the
+    /// MPC's ground-effect surface is loaded as its settings name it.
     pub fn new(
         robot: &RobotConfig,
         mpc_settings: MpcSettings,
         settings: FlightSettings,
     ) -> Result<Self> {
+        let surface = ground_surface(&mpc_settings.model.ground_effect)?;
+        Self::with_ground_surface(robot, mpc_settings, settings, surface)
+    }
+
+    /// [`Self::new`] with the MPC's ground-effect surface given (e.g. parsed
+    /// from the text a flight log stores).
+    pub fn with_ground_surface(
+        robot: &RobotConfig,
+        mpc_settings: MpcSettings,
+        settings: FlightSettings,
+        surface: Option<Surface>,
+    ) -> Result<Self> {
         let model = Model::new(robot);
         let linkage = Linkage::from_config(&robot.linkage, robot.limits.tilt_max())?;
-        let surface = ground_surface(&mpc_settings.model.ground_effect)?;
         let mut mpc = Mpc::new(model.clone(), mpc_settings)?;
         mpc.set_ground_effect(surface);
         let steps = mpc.steps();

@@ -14,6 +14,7 @@ use std::sync::OnceLock;
 
 use atmo_daemon::flight_log::INPUTS_TOPIC;
 use atmo_daemon::replay::{CutReplay, RecordedFlight, replay};
+use atmo_mpc::settings::GroundEffectSource;
 use atmo_sim::closed_loop::{ControllerConfig, STATUS_TOPIC, Summary, fly_logged};
 use atmo_sim::scenario::Scenario;
 
@@ -152,6 +153,64 @@ fn a_flight_with_solves_cut_by_the_time_limit_replays_bit_for_bit() {
         uncut.first_difference.is_some(),
         "the cuts made no difference: {uncut:?}"
     );
+}
+
+/// The MPC predicting with a plant file's ground-effect surface: the file's
+/// text is logged (`config/ground_effect`), and the replay builds the MPC
+/// from that text, not from the file (deleted before the replay); a
+/// what-if with a changed surface file differs.
+#[test]
+fn a_ground_effect_file_is_logged_and_replayed_from_the_log() {
+    let scenario = Scenario::load(repo().join("config/scenarios/wheel_landing.toml")).unwrap();
+    let surface = dir().join("surface.toml");
+    let shipped = std::fs::read_to_string(repo().join("config/plant.toml")).unwrap();
+    std::fs::write(&surface, &shipped).unwrap();
+    let controller = ControllerConfig::atmo()
+        .unwrap()
+        .deterministic()
+        .with_ground_effect(GroundEffectSource::File(surface.clone()))
+        .unwrap();
+    let path = dir().join("ground_effect_file.mcap");
+    fly_logged(&scenario, &controller, &path, |_| {}).unwrap();
+    std::fs::remove_file(&surface).unwrap();
+
+    let flight = RecordedFlight::read(&path, STATUS_TOPIC).unwrap();
+    let logged = flight
+        .files
+        .ground_effect
+        .clone()
+        .expect("the surface file is logged");
+    assert_eq!(logged.text, shipped);
+    assert_eq!(logged.source, surface);
+    assert!(
+        flight
+            .files
+            .mpc
+            .text
+            .contains(&format!("ground_effect = \"{}\"", surface.display()))
+    );
+    let config = RecordedFlight::config(&flight.files).unwrap();
+    let report = replay(&flight, &config, CutReplay::AsLogged, |_| {}).unwrap();
+    assert_eq!(report.first_difference, None, "{report:?}");
+
+    // What-if: the 60 deg gains doubled (a file of the same name).
+    let stronger = dir().join("what_if");
+    std::fs::create_dir_all(&stronger).unwrap();
+    let row_60_deg = "[0.070, 0.045, 0.025, 0.010, 0.003, 0.0],";
+    assert!(shipped.contains(row_60_deg));
+    let scaled = shipped.replacen(row_60_deg, "[0.140, 0.090, 0.050, 0.020, 0.006, 0.0],", 1);
+    std::fs::write(stronger.join("surface.toml"), scaled).unwrap();
+    let mut files = flight.files.clone();
+    let replaced = files.override_with(&stronger).unwrap();
+    assert_eq!(replaced, [stronger.join("surface.toml")]);
+    let what_if = replay(
+        &flight,
+        &RecordedFlight::config(&files).unwrap(),
+        CutReplay::None,
+        |_| {},
+    )
+    .unwrap();
+    assert!(what_if.first_difference.is_some(), "{what_if:?}");
 }
 
 /// Copies `input` to `output`, passing each message through `edit`
