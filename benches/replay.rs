@@ -19,7 +19,7 @@ use std::time::{Duration, Instant};
 
 use atmo_daemon::control_loop::TickTiming;
 use atmo_daemon::flight_log::TickChannels;
-use atmo_daemon::replay::{RecordedFlight, replay};
+use atmo_daemon::replay::{CutReplay, RecordedFlight, replay};
 use atmo_daemon::telemetry::status_message;
 use atmo_io::mcap_log::{LoggerOptions, McapLogger};
 use atmo_sim::closed_loop::{ControllerConfig, STATUS_TOPIC, TickRecord, fly_logged};
@@ -69,7 +69,8 @@ fn bench(c: &mut Criterion) {
                 let t0 = Instant::now();
                 for k in 0..batch {
                     let i = k as usize % statuses.len();
-                    channels.log_tick(&log, k, black_box(&records[i].inputs), &statuses[i]);
+                    let r = &records[i];
+                    channels.log_tick(&log, k, black_box(&r.inputs), &r.outputs, &statuses[i]);
                 }
                 total += t0.elapsed();
                 done += batch;
@@ -88,7 +89,7 @@ fn bench(c: &mut Criterion) {
         b.iter(|| {
             let flight = RecordedFlight::read(&log_path, STATUS_TOPIC).unwrap();
             let config = RecordedFlight::config(&flight.files).unwrap();
-            let report = replay(&flight, &config, |_| {}).unwrap();
+            let report = replay(&flight, &config, CutReplay::AsLogged, |_| {}).unwrap();
             assert!(report.identical() && report.ticks == 2100);
             black_box(report)
         });

@@ -200,6 +200,7 @@ impl ControlLoop {
             Some(inputs) => {
                 let outputs = stack.step(&inputs);
                 io.emit(&inputs, &outputs, &self.previous);
+                stack.open_cut_window(None);
                 stack.prepare_next();
                 true
             }

@@ -8,7 +8,8 @@
 //!   thread.
 //! - At start, the configuration: the robot, flight and MPC files' texts as
 //!   MCAP attachments (`config/robot`, `config/flight`, `config/mpc`, media
-//!   type `application/toml`) and one metadata record [`CONFIG_METADATA`]
+//!   type `application/toml`; `config/ground_effect` too when the MPC
+//!   predicts with a plant file's ground-effect surface) and one metadata record [`CONFIG_METADATA`]
 //!   with each file's source path and SHA-256, so that a replay rebuilds the
 //!   same flight stack and notices an attachment that changed.
 
@@ -19,11 +20,13 @@ use atmo_core::ConfigFile as _;
 use atmo_core::RobotConfig;
 use atmo_io::mcap_log::{Channel, LogExtras, LoggerHandle};
 use atmo_io::msg::{MpcStatus, TickInputs};
+use atmo_mpc::settings::GroundEffectSource;
 use atmo_mpc::{MpcFile, MpcSettings};
 use sha2::{Digest, Sha256};
 
 use crate::error::{DaemonError, Result};
-use crate::flight_stack::{FlightStack, StepInputs};
+use crate::flight_stack::{FlightStack, StepInputs, StepOutputs};
+use crate::ground_model::{ground_surface, surface_from_text};
 use crate::settings::FlightSettings;
 
 /// Topic of the per-tick inputs.
@@ -53,13 +56,21 @@ impl TickChannels {
         })
     }
 
-    /// Queues one tick's inputs and status, both stamped with the tick's
-    /// clock. Never blocks, never allocates; a full queue drops and counts.
-    pub fn log_tick(&self, log: &LoggerHandle, tick: u64, inputs: &StepInputs, status: &MpcStatus) {
+    /// Queues one tick's inputs (with the solves the time limit cut,
+    /// `outputs.status.solver_cuts`) and status, both stamped with the
+    /// tick's clock. Never blocks, never allocates; a full queue drops and counts.
+    pub fn log_tick(
+        &self,
+        log: &LoggerHandle,
+        tick: u64,
+        inputs: &StepInputs,
+        outputs: &StepOutputs,
+        status: &MpcStatus,
+    ) {
         log.try_log(
             self.inputs,
             inputs.now_ns,
-            &crate::telemetry::inputs_message(tick, inputs),
+            &crate::telemetry::inputs_message(tick, inputs, &outputs.status.solver_cuts),
         );
         log.try_log(self.status, inputs.now_ns, status);
     }
@@ -93,12 +104,15 @@ impl ConfigText {
 }
 
 /// The files a flight stack is built from: robot, flight settings, MPC
-/// settings (the preset is the flight settings' `mpc_preset`).
+/// settings (the preset is the flight settings' `mpc_preset`), and the
+/// plant file whose ground-effect surface the MPC predicts with when its
+/// `[model] ground_effect` names one.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct FlightConfigFiles {
     pub robot: ConfigText,
     pub flight: ConfigText,
     pub mpc: ConfigText,
+    pub ground_effect: Option<ConfigText>,
 }
 
 /// A flight stack's configuration, parsed and validated.
@@ -107,31 +121,57 @@ pub struct FlightConfig {
     pub robot: RobotConfig,
     pub flight: FlightSettings,
     pub mpc: MpcSettings,
+    /// The text of the plant file `mpc.model.ground_effect` names, if it names one.
+    pub ground_effect: Option<ConfigText>,
 }
 
 impl FlightConfig {
-    /// Builds the flight stack.
+    /// Builds the flight stack (a ground-effect surface from the stored
+    /// text, never re-read from disk).
     ///
     /// # Errors
     /// Settings the flight stack refuses.
     pub fn stack(&self) -> Result<FlightStack> {
-        FlightStack::new(&self.robot, self.mpc.clone(), self.flight.clone())
+        let surface = match (&self.mpc.model.ground_effect, &self.ground_effect) {
+            (GroundEffectSource::File(_), Some(file)) => {
+                Some(surface_from_text(&file.text, &file.source)?)
+            }
+            (GroundEffectSource::File(path), None) => {
+                return Err(DaemonError::Setup(format!(
+                    "model.ground_effect: {}: its text is not loaded",
+                    path.display()
+                )));
+            }
+            (source, _) => ground_surface(source)?,
+        };
+        FlightStack::with_ground_surface(
+            &self.robot,
+            self.mpc.clone(),
+            self.flight.clone(),
+            surface,
+        )
     }
 }
 
-const ROLES: [&str; 3] = ["robot", "flight", "mpc"];
+const ROBOT: &str = "robot";
+const FLIGHT: &str = "flight";
+const MPC: &str = "mpc";
+const GROUND_EFFECT: &str = "ground_effect";
 
 impl FlightConfigFiles {
-    /// Reads the three files.
+    /// Reads the three files, and the ground-effect file the MPC file names.
     ///
     /// # Errors
-    /// A file that cannot be read, named.
+    /// A file that cannot be read, named; texts that do not parse.
     pub fn read(robot: &Path, flight: &Path, mpc: &Path) -> Result<Self> {
-        Ok(Self {
+        let mut files = Self {
             robot: ConfigText::read(robot)?,
             flight: ConfigText::read(flight)?,
             mpc: ConfigText::read(mpc)?,
-        })
+            ground_effect: None,
+        };
+        files.read_ground_effect()?;
+        Ok(files)
     }
 
     /// The shipped config/atmo.toml, config/flight.toml and config/mpc.toml
@@ -151,23 +191,28 @@ impl FlightConfigFiles {
                 include_str!("../../../config/flight.toml"),
             ),
             mpc: text("config/mpc.toml", include_str!("../../../config/mpc.toml")),
+            ground_effect: None,
         }
     }
 
-    fn files(&self) -> [&ConfigText; 3] {
-        [&self.robot, &self.flight, &self.mpc]
+    /// `(role, file)` of every file present.
+    fn files(&self) -> Vec<(&'static str, &ConfigText)> {
+        let mut files = vec![
+            (ROBOT, &self.robot),
+            (FLIGHT, &self.flight),
+            (MPC, &self.mpc),
+        ];
+        files.extend(self.ground_effect.as_ref().map(|g| (GROUND_EFFECT, g)));
+        files
     }
 
-    fn files_mut(&mut self) -> [&mut ConfigText; 3] {
-        [&mut self.robot, &mut self.flight, &mut self.mpc]
+    fn files_mut(&mut self) -> Vec<&mut ConfigText> {
+        let mut files = vec![&mut self.robot, &mut self.flight, &mut self.mpc];
+        files.extend(self.ground_effect.as_mut());
+        files
     }
 
-    /// Parses and validates the texts (errors name the source file, line, key).
-    ///
-    /// # Errors
-    /// Bad TOML or values, an unknown MPC preset.
-    pub fn parse(&self) -> Result<FlightConfig> {
-        let robot = RobotConfig::from_toml_str(&self.robot.text, &self.robot.source)?;
+    fn mpc_settings(&self) -> Result<(FlightSettings, MpcSettings)> {
         let flight = FlightSettings::from_toml_str(&self.flight.text, &self.flight.source)?;
         let mpc = MpcFile::from_toml_str(&self.mpc.text, &self.mpc.source)?
             .settings(&flight.mpc_preset)
@@ -179,7 +224,68 @@ impl FlightConfigFiles {
                     self.flight.source.display()
                 ))
             })?;
-        Ok(FlightConfig { robot, flight, mpc })
+        Ok((flight, mpc))
+    }
+
+    fn ground_effect_source(&self) -> Result<GroundEffectSource> {
+        Ok(self.mpc_settings()?.1.model.ground_effect)
+    }
+
+    /// Reads the plant file the MPC text names as its ground-effect surface
+    /// (none if it names none).
+    fn read_ground_effect(&mut self) -> Result<()> {
+        self.ground_effect = match self.ground_effect_source()? {
+            GroundEffectSource::File(path) => Some(ConfigText::read(&path)?),
+            _ => None,
+        };
+        Ok(())
+    }
+
+    /// Sets the MPC's `[model] ground_effect` in the MPC text (comments and
+    /// layout kept) and reads the file it names, so that the texts stay
+    /// the exact description of the flight stack flown (and logged).
+    ///
+    /// # Errors
+    /// An MPC text that is not TOML, a file that cannot be read.
+    pub fn set_ground_effect(&mut self, source: &GroundEffectSource) -> Result<()> {
+        let mut doc: toml_edit::DocumentMut = self
+            .mpc
+            .text
+            .parse()
+            .map_err(|e| DaemonError::Setup(format!("{}: {e}", self.mpc.source.display())))?;
+        let value = match source {
+            GroundEffectSource::None => "none".to_string(),
+            GroundEffectSource::PlantDefault => "default".to_string(),
+            GroundEffectSource::File(path) => path.display().to_string(),
+        };
+        doc["model"]["ground_effect"] = toml_edit::value(value);
+        self.mpc.text = doc.to_string();
+        self.read_ground_effect()
+    }
+
+    /// Parses and validates the texts (errors name the source file, line, key).
+    ///
+    /// # Errors
+    /// Bad TOML or values, an unknown MPC preset, a ground-effect file named
+    /// but not held.
+    pub fn parse(&self) -> Result<FlightConfig> {
+        let robot = RobotConfig::from_toml_str(&self.robot.text, &self.robot.source)?;
+        let (flight, mpc) = self.mpc_settings()?;
+        if let (GroundEffectSource::File(path), None) =
+            (&mpc.model.ground_effect, &self.ground_effect)
+        {
+            return Err(DaemonError::Setup(format!(
+                "{}: model.ground_effect names {}, whose text is missing",
+                self.mpc.source.display(),
+                path.display()
+            )));
+        }
+        Ok(FlightConfig {
+            robot,
+            flight,
+            mpc,
+            ground_effect: self.ground_effect.clone(),
+        })
     }
 
     /// Stores the texts in the log (attachments `config/<role>`) with the
@@ -190,7 +296,7 @@ impl FlightConfigFiles {
     /// The logger has stopped.
     pub fn log_to(&self, log: &LoggerHandle, log_time_ns: u64) -> atmo_io::Result<()> {
         let mut entries = BTreeMap::new();
-        for (role, file) in ROLES.iter().zip(self.files()) {
+        for (role, file) in self.files() {
             log.attach(
                 &format!("config/{role}"),
                 TOML_MEDIA_TYPE,
@@ -219,8 +325,7 @@ impl FlightConfigFiles {
                 "no `{CONFIG_METADATA}` metadata record: the log does not hold the configuration it was flown with"
             ))
         })?;
-        let mut texts = Vec::with_capacity(3);
-        for role in ROLES {
+        let role = |role: &str| -> Result<ConfigText> {
             let name = format!("config/{role}");
             let attachment = extras
                 .attachment(&name)
@@ -245,31 +350,38 @@ impl FlightConfigFiles {
                     "attachment `{name}` is corrupt: SHA-256 {actual}, recorded {recorded}"
                 )));
             }
-            texts.push(config);
-        }
-        let mut texts = texts.into_iter();
-        let mut next = || {
-            texts
-                .next()
-                .ok_or_else(|| fail("internal: role count".into()))
+            Ok(config)
         };
-        Ok(Self {
-            robot: next()?,
-            flight: next()?,
-            mpc: next()?,
-        })
+        let files = Self {
+            robot: role(ROBOT)?,
+            flight: role(FLIGHT)?,
+            mpc: role(MPC)?,
+            ground_effect: meta
+                .contains_key(&format!("{GROUND_EFFECT}.sha256"))
+                .then(|| role(GROUND_EFFECT))
+                .transpose()?,
+        };
+        // The MPC text must not name a surface the log does not hold.
+        files.parse().map_err(|e| fail(e.to_string()))?;
+        Ok(files)
     }
 
     /// What-if: replaces every file whose name (the last path component of
-    /// its source) is `path`'s, or, for a folder, is present in it. Returns
-    /// the sources replaced.
+    /// its source) is `path`'s, or, for a folder, is present in it; a new
+    /// MPC file that names another ground-effect file reads that one.
+    /// Returns the sources replaced.
     ///
     /// # Errors
     /// A path that is neither, a file that cannot be read, or one that
     /// replaces nothing (named, with the names that would match).
     pub fn override_with(&mut self, path: &Path) -> Result<Vec<PathBuf>> {
+        let source_before = self.ground_effect_source()?;
         let mut replaced = Vec::new();
-        let names: Vec<String> = self.files().iter().map(|f| file_name(&f.source)).collect();
+        let names: Vec<String> = self
+            .files()
+            .iter()
+            .map(|(_, f)| file_name(&f.source))
+            .collect();
         for (file, name) in self.files_mut().into_iter().zip(&names) {
             let candidate = if path.is_dir() {
                 path.join(name)
@@ -289,6 +401,9 @@ impl FlightConfigFiles {
                 path.display(),
                 names.join(", ")
             )));
+        }
+        if self.ground_effect_source()? != source_before {
+            self.read_ground_effect()?;
         }
         Ok(replaced)
     }

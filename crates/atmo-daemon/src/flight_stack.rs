@@ -13,11 +13,11 @@
 use atmo_core::control::{DiffDrive, WheelRates, blending_alpha};
 use atmo_core::model::{Input, State, idx};
 use atmo_core::{Linkage, Model, RobotConfig};
-use atmo_mpc::{AlphaSchedule, Mpc, MpcSettings, Outcome};
+use atmo_mpc::{AlphaSchedule, Mpc, MpcSettings, Outcome, SolverCuts};
 use nalgebra::Vector3;
 
 use crate::error::{DaemonError, Result};
-use crate::ground_model::ground_surface;
+use crate::ground_model::{Surface, ground_surface};
 use crate::modes::{Conditions, Mode, Thresholds, next_mode};
 use crate::observer::{DisturbanceObserver, ObserverSettings};
 use crate::settings::FlightSettings;
@@ -142,6 +142,10 @@ pub struct Status {
     /// Disturbance wrench the MPC predicts with (body force N, torque N m).
     pub disturbance: [f64; 6],
     pub rejected: RejectCounters,
+    /// Solves the wall-clock time limit cut since the last
+    /// [`FlightStack::open_cut_window`] (the preparation before this tick
+    /// and this tick's feedback): logged so that a replay cuts them again.
+    pub solver_cuts: SolverCuts,
 }
 
 /// What one tick commands.
@@ -199,15 +203,27 @@ pub struct FlightStack {
 }
 
 impl FlightStack {
-    /// Builds the stack and its MPC (all allocations happen here).
+    /// Builds the stack and its MPC (all allocations happen here); the
+    /// MPC's ground-effect surface is loaded as its settings name it.
     pub fn new(
         robot: &RobotConfig,
         mpc_settings: MpcSettings,
         settings: FlightSettings,
     ) -> Result<Self> {
+        let surface = ground_surface(&mpc_settings.model.ground_effect)?;
+        Self::with_ground_surface(robot, mpc_settings, settings, surface)
+    }
+
+    /// [`Self::new`] with the MPC's ground-effect surface given (e.g. parsed
+    /// from the text a flight log stores).
+    pub fn with_ground_surface(
+        robot: &RobotConfig,
+        mpc_settings: MpcSettings,
+        settings: FlightSettings,
+        surface: Option<Surface>,
+    ) -> Result<Self> {
         let model = Model::new(robot);
         let linkage = Linkage::from_config(&robot.linkage, robot.limits.tilt_max())?;
-        let surface = ground_surface(&mpc_settings.model.ground_effect)?;
         let mut mpc = Mpc::new(model.clone(), mpc_settings)?;
         mpc.set_ground_effect(surface);
         let steps = mpc.steps();
@@ -457,6 +473,7 @@ impl FlightStack {
             drive_velocity: [0.0, 0.0],
             disturbance: [0.0; 6],
             rejected: self.rejected,
+            solver_cuts: SolverCuts::default(),
         };
         self.observe(mode, tilt);
         status.disturbance = self.observer.wrench().into();
@@ -465,6 +482,7 @@ impl FlightStack {
         let wheel_rates = self.wheels(mode, &state, height, pilot, &mut status);
         self.last_thrust = thrust;
         status.rejected = self.rejected;
+        status.solver_cuts = self.mpc.solver_cuts();
         StepOutputs {
             thrust: [thrust[0], thrust[1], thrust[2], thrust[3]],
             tilt_velocity,
@@ -713,6 +731,14 @@ impl FlightStack {
         let _ = self.mpc.set_alpha(alpha);
         let _ = self.mpc.set_disturbance(&self.observer.wrench());
         let _ = self.mpc.set_ground_height(self.last_ground_z);
+    }
+
+    /// Opens the window of MPC solves whose time-limit cuts the next
+    /// `step` reports (`Status::solver_cuts`): call before `prepare_next`.
+    /// A replay passes the logged window's cuts as `script` (see
+    /// `atmo_mpc::qp::cuts`); in flight, `None`.
+    pub fn open_cut_window(&mut self, script: Option<SolverCuts>) {
+        self.mpc.open_cut_window(script);
     }
 
     /// The RTI preparation phase for the next tick. Call after the outputs

@@ -4,6 +4,7 @@
 //! `config/plant.toml` and of the `fitted_effects.toml` that `atmo-sim
 //! explain` writes). Start-up only.
 
+use std::path::Path;
 use std::sync::Arc;
 
 use atmo_core::ConfigFile as _;
@@ -14,21 +15,32 @@ use atmo_plant::ground_effect::GroundEffect;
 
 use crate::error::{DaemonError, Result};
 
-/// The surface `source` names, loaded and checked.
-pub fn ground_surface(source: &GroundEffectSource) -> Result<Option<Arc<dyn ThrustGainSurface>>> {
+/// A shared surface, as the MPC takes it.
+pub type Surface = Arc<dyn ThrustGainSurface>;
+
+/// The surface `source` names, loaded and checked (a file is read here).
+pub fn ground_surface(source: &GroundEffectSource) -> Result<Option<Surface>> {
     Ok(match source {
         GroundEffectSource::None => None,
         GroundEffectSource::PlantDefault => Some(Arc::new(GroundEffect::default_surface())),
         GroundEffectSource::File(path) => {
-            let plant = PlantConfig::load(path)
+            let text = atmo_core::config_file::read_config_file(path)
                 .map_err(|e| DaemonError::Setup(format!("model.ground_effect: {e}")))?;
-            let Some(config) = plant.effects.ground_effect.filter(|g| g.enabled) else {
-                return Err(DaemonError::Setup(format!(
-                    "model.ground_effect: {} has no enabled [effects.ground_effect]",
-                    path.display()
-                )));
-            };
-            Some(Arc::new(GroundEffect::new(&config)))
+            Some(surface_from_text(&text, path)?)
         }
     })
+}
+
+/// The enabled `[effects.ground_effect]` of a plant file's `text` (read
+/// from `source`, named in errors).
+pub fn surface_from_text(text: &str, source: &Path) -> Result<Surface> {
+    let plant = PlantConfig::from_toml_str(text, source)
+        .map_err(|e| DaemonError::Setup(format!("model.ground_effect: {e}")))?;
+    let Some(config) = plant.effects.ground_effect.filter(|g| g.enabled) else {
+        return Err(DaemonError::Setup(format!(
+            "model.ground_effect: {} has no enabled [effects.ground_effect]",
+            source.display()
+        )));
+    };
+    Ok(Arc::new(GroundEffect::new(&config)))
 }

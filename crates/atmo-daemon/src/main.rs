@@ -6,12 +6,11 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result, bail};
-use atmo_core::RobotConfig;
+use atmo_daemon::Mode;
 use atmo_daemon::cli::DaemonConfigArg;
 use atmo_daemon::control_loop::ControlThread;
 use atmo_daemon::flight_log::{FlightConfig, FlightConfigFiles, TickChannels};
 use atmo_daemon::onboard::{DaemonConfig, OnboardIo, OnboardSettings, OnboardShared};
-use atmo_daemon::{FlightSettings, FlightStack, Mode};
 use atmo_io::mcap_log::McapLogger;
 use atmo_io::ros2::{Ros2Node, Ros2StartOptions};
 use clap::{Parser, Subcommand};
@@ -119,7 +118,7 @@ fn replay_command(
     out: &std::path::Path,
     status_topic: &str,
 ) -> Result<bool> {
-    use atmo_daemon::replay::{RecordedFlight, replay};
+    use atmo_daemon::replay::{CutReplay, RecordedFlight, replay};
     let flight = RecordedFlight::read(log, status_topic)?;
     let mut files = flight.files.clone();
     if let Some(path) = what_if {
@@ -130,7 +129,13 @@ fn replay_command(
     let config = RecordedFlight::config(&files)?;
     let started = Instant::now();
     let mut table = atmo_daemon::whatif::WhatIfTable::default();
-    let report = replay(&flight, &config, |pair| {
+    // A what-if's solves are other solves: none is cut (see `CutReplay`).
+    let cuts = if what_if.is_some() {
+        CutReplay::None
+    } else {
+        CutReplay::AsLogged
+    };
+    let report = replay(&flight, &config, cuts, |pair| {
         if what_if.is_some() {
             table.push(pair);
         }
@@ -148,6 +153,18 @@ fn replay_command(
     if inputs_left + status_left > 0 {
         println!(
             "  the log ends mid-tick: replayed to its last complete tick ({inputs_left} inputs and {status_left} status records after it)"
+        );
+    }
+    if report.cuts_replayed > 0 {
+        println!(
+            "  {} solves the time limit cut in flight were cut again at their logged iteration",
+            report.cuts_replayed
+        );
+    }
+    if report.cut_overflow_ticks > 0 {
+        println!(
+            "  {} ticks had more time-limit cuts than the log records: they cannot be reproduced",
+            report.cut_overflow_ticks
         );
     }
     match &report.first_difference {
@@ -173,35 +190,32 @@ struct Loaded {
     config: DaemonConfig,
     /// The exact texts the flight stack is built from (logged at start).
     files: FlightConfigFiles,
-    robot: RobotConfig,
-    flight: FlightSettings,
-    mpc: atmo_mpc::MpcSettings,
+    /// Parsed from `files`: the flight stack is built from these texts only.
+    parsed: FlightConfig,
 }
 
 fn load(arg: &DaemonConfigArg) -> Result<Loaded> {
     let config = arg.load()?;
     let files = FlightConfigFiles::read(&config.robot, &config.flight, &config.mpc)?;
-    let FlightConfig { robot, flight, mpc } = files.parse()?;
+    let parsed = files.parse()?;
     Ok(Loaded {
         config,
         files,
-        robot,
-        flight,
-        mpc,
+        parsed,
     })
 }
 
 fn check(arg: &DaemonConfigArg) -> Result<()> {
     let l = load(arg)?;
     let path = &arg.config;
-    FlightStack::new(&l.robot, l.mpc.clone(), l.flight.clone())?;
+    l.parsed.stack()?;
     println!("{}: valid", path.display());
     println!("  robot  {}", l.config.robot.display());
     println!(
         "  flight {} ({} Hz, MPC preset `{}`)",
         l.config.flight.display(),
-        l.flight.control_loop.rate_hz,
-        l.flight.mpc_preset
+        l.parsed.flight.control_loop.rate_hz,
+        l.parsed.flight.mpc_preset
     );
     println!("  mpc    {}", l.config.mpc.display());
     println!("  log    {}", l.config.log.path.display());
@@ -220,7 +234,7 @@ fn check(arg: &DaemonConfigArg) -> Result<()> {
 fn run(arg: &DaemonConfigArg, log_path: Option<PathBuf>, duration: Option<f64>) -> Result<()> {
     let l = load(arg)?;
     let path = &arg.config;
-    let stack = FlightStack::new(&l.robot, l.mpc, l.flight.clone())?;
+    let stack = l.parsed.stack()?;
     let period = atmo_daemon::control_loop::tick_period(stack.period());
 
     // SIGINT/SIGTERM only set a flag: the main thread shuts down in order.
@@ -245,7 +259,7 @@ fn run(arg: &DaemonConfigArg, log_path: Option<PathBuf>, duration: Option<f64>) 
         Ros2Node::start(&l.config.ros2, Ros2StartOptions::default()).context("ROS 2 node")?;
 
     let shared = Arc::new(OnboardShared::default());
-    let settings = OnboardSettings::new(&l.config, l.flight.failsafe.estimate_timeout);
+    let settings = OnboardSettings::new(&l.config, l.parsed.flight.failsafe.estimate_timeout);
     let drivers = l.config.drivers.clone();
     let (thread_shared, thread_log, thread_ros_out) =
         (Arc::clone(&shared), log.clone(), ros_out.clone());
@@ -264,7 +278,7 @@ fn run(arg: &DaemonConfigArg, log_path: Option<PathBuf>, duration: Option<f64>) 
     tracing::info!(
         config = %path.display(),
         log = %log_path.display(),
-        rate_hz = l.flight.control_loop.rate_hz,
+        rate_hz = l.parsed.flight.control_loop.rate_hz,
         "atmo-daemon running"
     );
 

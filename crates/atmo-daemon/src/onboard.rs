@@ -401,7 +401,7 @@ impl TickIo for OnboardIo {
         // Both drop and count when full; neither blocks.
         self.ros_out.try_publish_status(&status);
         self.channels
-            .log_tick(&self.log, self.tick, inputs, &status);
+            .log_tick(&self.log, self.tick, inputs, outputs, &status);
         self.latch.mode(outputs.status.mode);
         self.tick += 1;
         let alive = status

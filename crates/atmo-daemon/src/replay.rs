@@ -12,14 +12,21 @@
 //! outputs of the maths, and are not compared.
 //!
 //! The flight stack is a pure function of its inputs and its clock with
-//! one exception: the MPC's wall-clock time limit. A replay lifts it (as
-//! a simulation does, [`REPLAY_TIME_LIMIT_S`]); a solve that hit the limit
-//! in flight then shows as a difference in the solver status.
+//! one exception: the MPC's wall-clock time limit, which ends a solve after
+//! however many iterations the flying machine managed. The log records each
+//! cut solve and the iteration it ended at (`TickInputs.solver_cut_*`,
+//! `atmo_mpc::qp::cuts`); a replay lifts the time limit
+//! ([`REPLAY_TIME_LIMIT_S`]) and ends exactly those solves at exactly those
+//! iterations ([`CutReplay::AsLogged`]), so a flight whose solves were cut
+//! replays bit for bit too. A window with more cuts than the log holds
+//! (`solver_cut_overflow`) cannot be reproduced: counted in the report.
 //!
 //! With another configuration (what-if) the same inputs go through a changed
 //! flight stack. That is open loop with respect to the plant: the robot's
 //! estimate, encoder and contact are as recorded, not as the new commands
-//! would have made them.
+//! would have made them. Its solves are different ones, so no cut is
+//! repeated ([`CutReplay::None`]): every solve runs to convergence or to the
+//! iteration cap.
 
 use std::path::{Path, PathBuf};
 
@@ -30,7 +37,7 @@ use atmo_io::msg::{Label, Mode, MpcStatus, RosMessage, SolverStatus, TickInputs}
 use crate::control_loop::TickTiming;
 use crate::error::{DaemonError, Result};
 use crate::flight_log::{FlightConfig, FlightConfigFiles, INPUTS_TOPIC};
-use crate::telemetry::{inputs_from_message, status_message};
+use crate::telemetry::{cuts_from_message, inputs_from_message, status_message};
 
 /// The MPC time limit of a replay, s: the settings' maximum, so that no
 /// solve is cut by how busy the replaying machine is.
@@ -316,6 +323,19 @@ pub struct ReplayReport {
     pub first_difference: Option<Difference>,
     /// Simulated duration, s.
     pub duration_s: f64,
+    /// Solves the time limit cut in flight, cut again at the same iteration.
+    pub cuts_replayed: usize,
+    /// Ticks whose cuts overflowed the log's record (not reproducible).
+    pub cut_overflow_ticks: usize,
+}
+
+/// Whether a replay repeats the solves the time limit cut in flight.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum CutReplay {
+    /// The same configuration: end each logged cut solve at its iteration.
+    AsLogged,
+    /// A what-if: no solve is cut.
+    None,
 }
 
 impl ReplayReport {
@@ -352,6 +372,7 @@ pub fn first_difference(
 pub fn replay(
     flight: &RecordedFlight,
     config: &FlightConfig,
+    cuts: CutReplay,
     mut on_tick: impl FnMut(&TickPair<'_>),
 ) -> Result<ReplayReport> {
     let mut stack = config.stack()?;
@@ -360,11 +381,26 @@ pub fn replay(
         differing_ticks: 0,
         first_difference: None,
         duration_s: flight.duration_s(),
+        cuts_replayed: 0,
+        cut_overflow_ticks: 0,
     };
+    // The window of a tick opens before the preparation that precedes it
+    // (the first one before its step), as `ControlLoop::tick` opens it.
+    let mut script = |message: Option<&TickInputs>| match (cuts, message) {
+        (CutReplay::AsLogged, Some(m)) => {
+            let logged = cuts_from_message(m);
+            report.cuts_replayed += usize::from(logged.count);
+            report.cut_overflow_ticks += usize::from(logged.overflow > 0);
+            Some(logged)
+        }
+        _ => Some(atmo_mpc::SolverCuts::default()),
+    };
+    stack.open_cut_window(script(flight.inputs.first()));
     let timing = TickTiming::default();
-    for (message, logged) in flight.inputs.iter().zip(&flight.status) {
+    for (k, (message, logged)) in flight.inputs.iter().zip(&flight.status).enumerate() {
         let inputs = inputs_from_message(message);
         let outputs = stack.step(&inputs);
+        stack.open_cut_window(script(flight.inputs.get(k + 1)));
         stack.prepare_next();
         let replayed = status_message(message.tick, &inputs, &outputs, &timing);
         let time_s = message.clock_ns as f64 * 1e-9;

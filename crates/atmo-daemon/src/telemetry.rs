@@ -7,13 +7,14 @@ use atmo_io::msg::{
     IoHealth, Label, Mode as ModeMsg, MpcStatus, PilotInput as PilotMsg, SolverStatus, TickInputs,
     TickTiming as TimingMsg,
 };
+use atmo_mpc::SolverCuts;
 
 use crate::control_loop::TickTiming;
 use crate::flight_stack::{Estimate, PilotInput, StepInputs, StepOutputs};
 
 /// The tick's inputs as the `atmo_msgs/TickInputs` message (every field of
-/// [`StepInputs`], bit for bit).
-pub fn inputs_message(tick: u64, inputs: &StepInputs) -> TickInputs {
+/// [`StepInputs`], bit for bit, and the solves the time limit cut).
+pub fn inputs_message(tick: u64, inputs: &StepInputs, cuts: &SolverCuts) -> TickInputs {
     let estimate = inputs.estimate;
     TickInputs {
         tick,
@@ -27,6 +28,20 @@ pub fn inputs_message(tick: u64, inputs: &StepInputs) -> TickInputs {
         ground_contact: inputs.ground_contact,
         ground_z: inputs.ground_z,
         driver_lost: inputs.driver_lost,
+        solver_cut_count: cuts.count,
+        solver_cut_solve: cuts.solve,
+        solver_cut_iteration: cuts.iteration,
+        solver_cut_overflow: cuts.overflow,
+    }
+}
+
+/// The time-limit cuts a `TickInputs` message carries.
+pub fn cuts_from_message(m: &TickInputs) -> SolverCuts {
+    SolverCuts {
+        count: m.solver_cut_count,
+        solve: m.solver_cut_solve,
+        iteration: m.solver_cut_iteration,
+        overflow: m.solver_cut_overflow,
     }
 }
 

@@ -313,7 +313,7 @@ fn logging_a_tick_does_not_allocate() {
     for tick in 0..ticks {
         inputs.now_ns += 6_666_666;
         let status = atmo_daemon::telemetry::status_message(tick, &inputs, &outputs, &timing);
-        channels.log_tick(&log, tick, &inputs, &status);
+        channels.log_tick(&log, tick, &inputs, &outputs, &status);
     }
     let allocations = thread_allocations() - before;
     log.finish();

@@ -313,7 +313,9 @@ fn driver_process_round_trip_death_and_restart() {
 /// receipt in the driver process, both CLOCK_MONOTONIC, for a driver that
 /// polls continuously (the transport) and one that sleeps until the
 /// daemon's event (what a real driver should do). Printed for
-/// BENCHMARKS.md; bounded loosely (a loaded 2-core machine).
+/// BENCHMARKS.md, not asserted (a wall-clock figure depends on the
+/// machine's load); what is asserted is that every command reaches the
+/// driver and is echoed in its heartbeat (each waited for up to 2 s).
 fn latency(mode: &str) -> Vec<u64> {
     let config = config(&format!("lat{mode}"));
     let mut ports = FlightPorts::open(&config).unwrap();
@@ -333,24 +335,36 @@ fn latency(mode: &str) -> Vec<u64> {
     }
     let mut latencies = Vec::new();
     let mut last_echo = u64::MAX;
+    let mut missed = 0;
     for _ in 0..450 {
         ports.send_thrust([0.5; 4]);
         assert!(ports.notify_drivers());
-        std::thread::sleep(Duration::from_micros(6667));
-        if let Some(beat) = ports.poll(monotonic_ns()).heartbeats[DriverId::Thrusters as usize]
-            && beat.last_command_sequence != last_echo
-            && beat.last_command_stamp_ns != 0
-        {
-            last_echo = beat.last_command_sequence;
-            latencies.push(beat.last_command_received_ns - beat.last_command_stamp_ns);
+        let sent = monotonic_ns();
+        loop {
+            std::thread::sleep(Duration::from_micros(200));
+            if let Some(beat) = ports.poll(monotonic_ns()).heartbeats[DriverId::Thrusters as usize]
+                && beat.last_command_sequence != last_echo
+                && beat.last_command_stamp_ns != 0
+            {
+                last_echo = beat.last_command_sequence;
+                latencies.push(beat.last_command_received_ns - beat.last_command_stamp_ns);
+                break;
+            }
+            if monotonic_ns() - sent > 2_000_000_000 {
+                missed += 1;
+                break;
+            }
         }
+        // The rest of a 150 Hz period.
+        let spent = Duration::from_nanos(monotonic_ns() - sent);
+        std::thread::sleep(Duration::from_micros(6667).saturating_sub(spent));
     }
     child.kill();
     drop(ports);
     cleanup_stale(&config).unwrap();
     remove_prefix_segment(&config.iceoryx_prefix);
+    assert_eq!(missed, 0, "{missed} of 450 commands never echoed by the driver");
     latencies.sort_unstable();
-    assert!(latencies.len() > 300, "{} echoes", latencies.len());
     let us = |ns: u64| ns as f64 * 1e-3;
     eprintln!(
         "tick-to-driver latency ({mode} driver) over {} commands: median {:.1} us, p90 {:.1} us, p99 {:.1} us, max {:.1} us",
@@ -366,10 +380,9 @@ fn latency(mode: &str) -> Vec<u64> {
 #[test]
 fn tick_to_driver_latency() {
     let _serial = serial();
-    let spinning = latency("spin");
-    assert!(percentile(&spinning, 0.5) < 1_000_000, "median above 1 ms");
-    let waiting = latency("wait");
-    assert!(percentile(&waiting, 0.5) < 1_000_000, "median above 1 ms");
+    for mode in ["spin", "wait"] {
+        assert_eq!(latency(mode).len(), 450);
+    }
 }
 
 #[test]

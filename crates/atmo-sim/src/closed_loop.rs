@@ -17,12 +17,13 @@ use std::time::Instant;
 use atmo_core::RobotConfig;
 use atmo_core::model::{State, idx};
 use atmo_daemon::control_loop::{TickTiming, tick_period};
-use atmo_daemon::flight_log::{FlightConfigFiles, TickChannels};
+use atmo_daemon::flight_log::{FlightConfig, FlightConfigFiles, TickChannels};
 use atmo_daemon::inputs::InputSettings;
 use atmo_daemon::{FlightSettings, FlightStack, Mode, StepInputs, StepOutputs};
 use atmo_io::msg::{Mode as ModeMsg, MpcStatus, SimTruth};
 use atmo_io::review::figure::FlightTrace;
 use atmo_mpc::MpcSettings;
+use atmo_mpc::settings::GroundEffectSource;
 
 use crate::error::{Result, SimError};
 use crate::scenario::{Scenario, SuccessConfig};
@@ -124,6 +125,35 @@ impl ControllerConfig {
         self.mpc.solver.time_limit = 10.0;
         self
     }
+
+    /// The MPC's ground-effect surface `source`, set in the settings and in
+    /// the MPC text a flight log stores (a named file's text is read and
+    /// stored too), so that a replay rebuilds the controller flown.
+    ///
+    /// # Errors
+    /// A file that cannot be read.
+    pub fn with_ground_effect(mut self, source: GroundEffectSource) -> Result<Self> {
+        self.files
+            .set_ground_effect(&source)
+            .map_err(|e| SimError::Setup(e.to_string()))?;
+        self.mpc.model.ground_effect = source;
+        Ok(self)
+    }
+
+    /// The flight stack (its ground-effect surface from the stored text).
+    ///
+    /// # Errors
+    /// Settings the flight stack refuses.
+    pub fn stack(&self) -> Result<FlightStack> {
+        FlightConfig {
+            robot: self.robot.clone(),
+            flight: self.flight.clone(),
+            mpc: self.mpc.clone(),
+            ground_effect: self.files.ground_effect.clone(),
+        }
+        .stack()
+        .map_err(|e| SimError::Setup(e.to_string()))
+    }
 }
 
 /// The record of `tick`, with the plant's truth at it.
@@ -172,12 +202,7 @@ pub fn fly_observed(
 ) -> Result<Summary> {
     let wall = Instant::now();
     let mut plant = scenario.build_plant()?;
-    let mut stack = FlightStack::new(
-        &controller.robot,
-        controller.mpc.clone(),
-        controller.flight.clone(),
-    )
-    .map_err(|e| SimError::Setup(e.to_string()))?;
+    let mut stack = controller.stack()?;
     let duration = scenario.file.duration;
     let mut tracker = LandingTracker::new((duration / stack.period()) as usize + 2);
     // The daemon's constant ground height: the terrain under the start.
@@ -287,7 +312,7 @@ pub fn fly_logged(
             let message =
                 atmo_daemon::telemetry::status_message(tick, &r.inputs, &r.outputs, &r.timing);
             // Counted if dropped (queue full): reported as an error below.
-            channels.log_tick(&log, tick, &r.inputs, &message);
+            channels.log_tick(&log, tick, &r.inputs, &r.outputs, &message);
             tick += 1;
             on_tick(r);
         },

@@ -41,18 +41,14 @@ pub fn run(
     let scenario = Scenario::load(scenario_path).with_context(|| "loading the scenario")?;
     let base = ControllerConfig::atmo()?.deterministic();
     let ground_effect = surface.map_or(GroundEffectSource::PlantDefault, GroundEffectSource::File);
-    let with = |source: GroundEffectSource| {
-        let mut c = base.clone();
-        c.mpc.model.ground_effect = source;
-        c
-    };
+    let with = |source: GroundEffectSource| base.clone().with_ground_effect(source);
     let controllers: Vec<(&str, ControllerConfig)> = match choice {
         ControllerChoice::Config => vec![("", base.clone())],
-        ControllerChoice::Nominal => vec![("nominal", with(GroundEffectSource::None))],
-        ControllerChoice::GroundEffect => vec![("ground-effect", with(ground_effect))],
+        ControllerChoice::Nominal => vec![("nominal", with(GroundEffectSource::None)?)],
+        ControllerChoice::GroundEffect => vec![("ground-effect", with(ground_effect)?)],
         ControllerChoice::Both => vec![
-            ("nominal", with(GroundEffectSource::None)),
-            ("ground-effect", with(ground_effect)),
+            ("nominal", with(GroundEffectSource::None)?),
+            ("ground-effect", with(ground_effect)?),
         ],
     };
     let dir: PathBuf = out.join(&scenario.file.name);

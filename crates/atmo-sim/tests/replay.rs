@@ -13,7 +13,8 @@ use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
 use atmo_daemon::flight_log::INPUTS_TOPIC;
-use atmo_daemon::replay::{RecordedFlight, replay};
+use atmo_daemon::replay::{CutReplay, RecordedFlight, replay};
+use atmo_mpc::settings::GroundEffectSource;
 use atmo_sim::closed_loop::{ControllerConfig, STATUS_TOPIC, Summary, fly_logged};
 use atmo_sim::scenario::Scenario;
 
@@ -49,7 +50,7 @@ fn a_simulated_landing_replays_bit_for_bit() {
     assert_eq!(flight.incomplete_tail, (0, 0));
     let config = RecordedFlight::config(&flight.files).unwrap();
     let mut compared = 0;
-    let report = replay(&flight, &config, |_| compared += 1).unwrap();
+    let report = replay(&flight, &config, CutReplay::AsLogged, |_| compared += 1).unwrap();
     assert_eq!(report.first_difference, None, "{report:?}");
     assert_eq!(report.differing_ticks, 0);
     // 14 s at 150 Hz: every tick of the flight.
@@ -69,7 +70,13 @@ fn one_changed_mpc_weight_reports_the_first_differing_tick_and_field() {
         .mpc
         .text
         .replacen(before, "q1 = [1.0, 1.0, 2.0, 10.0, 10.0, 20.0,", 1);
-    let report = replay(&flight, &RecordedFlight::config(&files).unwrap(), |_| {}).unwrap();
+    let report = replay(
+        &flight,
+        &RecordedFlight::config(&files).unwrap(),
+        CutReplay::None,
+        |_| {},
+    )
+    .unwrap();
     let first = report.first_difference.clone().expect("a difference");
     // The stack flies from the first tick: the weight shows at once, in the
     // first compared output, the first thruster command.
@@ -105,11 +112,105 @@ fn a_log_cut_mid_flight_replays_to_its_last_complete_tick() {
     let report = replay(
         &flight,
         &RecordedFlight::config(&flight.files).unwrap(),
+        CutReplay::AsLogged,
         |_| {},
     )
     .unwrap();
     assert_eq!(report.ticks, ticks);
     assert_eq!(report.first_difference, None, "{report:?}");
+}
+
+/// A flight whose solves the wall-clock time limit cut (200 us: most of a
+/// debug build's solves and some of a release build's) replays bit for bit:
+/// the log records each cut solve's iteration and the replay ends the same
+/// solves there. Without repeating the cuts the replay differs.
+#[test]
+fn a_flight_with_solves_cut_by_the_time_limit_replays_bit_for_bit() {
+    let mut scenario = Scenario::load(repo().join("config/scenarios/wheel_landing.toml")).unwrap();
+    scenario.file.duration = 3.0;
+    let mut controller = ControllerConfig::atmo().unwrap();
+    controller.mpc.solver.time_limit = 2e-4;
+    let path = dir().join("time_limited.mcap");
+    fly_logged(&scenario, &controller, &path, |_| {}).unwrap();
+    let flight = RecordedFlight::read(&path, STATUS_TOPIC).unwrap();
+    let cut: usize = flight
+        .inputs
+        .iter()
+        .map(|m| usize::from(m.solver_cut_count))
+        .sum();
+    assert!(cut > 0, "no solve was cut: the test tests nothing");
+    let config = RecordedFlight::config(&flight.files).unwrap();
+    let report = replay(&flight, &config, CutReplay::AsLogged, |_| {}).unwrap();
+    println!(
+        "{} ticks, {cut} solves cut in flight, {} cut again",
+        report.ticks, report.cuts_replayed
+    );
+    assert_eq!(report.first_difference, None, "{report:?}");
+    assert_eq!(report.cuts_replayed, cut);
+    assert_eq!(report.cut_overflow_ticks, 0);
+    let uncut = replay(&flight, &config, CutReplay::None, |_| {}).unwrap();
+    assert!(
+        uncut.first_difference.is_some(),
+        "the cuts made no difference: {uncut:?}"
+    );
+}
+
+/// The MPC predicting with a plant file's ground-effect surface: the file's
+/// text is logged (`config/ground_effect`), and the replay builds the MPC
+/// from that text, not from the file (deleted before the replay); a
+/// what-if with a changed surface file differs.
+#[test]
+fn a_ground_effect_file_is_logged_and_replayed_from_the_log() {
+    let scenario = Scenario::load(repo().join("config/scenarios/wheel_landing.toml")).unwrap();
+    let surface = dir().join("surface.toml");
+    let shipped = std::fs::read_to_string(repo().join("config/plant.toml")).unwrap();
+    std::fs::write(&surface, &shipped).unwrap();
+    let controller = ControllerConfig::atmo()
+        .unwrap()
+        .deterministic()
+        .with_ground_effect(GroundEffectSource::File(surface.clone()))
+        .unwrap();
+    let path = dir().join("ground_effect_file.mcap");
+    fly_logged(&scenario, &controller, &path, |_| {}).unwrap();
+    std::fs::remove_file(&surface).unwrap();
+
+    let flight = RecordedFlight::read(&path, STATUS_TOPIC).unwrap();
+    let logged = flight
+        .files
+        .ground_effect
+        .clone()
+        .expect("the surface file is logged");
+    assert_eq!(logged.text, shipped);
+    assert_eq!(logged.source, surface);
+    assert!(
+        flight
+            .files
+            .mpc
+            .text
+            .contains(&format!("ground_effect = \"{}\"", surface.display()))
+    );
+    let config = RecordedFlight::config(&flight.files).unwrap();
+    let report = replay(&flight, &config, CutReplay::AsLogged, |_| {}).unwrap();
+    assert_eq!(report.first_difference, None, "{report:?}");
+
+    // What-if: the 60 deg gains doubled (a file of the same name).
+    let stronger = dir().join("what_if");
+    std::fs::create_dir_all(&stronger).unwrap();
+    let row_60_deg = "[0.070, 0.045, 0.025, 0.010, 0.003, 0.0],";
+    assert!(shipped.contains(row_60_deg));
+    let scaled = shipped.replacen(row_60_deg, "[0.140, 0.090, 0.050, 0.020, 0.006, 0.0],", 1);
+    std::fs::write(stronger.join("surface.toml"), scaled).unwrap();
+    let mut files = flight.files.clone();
+    let replaced = files.override_with(&stronger).unwrap();
+    assert_eq!(replaced, [stronger.join("surface.toml")]);
+    let what_if = replay(
+        &flight,
+        &RecordedFlight::config(&files).unwrap(),
+        CutReplay::None,
+        |_| {},
+    )
+    .unwrap();
+    assert!(what_if.first_difference.is_some(), "{what_if:?}");
 }
 
 /// Copies `input` to `output`, passing each message through `edit`

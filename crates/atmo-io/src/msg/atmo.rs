@@ -145,6 +145,11 @@ pub struct TickInputs {
     /// NED z of the ground, m.
     pub ground_z: f64,
     pub driver_lost: bool,
+    /// Time-limit cuts of the tick's solves (see the `.msg`).
+    pub solver_cut_count: u8,
+    pub solver_cut_solve: [u8; 12],
+    pub solver_cut_iteration: [u32; 12],
+    pub solver_cut_overflow: u32,
 }
 
 /// `atmo_msgs/msg/SimTruth`: the simulator's truth after a plant step.

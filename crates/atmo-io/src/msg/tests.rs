@@ -576,6 +576,21 @@ fn tick_inputs_and_sim_truth_layouts() {
     body.extend([0; 4]);
     body.extend(f64s(&[-0.25]));
     body.push(0);
+    // The time-limit cuts: a count, twelve solve numbers, twelve iterations
+    // (each uint32 aligned to 4), the overflow.
+    m.solver_cut_count = 2;
+    m.solver_cut_solve[1] = 7;
+    m.solver_cut_iteration[1] = 9;
+    m.solver_cut_overflow = 1;
+    body.push(2);
+    body.extend([0, 7, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0]);
+    while body.len() % 4 != 0 {
+        body.push(0);
+    }
+    for iteration in [0u32, 9, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0] {
+        body.extend(iteration.to_le_bytes());
+    }
+    body.extend(1u32.to_le_bytes());
     round_trip(&m, &body);
     assert_eq!(
         super::definitions::fields("atmo_msgs", definition(TickInputs::TYPE_NAME).unwrap())
@@ -593,7 +608,11 @@ fn tick_inputs_and_sim_truth_layouts() {
             "pilot",
             "ground_contact",
             "ground_z",
-            "driver_lost"
+            "driver_lost",
+            "solver_cut_count",
+            "solver_cut_solve",
+            "solver_cut_iteration",
+            "solver_cut_overflow"
         ]
     );
     let truth = SimTruth {

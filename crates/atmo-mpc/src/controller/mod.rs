@@ -18,6 +18,7 @@ use clarabel::solver::SolverStatus;
 
 use crate::error::{MpcError, Result};
 use crate::homotopy::HomotopyStop;
+use crate::qp::cuts::SolverCuts;
 use crate::qp::{LinearizedHorizon, QpBackend, SolveReport};
 use crate::settings::{FeedbackMethod, Formulation, MpcSettings};
 
@@ -220,6 +221,19 @@ impl Mpc {
     /// (zero without the homotopy).
     pub fn predicted_deviation_of_last_preparation(&self) -> State {
         self.predicted_e0
+    }
+
+    /// Opens a window of solves: the time-limit cuts of the solves that
+    /// follow are recorded ([`Self::solver_cuts`]); with a `script` (a replay
+    /// of a recorded window, the time limit lifted) those solves end where
+    /// the recorded ones did. See [`crate::qp::cuts`].
+    pub fn open_cut_window(&mut self, script: Option<SolverCuts>) {
+        self.qp.open_cut_window(script);
+    }
+
+    /// The time-limit cuts of the current window so far.
+    pub fn solver_cuts(&self) -> SolverCuts {
+        self.qp.window_cuts()
     }
 
     /// True when the feedback uses the homotopy (configured, condensed QP).

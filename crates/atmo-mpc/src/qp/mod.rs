@@ -7,6 +7,7 @@
 //! factorization is reused and nothing is allocated by our code.
 
 mod condensed;
+pub mod cuts;
 mod solver;
 mod sparse;
 
@@ -141,6 +142,23 @@ impl QpBackend {
                 qp.solved_by = SolvedBy::Clarabel;
                 qp.solver.solve()
             }
+        }
+    }
+
+    /// Opens a window of solves whose time-limit cuts are recorded (or, with
+    /// a `script`, repeated: a replay); see [`cuts`].
+    pub fn open_cut_window(&mut self, script: Option<cuts::SolverCuts>) {
+        match self {
+            Self::Sparse(qp) => qp.solver.open_cut_window(script),
+            Self::Condensed(qp) => qp.solver.open_cut_window(script),
+        }
+    }
+
+    /// The time-limit cuts of the current window so far.
+    pub fn window_cuts(&self) -> cuts::SolverCuts {
+        match self {
+            Self::Sparse(qp) => qp.solver.window_cuts(),
+            Self::Condensed(qp) => qp.solver.window_cuts(),
         }
     }
 

@@ -1,13 +1,14 @@
 //! Clarabel built once with a fixed pattern, and our own per-solve time limit.
 
 use std::sync::Arc;
-use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::atomic::{AtomicU32, AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 
 use clarabel::algebra::CscMatrix;
 use clarabel::solver::{DefaultInfo, DefaultSettings, DefaultSolver, IPSolver, SupportedConeT};
 
 use super::SolveReport;
+use super::cuts::{CutWindow, SolverCuts};
 use crate::error::{MpcError, Result};
 use crate::settings::SolverSettings;
 
@@ -31,14 +32,22 @@ pub fn build_solver(
 
 /// Clarabel with a per-solve wall-clock limit measured by us: a termination
 /// callback (checked once per interior-point iteration) compares a monotonic
-/// clock with the deadline set just before the solve.
+/// clock with the deadline set just before the solve. In a replay the
+/// callback instead ends a scripted solve at its recorded iteration
+/// ([`super::cuts`]).
 pub struct TimedSolver {
     pub solver: DefaultSolver<f64>,
     epoch: Instant,
     /// Nanoseconds after `epoch`; shared with the callback.
     deadline: Arc<AtomicU64>,
+    /// Iteration a replayed solve ends at ([`NOT_SCRIPTED`]: none); shared
+    /// with the callback.
+    scripted_cut: Arc<AtomicU32>,
     limit: Duration,
+    window: CutWindow,
 }
+
+const NOT_SCRIPTED: u32 = u32::MAX;
 
 impl TimedSolver {
     pub fn new(
@@ -52,32 +61,59 @@ impl TimedSolver {
         let mut solver = build_solver(p, q, a, b, cones, settings)?;
         let epoch = Instant::now();
         let deadline = Arc::new(AtomicU64::new(u64::MAX));
-        let shared = Arc::clone(&deadline);
-        solver.set_termination_callback(move |_info: &DefaultInfo<f64>| {
-            nanos_since(epoch) > shared.load(Ordering::Relaxed)
+        let scripted_cut = Arc::new(AtomicU32::new(NOT_SCRIPTED));
+        let (deadline_seen, cut_seen) = (Arc::clone(&deadline), Arc::clone(&scripted_cut));
+        solver.set_termination_callback(move |info: &DefaultInfo<f64>| {
+            match cut_seen.load(Ordering::Relaxed) {
+                NOT_SCRIPTED => nanos_since(epoch) > deadline_seen.load(Ordering::Relaxed),
+                cut => info.iterations >= cut,
+            }
         });
         Ok(Self {
             solver,
             epoch,
             deadline,
+            scripted_cut,
             limit: Duration::from_secs_f64(settings.time_limit),
+            window: CutWindow::default(),
         })
     }
 
-    /// Solves; `CallbackTerminated` means the time limit was hit.
+    /// Solves; `CallbackTerminated` means the time limit was hit (or, in a
+    /// replay, the recorded cut was reached).
     pub fn solve(&mut self) -> SolveReport {
         let start = Instant::now();
+        let (ordinal, script) = self.window.next_solve();
         let limit = u64::try_from(self.limit.as_nanos()).unwrap_or(u64::MAX);
-        self.deadline.store(
-            nanos_since(self.epoch).saturating_add(limit),
-            Ordering::Relaxed,
-        );
+        let deadline = match script {
+            // A replay: only the recorded cuts end a solve early.
+            Some(_) => u64::MAX,
+            None => nanos_since(self.epoch).saturating_add(limit),
+        };
+        self.deadline.store(deadline, Ordering::Relaxed);
+        let cut = script.flatten().unwrap_or(NOT_SCRIPTED);
+        self.scripted_cut.store(cut, Ordering::Relaxed);
         self.solver.solve();
-        SolveReport {
+        let report = SolveReport {
             status: self.solver.solution.status,
             iterations: self.solver.solution.iterations,
             solve_time: start.elapsed().as_secs_f64(),
+        };
+        if report.status == clarabel::solver::SolverStatus::CallbackTerminated {
+            self.window.record(ordinal, report.iterations);
         }
+        report
+    }
+
+    /// Opens a window of solves ([`super::cuts`]): `script` repeats a
+    /// recorded window's cuts (a replay), `None` flies on the wall clock.
+    pub fn open_cut_window(&mut self, script: Option<SolverCuts>) {
+        self.window.open(script);
+    }
+
+    /// The cuts of the current window so far.
+    pub fn window_cuts(&self) -> SolverCuts {
+        self.window.cuts()
     }
 }
 
@@ -208,10 +244,37 @@ mod tests {
     }
 
     #[test]
+    fn a_scripted_window_cuts_where_the_recorded_one_did() {
+        let settings = MpcSettings::atmo("default").unwrap().solver;
+        let mut solver = tiny(&settings);
+        let full = solver.solve();
+        assert_eq!(full.status, SolverStatus::Solved);
+        assert!(full.iterations >= 3, "{full:?}");
+        let mut script = SolverCuts::default();
+        script.record(1, 2);
+        solver.open_cut_window(Some(script));
+        assert_eq!(solver.solve().status, SolverStatus::Solved);
+        let cut = solver.solve();
+        assert_eq!(
+            (cut.status, cut.iterations),
+            (SolverStatus::CallbackTerminated, 2)
+        );
+        assert_eq!(solver.solve().status, SolverStatus::Solved);
+        assert_eq!(solver.window_cuts(), script);
+        // Back in flight: the wall clock, nothing scripted.
+        solver.open_cut_window(None);
+        assert_eq!(solver.solve().status, SolverStatus::Solved);
+        assert!(solver.window_cuts().is_empty());
+    }
+
+    #[test]
     fn time_limit_stops_a_solve() {
         let mut settings = MpcSettings::atmo("default").unwrap().solver;
         settings.time_limit = 0.0;
         let mut solver = tiny(&settings);
-        assert_eq!(solver.solve().status, SolverStatus::CallbackTerminated);
+        let cut = solver.solve();
+        assert_eq!(cut.status, SolverStatus::CallbackTerminated);
+        // Recorded, as solve 0 of the window, for a replay.
+        assert_eq!(solver.window_cuts().cut_of(0), Some(cut.iterations));
     }
 }
