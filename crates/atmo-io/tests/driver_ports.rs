@@ -363,7 +363,10 @@ fn latency(mode: &str) -> Vec<u64> {
     drop(ports);
     cleanup_stale(&config).unwrap();
     remove_prefix_segment(&config.iceoryx_prefix);
-    assert_eq!(missed, 0, "{missed} of 450 commands never echoed by the driver");
+    assert_eq!(
+        missed, 0,
+        "{missed} of 450 commands never echoed by the driver"
+    );
     latencies.sort_unstable();
     let us = |ns: u64| ns as f64 * 1e-3;
     eprintln!(

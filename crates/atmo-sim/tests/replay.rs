@@ -120,16 +120,19 @@ fn a_log_cut_mid_flight_replays_to_its_last_complete_tick() {
     assert_eq!(report.first_difference, None, "{report:?}");
 }
 
-/// A flight whose solves the wall-clock time limit cut (200 us: most of a
-/// debug build's solves and some of a release build's) replays bit for bit:
-/// the log records each cut solve's iteration and the replay ends the same
-/// solves there. Without repeating the cuts the replay differs.
+/// A flight whose solves the wall-clock time limit cut (10 us, the
+/// settings' minimum: shorter than one interior-point iteration of the
+/// MPC's QP, so every Clarabel solve is cut) replays bit for bit: the log
+/// records each cut solve's iteration and the replay ends the same solves
+/// there. (Whether a replay without the cuts would differ depends on the
+/// machine: a cut preparation solve only seeds the homotopy, which reaches
+/// the same exact solution.)
 #[test]
 fn a_flight_with_solves_cut_by_the_time_limit_replays_bit_for_bit() {
     let mut scenario = Scenario::load(repo().join("config/scenarios/wheel_landing.toml")).unwrap();
     scenario.file.duration = 3.0;
     let mut controller = ControllerConfig::atmo().unwrap();
-    controller.mpc.solver.time_limit = 2e-4;
+    controller.mpc.solver.time_limit = 1e-5;
     let path = dir().join("time_limited.mcap");
     fly_logged(&scenario, &controller, &path, |_| {}).unwrap();
     let flight = RecordedFlight::read(&path, STATUS_TOPIC).unwrap();
@@ -148,11 +151,6 @@ fn a_flight_with_solves_cut_by_the_time_limit_replays_bit_for_bit() {
     assert_eq!(report.first_difference, None, "{report:?}");
     assert_eq!(report.cuts_replayed, cut);
     assert_eq!(report.cut_overflow_ticks, 0);
-    let uncut = replay(&flight, &config, CutReplay::None, |_| {}).unwrap();
-    assert!(
-        uncut.first_difference.is_some(),
-        "the cuts made no difference: {uncut:?}"
-    );
 }
 
 /// The MPC predicting with a plant file's ground-effect surface: the file's
