@@ -115,6 +115,7 @@ pub mod error;
 pub mod homotopy;
 pub mod qp;
 pub mod settings;
+pub mod tilt_model;
 
 pub use controller::{
     AlphaSchedule, DegradedCause, FailureCause, FeedbackPath, HomotopyFallback, Mpc, Outcome,

@@ -12,9 +12,9 @@ mod solver;
 mod sparse;
 
 use atmo_core::model::{NU as ATMO_NU, NX as ATMO_NX};
-use nalgebra::{SMatrix, SVector};
 use clarabel::algebra::CscMatrix;
 use clarabel::solver::{DefaultSolver, SolverStatus, SupportedConeT};
+use nalgebra::{SMatrix, SVector};
 
 use crate::error::Result;
 use crate::settings::{Formulation, SolverSettings};
@@ -170,7 +170,13 @@ impl<const NX: usize, const NU: usize> QpBackend<NX, NU> {
 
     /// The solution as plan deviations (states by forward simulation of the
     /// linear model in the condensed form).
-    pub fn extract(&self, lin: &LinearizedHorizon<NX, NU>, e0: &SVector<f64, NX>, dx: &mut [SVector<f64, NX>], du: &mut [SVector<f64, NU>]) {
+    pub fn extract(
+        &self,
+        lin: &LinearizedHorizon<NX, NU>,
+        e0: &SVector<f64, NX>,
+        dx: &mut [SVector<f64, NX>],
+        du: &mut [SVector<f64, NU>],
+    ) {
         match self {
             Self::Sparse(qp) => qp.extract(dx, du),
             Self::Condensed(qp) => qp.extract(lin, e0, dx, du),

@@ -2,9 +2,9 @@
 //! equality constraints, diagonal Hessian.
 
 use atmo_core::model::{NU as ATMO_NU, NX as ATMO_NX};
-use nalgebra::SVector;
 use clarabel::algebra::CscMatrix;
 use clarabel::solver::SupportedConeT;
+use nalgebra::SVector;
 
 use super::solver::{CscBuilder, TimedSolver, solver_error};
 use super::{LinearizedHorizon, QpSnapshot};
@@ -28,7 +28,6 @@ pub struct SparseQp<const NX: usize = ATMO_NX, const NU: usize = ATMO_NU> {
     p_pattern: CscMatrix<f64>,
     a_pattern: CscMatrix<f64>,
 }
-
 
 impl<const NX: usize, const NU: usize> SparseQp<NX, NU> {
     const STAGE: usize = NX + NU;
@@ -72,7 +71,12 @@ impl<const NX: usize, const NU: usize> SparseQp<NX, NU> {
         }
     }
 
-    fn fill_vectors(lin: &LinearizedHorizon<NX, NU>, p_vals: &mut [f64], q: &mut [f64], b: &mut [f64]) {
+    fn fill_vectors(
+        lin: &LinearizedHorizon<NX, NU>,
+        p_vals: &mut [f64],
+        q: &mut [f64],
+        b: &mut [f64],
+    ) {
         let n = lin.steps();
         for k in 0..=n {
             let o = Self::x_offset(k);
