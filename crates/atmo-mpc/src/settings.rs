@@ -42,8 +42,10 @@ pub struct TiltPlanSettings {
     pub rate_weight: f64,
     /// Weight on `(varphi - varphi_max)^2` at the predicted touchdown.
     pub touchdown_tilt_weight: f64,
-    /// Weight on `(v_z - v_z,ref)^2` at the predicted touchdown, s^2/m^2.
+    /// Weight on `(v_z - touchdown_speed)^2` at the predicted touchdown, s^2/m^2.
     pub touchdown_speed_weight: f64,
+    /// The vertical speed aimed at when the wheels touch, m/s (down positive).
+    pub touchdown_speed: f64,
     /// Upper bound of every rotor command while the tilt is planned (the
     /// thrust margin kept for attitude control).
     pub thrust_max: f64,
@@ -303,6 +305,12 @@ impl ConfigFile for MpcFile {
             // Strictly convex in the tilt rate too.
             c.range("tilt_plan.rate_weight", t.rate_weight, 1e-9..=1e6, "")?;
             c.range("tilt_plan.thrust_max", t.thrust_max, 0.1..=1.0, "")?;
+            c.range(
+                "tilt_plan.touchdown_speed",
+                t.touchdown_speed,
+                0.0..=2.0,
+                "m/s",
+            )?;
         }
         c.range(
             "failure.grace_ticks",

@@ -23,12 +23,16 @@
 //! stage when it does not within the horizon). The cost adds
 //!
 //! ```text
-//! sum_k  w_tilt (varphi_k - varphi_max)^2 + w_rate omega_k^2
-//!   + sum_{k in {floor s*, ceil s*}} lambda_k [ W_tilt (varphi_k - varphi_max)^2 + W_v (v_z,k - v_z,ref,k)^2 ]
+//! sum_k  kappa_k [ |x_k - r_k|^2_Q + w_tilt (varphi_k - varphi_max)^2 ] + w_rate omega_k^2
+//!   + sum_{k in {floor s*, ceil s*}} lambda_k [ W_tilt (varphi_k - varphi_max)^2 + W_v (v_z,k - v_td)^2 ]
+//! kappa_k = clamp(1 - (k - s*), 0, 1)
 //! ```
 //!
 //! with `lambda` the linear-interpolation weights of `s*` between its two
-//! stages (so the touchdown term moves smoothly from tick to tick). The
+//! stages and `v_td` the touchdown speed aimed at. The state cost fades
+//! out past the touchdown (`kappa`): the plan ends on the wheels, and what
+//! the model (which has no ground) predicts beyond is not penalized. Both
+//! are continuous in `s*`, so the objective moves smoothly from tick to tick. The
 //! optimizer trades the tilt at touchdown against the vertical speed there,
 //! through the thrust it has left (rotor bound, ground effect of the model).
 
@@ -359,18 +363,26 @@ impl Mpc {
             e[idx::YAW] = wrap_angle(e[idx::YAW]);
             lin.x_err[k] = tilt_state(&e, self.varphi[k] - plan.tilt_max);
         }
-        // The landing objective at the predicted touchdown.
+        // The landing objective at the predicted touchdown; the plan ends
+        // there (past it the model, without the ground, is fiction).
         let touchdown = touchdown_stage(
             (0..=n).map(|k| self.clearance(&self.plan_x[k], self.varphi[k], plan.wheel_radius)),
             n,
         );
         tilt.touchdown_stage = touchdown;
+        for k in 0..=n {
+            let kept = (1.0 - (k as f64 - touchdown)).clamp(0.0, 1.0);
+            if kept < 1.0 {
+                lin.q_diag[k] *= kept;
+            }
+        }
         let below = touchdown.floor() as usize;
         let frac = touchdown - below as f64;
         for (k, lambda) in [(below, 1.0 - frac), (below + 1, frac)] {
             if k <= n && lambda > 0.0 {
                 lin.q_diag[k][TILT] += lambda * w.touchdown_tilt_weight;
                 lin.q_diag[k][idx::VZ] += lambda * w.touchdown_speed_weight;
+                lin.x_err[k][idx::VZ] = self.plan_x[k][idx::VZ] - w.touchdown_speed;
             }
         }
         tilt.qp.load(&tilt.lin)?;
