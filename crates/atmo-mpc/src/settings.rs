@@ -38,6 +38,8 @@ pub struct TiltPlanSettings {
     pub enabled: bool,
     /// Weight on `(varphi_k - varphi_max)^2` at every stage, 1/rad^2.
     pub tilt_weight: f64,
+    /// Weight on `(v_z,k - v_z,ref,k)^2` at every stage before the touchdown, s^2/m^2.
+    pub descent_speed_weight: f64,
     /// Weight on the tilt rate `omega_k^2`, s^2/rad^2.
     pub rate_weight: f64,
     /// Weight on `(varphi - varphi_max)^2` at the predicted touchdown.
@@ -297,6 +299,7 @@ impl ConfigFile for MpcFile {
         if let Some(t) = &self.tilt_plan {
             for (key, value) in [
                 ("tilt_plan.tilt_weight", t.tilt_weight),
+                ("tilt_plan.descent_speed_weight", t.descent_speed_weight),
                 ("tilt_plan.touchdown_tilt_weight", t.touchdown_tilt_weight),
                 ("tilt_plan.touchdown_speed_weight", t.touchdown_speed_weight),
             ] {

@@ -426,10 +426,13 @@ impl Mpc {
     /// Re-solves the QP currently loaded (after a `prepare` and a `feedback`),
     /// touching nothing else. For measuring the bare solver call.
     pub fn resolve_loaded_qp(&mut self) -> SolveReport {
-        self.qp.solve()
+        match self.tilt.as_deref_mut().filter(|t| t.active) {
+            Some(tilt) => tilt.qp.solve(),
+            None => self.qp.solve(),
+        }
     }
 
-    /// A copy of the QP currently loaded in the solver (allocates).
+    /// A copy of the nominal (12/4) QP last loaded in the solver (allocates).
     pub fn qp_snapshot(&self) -> QpSnapshot {
         self.qp.snapshot()
     }
