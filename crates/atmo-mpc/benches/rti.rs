@@ -350,7 +350,7 @@ fn rti_tilt_plan(c: &mut Criterion) {
             x[idx::Z] = -0.25;
         }
     }
-    let mut timed =
+    let timed =
         |group: &mut criterion::BenchmarkGroup<'_, _>, label: &str, feedback_only: bool| {
             let mut mpc = make();
             mpc.reset(&recorded[0].0).unwrap();
