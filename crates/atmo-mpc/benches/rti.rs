@@ -350,37 +350,36 @@ fn rti_tilt_plan(c: &mut Criterion) {
             x[idx::Z] = -0.25;
         }
     }
-    let timed =
-        |group: &mut criterion::BenchmarkGroup<'_, _>, label: &str, feedback_only: bool| {
-            let mut mpc = make();
-            mpc.reset(&recorded[0].0).unwrap();
-            let mut i = 0;
-            let mut not_solved = 0;
-            group.bench_function(label, |b| {
-                b.iter_custom(|iters| {
-                    let mut total = Duration::ZERO;
-                    for _ in 0..iters {
-                        let (x, varphi) = recorded[i % RECORDED_TICKS];
-                        i += 1;
-                        mpc.set_tilt_plan(&plan).unwrap();
-                        mpc.set_measured_tilt(varphi).unwrap();
-                        let start = Instant::now();
-                        mpc.prepare().unwrap();
-                        let fb = Instant::now();
-                        let out = mpc.feedback(black_box(&x)).unwrap();
-                        total += if feedback_only {
-                            fb.elapsed()
-                        } else {
-                            start.elapsed()
-                        };
-                        not_solved += usize::from(out.outcome != Outcome::Solved);
-                        black_box(out.u);
-                    }
-                    total
-                });
+    let timed = |group: &mut criterion::BenchmarkGroup<'_, _>, label: &str, feedback_only: bool| {
+        let mut mpc = make();
+        mpc.reset(&recorded[0].0).unwrap();
+        let mut i = 0;
+        let mut not_solved = 0;
+        group.bench_function(label, |b| {
+            b.iter_custom(|iters| {
+                let mut total = Duration::ZERO;
+                for _ in 0..iters {
+                    let (x, varphi) = recorded[i % RECORDED_TICKS];
+                    i += 1;
+                    mpc.set_tilt_plan(&plan).unwrap();
+                    mpc.set_measured_tilt(varphi).unwrap();
+                    let start = Instant::now();
+                    mpc.prepare().unwrap();
+                    let fb = Instant::now();
+                    let out = mpc.feedback(black_box(&x)).unwrap();
+                    total += if feedback_only {
+                        fb.elapsed()
+                    } else {
+                        start.elapsed()
+                    };
+                    not_solved += usize::from(out.outcome != Outcome::Solved);
+                    black_box(out.u);
+                }
+                total
             });
-            eprintln!("rti_tilt_plan/{label}: {not_solved} of {i} ticks not Solved");
-        };
+        });
+        eprintln!("rti_tilt_plan/{label}: {not_solved} of {i} ticks not Solved");
+    };
     timed(&mut group, "tick", false);
     timed(&mut group, "feedback", true);
     group.finish();
