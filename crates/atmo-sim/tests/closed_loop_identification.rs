@@ -9,12 +9,12 @@
 //! numbers are printed; the fitted controller must touch down steeper with
 //! an impact that is not worse (medians over the seeds).
 //!
-//! About a minute in release (67 s measured at load 10 on 2 cores; run by
-//! .ci/run): `cargo test --release -p atmo-sim --test
-//! closed_loop_identification -- --ignored --nocapture`. Measured there:
-//! ground_effect selected (confidence 1.00); over seeds 1-8 the median
-//! touchdown went from 62.61 deg at 0.40 m/s (nominal MPC) to 63.53 deg at
-//! 0.36 m/s (fitted surface, planned tilt).
+//! Seconds in release (5.7 s measured on main of 2026-12-02 at load 8, 67 s
+//! before issue 16's faster finder; run by .ci/run): `cargo test --release
+//! -p atmo-sim --test closed_loop_identification -- --ignored --nocapture`.
+//! Measured there: ground_effect selected (confidence 1.00); over seeds 1-8
+//! the median touchdown went from 62.61 deg at 0.40 m/s (nominal MPC) to
+//! 63.54 deg at 0.37 m/s (fitted surface, planned tilt).
 // Test, bench and example code: an unwrap that fails is the failure report.
 #![allow(clippy::unwrap_used)]
 
@@ -38,7 +38,7 @@ fn median(mut v: Vec<f64>) -> f64 {
 }
 
 #[test]
-#[ignore = "about a minute in release; see the module docs for the command"]
+#[ignore = "release build; see the module docs for the command"]
 fn fitted_ground_effect_in_the_mpc_lands_steeper_than_the_nominal_mpc() {
     let robot = RobotConfig::atmo();
     let mut plant = PlantConfig::ideal();
