@@ -24,7 +24,7 @@ use std::fmt::Debug;
 use nalgebra::Vector3;
 
 use crate::model::{
-    Dynamics, Input, InputJacobian, Linearization, State, TiltedBody, idx, sin_cos,
+    Dynamics, Input, InputJacobian, Linearization, State, TiltPartial, TiltedBody, idx, sin_cos,
 };
 
 /// `g(h, varphi)` and its partials, at one point.
@@ -57,6 +57,9 @@ pub struct GroundedBody<'a, S: ThrustGainSurface + ?Sized> {
 /// Per rotor: the gain and `dg_i/d(z, pitch, roll)`.
 struct RotorGains {
     gain: [f64; 4],
+    /// `dg_i/dh` and `dg_i/dvarphi` (the surface's partials).
+    d_height_raw: [f64; 4],
+    d_tilt: [f64; 4],
     d_z: [f64; 4],
     d_pitch: [f64; 4],
     d_roll: [f64; 4],
@@ -78,6 +81,8 @@ impl<S: ThrustGainSurface + ?Sized> GroundedBody<'_, S> {
         let (sr, cr) = sin_cos(x[idx::ROLL]);
         let mut out = RotorGains {
             gain: [0.0; 4],
+            d_height_raw: [0.0; 4],
+            d_tilt: [0.0; 4],
             d_z: [0.0; 4],
             d_pitch: [0.0; 4],
             d_roll: [0.0; 4],
@@ -88,12 +93,41 @@ impl<S: ThrustGainSurface + ?Sized> GroundedBody<'_, S> {
             let h = self.ground_z - (x[idx::Z] + down);
             let g = self.surface.gain_partials(h, self.body.varphi);
             out.gain[i] = g.gain;
+            out.d_height_raw[i] = g.d_height;
+            out.d_tilt[i] = g.d_tilt;
             // dh/dz = -1; dh/dpitch = -d(down)/dpitch; dh/droll = -d(down)/droll.
             out.d_z[i] = -g.d_height;
             out.d_pitch[i] = -g.d_height * (-cp * r.x - sp * sr * r.y - sp * cr * r.z);
             out.d_roll[i] = -g.d_height * (cp * cr * r.y - cp * sr * r.z);
         }
         out
+    }
+
+    /// [`Dynamics::linearize`] and `df/dvarphi` together, given
+    /// `partial = model.tilt_partial(&self.body)`: with `u_eff,i = u_i (1 + g_i)`,
+    /// `df/dvarphi = f_varphi(x, u_eff) + f_u(x, u_eff) diag(u_i) dg/dvarphi`,
+    /// `dg_i/dvarphi = g_h dh_i/dvarphi + g_varphi`,
+    /// `dh_i/dvarphi = -(R(theta) dr_i/dvarphi)_z`.
+    pub fn linearize_with_tilt(
+        &self,
+        partial: &TiltPartial,
+        x: &State,
+        u: &Input,
+    ) -> (Linearization, State) {
+        let (sp, cp) = sin_cos(x[idx::PITCH]);
+        let (sr, cr) = sin_cos(x[idx::ROLL]);
+        let lin = self.linearize(x, u);
+        let g = self.rotor_gains(x);
+        let u_eff = Input::from_fn(|i, _| u[i] * (1.0 + g.gain[i]));
+        let mut d_tilt = self.body.tilt_derivative(partial, x, &u_eff);
+        for i in 0..4 {
+            let dr = &partial.rotor_position[i];
+            let d_height = -(-sp * dr.x + cp * sr * dr.y + cp * cr * dr.z);
+            let dg = g.d_height_raw[i] * d_height + g.d_tilt[i];
+            // lin.dfdu column i is f_u(x, u_eff) e_i (1 + g_i).
+            d_tilt += lin.dfdu.column(i) * (u[i] * dg / (1.0 + g.gain[i]));
+        }
+        (lin, d_tilt)
     }
 
     /// The gains `g_i` at state x (for logs and tests).
@@ -216,6 +250,37 @@ mod tests {
             let fd = (rk4_step(&body, &xp, &u, 0.1) - rk4_step(&body, &xm, &u, 0.1)) / (2.0 * eps);
             let err = (fd - step.a.column(j)).amax();
             assert!(err < 1e-6, "RK4 A column {j}: {err}");
+        }
+    }
+
+    #[test]
+    fn tilt_derivative_matches_finite_differences() {
+        let model = model();
+        let surface = Smooth;
+        let mut x = State::zeros();
+        x[idx::Z] = -0.15;
+        x[idx::PITCH] = 0.08;
+        x[idx::ROLL] = -0.06;
+        x[idx::WX] = 0.1;
+        let u = Input::new(0.6, 0.7, 0.8, 0.65);
+        let eps = 1e-6;
+        let at = |v: f64| GroundedBody {
+            body: model.at_tilt(v),
+            surface: &surface,
+            ground_z: 0.1,
+        };
+        for varphi in [0.3, 0.9, 1.2] {
+            let grounded = at(varphi);
+            let partial = model.tilt_partial(&grounded.body);
+            let (lin, d_tilt) = grounded.linearize_with_tilt(&partial, &x, &u);
+            assert_eq!(lin, grounded.linearize(&x, &u));
+            let fd = (at(varphi + eps).dynamics(&x, &u) - at(varphi - eps).dynamics(&x, &u))
+                / (2.0 * eps);
+            let err = (fd - d_tilt).amax();
+            assert!(err < 1e-6 * (1.0 + fd.amax()), "varphi {varphi}: {err}");
+            // The surface's own tilt and height terms are in it.
+            let nominal = grounded.body.tilt_derivative(&partial, &x, &u);
+            assert!((d_tilt - nominal).amax() > 1e-2, "varphi {varphi}");
         }
     }
 

@@ -33,6 +33,9 @@ use nalgebra::{
 
 use crate::config::{ArmInertiaConvention, RobotConfig};
 
+mod tilt_partial;
+pub use tilt_partial::TiltPartial;
+
 /// Number of states.
 pub const NX: usize = 12;
 /// Number of inputs (normalized rotor commands).
@@ -371,22 +374,22 @@ pub struct TiltedBody {
     pub disturbance: Vector6<f64>,
 }
 
-/// `x_dot` with its Jacobians.
+/// `x_dot` with its Jacobians (N states, M inputs; ATMO's 12 and 4 by default).
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Linearization {
-    pub xdot: State,
-    pub dfdx: StateJacobian,
-    pub dfdu: InputJacobian,
+pub struct Linearization<const N: usize = NX, const M: usize = NU> {
+    pub xdot: SVector<f64, N>,
+    pub dfdx: SMatrix<f64, N, N>,
+    pub dfdu: SMatrix<f64, N, M>,
 }
 
 /// An RK4 step with its sensitivities.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct StepSensitivity {
-    pub next: State,
+pub struct StepSensitivity<const N: usize = NX, const M: usize = NU> {
+    pub next: SVector<f64, N>,
     /// dx+/dx.
-    pub a: StateJacobian,
+    pub a: SMatrix<f64, N, N>,
     /// dx+/du.
-    pub b: InputJacobian,
+    pub b: SMatrix<f64, N, M>,
 }
 
 impl TiltedBody {
@@ -581,10 +584,11 @@ impl TiltedBody {
     }
 }
 
-/// Something RK4 can step: `x_dot` and its Jacobians.
-pub trait Dynamics {
-    fn dynamics(&self, x: &State, u: &Input) -> State;
-    fn linearize(&self, x: &State, u: &Input) -> Linearization;
+/// Something RK4 can step: `x_dot` and its Jacobians (N states, M inputs;
+/// ATMO's 12 and 4 by default, atmo-mpc's tilt-planning model has 13 and 5).
+pub trait Dynamics<const N: usize = NX, const M: usize = NU> {
+    fn dynamics(&self, x: &SVector<f64, N>, u: &SVector<f64, M>) -> SVector<f64, N>;
+    fn linearize(&self, x: &SVector<f64, N>, u: &SVector<f64, M>) -> Linearization<N, M>;
 }
 
 impl Dynamics for TiltedBody {
@@ -597,7 +601,12 @@ impl Dynamics for TiltedBody {
 }
 
 /// One classical RK4 step of length `dt` with u held constant.
-pub fn rk4_step<D: Dynamics + ?Sized>(f: &D, x: &State, u: &Input, dt: f64) -> State {
+pub fn rk4_step<const N: usize, const M: usize, D: Dynamics<N, M> + ?Sized>(
+    f: &D,
+    x: &SVector<f64, N>,
+    u: &SVector<f64, M>,
+    dt: f64,
+) -> SVector<f64, N> {
     let k1 = f.dynamics(x, u);
     let k2 = f.dynamics(&(x + k1 * (0.5 * dt)), u);
     let k3 = f.dynamics(&(x + k2 * (0.5 * dt)), u);
@@ -607,36 +616,37 @@ pub fn rk4_step<D: Dynamics + ?Sized>(f: &D, x: &State, u: &Input, dt: f64) -> S
 
 /// One RK4 step with its exact sensitivities dx+/dx and dx+/du
 /// (the derivative of the discrete map, not of the continuous flow).
-pub fn rk4_step_sensitivity<D: Dynamics + ?Sized>(
+pub fn rk4_step_sensitivity<const N: usize, const M: usize, D: Dynamics<N, M> + ?Sized>(
     f: &D,
-    x: &State,
-    u: &Input,
+    x: &SVector<f64, N>,
+    u: &SVector<f64, M>,
     dt: f64,
-) -> StepSensitivity {
+) -> StepSensitivity<N, M> {
     let h = dt;
+    let eye = SMatrix::<f64, N, N>::identity();
     let l1 = f.linearize(x, u);
     let s1x = l1.dfdx;
     let s1u = l1.dfdu;
 
     let x2 = x + l1.xdot * (0.5 * h);
     let l2 = f.linearize(&x2, u);
-    let s2x = l2.dfdx * (StateJacobian::identity() + s1x * (0.5 * h));
+    let s2x = l2.dfdx * (eye + s1x * (0.5 * h));
     let s2u = l2.dfdx * (s1u * (0.5 * h)) + l2.dfdu;
 
     let x3 = x + l2.xdot * (0.5 * h);
     let l3 = f.linearize(&x3, u);
-    let s3x = l3.dfdx * (StateJacobian::identity() + s2x * (0.5 * h));
+    let s3x = l3.dfdx * (eye + s2x * (0.5 * h));
     let s3u = l3.dfdx * (s2u * (0.5 * h)) + l3.dfdu;
 
     let x4 = x + l3.xdot * h;
     let l4 = f.linearize(&x4, u);
-    let s4x = l4.dfdx * (StateJacobian::identity() + s3x * h);
+    let s4x = l4.dfdx * (eye + s3x * h);
     let s4u = l4.dfdx * (s3u * h) + l4.dfdu;
 
     let w = h / 6.0;
     StepSensitivity {
         next: x + (l1.xdot + l2.xdot * 2.0 + l3.xdot * 2.0 + l4.xdot) * w,
-        a: StateJacobian::identity() + (s1x + s2x * 2.0 + s3x * 2.0 + s4x) * w,
+        a: eye + (s1x + s2x * 2.0 + s3x * 2.0 + s4x) * w,
         b: (s1u + s2u * 2.0 + s3u * 2.0 + s4u) * w,
     }
 }

@@ -13,7 +13,7 @@
 use atmo_core::control::{DiffDrive, WheelRates, blending_alpha};
 use atmo_core::model::{Input, State, idx};
 use atmo_core::{Linkage, Model, RobotConfig};
-use atmo_mpc::{AlphaSchedule, Mpc, MpcSettings, Outcome, SolverCuts};
+use atmo_mpc::{AlphaSchedule, Mpc, MpcSettings, Outcome, SolverCuts, TiltPlan};
 use nalgebra::Vector3;
 
 use crate::error::{DaemonError, Result};
@@ -200,6 +200,11 @@ pub struct FlightStack {
     transition_limit: f64,
     /// The mode changed: re-plan with a few SQP iterations before the next feedback.
     replan: bool,
+    /// In the transition the MPC plans the tilt (`[tilt_plan] enabled`).
+    plans_tilt: bool,
+    wheel_radius: f64,
+    /// The tilt rate of the MPC's last plan (when it plans the tilt).
+    mpc_tilt_rate: Option<f64>,
 }
 
 impl FlightStack {
@@ -224,6 +229,7 @@ impl FlightStack {
     ) -> Result<Self> {
         let model = Model::new(robot);
         let linkage = Linkage::from_config(&robot.linkage, robot.limits.tilt_max())?;
+        let plans_tilt = mpc_settings.tilt_plan.is_some_and(|t| t.enabled);
         let mut mpc = Mpc::new(model.clone(), mpc_settings)?;
         mpc.set_ground_effect(surface);
         let steps = mpc.steps();
@@ -286,6 +292,9 @@ impl FlightStack {
                 max_torque: settings.observer.max_torque,
             }),
             replan: false,
+            plans_tilt,
+            wheel_radius: robot.wheels.radius,
+            mpc_tilt_rate: None,
             transition_limit: 0.0,
             model,
             settings,
@@ -363,6 +372,7 @@ impl FlightStack {
     /// Tilt limit in force in `mode`, rad.
     fn tilt_limit(&self, mode: Mode) -> f64 {
         match mode {
+            Mode::Transition if self.plans_tilt => self.transition_tilt_max,
             Mode::Transition => self.transition_limit,
             Mode::Takeoff | Mode::Flight | Mode::Morphing | Mode::Failsafe => self.flight_tilt_max,
             Mode::Disarmed | Mode::Drive | Mode::Touchdown => self.tilt_max,
@@ -392,6 +402,8 @@ impl FlightStack {
             Mode::Disarmed | Mode::Drive | Mode::Touchdown => 0.0,
             Mode::Takeoff if grounded && tilt <= takeoff_tilt => 0.0,
             Mode::Takeoff | Mode::Flight | Mode::Failsafe => -v,
+            // Held until the MPC's plan says otherwise (see `step`).
+            Mode::Transition if self.plans_tilt => 0.0,
             Mode::Morphing | Mode::Transition => v,
         }
     }
@@ -479,6 +491,15 @@ impl FlightStack {
         status.disturbance = self.observer.wrench().into();
 
         let thrust = self.thrust(mode, &state, estimate_fresh, pilot, tilt, &mut status);
+        let tilt_velocity = match self.mpc_tilt_rate.take() {
+            // In the transition the MPC's plan decides, within the same limits.
+            Some(rate) if mode == Mode::Transition && self.plans_tilt => {
+                let planned = self.limit_tilt_velocity(rate, tilt, limit);
+                self.tilt_command = planned;
+                planned
+            }
+            _ => tilt_velocity,
+        };
         let wheel_rates = self.wheels(mode, &state, height, pilot, &mut status);
         self.last_thrust = thrust;
         status.rejected = self.rejected;
@@ -590,6 +611,8 @@ impl FlightStack {
             }
             self.mpc_warm = true;
         }
+        // Setters refuse only non-finite values, which `ingest` keeps out.
+        let _ = self.mpc.set_measured_tilt(self.last_tilt);
         let result = if self.replan {
             self.replan = false;
             self.fill_reference(state);
@@ -606,6 +629,7 @@ impl FlightStack {
             status.solver = SolverState::Failed;
             return self.last_thrust;
         };
+        self.mpc_tilt_rate = out.tilt_rate;
         status.solver = match out.outcome {
             Outcome::Solved => SolverState::Solved,
             Outcome::Degraded(_) => SolverState::Degraded,
@@ -725,9 +749,20 @@ impl FlightStack {
         // Setters only refuse non-finite or mis-sized data, which cannot
         // reach here (inputs are validated); a refusal keeps the old value.
         let _ = self.mpc.set_reference(&self.reference);
-        let _ = self
-            .mpc
-            .set_tilt_ramp(tilt, self.tilt_command, 0.0, limit.max(tilt));
+        if self.mode == Mode::Transition && self.plans_tilt {
+            let plan = TiltPlan {
+                tilt_min: 0.0,
+                tilt_max: self.transition_tilt_max,
+                rate_min: -self.tilt_rate_max,
+                rate_max: self.tilt_rate_max,
+                wheel_radius: self.wheel_radius,
+            };
+            let _ = self.mpc.set_tilt_plan(&plan);
+        } else {
+            let _ = self
+                .mpc
+                .set_tilt_ramp(tilt, self.tilt_command, 0.0, limit.max(tilt));
+        }
         let _ = self.mpc.set_alpha(alpha);
         let _ = self.mpc.set_disturbance(&self.observer.wrench());
         let _ = self.mpc.set_ground_height(self.last_ground_z);

@@ -1,5 +1,5 @@
 //! RTI timing: one full tick, the feedback phase alone (the homotopy, and
-//! its fallback to Clarabel), and the same QPs solved by Clarabel and (with
+//! its fallback to Clarabel), the transition with the tilt planned by the MPC, and the same QPs solved by Clarabel and (with
 //! `--features osqp-compare`, needs cmake) OSQP in both formulations.
 // Test, bench and example code: an unwrap that fails is the failure report.
 #![allow(clippy::unwrap_used)]
@@ -13,7 +13,7 @@ use std::time::{Duration, Instant};
 
 use atmo_core::RobotConfig;
 use atmo_core::model::{Model, idx};
-use atmo_mpc::{FeedbackMethod, Formulation, Mpc, Outcome, QpSnapshot};
+use atmo_mpc::{FeedbackMethod, Formulation, Mpc, Outcome, QpSnapshot, TiltPlan};
 use atmo_plant::ground_effect::GroundEffect;
 use clarabel::solver::IPSolver;
 use criterion::{Criterion, criterion_group, criterion_main};
@@ -296,9 +296,99 @@ fn qp_solver_compare(c: &mut Criterion) {
     group.finish();
 }
 
+/// The transition with the tilt planned by the MPC (13/5 QP, the default
+/// ground-effect surface, the landing objective): 60 deg at 0.25 m,
+/// descending at 0.2 m/s. `tick`: preparation + feedback; `feedback`: the
+/// feedback phase alone. The estimates come from a closed loop of the
+/// atmo-core model with the planned tilt rate integrated.
+fn rti_tilt_plan(c: &mut Criterion) {
+    let mut group = c.benchmark_group("rti_tilt_plan");
+    let robot = RobotConfig::atmo();
+    let mut settings = scenarios::settings(formulation());
+    settings.model.ground_effect = atmo_mpc::settings::GroundEffectSource::PlantDefault;
+    let plan = TiltPlan {
+        tilt_min: 0.0,
+        tilt_max: robot.limits.tilt_transition_max(),
+        rate_min: -robot.limits.tilt_rate_max,
+        rate_max: robot.limits.tilt_rate_max,
+        wheel_radius: robot.wheels.radius,
+    };
+    let make = || {
+        let model = Model::new(&robot);
+        let mut mpc = Mpc::new(model, settings.clone()).unwrap();
+        mpc.set_ground_effect(Some(Arc::new(GroundEffect::default_surface())));
+        mpc.set_ground_height(0.0).unwrap();
+        let mut reference = atmo_core::State::zeros();
+        reference[idx::VZ] = 0.2;
+        mpc.set_reference_constant(&reference).unwrap();
+        mpc.set_alpha(0.2).unwrap();
+        mpc.set_tilt_ramp(60f64.to_radians(), 0.0, 0.0, plan.tilt_max)
+            .unwrap();
+        mpc.set_tilt_plan(&plan).unwrap();
+        mpc
+    };
+    // Record the closed loop once.
+    let mut mpc = make();
+    let mut x = atmo_core::State::zeros();
+    x[idx::Z] = -0.25;
+    x[idx::VZ] = 0.1;
+    let mut varphi = 60f64.to_radians();
+    mpc.reset(&x).unwrap();
+    let period = mpc.settings().horizon.tick_period;
+    let mut recorded = Vec::with_capacity(RECORDED_TICKS);
+    for _ in 0..RECORDED_TICKS {
+        recorded.push((x, varphi));
+        mpc.set_measured_tilt(varphi).unwrap();
+        let out = mpc.tick(&x).unwrap();
+        let body = mpc.model().at_tilt(varphi);
+        for _ in 0..7 {
+            x = body.rk4_step(&x, &out.u, period / 7.0);
+        }
+        varphi += out.tilt_rate.unwrap() * period;
+        // Hold the height band of a landing (the model has no ground).
+        if x[idx::Z] > -0.15 {
+            x[idx::Z] = -0.25;
+        }
+    }
+    let timed = |group: &mut criterion::BenchmarkGroup<'_, _>, label: &str, feedback_only: bool| {
+        let mut mpc = make();
+        mpc.reset(&recorded[0].0).unwrap();
+        let mut i = 0;
+        let mut not_solved = 0;
+        group.bench_function(label, |b| {
+            b.iter_custom(|iters| {
+                let mut total = Duration::ZERO;
+                for _ in 0..iters {
+                    let (x, varphi) = recorded[i % RECORDED_TICKS];
+                    i += 1;
+                    mpc.set_tilt_plan(&plan).unwrap();
+                    mpc.set_measured_tilt(varphi).unwrap();
+                    let start = Instant::now();
+                    mpc.prepare().unwrap();
+                    let fb = Instant::now();
+                    let out = mpc.feedback(black_box(&x)).unwrap();
+                    total += if feedback_only {
+                        fb.elapsed()
+                    } else {
+                        start.elapsed()
+                    };
+                    not_solved += usize::from(out.outcome != Outcome::Solved);
+                    black_box(out.u);
+                }
+                total
+            });
+        });
+        eprintln!("rti_tilt_plan/{label}: {not_solved} of {i} ticks not Solved");
+    };
+    timed(&mut group, "tick", false);
+    timed(&mut group, "feedback", true);
+    group.finish();
+}
+
 criterion_group!(
     benches,
     rti_tick,
+    rti_tilt_plan,
     rti_tick_ground_effect,
     rti_feedback,
     rti_feedback_fallback,

@@ -18,8 +18,24 @@
 //! `GroundedBody`: rotor i's thrust times `1 + g(h_i, varphi_k)`, h_i its hub
 //! height above the ground plane [`Mpc::set_ground_height`], linearized
 //! exactly (height through position and attitude). `"none"` is the nominal
-//! model and the default (measured better with the tilt on the paper's ramp:
-//! docs/ground_effect.md).
+//! model (measured better with the tilt on the paper's ramp:
+//! docs/ground_effect.md); the shipped default is `"default"` with the
+//! tilt planned (below; docs/landing.md).
+//!
+//! # The tilt as a decision (transition)
+//!
+//! With `[tilt_plan]` configured and a [`TiltPlan`] set ([`Mpc::set_tilt_plan`],
+//! the flight stack does it in the transition), the tilt is no parameter:
+//! the model is [`tilt_model`]'s 13 states `(x, varphi)` and 5 inputs
+//! `(u, omega)`, `varphi_dot = omega`, with `df/dvarphi` exact (atmo-core
+//! `TiltPartial`), and the same RTI QP (generic in its size) carries the
+//! tilt-rate box `[rate_min, rate_max]` narrowed by the tilt limits at the
+//! plan's tilt, the rotor box `[0, thrust_max]`, and the landing objective:
+//! the tilt's distance from its limit and the vertical speed weighed at the
+//! touchdown predicted along the plan (wheel clearance crossing zero), the
+//! state cost faded out past it, the descent held to its reference before
+//! it (`controller::tilt_plan`, docs/landing.md). The feedback is the same
+//! exact homotopy; [`TickOutput::tilt_rate`] is the planned rate to command.
 //!
 //! The yaw entry of `x - r` is the wrapped difference (in (-pi, pi]), so a
 //! reference at +179 deg and a state at -179 deg are 2 deg apart.
@@ -115,10 +131,11 @@ pub mod error;
 pub mod homotopy;
 pub mod qp;
 pub mod settings;
+pub mod tilt_model;
 
 pub use controller::{
     AlphaSchedule, DegradedCause, FailureCause, FeedbackPath, HomotopyFallback, Mpc, Outcome,
-    SqpReport, TickOutput, TickTimings, wrap_angle,
+    SqpReport, TickOutput, TickTimings, TiltPlan, wrap_angle,
 };
 pub use error::{MpcError, Result};
 pub use homotopy::{Bound, BoxHomotopy, HomotopyStop};

@@ -24,6 +24,33 @@ pub struct MpcFile {
     pub feedback: FeedbackSettings,
     pub failure: FailureSettings,
     pub model: ModelSettings,
+    /// The tilt as a decision of the MPC in the transition (absent: the
+    /// paper's tilt law everywhere).
+    pub tilt_plan: Option<TiltPlanSettings>,
+}
+
+/// `[tilt_plan]`: the tilt-rate input and the landing objective (crate
+/// docs, docs/landing.md).
+#[derive(Debug, Clone, Copy, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct TiltPlanSettings {
+    /// Whether the flight stack lets the MPC plan the tilt in the transition.
+    pub enabled: bool,
+    /// Weight on `(varphi_k - varphi_max)^2` at every stage, 1/rad^2.
+    pub tilt_weight: f64,
+    /// Weight on `(v_z,k - v_z,ref,k)^2` at every stage before the touchdown, s^2/m^2.
+    pub descent_speed_weight: f64,
+    /// Weight on the tilt rate `omega_k^2`, s^2/rad^2.
+    pub rate_weight: f64,
+    /// Weight on `(varphi - varphi_max)^2` at the predicted touchdown.
+    pub touchdown_tilt_weight: f64,
+    /// Weight on `(v_z - touchdown_speed)^2` at the predicted touchdown, s^2/m^2.
+    pub touchdown_speed_weight: f64,
+    /// The vertical speed aimed at when the wheels touch, m/s (down positive).
+    pub touchdown_speed: f64,
+    /// Upper bound of every rotor command while the tilt is planned (the
+    /// thrust margin kept for attitude control).
+    pub thrust_max: f64,
 }
 
 /// Which thrust-gain surface the prediction model carries near the ground.
@@ -182,6 +209,7 @@ pub struct MpcSettings {
     pub feedback: FeedbackSettings,
     pub failure: FailureSettings,
     pub model: ModelSettings,
+    pub tilt_plan: Option<TiltPlanSettings>,
 }
 
 impl MpcSettings {
@@ -268,6 +296,25 @@ impl ConfigFile for MpcFile {
             0..=10_000,
             "changes",
         )?;
+        if let Some(t) = &self.tilt_plan {
+            for (key, value) in [
+                ("tilt_plan.tilt_weight", t.tilt_weight),
+                ("tilt_plan.descent_speed_weight", t.descent_speed_weight),
+                ("tilt_plan.touchdown_tilt_weight", t.touchdown_tilt_weight),
+                ("tilt_plan.touchdown_speed_weight", t.touchdown_speed_weight),
+            ] {
+                c.range(key, value, 0.0..=1e6, "")?;
+            }
+            // Strictly convex in the tilt rate too.
+            c.range("tilt_plan.rate_weight", t.rate_weight, 1e-9..=1e6, "")?;
+            c.range("tilt_plan.thrust_max", t.thrust_max, 0.1..=1.0, "")?;
+            c.range(
+                "tilt_plan.touchdown_speed",
+                t.touchdown_speed,
+                0.0..=2.0,
+                "m/s",
+            )?;
+        }
         c.range(
             "failure.grace_ticks",
             self.failure.grace_ticks,
@@ -297,6 +344,7 @@ impl MpcFile {
             feedback: self.feedback,
             failure: self.failure,
             model: self.model.clone(),
+            tilt_plan: self.tilt_plan,
         })
     }
 }

@@ -10,7 +10,7 @@ mod common;
 use atmo_core::RobotConfig;
 use atmo_core::alloc_counter::count;
 use atmo_core::model::{Model, State, idx};
-use atmo_mpc::{FeedbackPath, Formulation, Mpc, Outcome};
+use atmo_mpc::{FeedbackPath, Formulation, Mpc, Outcome, TiltPlan};
 use common::{SUBSTEPS, hover_at};
 
 #[global_allocator]
@@ -40,6 +40,9 @@ enum Feedback {
     /// roll and pitch rate each tick: the
     /// homotopy falls back to Clarabel whenever the active set moves.
     ForcedFallback,
+    /// The shipped settings with the tilt planned by the MPC (13/5 QP,
+    /// landing objective), from 50 deg, the planned rate integrated.
+    TiltPlanned,
 }
 
 fn measure(formulation: Formulation, feedback: Feedback) -> Counts {
@@ -59,14 +62,37 @@ fn measure(formulation: Formulation, feedback: Feedback) -> Counts {
     let mut counts = Counts::default();
     let warm_up = TICKS - MEASURED_TICKS;
     let rate = std::f64::consts::FRAC_PI_2 / 4.0;
+    let robot = RobotConfig::atmo();
+    let plan = TiltPlan {
+        tilt_min: 0.0,
+        tilt_max: robot.limits.tilt_transition_max(),
+        rate_min: -rate,
+        rate_max: rate,
+        wheel_radius: robot.wheels.radius,
+    };
+    let mut planned_tilt = 50f64.to_radians();
+    if feedback == Feedback::TiltPlanned {
+        mpc.set_tilt_ramp(planned_tilt, 0.0, 0.0, plan.tilt_max)
+            .unwrap();
+        mpc.set_ground_height(0.0).unwrap();
+    }
     for tick in 0..TICKS {
-        let varphi = (rate * tick_period * tick as f64).min(50f64.to_radians());
+        let varphi = if feedback == Feedback::TiltPlanned {
+            planned_tilt
+        } else {
+            (rate * tick_period * tick as f64).min(50f64.to_radians())
+        };
         let warm = tick < warm_up;
         let (prep, n_prep) = count(|| {
             mpc.set_reference_constant(&reference).unwrap();
             mpc.set_alpha(varphi.cos()).unwrap();
-            mpc.set_tilt_ramp(varphi, rate, 0.0, 50f64.to_radians())
-                .unwrap();
+            if feedback == Feedback::TiltPlanned {
+                mpc.set_tilt_plan(&plan).unwrap();
+                mpc.set_measured_tilt(varphi).unwrap();
+            } else {
+                mpc.set_tilt_ramp(varphi, rate, 0.0, 50f64.to_radians())
+                    .unwrap();
+            }
             mpc.prepare()
         });
         prep.unwrap();
@@ -94,6 +120,10 @@ fn measure(formulation: Formulation, feedback: Feedback) -> Counts {
         for _ in 0..SUBSTEPS {
             x = body.rk4_step(&x, &out.u, h);
         }
+        if feedback == Feedback::TiltPlanned {
+            assert!(mpc.plans_tilt());
+            planned_tilt += out.tilt_rate.unwrap() * tick_period;
+        }
     }
     // The failure path: a non-finite estimate.
     let mut bad: State = x;
@@ -113,6 +143,7 @@ fn tick_does_not_allocate_in_our_code() {
     for (formulation, feedback) in [
         (Formulation::Condensed, Feedback::Shipped),
         (Formulation::Condensed, Feedback::ForcedFallback),
+        (Formulation::Condensed, Feedback::TiltPlanned),
         (Formulation::Sparse, Feedback::Shipped),
     ] {
         let c = measure(formulation, feedback);
@@ -146,7 +177,7 @@ fn tick_does_not_allocate_in_our_code() {
         );
         assert_eq!(c.fallback, 0, "{case}: the failure path allocates");
         match (formulation, feedback) {
-            (Formulation::Condensed, Feedback::Shipped) => {
+            (Formulation::Condensed, Feedback::Shipped | Feedback::TiltPlanned) => {
                 assert_eq!(c.clarabel_ticks, 0, "{case}: the homotopy fell back");
                 assert_eq!(c.feedback, 0, "{case}: the homotopy feedback allocates");
             }

@@ -3,6 +3,8 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
+use atmo_core::ConfigFile as _;
+use atmo_mpc::MpcFile;
 use atmo_mpc::settings::GroundEffectSource;
 use atmo_sim::closed_loop::{ControllerConfig, TickRecord, fly_logged, trace_of};
 use atmo_sim::figure::{Markers, write_landing_figure};
@@ -17,10 +19,23 @@ pub enum ControllerChoice {
     Config,
     /// No ground effect in the model (the controller before issue 17).
     Nominal,
-    /// The ground-effect surface in the model.
+    /// The ground-effect surface in the model, the tilt on the paper's law.
     GroundEffect,
-    /// Both, on the same scenario and seeds.
+    /// The ground-effect surface in the model and the tilt planned by the
+    /// MPC in the transition (`[tilt_plan]` of the MPC settings, enabled).
+    PlannedTilt,
+    /// Nominal and ground-effect, on the same scenario and seeds.
     Both,
+    /// Nominal, ground-effect and planned-tilt, on the same scenario and seeds.
+    All,
+}
+
+/// `--controller`, `--ground-surface`, `--mpc-config`.
+#[derive(Debug, Clone)]
+pub struct ControllerArgs {
+    pub choice: ControllerChoice,
+    pub surface: Option<PathBuf>,
+    pub mpc_config: Option<PathBuf>,
 }
 
 /// `--runs`, `--seed`, `--jobs`.
@@ -35,20 +50,44 @@ pub fn run(
     scenario_path: &Path,
     out: &Path,
     runs: MonteCarloArgs,
-    choice: ControllerChoice,
-    surface: Option<PathBuf>,
+    controller: ControllerArgs,
 ) -> Result<()> {
     let scenario = Scenario::load(scenario_path).with_context(|| "loading the scenario")?;
-    let base = ControllerConfig::atmo()?.deterministic();
-    let ground_effect = surface.map_or(GroundEffectSource::PlantDefault, GroundEffectSource::File);
-    let with = |source: GroundEffectSource| base.clone().with_ground_effect(source);
-    let controllers: Vec<(&str, ControllerConfig)> = match choice {
+    let mut base = ControllerConfig::atmo()?.deterministic();
+    if let Some(path) = &controller.mpc_config {
+        base.mpc = MpcFile::load(path)
+            .and_then(|file| file.settings(&base.flight.mpc_preset))
+            .with_context(|| format!("loading --mpc-config {}", path.display()))?;
+        base = base.deterministic();
+    }
+    let ground_effect = controller
+        .surface
+        .map_or(GroundEffectSource::PlantDefault, GroundEffectSource::File);
+    let with = |source: &GroundEffectSource, plans_tilt: bool| -> Result<ControllerConfig> {
+        let mut c = base.clone().with_ground_effect(source.clone())?;
+        match c.mpc.tilt_plan.as_mut() {
+            Some(t) => t.enabled = plans_tilt,
+            None if plans_tilt => {
+                bail!("--controller planned-tilt: the MPC settings have no [tilt_plan]")
+            }
+            None => {}
+        }
+        Ok(c)
+    };
+    let none = GroundEffectSource::None;
+    let controllers: Vec<(&str, ControllerConfig)> = match controller.choice {
         ControllerChoice::Config => vec![("", base.clone())],
-        ControllerChoice::Nominal => vec![("nominal", with(GroundEffectSource::None)?)],
-        ControllerChoice::GroundEffect => vec![("ground-effect", with(ground_effect)?)],
+        ControllerChoice::Nominal => vec![("nominal", with(&none, false)?)],
+        ControllerChoice::GroundEffect => vec![("ground-effect", with(&ground_effect, false)?)],
+        ControllerChoice::PlannedTilt => vec![("planned-tilt", with(&ground_effect, true)?)],
         ControllerChoice::Both => vec![
-            ("nominal", with(GroundEffectSource::None)?),
-            ("ground-effect", with(ground_effect)?),
+            ("nominal", with(&none, false)?),
+            ("ground-effect", with(&ground_effect, false)?),
+        ],
+        ControllerChoice::All => vec![
+            ("nominal", with(&none, false)?),
+            ("ground-effect", with(&ground_effect, false)?),
+            ("planned-tilt", with(&ground_effect, true)?),
         ],
     };
     let dir: PathBuf = out.join(&scenario.file.name);

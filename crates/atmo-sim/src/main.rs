@@ -57,10 +57,13 @@ enum Command {
         #[arg(long)]
         jobs: Option<usize>,
         /// The MPC's prediction model: `nominal` (no ground effect),
-        /// `ground-effect` (the plant's documented default surface), `both`
-        /// (fly each on the same scenario and seeds, into OUT/<scenario
+        /// `ground-effect` (the plant's documented default surface, the tilt
+        /// on the paper's law), `planned-tilt` (the ground-effect model and
+        /// the MPC deciding the tilt in the transition, config/mpc.toml's
+        /// [tilt_plan]), `both` (nominal and ground-effect) or `all` (the
+        /// three; fly each on the same scenario and seeds, into OUT/<scenario
         /// name>/<controller>/, and print one table), or `config` (what
-        /// config/mpc.toml's [model] says).
+        /// config/mpc.toml says).
         #[arg(long, value_enum, default_value_t = fly::ControllerChoice::Config)]
         controller: fly::ControllerChoice,
         /// With `--controller ground-effect` or `both`: the surface from
@@ -68,6 +71,10 @@ enum Command {
         /// fitted_effects.toml of `atmo-sim explain`).
         #[arg(long)]
         ground_surface: Option<PathBuf>,
+        /// Fly with this MPC settings file instead of the shipped
+        /// config/mpc.toml (same layout; the flight settings' preset is used).
+        #[arg(long)]
+        mpc_config: Option<PathBuf>,
     },
     // The help text is the doc comment of `atmo_explain::cli::Args` (a doc
     // comment here would replace it).
@@ -135,6 +142,7 @@ fn main() -> Result<()> {
             jobs,
             controller,
             ground_surface,
+            mpc_config,
         } => fly::run(
             &scenario.scenario,
             &out,
@@ -143,8 +151,11 @@ fn main() -> Result<()> {
                 seed,
                 jobs,
             },
-            controller,
-            ground_surface,
+            fly::ControllerArgs {
+                choice: controller,
+                surface: ground_surface,
+                mpc_config,
+            },
         ),
         Command::Serve {
             scenario,

@@ -5,6 +5,7 @@
 
 mod outcome;
 mod tick;
+mod tilt_plan;
 
 use std::f64::consts::{PI, TAU};
 use std::sync::Arc;
@@ -21,6 +22,9 @@ use crate::homotopy::HomotopyStop;
 use crate::qp::cuts::SolverCuts;
 use crate::qp::{LinearizedHorizon, QpBackend, SolveReport};
 use crate::settings::{FeedbackMethod, Formulation, MpcSettings};
+
+pub use tilt_plan::TiltPlan;
+use tilt_plan::TiltPlanner;
 
 pub use outcome::{
     AlphaSchedule, DegradedCause, FailureCause, FeedbackPath, HomotopyFallback, Outcome, SqpReport,
@@ -77,6 +81,8 @@ pub struct Mpc {
     ground_effect: Option<Arc<dyn ThrustGainSurface>>,
     /// NED z of the ground plane, m.
     ground_z: f64,
+    /// The tilt-planning QP (when `[tilt_plan]` is configured).
+    tilt: Option<Box<TiltPlanner>>,
 }
 
 impl Mpc {
@@ -90,7 +96,12 @@ impl Mpc {
         let mut lin = LinearizedHorizon::new(steps);
         Self::start_up_linearization(&model, &settings, &hover, &mut lin);
         let qp = QpBackend::new(&lin, &settings.solver)?;
+        let tilt = match settings.tilt_plan {
+            Some(weights) => Some(Box::new(TiltPlanner::new(&model, &settings, weights)?)),
+            None => None,
+        };
         Ok(Self {
+            tilt,
             model,
             steps,
             stage_dt,
@@ -291,6 +302,7 @@ impl Mpc {
             check_tilt(*v)?;
         }
         self.varphi.copy_from_slice(varphi);
+        self.stop_planning_tilt();
         Ok(())
     }
 
@@ -318,6 +330,7 @@ impl Mpc {
         for (k, v) in self.varphi.iter_mut().enumerate() {
             *v = (varphi_now + rate * self.stage_dt * k as f64).clamp(min, max);
         }
+        self.stop_planning_tilt();
         Ok(())
     }
 

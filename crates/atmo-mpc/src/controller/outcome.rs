@@ -121,6 +121,9 @@ pub struct TickOutput {
     pub outcome: Outcome,
     pub timings: TickTimings,
     pub path: FeedbackPath,
+    /// The planned tilt rate to command now, rad/s, when the MPC plans the
+    /// tilt ([`crate::Mpc::set_tilt_plan`]); `None`: the tilt is a parameter.
+    pub tilt_rate: Option<f64>,
 }
 
 /// Result of [`Mpc::converge_sqp`].

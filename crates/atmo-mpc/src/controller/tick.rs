@@ -1,11 +1,12 @@
 //! The two phases of a tick (preparation, feedback), the fallback, and the
 //! re-planning and SQP diagnostics built on them.
 
-use std::f64::consts::{PI, TAU};
+use std::f64::consts::{FRAC_PI_2, PI, TAU};
 use std::time::{Duration, Instant};
 
-use atmo_core::model::{State, idx};
+use atmo_core::model::{NU, NX, State, idx};
 use clarabel::solver::SolverStatus;
+use nalgebra::SVector;
 
 use super::outcome::{
     DegradedCause, FailureCause, FeedbackPath, HomotopyFallback, Outcome, SqpReport, TickOutput,
@@ -13,8 +14,10 @@ use super::outcome::{
 };
 use super::{Mpc, hover_reference, wrap_angle};
 use crate::error::{MpcError, Result};
-use crate::qp::{QpSnapshot, SolveReport};
+use crate::homotopy::HomotopyStop;
+use crate::qp::{QpBackend, QpSnapshot, SolveReport};
 use crate::settings::Predictor;
+use crate::tilt_model::{TILT, TILT_RATE, tilt_state};
 
 impl Mpc {
     /// Preparation phase: shift the plan by one tick, linearize along it
@@ -29,8 +32,54 @@ impl Mpc {
         self.preparation_ok = false;
         if shift {
             self.shift_plan();
+            self.shift_tilt_plan();
         }
         self.rewrap_plan_yaw();
+        let planning = self.plans_tilt();
+        if let Some(tilt) = self.tilt.as_deref_mut() {
+            tilt.active = false;
+        }
+        let linearized = if planning {
+            self.linearize_tilt_plan()
+        } else {
+            self.linearize_nominal()
+        };
+        if let Err(e) = linearized {
+            self.preparation_time = start.elapsed();
+            return Err(e);
+        }
+        self.prepared_solution = None;
+        self.preparation_solve.solve_time = 0.0;
+        self.preparation_solve.iterations = 0;
+        if self.uses_homotopy() {
+            let e0 = self.predicted_deviation(shift);
+            self.predicted_e0 = e0;
+            let max_changes = self.settings.feedback.max_preparation_changes;
+            let prepared = if planning {
+                let e0_tilt = tilt_state(&e0, self.predicted_tilt_deviation(shift));
+                match self.tilt.as_deref_mut().and_then(|t| t.qp.condensed_mut()) {
+                    Some(qp) => Some(qp.prepare_solution(&e0_tilt, max_changes)?),
+                    None => None,
+                }
+            } else {
+                match self.qp.condensed_mut() {
+                    Some(qp) => Some(qp.prepare_solution(&e0, max_changes)?),
+                    None => None,
+                }
+            };
+            if let Some(prepared) = prepared {
+                self.preparation_solve = prepared.clarabel;
+                self.prepared_solution = Some(prepared.correction.map(|_| ()));
+            }
+        }
+        self.preparation_ok = true;
+        self.preparation_time = start.elapsed();
+        Ok(self.preparation_time)
+    }
+
+    /// The preparation's linearization with the tilt as a parameter, loaded
+    /// into the 12/4 QP.
+    fn linearize_nominal(&mut self) -> Result<()> {
         let weights = &self.settings.weights;
         let q = weights.state_weight(self.alpha);
         let r = weights.input_weight(self.alpha);
@@ -44,7 +93,6 @@ impl Mpc {
                 && s.b.iter().all(|v| v.is_finite())
                 && defect.iter().all(|v| v.is_finite()))
             {
-                self.preparation_time = start.elapsed();
                 self.plan_diverged = true;
                 return Err(MpcError::NonFiniteLinearization { stage: k });
             }
@@ -62,23 +110,7 @@ impl Mpc {
             e[idx::YAW] = wrap_angle(e[idx::YAW]);
             self.lin.x_err[k] = e;
         }
-        self.qp.load(&self.lin)?;
-        self.prepared_solution = None;
-        self.preparation_solve.solve_time = 0.0;
-        self.preparation_solve.iterations = 0;
-        if self.uses_homotopy() {
-            let e0 = self.predicted_deviation(shift);
-            self.predicted_e0 = e0;
-            let max_changes = self.settings.feedback.max_preparation_changes;
-            if let Some(qp) = self.qp.condensed_mut() {
-                let prepared = qp.prepare_solution(&e0, max_changes)?;
-                self.preparation_solve = prepared.clarabel;
-                self.prepared_solution = Some(prepared.correction.map(|_| ()));
-            }
-        }
-        self.preparation_ok = true;
-        self.preparation_time = start.elapsed();
-        Ok(self.preparation_time)
+        self.qp.load(&self.lin)
     }
 
     /// `x_pred - xbar_0` for the estimate the preparation expects (see
@@ -150,6 +182,9 @@ impl Mpc {
             .iter()
             .all(|v| v.is_finite())
             .then_some((*x_est, out.u));
+        if let Some(tilt) = self.tilt.as_deref_mut() {
+            tilt.last_applied = out.tilt_rate.map(|rate| (tilt.measured, rate));
+        }
         Ok(out)
     }
 
@@ -180,61 +215,41 @@ impl Mpc {
         let mut e0 = x_est - self.plan_x[0];
         e0[idx::YAW] = wrap_angle(e0[idx::YAW]);
         let max_changes = self.settings.feedback.max_active_set_changes;
-        let mut fallback = None;
-        let walked = match (self.prepared_solution, self.qp.condensed_mut()) {
-            (Some(Ok(())), Some(qp)) => match qp.feedback_solution(&e0, max_changes) {
-                Ok(changes) => Some(changes),
-                Err(stop) => {
-                    fallback = Some(HomotopyFallback::Feedback(stop));
-                    None
-                }
-            },
-            (Some(Err(stop)), _) => {
-                fallback = Some(HomotopyFallback::Preparation(stop));
-                None
-            }
-            _ => None,
-        };
-        let (outcome, path) = if let Some(active_set_changes) = walked {
-            timings.solver_iterations = timings.preparation_solver_iterations;
-            (
-                Outcome::Solved,
-                FeedbackPath::Homotopy { active_set_changes },
-            )
-        } else {
-            if fallback.is_some() {
-                self.homotopy_fallbacks += 1;
-            }
-            let path = FeedbackPath::Clarabel { fallback };
-            if self.qp.set_initial_deviation(&e0).is_err() {
-                return Ok(self.fail_on(path, FailureCause::PreparationFailed, timings, start));
-            }
-            let report: SolveReport = self.qp.solve();
-            timings.solve = Duration::from_secs_f64(report.solve_time.max(0.0));
-            timings.feedback_solver_iterations = report.iterations;
-            timings.solver_iterations = timings.preparation_solver_iterations + report.iterations;
-            let outcome = match report.status {
-                SolverStatus::Solved => Outcome::Solved,
-                SolverStatus::AlmostSolved => Outcome::Degraded(DegradedCause::ReducedAccuracy),
-                // A limit hit early leaves an iterate far from the optimum (up to
-                // 0.27 in u after 0-2 iterations, measured): fly the shifted plan
-                // unless the iterate already meets the reduced tolerances.
-                SolverStatus::MaxIterations if self.qp.iterate_usable() => {
-                    Outcome::Degraded(DegradedCause::IterationLimit)
-                }
-                // Our per-solve clock ends a solve through the termination callback.
-                SolverStatus::MaxTime | SolverStatus::CallbackTerminated
-                    if self.qp.iterate_usable() =>
-                {
-                    Outcome::Degraded(DegradedCause::TimeLimit)
-                }
-                other => {
-                    return Ok(self.fail_on(path, FailureCause::Solver(other), timings, start));
-                }
+        let prepared = self.prepared_solution;
+        let planning = self.tilt.as_deref().is_some_and(|t| t.active);
+        let solved = if planning {
+            let Some(tilt) = self.tilt.as_deref_mut() else {
+                return Err(MpcError::NotPrepared);
             };
-            (outcome, path)
+            let e0_tilt = tilt_state(&e0, tilt.measured - self.varphi[0]);
+            let solved = solve_at(&mut tilt.qp, prepared, &e0_tilt, max_changes, &mut timings);
+            if solved.is_ok() {
+                tilt.qp
+                    .extract(&tilt.lin, &e0_tilt, &mut tilt.dx, &mut tilt.du);
+            }
+            solved
+        } else {
+            let solved = solve_at(&mut self.qp, prepared, &e0, max_changes, &mut timings);
+            if solved.is_ok() {
+                self.qp.extract(&self.lin, &e0, &mut self.dx, &mut self.du);
+            }
+            solved
         };
-        self.qp.extract(&self.lin, &e0, &mut self.dx, &mut self.du);
+        let (outcome, path) = match solved {
+            Ok(done) => done,
+            Err((path, cause)) => {
+                if path.is_fallback() {
+                    self.homotopy_fallbacks += 1;
+                }
+                return Ok(self.fail_on(path, cause, timings, start));
+            }
+        };
+        if path.is_fallback() {
+            self.homotopy_fallbacks += 1;
+        }
+        if planning {
+            self.split_tilt_solution();
+        }
         let finite = self.dx.iter().all(|x| x.iter().all(|v| v.is_finite()))
             && self.du.iter().all(|u| u.iter().all(|v| v.is_finite()));
         if !finite {
@@ -247,6 +262,7 @@ impl Mpc {
             // The solver meets the box to its tolerance; the actuators need it exactly.
             self.plan_u[k] = (self.plan_u[k] + self.du[k]).map(|u| u.clamp(0.0, 1.0));
         }
+        let tilt_rate = self.apply_tilt_solution();
         self.failed_ticks = 0;
         timings.feedback = start.elapsed();
         Ok(TickOutput {
@@ -254,7 +270,34 @@ impl Mpc {
             outcome,
             timings,
             path,
+            tilt_rate,
         })
+    }
+
+    /// The 12/4 parts of the tilt QP's step into `dx`, `du`.
+    fn split_tilt_solution(&mut self) {
+        if let Some(tilt) = self.tilt.as_deref() {
+            for (dx, t) in self.dx.iter_mut().zip(&tilt.dx) {
+                *dx = t.fixed_rows::<NX>(0).into_owned();
+            }
+            for (du, t) in self.du.iter_mut().zip(&tilt.du) {
+                *du = t.fixed_rows::<NU>(0).into_owned();
+            }
+        }
+    }
+
+    /// The tilt QP's step applied to the tilt plan (after a finite
+    /// solution); the rate to command now.
+    fn apply_tilt_solution(&mut self) -> Option<f64> {
+        let tilt = self.tilt.as_deref_mut().filter(|t| t.active)?;
+        for (varphi, dx) in self.varphi.iter_mut().zip(&tilt.dx) {
+            *varphi = (*varphi + dx[TILT]).clamp(0.0, FRAC_PI_2);
+        }
+        for k in 0..self.steps {
+            let (lo, hi) = (tilt.lin.u_lo[k][TILT_RATE], tilt.lin.u_hi[k][TILT_RATE]);
+            tilt.rate[k] = (tilt.rate[k] + tilt.du[k][TILT_RATE]).clamp(lo, hi.max(lo));
+        }
+        Some(tilt.rate[0])
     }
 
     /// [`Self::fail`] after a solve was attempted on `path`.
@@ -297,11 +340,17 @@ impl Mpc {
             }
         };
         timings.feedback = start.elapsed();
+        let tilt_rate = self
+            .tilt
+            .as_deref()
+            .filter(|t| t.plan.is_some())
+            .map(|t| t.rate[0]);
         TickOutput {
             u: u.map(|v| v.clamp(0.0, 1.0)),
             outcome,
             timings,
             path: FeedbackPath::NoSolve,
+            tilt_rate,
         }
     }
 
@@ -377,10 +426,13 @@ impl Mpc {
     /// Re-solves the QP currently loaded (after a `prepare` and a `feedback`),
     /// touching nothing else. For measuring the bare solver call.
     pub fn resolve_loaded_qp(&mut self) -> SolveReport {
-        self.qp.solve()
+        match self.tilt.as_deref_mut().filter(|t| t.active) {
+            Some(tilt) => tilt.qp.solve(),
+            None => self.qp.solve(),
+        }
     }
 
-    /// A copy of the QP currently loaded in the solver (allocates).
+    /// A copy of the nominal (12/4) QP last loaded in the solver (allocates).
     pub fn qp_snapshot(&self) -> QpSnapshot {
         self.qp.snapshot()
     }
@@ -389,4 +441,62 @@ impl Mpc {
     pub fn qp_solution(&self) -> &[f64] {
         self.qp.raw_solution()
     }
+}
+
+/// The QP's solution at `e0`: the homotopy from the prepared solution when
+/// it is ready, else Clarabel; how it ended, or the failure (with the path
+/// tried). Generic in the QP's size (nominal 12/4, tilt planning 13/5).
+fn solve_at<const NX_: usize, const NU_: usize>(
+    qp: &mut QpBackend<NX_, NU_>,
+    prepared: Option<std::result::Result<(), HomotopyStop>>,
+    e0: &SVector<f64, NX_>,
+    max_changes: u32,
+    timings: &mut TickTimings,
+) -> std::result::Result<(Outcome, FeedbackPath), (FeedbackPath, FailureCause)> {
+    let mut fallback = None;
+    let walked = match (prepared, qp.condensed_mut()) {
+        (Some(Ok(())), Some(condensed)) => match condensed.feedback_solution(e0, max_changes) {
+            Ok(changes) => Some(changes),
+            Err(stop) => {
+                fallback = Some(HomotopyFallback::Feedback(stop));
+                None
+            }
+        },
+        (Some(Err(stop)), _) => {
+            fallback = Some(HomotopyFallback::Preparation(stop));
+            None
+        }
+        _ => None,
+    };
+    if let Some(active_set_changes) = walked {
+        timings.solver_iterations = timings.preparation_solver_iterations;
+        return Ok((
+            Outcome::Solved,
+            FeedbackPath::Homotopy { active_set_changes },
+        ));
+    }
+    let path = FeedbackPath::Clarabel { fallback };
+    if qp.set_initial_deviation(e0).is_err() {
+        return Err((path, FailureCause::PreparationFailed));
+    }
+    let report: SolveReport = qp.solve();
+    timings.solve = Duration::from_secs_f64(report.solve_time.max(0.0));
+    timings.feedback_solver_iterations = report.iterations;
+    timings.solver_iterations = timings.preparation_solver_iterations + report.iterations;
+    let outcome = match report.status {
+        SolverStatus::Solved => Outcome::Solved,
+        SolverStatus::AlmostSolved => Outcome::Degraded(DegradedCause::ReducedAccuracy),
+        // A limit hit early leaves an iterate far from the optimum (up to
+        // 0.27 in u after 0-2 iterations, measured): fly the shifted plan
+        // unless the iterate already meets the reduced tolerances.
+        SolverStatus::MaxIterations if qp.iterate_usable() => {
+            Outcome::Degraded(DegradedCause::IterationLimit)
+        }
+        // Our per-solve clock ends a solve through the termination callback.
+        SolverStatus::MaxTime | SolverStatus::CallbackTerminated if qp.iterate_usable() => {
+            Outcome::Degraded(DegradedCause::TimeLimit)
+        }
+        other => return Err((path, FailureCause::Solver(other))),
+    };
+    Ok((outcome, path))
 }

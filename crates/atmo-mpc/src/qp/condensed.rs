@@ -1,7 +1,7 @@
 //! The condensed QP: states eliminated, 4N inputs, a dense Hessian and box
 //! constraints only, so that the feedback can walk the exact homotopy.
 
-use atmo_core::model::{Input, InputJacobian, NU, NX, State, StateJacobian};
+use atmo_core::model::{NU as ATMO_NU, NX as ATMO_NX};
 use clarabel::algebra::CscMatrix;
 use clarabel::solver::{SolverStatus, SupportedConeT};
 use nalgebra::{SMatrix, SVector};
@@ -12,12 +12,10 @@ use crate::error::Result;
 use crate::homotopy::{Bound, BoxHomotopy, HomotopyStop};
 use crate::settings::SolverSettings;
 
-type Gain = SMatrix<f64, NU, NX>;
-
 /// Variables `du` (4N). With `dx_k = Phi_k e0 + sum_{j<k} G_{k,j} du_j + w_k`
 /// the cost becomes `1/2 du' H du + (g0 + M e0)' du`; constraints are the box
 /// `-ubar <= du <= 1 - ubar` only, so A = [I; -I] never changes.
-pub struct CondensedQp {
+pub struct CondensedQp<const NX: usize = ATMO_NX, const NU: usize = ATMO_NU> {
     steps: usize,
     pub(super) solver: TimedSolver,
     /// Dense Hessian, column-major n x n (both triangles).
@@ -28,14 +26,14 @@ pub struct CondensedQp {
     q: Vec<f64>,
     b: Vec<f64>,
     /// `M_i = B_i' S_{i+1} Phi_{i+1}`, rows 4i..4i+4 of M.
-    m: Vec<Gain>,
+    m: Vec<SMatrix<f64, NU, NX>>,
     // Work arrays of the condensing recursions.
-    phi: Vec<StateJacobian>,
-    w: Vec<State>,
+    phi: Vec<SMatrix<f64, NX, NX>>,
+    w: Vec<SVector<f64, NX>>,
     /// `G_{k,j}`, k = 1..N, j < k, at `k (k - 1) / 2 + j`.
-    g: Vec<InputJacobian>,
-    s: Vec<StateJacobian>,
-    lambda: Vec<State>,
+    g: Vec<SMatrix<f64, NX, NU>>,
+    s: Vec<SMatrix<f64, NX, NX>>,
+    lambda: Vec<SVector<f64, NX>>,
     p_pattern: CscMatrix<f64>,
     a_pattern: CscMatrix<f64>,
     /// The exact solution, moved from the predicted to the actual `e0`.
@@ -66,8 +64,8 @@ fn g_index(k: usize, j: usize) -> usize {
     k * (k - 1) / 2 + j
 }
 
-impl CondensedQp {
-    pub(super) fn new(lin: &LinearizedHorizon, settings: &SolverSettings) -> Result<Self> {
+impl<const NX: usize, const NU: usize> CondensedQp<NX, NU> {
+    pub(super) fn new(lin: &LinearizedHorizon<NX, NU>, settings: &SolverSettings) -> Result<Self> {
         let steps = lin.steps();
         let n = NU * steps;
         let mut p = CscBuilder::new(n);
@@ -101,12 +99,12 @@ impl CondensedQp {
             g0: vec![0.0; n],
             q: vec![0.0; n],
             b: vec![0.0; 2 * n],
-            m: vec![Gain::zeros(); steps],
-            phi: vec![StateJacobian::identity(); steps + 1],
-            w: vec![State::zeros(); steps + 1],
-            g: vec![InputJacobian::zeros(); steps * (steps + 1) / 2],
-            s: vec![StateJacobian::zeros(); steps + 1],
-            lambda: vec![State::zeros(); steps + 1],
+            m: vec![SMatrix::<f64, NU, NX>::zeros(); steps],
+            phi: vec![SMatrix::<f64, NX, NX>::identity(); steps + 1],
+            w: vec![SVector::<f64, NX>::zeros(); steps + 1],
+            g: vec![SMatrix::<f64, NX, NU>::zeros(); steps * (steps + 1) / 2],
+            s: vec![SMatrix::<f64, NX, NX>::zeros(); steps + 1],
+            lambda: vec![SVector::<f64, NX>::zeros(); steps + 1],
             p_pattern,
             a_pattern,
             homotopy: BoxHomotopy::new(n),
@@ -131,12 +129,12 @@ impl CondensedQp {
     }
 
     /// The condensing recursions (see the crate docs).
-    fn condense(&mut self, lin: &LinearizedHorizon) {
+    fn condense(&mut self, lin: &LinearizedHorizon<NX, NU>) {
         let n = self.steps;
         let nu_total = NU * n;
         // Forward: Phi, w, G.
-        self.phi[0] = StateJacobian::identity();
-        self.w[0] = State::zeros();
+        self.phi[0] = SMatrix::<f64, NX, NX>::identity();
+        self.w[0] = SVector::<f64, NX>::zeros();
         for k in 0..n {
             self.phi[k + 1] = lin.a[k] * self.phi[k];
             self.w[k + 1] = lin.a[k] * self.w[k] + lin.defect[k];
@@ -148,7 +146,7 @@ impl CondensedQp {
         // Backward: S_k = Q_k + A_k' S_{k+1} A_k, lambda_k = Q_k c_k + A_k' lambda_{k+1},
         // with c_k = w_k + xbar_k - x_ref_k.
         let c_n = self.w[n] + lin.x_err[n];
-        self.s[n] = StateJacobian::from_diagonal(&lin.q_diag[n]);
+        self.s[n] = SMatrix::<f64, NX, NX>::from_diagonal(&lin.q_diag[n]);
         self.lambda[n] = lin.q_diag[n].component_mul(&c_n);
         for k in (1..n).rev() {
             let c_k = self.w[k] + lin.x_err[k];
@@ -163,7 +161,7 @@ impl CondensedQp {
         }
         // Rows of H, M and g0.
         for i in 0..n {
-            let t: Gain = lin.b[i].transpose() * self.s[i + 1];
+            let t: SMatrix<f64, NU, NX> = lin.b[i].transpose() * self.s[i + 1];
             self.m[i] = t * self.phi[i + 1];
             let g_i =
                 lin.b[i].transpose() * self.lambda[i + 1] + lin.r_diag.component_mul(&lin.u_err[i]);
@@ -194,13 +192,13 @@ impl CondensedQp {
         }
         for k in 0..n {
             for i in 0..NU {
-                self.b[NU * k + i] = 1.0 - lin.u_bar[k][i];
-                self.b[nu_total + NU * k + i] = lin.u_bar[k][i];
+                self.b[NU * k + i] = lin.u_hi[k][i] - lin.u_bar[k][i];
+                self.b[nu_total + NU * k + i] = lin.u_bar[k][i] - lin.u_lo[k][i];
             }
         }
     }
 
-    pub(super) fn load(&mut self, lin: &LinearizedHorizon) -> Result<()> {
+    pub(super) fn load(&mut self, lin: &LinearizedHorizon<NX, NU>) -> Result<()> {
         self.condense(lin);
         self.q.copy_from_slice(&self.g0);
         self.solver
@@ -212,7 +210,7 @@ impl CondensedQp {
     }
 
     /// `q = g0 + M e0`.
-    fn gradient_at(&mut self, e0: &State) {
+    fn gradient_at(&mut self, e0: &SVector<f64, NX>) {
         for i in 0..self.steps {
             let gi = self.m[i] * e0;
             for d in 0..NU {
@@ -221,7 +219,7 @@ impl CondensedQp {
         }
     }
 
-    pub(super) fn set_initial_deviation(&mut self, e0: &State) -> Result<()> {
+    pub(super) fn set_initial_deviation(&mut self, e0: &SVector<f64, NX>) -> Result<()> {
         self.gradient_at(e0);
         self.solved_by = SolvedBy::Clarabel;
         self.solver.solver.update_q(&self.q).map_err(solver_error)
@@ -243,7 +241,7 @@ impl CondensedQp {
     /// multiplier) is corrected by the homotopy into the exact solution there.
     pub fn prepare_solution(
         &mut self,
-        e0_predicted: &State,
+        e0_predicted: &SVector<f64, NX>,
         max_changes: u32,
     ) -> Result<PreparedSolution> {
         self.set_initial_deviation(e0_predicted)?;
@@ -289,7 +287,7 @@ impl CondensedQp {
     /// On `Err` the solution is unusable; solve with Clarabel instead.
     pub fn feedback_solution(
         &mut self,
-        e0: &State,
+        e0: &SVector<f64, NX>,
         max_changes: u32,
     ) -> std::result::Result<u32, HomotopyStop> {
         self.gradient_at(e0);
@@ -323,10 +321,10 @@ impl CondensedQp {
 
     pub(super) fn extract(
         &self,
-        lin: &LinearizedHorizon,
-        e0: &State,
-        dx: &mut [State],
-        du: &mut [Input],
+        lin: &LinearizedHorizon<NX, NU>,
+        e0: &SVector<f64, NX>,
+        dx: &mut [SVector<f64, NX>],
+        du: &mut [SVector<f64, NU>],
     ) {
         let z = self.raw_solution();
         dx[0] = *e0;

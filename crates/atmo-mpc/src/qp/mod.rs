@@ -11,9 +11,10 @@ pub mod cuts;
 mod solver;
 mod sparse;
 
-use atmo_core::model::{Input, InputJacobian, State, StateJacobian};
+use atmo_core::model::{NU as ATMO_NU, NX as ATMO_NX};
 use clarabel::algebra::CscMatrix;
 use clarabel::solver::{DefaultSolver, SolverStatus, SupportedConeT};
+use nalgebra::{SMatrix, SVector};
 
 use crate::error::Result;
 use crate::settings::{Formulation, SolverSettings};
@@ -26,35 +27,40 @@ pub use sparse::SparseQp;
 /// Everything the QP needs from one linearization along the plan.
 /// Stages `k = 0..N` for states, `0..N-1` for inputs.
 #[derive(Debug, Clone)]
-pub struct LinearizedHorizon {
+pub struct LinearizedHorizon<const NX: usize = ATMO_NX, const NU: usize = ATMO_NU> {
     /// `dx_{k+1} = A_k dx_k + B_k du_k + defect_k`.
-    pub a: Vec<StateJacobian>,
-    pub b: Vec<InputJacobian>,
+    pub a: Vec<SMatrix<f64, NX, NX>>,
+    pub b: Vec<SMatrix<f64, NX, NU>>,
     /// `RK4(xbar_k, ubar_k) - xbar_{k+1}`: the multiple-shooting gap.
-    pub defect: Vec<State>,
+    pub defect: Vec<SVector<f64, NX>>,
     /// Diagonal of the state weight per stage (index N: terminal).
-    pub q_diag: Vec<State>,
+    pub q_diag: Vec<SVector<f64, NX>>,
     /// Diagonal of the input weight.
-    pub r_diag: Input,
+    pub r_diag: SVector<f64, NU>,
     /// `xbar_k - x_ref_k`, yaw entry wrapped to (-pi, pi].
-    pub x_err: Vec<State>,
+    pub x_err: Vec<SVector<f64, NX>>,
     /// `ubar_k - u_ref_k`.
-    pub u_err: Vec<Input>,
-    /// `ubar_k`: bounds are `-ubar <= du <= 1 - ubar`.
-    pub u_bar: Vec<Input>,
+    pub u_err: Vec<SVector<f64, NU>>,
+    /// `ubar_k`: bounds are `u_lo - ubar <= du <= u_hi - ubar`.
+    pub u_bar: Vec<SVector<f64, NU>>,
+    /// Input bounds per stage (0 and 1 for the rotor commands).
+    pub u_lo: Vec<SVector<f64, NU>>,
+    pub u_hi: Vec<SVector<f64, NU>>,
 }
 
-impl LinearizedHorizon {
+impl<const NX: usize, const NU: usize> LinearizedHorizon<NX, NU> {
     pub fn new(steps: usize) -> Self {
         Self {
-            a: vec![StateJacobian::identity(); steps],
-            b: vec![InputJacobian::zeros(); steps],
-            defect: vec![State::zeros(); steps],
-            q_diag: vec![State::from_element(1.0); steps + 1],
-            r_diag: Input::from_element(1.0),
-            x_err: vec![State::zeros(); steps + 1],
-            u_err: vec![Input::zeros(); steps],
-            u_bar: vec![Input::from_element(0.5); steps],
+            a: vec![SMatrix::<f64, NX, NX>::identity(); steps],
+            b: vec![SMatrix::<f64, NX, NU>::zeros(); steps],
+            defect: vec![SVector::<f64, NX>::zeros(); steps],
+            q_diag: vec![SVector::<f64, NX>::from_element(1.0); steps + 1],
+            r_diag: SVector::<f64, NU>::from_element(1.0),
+            x_err: vec![SVector::<f64, NX>::zeros(); steps + 1],
+            u_err: vec![SVector::<f64, NU>::zeros(); steps],
+            u_bar: vec![SVector::<f64, NU>::from_element(0.5); steps],
+            u_lo: vec![SVector::<f64, NU>::zeros(); steps],
+            u_hi: vec![SVector::<f64, NU>::from_element(1.0); steps],
         }
     }
 
@@ -104,14 +110,14 @@ impl QpSnapshot {
 }
 
 /// The RTI QP and its solver, in the chosen formulation.
-pub enum QpBackend {
-    Sparse(Box<SparseQp>),
-    Condensed(Box<CondensedQp>),
+pub enum QpBackend<const NX: usize = ATMO_NX, const NU: usize = ATMO_NU> {
+    Sparse(Box<SparseQp<NX, NU>>),
+    Condensed(Box<CondensedQp<NX, NU>>),
 }
 
-impl QpBackend {
+impl<const NX: usize, const NU: usize> QpBackend<NX, NU> {
     /// Builds the pattern from `lin` and creates Clarabel once.
-    pub fn new(lin: &LinearizedHorizon, settings: &SolverSettings) -> Result<Self> {
+    pub fn new(lin: &LinearizedHorizon<NX, NU>, settings: &SolverSettings) -> Result<Self> {
         Ok(match settings.formulation {
             Formulation::Sparse => Self::Sparse(Box::new(SparseQp::new(lin, settings)?)),
             Formulation::Condensed => Self::Condensed(Box::new(CondensedQp::new(lin, settings)?)),
@@ -119,7 +125,7 @@ impl QpBackend {
     }
 
     /// Preparation: write the new linearization into the solver.
-    pub fn load(&mut self, lin: &LinearizedHorizon) -> Result<()> {
+    pub fn load(&mut self, lin: &LinearizedHorizon<NX, NU>) -> Result<()> {
         match self {
             Self::Sparse(qp) => qp.load(lin),
             Self::Condensed(qp) => qp.load(lin),
@@ -127,7 +133,7 @@ impl QpBackend {
     }
 
     /// Feedback: insert `dx_0 = x_est - xbar_0`.
-    pub fn set_initial_deviation(&mut self, e0: &State) -> Result<()> {
+    pub fn set_initial_deviation(&mut self, e0: &SVector<f64, NX>) -> Result<()> {
         match self {
             Self::Sparse(qp) => qp.set_initial_deviation(e0),
             Self::Condensed(qp) => qp.set_initial_deviation(e0),
@@ -164,7 +170,13 @@ impl QpBackend {
 
     /// The solution as plan deviations (states by forward simulation of the
     /// linear model in the condensed form).
-    pub fn extract(&self, lin: &LinearizedHorizon, e0: &State, dx: &mut [State], du: &mut [Input]) {
+    pub fn extract(
+        &self,
+        lin: &LinearizedHorizon<NX, NU>,
+        e0: &SVector<f64, NX>,
+        dx: &mut [SVector<f64, NX>],
+        du: &mut [SVector<f64, NU>],
+    ) {
         match self {
             Self::Sparse(qp) => qp.extract(dx, du),
             Self::Condensed(qp) => qp.extract(lin, e0, dx, du),
@@ -202,7 +214,7 @@ impl QpBackend {
     }
 
     /// The condensed QP, whose box-only constraints allow the homotopy.
-    pub fn condensed_mut(&mut self) -> Option<&mut CondensedQp> {
+    pub fn condensed_mut(&mut self) -> Option<&mut CondensedQp<NX, NU>> {
         match self {
             Self::Sparse(_) => None,
             Self::Condensed(qp) => Some(qp),

@@ -1,9 +1,10 @@
 //! Sparse multiple shooting: states and inputs as variables, block-sparse
 //! equality constraints, diagonal Hessian.
 
-use atmo_core::model::{Input, NU, NX, State};
+use atmo_core::model::{NU as ATMO_NU, NX as ATMO_NX};
 use clarabel::algebra::CscMatrix;
 use clarabel::solver::SupportedConeT;
+use nalgebra::SVector;
 
 use super::solver::{CscBuilder, TimedSolver, solver_error};
 use super::{LinearizedHorizon, QpSnapshot};
@@ -14,35 +15,37 @@ use crate::settings::SolverSettings;
 /// (stage-interleaved, so the KKT matrix is banded). Rows: `12 (N+1)`
 /// equalities (`dx_0 = e0`, then `dx_{k+1} - A_k dx_k - B_k du_k = defect_k`),
 /// then `8N` bounds (`du <= 1 - ubar`, `-du <= ubar`). P is diagonal.
-pub struct SparseQp {
+pub struct SparseQp<const NX: usize = ATMO_NX, const NU: usize = ATMO_NU> {
     steps: usize,
     pub(super) solver: TimedSolver,
     p_vals: Vec<f64>,
     q: Vec<f64>,
     a_vals: Vec<f64>,
     b: Vec<f64>,
+    /// `0..NX`: the rows of b the feedback writes.
+    e0_rows: Vec<usize>,
     /// Pattern copies for snapshots.
     p_pattern: CscMatrix<f64>,
     a_pattern: CscMatrix<f64>,
 }
 
-const STAGE: usize = NX + NU;
+impl<const NX: usize, const NU: usize> SparseQp<NX, NU> {
+    const STAGE: usize = NX + NU;
 
-fn x_offset(k: usize) -> usize {
-    k * STAGE
-}
-fn u_offset(k: usize) -> usize {
-    k * STAGE + NX
-}
+    fn x_offset(k: usize) -> usize {
+        k * Self::STAGE
+    }
+    fn u_offset(k: usize) -> usize {
+        k * Self::STAGE + NX
+    }
 
-impl SparseQp {
     fn dims(steps: usize) -> (usize, usize, usize) {
-        (steps * STAGE + NX, NX * (steps + 1), 2 * NU * steps)
+        (steps * Self::STAGE + NX, NX * (steps + 1), 2 * NU * steps)
     }
 
     /// Walks A column by column in pattern order: `Some((row, value))` per
     /// entry, `None` at the end of each column.
-    fn walk_a(lin: &LinearizedHorizon, mut visit: impl FnMut(Option<(usize, f64)>)) {
+    fn walk_a(lin: &LinearizedHorizon<NX, NU>, mut visit: impl FnMut(Option<(usize, f64)>)) {
         let n = lin.steps();
         let bound_base = NX * (n + 1);
         for k in 0..=n {
@@ -68,16 +71,21 @@ impl SparseQp {
         }
     }
 
-    fn fill_vectors(lin: &LinearizedHorizon, p_vals: &mut [f64], q: &mut [f64], b: &mut [f64]) {
+    fn fill_vectors(
+        lin: &LinearizedHorizon<NX, NU>,
+        p_vals: &mut [f64],
+        q: &mut [f64],
+        b: &mut [f64],
+    ) {
         let n = lin.steps();
         for k in 0..=n {
-            let o = x_offset(k);
+            let o = Self::x_offset(k);
             for i in 0..NX {
                 p_vals[o + i] = lin.q_diag[k][i];
                 q[o + i] = lin.q_diag[k][i] * lin.x_err[k][i];
             }
             if k < n {
-                let o = u_offset(k);
+                let o = Self::u_offset(k);
                 for i in 0..NU {
                     p_vals[o + i] = lin.r_diag[i];
                     q[o + i] = lin.r_diag[i] * lin.u_err[k][i];
@@ -85,14 +93,14 @@ impl SparseQp {
                 b[NX * (k + 1)..NX * (k + 2)].copy_from_slice(lin.defect[k].as_slice());
                 let bound = NX * (n + 1) + 2 * NU * k;
                 for i in 0..NU {
-                    b[bound + i] = 1.0 - lin.u_bar[k][i];
-                    b[bound + NU + i] = lin.u_bar[k][i];
+                    b[bound + i] = lin.u_hi[k][i] - lin.u_bar[k][i];
+                    b[bound + NU + i] = lin.u_bar[k][i] - lin.u_lo[k][i];
                 }
             }
         }
     }
 
-    pub(super) fn new(lin: &LinearizedHorizon, settings: &SolverSettings) -> Result<Self> {
+    pub(super) fn new(lin: &LinearizedHorizon<NX, NU>, settings: &SolverSettings) -> Result<Self> {
         let steps = lin.steps();
         let (nz, rows_eq, rows_box) = Self::dims(steps);
         let mut a = CscBuilder::new(rows_eq + rows_box);
@@ -122,12 +130,13 @@ impl SparseQp {
             q,
             a_vals: a_pattern.nzval.clone(),
             b,
+            e0_rows: (0..NX).collect(),
             p_pattern,
             a_pattern,
         })
     }
 
-    pub(super) fn load(&mut self, lin: &LinearizedHorizon) -> Result<()> {
+    pub(super) fn load(&mut self, lin: &LinearizedHorizon<NX, NU>) -> Result<()> {
         let mut pos = 0;
         let vals = &mut self.a_vals;
         Self::walk_a(lin, |entry| {
@@ -150,22 +159,21 @@ impl SparseQp {
         self.solver.solver.update_b(&self.b).map_err(solver_error)
     }
 
-    pub(super) fn set_initial_deviation(&mut self, e0: &State) -> Result<()> {
+    pub(super) fn set_initial_deviation(&mut self, e0: &SVector<f64, NX>) -> Result<()> {
         self.b[..NX].copy_from_slice(e0.as_slice());
         // Only the first NX rows change: a selective update.
-        let rows: &[usize; NX] = &[0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11];
         self.solver
             .solver
-            .update_b(&rows.iter().zip(self.b[..NX].iter()))
+            .update_b(&self.e0_rows.iter().zip(self.b[..NX].iter()))
             .map_err(solver_error)
     }
 
-    pub(super) fn extract(&self, dx: &mut [State], du: &mut [Input]) {
+    pub(super) fn extract(&self, dx: &mut [SVector<f64, NX>], du: &mut [SVector<f64, NU>]) {
         let z = &self.solver.solver.solution.x;
         for k in 0..=self.steps {
-            dx[k].copy_from_slice(&z[x_offset(k)..x_offset(k) + NX]);
+            dx[k].copy_from_slice(&z[Self::x_offset(k)..Self::x_offset(k) + NX]);
             if k < self.steps {
-                du[k].copy_from_slice(&z[u_offset(k)..u_offset(k) + NU]);
+                du[k].copy_from_slice(&z[Self::u_offset(k)..Self::u_offset(k) + NU]);
             }
         }
     }
