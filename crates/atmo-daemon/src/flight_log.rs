@@ -248,18 +248,42 @@ impl FlightConfigFiles {
     /// # Errors
     /// An MPC text that is not TOML, a file that cannot be read.
     pub fn set_ground_effect(&mut self, source: &GroundEffectSource) -> Result<()> {
-        let mut doc: toml_edit::DocumentMut = self
-            .mpc
-            .text
-            .parse()
-            .map_err(|e| DaemonError::Setup(format!("{}: {e}", self.mpc.source.display())))?;
         let value = match source {
             GroundEffectSource::None => "none".to_string(),
             GroundEffectSource::PlantDefault => "default".to_string(),
             GroundEffectSource::File(path) => path.display().to_string(),
         };
-        doc["model"]["ground_effect"] = toml_edit::value(value);
+        self.set_mpc_value("model", "ground_effect", value)?;
+        self.read_ground_effect()
+    }
+
+    /// Sets `key` of `[table]` in the MPC text (comments and layout kept),
+    /// so that a setting changed for a flight is in the text its log stores.
+    ///
+    /// # Errors
+    /// An MPC text that is not TOML.
+    pub fn set_mpc_value(
+        &mut self,
+        table: &str,
+        key: &str,
+        value: impl Into<toml_edit::Value>,
+    ) -> Result<()> {
+        let mut doc: toml_edit::DocumentMut = self
+            .mpc
+            .text
+            .parse()
+            .map_err(|e| DaemonError::Setup(format!("{}: {e}", self.mpc.source.display())))?;
+        doc[table][key] = toml_edit::value(value);
         self.mpc.text = doc.to_string();
+        Ok(())
+    }
+
+    /// Replaces the MPC file (and the ground-effect file it names).
+    ///
+    /// # Errors
+    /// A file that cannot be read.
+    pub fn set_mpc_file(&mut self, path: &Path) -> Result<()> {
+        self.mpc = ConfigText::read(path)?;
         self.read_ground_effect()
     }
 

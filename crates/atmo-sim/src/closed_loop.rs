@@ -126,17 +126,54 @@ impl ControllerConfig {
         self
     }
 
-    /// The MPC's ground-effect surface `source`, set in the settings and in
-    /// the MPC text a flight log stores (a named file's text is read and
-    /// stored too), so that a replay rebuilds the controller flown.
+    /// The MPC's ground-effect surface `source`, set in the MPC text a
+    /// flight log stores (a named file's text is read and stored too) and
+    /// in the settings parsed from it, so that a replay rebuilds the
+    /// controller flown.
     ///
     /// # Errors
     /// A file that cannot be read.
     pub fn with_ground_effect(mut self, source: GroundEffectSource) -> Result<Self> {
+        self.files.set_ground_effect(&source).map_err(setup)?;
+        self.reparse_mpc()
+    }
+
+    /// `[tilt_plan] enabled`, in the MPC text and the settings.
+    ///
+    /// # Errors
+    /// MPC settings without a `[tilt_plan]` when `enabled`.
+    pub fn with_tilt_plan(mut self, enabled: bool) -> Result<Self> {
+        if self.mpc.tilt_plan.is_none() {
+            return if enabled {
+                Err(SimError::Setup(format!(
+                    "{}: the MPC settings have no [tilt_plan]",
+                    self.files.mpc.source.display()
+                )))
+            } else {
+                Ok(self)
+            };
+        }
         self.files
-            .set_ground_effect(&source)
-            .map_err(|e| SimError::Setup(e.to_string()))?;
-        self.mpc.model.ground_effect = source;
+            .set_mpc_value("tilt_plan", "enabled", enabled)
+            .map_err(setup)?;
+        self.reparse_mpc()
+    }
+
+    /// Another MPC file (text stored in the log, settings parsed from it).
+    ///
+    /// # Errors
+    /// A file that cannot be read or parsed.
+    pub fn with_mpc_file(mut self, path: &std::path::Path) -> Result<Self> {
+        self.files.set_mpc_file(path).map_err(setup)?;
+        self.reparse_mpc()
+    }
+
+    /// The MPC settings parsed again from the (edited) text, keeping the
+    /// time limit this config flies with (see [`Self::deterministic`]).
+    fn reparse_mpc(mut self) -> Result<Self> {
+        let time_limit = self.mpc.solver.time_limit;
+        self.mpc = self.files.parse().map_err(setup)?.mpc;
+        self.mpc.solver.time_limit = time_limit;
         Ok(self)
     }
 
@@ -154,6 +191,10 @@ impl ControllerConfig {
         .stack()
         .map_err(|e| SimError::Setup(e.to_string()))
     }
+}
+
+fn setup(e: impl std::fmt::Display) -> SimError {
+    SimError::Setup(e.to_string())
 }
 
 /// The record of `tick`, with the plant's truth at it.

@@ -3,8 +3,6 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
-use atmo_core::ConfigFile as _;
-use atmo_mpc::MpcFile;
 use atmo_mpc::settings::GroundEffectSource;
 use atmo_sim::closed_loop::{ControllerConfig, TickRecord, fly_logged, trace_of};
 use atmo_sim::figure::{Markers, write_landing_figure};
@@ -55,24 +53,19 @@ pub fn run(
     let scenario = Scenario::load(scenario_path).with_context(|| "loading the scenario")?;
     let mut base = ControllerConfig::atmo()?.deterministic();
     if let Some(path) = &controller.mpc_config {
-        base.mpc = MpcFile::load(path)
-            .and_then(|file| file.settings(&base.flight.mpc_preset))
+        base = base
+            .with_mpc_file(path)
             .with_context(|| format!("loading --mpc-config {}", path.display()))?;
-        base = base.deterministic();
     }
     let ground_effect = controller
         .surface
         .map_or(GroundEffectSource::PlantDefault, GroundEffectSource::File);
+    // Through the texts the flight log stores: a replay rebuilds this controller.
     let with = |source: &GroundEffectSource, plans_tilt: bool| -> Result<ControllerConfig> {
-        let mut c = base.clone().with_ground_effect(source.clone())?;
-        match c.mpc.tilt_plan.as_mut() {
-            Some(t) => t.enabled = plans_tilt,
-            None if plans_tilt => {
-                bail!("--controller planned-tilt: the MPC settings have no [tilt_plan]")
-            }
-            None => {}
-        }
-        Ok(c)
+        Ok(base
+            .clone()
+            .with_ground_effect(source.clone())?
+            .with_tilt_plan(plans_tilt)?)
     };
     let none = GroundEffectSource::None;
     let controllers: Vec<(&str, ControllerConfig)> = match controller.choice {

@@ -163,10 +163,13 @@ fn a_ground_effect_file_is_logged_and_replayed_from_the_log() {
     let surface = dir().join("surface.toml");
     let shipped = std::fs::read_to_string(repo().join("config/plant.toml")).unwrap();
     std::fs::write(&surface, &shipped).unwrap();
+    // The tilt on the paper's law (off in the text too: the log says so).
     let controller = ControllerConfig::atmo()
         .unwrap()
         .deterministic()
         .with_ground_effect(GroundEffectSource::File(surface.clone()))
+        .unwrap()
+        .with_tilt_plan(false)
         .unwrap();
     let path = dir().join("ground_effect_file.mcap");
     fly_logged(&scenario, &controller, &path, |_| {}).unwrap();
@@ -188,6 +191,7 @@ fn a_ground_effect_file_is_logged_and_replayed_from_the_log() {
             .contains(&format!("ground_effect = \"{}\"", surface.display()))
     );
     let config = RecordedFlight::config(&flight.files).unwrap();
+    assert!(!config.mpc.tilt_plan.unwrap().enabled);
     let report = replay(&flight, &config, CutReplay::AsLogged, |_| {}).unwrap();
     assert_eq!(report.first_difference, None, "{report:?}");
 
