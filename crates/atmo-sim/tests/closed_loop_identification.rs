@@ -9,10 +9,10 @@
 //! numbers are printed; the fitted controller must touch down steeper with
 //! an impact that is not worse (medians over the seeds).
 //!
-//! Seconds in release (5.7 s measured on main of 2026-12-02 at load 8, 67 s
-//! before issue 16's faster finder; run by .ci/run): `cargo test --release
-//! -p atmo-sim --test closed_loop_identification -- --ignored --nocapture`.
-//! Measured there: ground_effect selected (confidence 1.00); over seeds 1-8
+//! Seconds (5.7 s measured in release on main of 2026-12-02 at load 8; the
+//! workspace's test profile is optimized too, so it runs with `cargo test`):
+//! `cargo test -p atmo-sim --test closed_loop_identification -- --nocapture`.
+//! Measured in release: ground_effect selected (confidence 1.00); over seeds 1-8
 //! the median touchdown went from 62.61 deg at 0.40 m/s (nominal MPC) to
 //! 63.54 deg at 0.37 m/s (fitted surface, planned tilt).
 // Test, bench and example code: an unwrap that fails is the failure report.
@@ -38,7 +38,6 @@ fn median(mut v: Vec<f64>) -> f64 {
 }
 
 #[test]
-#[ignore = "release build; see the module docs for the command"]
 fn fitted_ground_effect_in_the_mpc_lands_steeper_than_the_nominal_mpc() {
     let robot = RobotConfig::atmo();
     let mut plant = PlantConfig::ideal();
@@ -63,14 +62,17 @@ fn fitted_ground_effect_in_the_mpc_lands_steeper_than_the_nominal_mpc() {
     std::fs::write(&fitted, &ex.fitted_effects_toml).unwrap();
 
     let base = ControllerConfig::atmo().unwrap().deterministic();
-    let mut nominal = base.clone();
-    nominal.mpc.model.ground_effect = GroundEffectSource::None;
-    if let Some(t) = nominal.mpc.tilt_plan.as_mut() {
-        t.enabled = false;
-    }
-    let mut informed = base.clone();
-    informed.mpc.model.ground_effect = GroundEffectSource::File(fitted);
-    informed.mpc.tilt_plan.as_mut().unwrap().enabled = true;
+    let nominal = base
+        .clone()
+        .with_ground_effect(GroundEffectSource::None)
+        .unwrap()
+        .with_tilt_plan(false)
+        .unwrap();
+    let informed = base
+        .with_ground_effect(GroundEffectSource::File(fitted))
+        .unwrap()
+        .with_tilt_plan(true)
+        .unwrap();
 
     let path: PathBuf = [
         env!("CARGO_MANIFEST_DIR"),
