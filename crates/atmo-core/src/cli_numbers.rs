@@ -15,6 +15,8 @@ pub const MAX_DEMO_DURATION_S: f64 = 3600.0;
 pub const MAX_SAMPLE_RATE_HZ: f64 = 1000.0;
 /// Most Monte Carlo runs of one `fly --runs`.
 pub const MAX_RUNS: usize = 100_000;
+/// Largest `explain --budget`, s (one day).
+pub const MAX_ANALYSIS_BUDGET_S: f64 = 86_400.0;
 
 /// A finite number in `(0, max]` of `unit`.
 fn positive_up_to(text: &str, unit: &str, max: f64) -> Result<f64, String> {
@@ -44,6 +46,11 @@ pub fn demo_duration_s(text: &str) -> Result<f64, String> {
 /// `explain --demo --rate`: Hz in `(0, MAX_SAMPLE_RATE_HZ]`.
 pub fn sample_rate_hz(text: &str) -> Result<f64, String> {
     positive_up_to(text, "Hz", MAX_SAMPLE_RATE_HZ)
+}
+
+/// `explain --budget`: seconds in `(0, MAX_ANALYSIS_BUDGET_S]`.
+pub fn analysis_budget_s(text: &str) -> Result<f64, String> {
+    positive_up_to(text, "seconds", MAX_ANALYSIS_BUDGET_S)
 }
 
 /// `fly --runs`: a count in `1..=MAX_RUNS`.

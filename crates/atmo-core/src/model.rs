@@ -561,7 +561,8 @@ impl TiltedBody {
     /// Level hover trim: the rotor commands that hold zero acceleration at
     /// zero attitude and rates (with the disturbance wrench, if any; its
     /// lateral force is left to the attitude). May exceed 1 past the
-    /// critical angle.
+    /// critical angle; +inf in every entry when no trim exists (a singular
+    /// allocation: never a panic on the control path).
     pub fn hover_trim(&self) -> Input {
         // Rows F_z, tau_x, tau_y, tau_z; F_x and F_y vanish by symmetry.
         let mut a = nalgebra::Matrix4::zeros();
@@ -578,9 +579,12 @@ impl TiltedBody {
             -gravity_torque.y - d[4],
             -gravity_torque.z - d[5],
         );
+        // Singular only when no command moves one of the four rows (no
+        // vertical thrust, no yaw authority): no trim exists, and every
+        // caller clamps or compares, so +inf reads as "beyond full".
         a.lu()
             .solve(&rhs)
-            .expect("hover allocation matrix is regular")
+            .unwrap_or_else(|| Input::from_element(f64::INFINITY))
     }
 }
 

@@ -3,7 +3,8 @@
 //! - [`modes`]: the paper's mode state machine as an explicit transition table.
 //! - [`flight_stack`]: `FlightStack::step(inputs)` (pure, deterministic, the
 //!   clock is an input): input validation, mode machine, tilt law with limits,
-//!   MPC feedback (thrusters), drive controller (wheels), failsafes, status.
+//!   MPC feedback (thrusters), drive controller (wheels), failsafes, status;
+//!   its inputs and outputs are the types of [`step_io`].
 //! - [`observer`]: disturbance observer that makes the MPC offset-free.
 //! - [`ground_model`]: the ground-effect surface of the MPC's model, from its settings.
 //! - [`control_loop`]: the one tick (gather -> step -> emit -> prepare)
@@ -41,6 +42,7 @@ pub mod observer;
 pub mod onboard;
 pub mod replay;
 pub mod settings;
+pub mod step_io;
 pub mod telemetry;
 pub mod whatif;
 

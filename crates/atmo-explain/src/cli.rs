@@ -72,6 +72,12 @@ pub struct Args {
     /// Seed (demo flight and stability subsampling).
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
+    /// Wall-clock budget of the analysis, s: a run that takes longer still
+    /// finishes, and says so (a note in the verdict, report.md and
+    /// explain.json, with its slowest stage).
+    #[arg(long, default_value_t = crate::DEFAULT_BUDGET_S,
+          value_parser = atmo_core::cli_numbers::analysis_budget_s)]
+    pub budget: f64,
     /// No progress bar.
     #[arg(long)]
     pub quiet: bool,
@@ -162,6 +168,7 @@ pub fn run(args: &Args, progress: &mut dyn FnMut(Progress)) -> Result<String, Ex
     };
     let opts = Options {
         seed: args.seed,
+        budget_s: args.budget,
         ..Options::default()
     };
     let start = std::time::Instant::now();

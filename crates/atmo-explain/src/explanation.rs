@@ -91,6 +91,8 @@ pub struct Explanation {
     pub ignored_columns: Vec<String>,
     pub skipped_nonfinite: usize,
     pub skipped_time: usize,
+    /// Rows dropped by the outlier rule (`recording::plausible`).
+    pub outliers: crate::recording::plausible::Outliers,
     pub contact_rows: usize,
     pub noise_floor: [f64; 6],
     pub mismatch_found: bool,

@@ -55,7 +55,7 @@ use std::time::Instant;
 use atmo_core::RobotConfig;
 
 pub use explanation::{EffectReport, Explanation, GridPoint, Parameter, RmsTable, Series};
-use recording::Recording;
+use recording::{Recording, plausible};
 use stages::{
     BaseRegressors, Findings, Residuals, accept_effects, fit_effects, locate_mismatch,
     profile_motor_lag, report, select_effects, validate,
@@ -102,13 +102,22 @@ pub struct Options {
     pub seed: u64,
     /// Most multi-step starts (spread over the recording).
     pub max_replay_starts: usize,
+    /// Wall-clock budget of the whole analysis, s: when exceeded the
+    /// analysis still finishes, and a note says by how much and which
+    /// stage took longest.
+    pub budget_s: f64,
 }
+
+/// Default [`Options::budget_s`]: about four times the analysis of a
+/// recording at the row limit ([`recording::MAX_ROWS`]) on one core.
+pub const DEFAULT_BUDGET_S: f64 = 300.0;
 
 impl Default for Options {
     fn default() -> Self {
         Self {
             seed: 1,
             max_replay_starts: 240,
+            budget_s: DEFAULT_BUDGET_S,
         }
     }
 }
@@ -165,6 +174,28 @@ impl Tracker<'_> {
     }
 }
 
+/// The note of an analysis whose `timings` (cumulative, the last one the
+/// total) went over `budget_s`, naming the slowest stage.
+fn over_budget(timings: &[(String, f64)], budget_s: f64) -> Option<String> {
+    let total = timings.last()?.1;
+    if total <= budget_s {
+        return None;
+    }
+    let mut slowest = ("", 0.0);
+    let mut before = 0.0;
+    for (stage, at) in timings.iter().filter(|(s, _)| s != "total") {
+        if at - before > slowest.1 {
+            slowest = (stage.as_str(), at - before);
+        }
+        before = *at;
+    }
+    Some(format!(
+        "the analysis took {total:.3} s, over its wall-clock budget of {budget_s} s \
+         (--budget); its slowest stage was `{}` ({:.3} s)",
+        slowest.0, slowest.1
+    ))
+}
+
 /// Runs the whole analysis.
 pub fn explain(rec: &Recording, robot: &RobotConfig, opts: &Options) -> Result<Explanation> {
     explain_with_progress(rec, robot, opts, &mut |_| {})
@@ -182,6 +213,28 @@ pub fn explain_with_progress(
         clock: Instant::now(),
         done: 0,
         timings: Vec::new(),
+    };
+    if rec.samples.len() > recording::MAX_ROWS {
+        return Err(ExplainError::Input {
+            file: rec.source.clone(),
+            message: recording::row_limit_error(&format!("{} rows", rec.samples.len())),
+        });
+    }
+    let screened;
+    let rec = if rec.samples.iter().all(plausible::is_plausible) {
+        rec
+    } else {
+        // In-memory recordings (the file readers already applied the rule).
+        let mut copy = rec.clone();
+        let dropped = plausible::drop_implausible(&mut copy.samples, |i| format!("row {}", i + 1))
+            .map_err(|message| ExplainError::Input {
+                file: rec.source.clone(),
+                message,
+            })?;
+        copy.outliers.rows += dropped.rows;
+        copy.outliers.columns.extend(dropped.columns);
+        screened = copy;
+        &screened
     };
     let res = t.step("residuals", || Residuals::new(rec, robot))?;
     let mismatch = t.step("locate", || locate_mismatch(&res));
@@ -216,6 +269,9 @@ pub fn explain_with_progress(
         done: t.done,
         total: STEPS.len(),
     });
+    if let Some(note) = over_budget(&t.timings, opts.budget_s) {
+        ex.notes.push(note);
+    }
     ex.timings_s = t.timings;
     Ok(ex)
 }

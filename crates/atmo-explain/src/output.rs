@@ -54,6 +54,8 @@ pub fn json(ex: &Explanation) -> serde_json::Value {
         "ignored_columns": ex.ignored_columns,
         "skipped_nonfinite_rows": ex.skipped_nonfinite,
         "skipped_time_rows": ex.skipped_time,
+        "implausible_rows": ex.outliers.rows,
+        "implausible_columns": ex.outliers.columns,
         "ground_contact_rows": ex.contact_rows,
         "noise_floor": CHANNELS.iter().zip(ex.noise_floor).map(|(c, v)| (c.to_string(), json!(v))).collect::<serde_json::Map<String, serde_json::Value>>(),
         "mismatch_found": ex.mismatch_found,
@@ -108,6 +110,14 @@ fn report_header(s: &mut String, ex: &Explanation) {
             s,
             "Skipped rows: {} non-finite or missing values, {} not advancing in time.\n",
             ex.skipped_nonfinite, ex.skipped_time
+        );
+    }
+    if ex.outliers.rows > 0 {
+        let _ = writeln!(
+            s,
+            "Dropped rows: {} with a cell outside its plausible range (docs/recording_format.md): {}.\n",
+            ex.outliers.rows,
+            ex.outliers.describe()
         );
     }
     if ex.contact_rows > 0 {

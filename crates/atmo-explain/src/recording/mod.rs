@@ -9,6 +9,7 @@
 //! increase, are skipped and counted.
 
 pub mod neural_fly;
+pub mod plausible;
 
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -36,12 +37,30 @@ pub const OPTIONAL_COLUMNS: [&str; 6] = [
 /// Optional columns of the mean commands applied until the next row.
 pub const MEAN_COMMAND_COLUMNS: [&str; 4] = ["u1_mean", "u2_mean", "u3_mean", "u4_mean"];
 
-/// One sample of a recording.
+/// Most rows of one recording: the memory of the analysis grows with the
+/// rows (bytes per row measured in BENCHMARKS.md), so a longer recording is
+/// refused with this limit named rather than left to the kernel's OOM
+/// killer. 10^6 rows: 1.85 h at 150 Hz.
+pub const MAX_ROWS: usize = 1_000_000;
+/// Largest recording file read, bytes (1 KiB per row at [`MAX_ROWS`]);
+/// checked before the file is read.
+pub const MAX_FILE_BYTES: u64 = 1 << 30;
+
+/// The error of a recording with more than [`MAX_ROWS`] rows, `at` the
+/// place the limit was passed.
+pub fn row_limit_error(at: &str) -> String {
+    format!(
+        "{at}: more than {MAX_ROWS} rows, the analysis's row limit (its memory grows \
+         with the rows; see BENCHMARKS.md): split the recording, or decimate it"
+    )
+}
+
 /// Largest time between two consecutive rows of a recording, s.
 pub const MAX_ROW_GAP_S: f64 = 10.0;
 /// Largest median row spacing of a recording, s (a sample rate of 1 Hz).
 pub const MAX_MEDIAN_DT_S: f64 = 1.0;
 
+/// One sample of a recording.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Sample {
     /// s.
@@ -75,6 +94,9 @@ pub struct Recording {
     pub skipped_nonfinite: usize,
     /// Rows skipped because their time did not increase.
     pub skipped_time: usize,
+    /// Rows dropped because a cell was outside its column's plausible
+    /// range ([`plausible`]).
+    pub outliers: plausible::Outliers,
 }
 
 impl Recording {
@@ -97,6 +119,18 @@ impl Recording {
             .and_then(|e| e.to_str())
             .unwrap_or("")
             .to_ascii_lowercase();
+        if let Ok(meta) = std::fs::metadata(path)
+            && meta.len() > MAX_FILE_BYTES
+        {
+            return Err(ExplainError::Input {
+                file: path.to_path_buf(),
+                message: format!(
+                    "{} bytes, over the {MAX_FILE_BYTES}-byte limit of a recording \
+                     ({MAX_ROWS} rows at most): split the recording, or decimate it",
+                    meta.len()
+                ),
+            });
+        }
         if ext == "mcap" {
             return Self::from_mcap(path);
         }
@@ -190,6 +224,9 @@ impl Recording {
                 }
                 _ => m0.varphi,
             };
+            if rec.samples.len() == MAX_ROWS {
+                return Err(fail(row_limit_error(STATUS_TOPIC)));
+            }
             last_t = t;
             let x = State::from_column_slice(&m.state);
             let u = Input::from_column_slice(&u);
@@ -207,6 +244,10 @@ impl Recording {
             return Err(fail(message));
         }
         mean_tick_commands(&mut rec.samples, &ticks);
+        rec.outliers = plausible::drop_implausible(&mut rec.samples, |i| {
+            format!("row {} of {STATUS_TOPIC}", i + 1)
+        })
+        .map_err(&fail)?;
         if rec.samples.is_empty() {
             return Err(fail(format!(
                 "no usable rows on {STATUS_TOPIC}: {} non-finite, {} out of order",
@@ -300,6 +341,7 @@ impl Recording {
         let mut values = [0.0; 18];
         let mut last_t = f64::NEG_INFINITY;
         let mut last_line = 0;
+        let mut sample_lines: Vec<usize> = Vec::new();
         for (index, line) in lines {
             fields.clear();
             fields.extend(line.split(','));
@@ -346,8 +388,12 @@ impl Recording {
                     values[0] - last_t
                 )));
             }
+            if rec.samples.len() == MAX_ROWS {
+                return Err(fail(row_limit_error(&format!("line {}", index + 1))));
+            }
             last_t = values[0];
             last_line = index + 1;
+            sample_lines.push(last_line);
             rec.samples.push(Sample {
                 t: values[0],
                 x: State::from_column_slice(&values[1..13]),
@@ -358,6 +404,9 @@ impl Recording {
                 battery_v: battery.and_then(parse),
             });
         }
+        rec.outliers =
+            plausible::drop_implausible(&mut rec.samples, |i| format!("line {}", sample_lines[i]))
+                .map_err(&fail)?;
         if let Some(message) = rec.median_spacing_error() {
             return Err(fail(message));
         }

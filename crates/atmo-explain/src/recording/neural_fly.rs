@@ -134,8 +134,11 @@ pub fn from_neural_fly_str(
         file: file.clone(),
         message,
     };
-    let mut lines = text.lines().filter(|l| !l.trim().is_empty());
-    let header = lines
+    let mut lines = text
+        .lines()
+        .enumerate()
+        .filter(|(_, l)| !l.trim().is_empty());
+    let (_, header) = lines
         .next()
         .ok_or_else(|| fail("the file is empty (expected a Neural-Fly header row)".into()))?;
     let names = split_row(header.trim_start_matches('\u{feff}'));
@@ -166,7 +169,8 @@ pub fn from_neural_fly_str(
         ..Recording::default()
     };
     let mut last_t = f64::NEG_INFINITY;
-    for line in lines {
+    let mut sample_lines: Vec<usize> = Vec::new();
+    for (index, line) in lines {
         let cells = split_row(line);
         let cell = |k: usize, len: usize| cells.get(cols[k]).and_then(|c| parse_cell(c, len));
         let (Some(t), Some(p), Some(v), Some(r), Some(w), Some(pwm)) = (
@@ -184,9 +188,17 @@ pub fn from_neural_fly_str(
             rec.skipped_time += 1;
             continue;
         }
+        if rec.samples.len() == super::MAX_ROWS {
+            return Err(fail(super::row_limit_error(&format!("line {}", index + 1))));
+        }
         last_t = t[0];
+        sample_lines.push(index + 1);
         rec.samples.push(convert(t[0], &p, &v, &r, &w, &pwm));
     }
+    rec.outliers = super::plausible::drop_implausible(&mut rec.samples, |i| {
+        format!("line {}", sample_lines[i])
+    })
+    .map_err(&fail)?;
     if rec.samples.is_empty() {
         return Err(fail(format!(
             "no usable Neural-Fly rows ({} malformed or non-finite, {} not advancing in time)",

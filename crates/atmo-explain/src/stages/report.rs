@@ -419,6 +419,7 @@ pub fn report(f: &Findings) -> Explanation {
         ignored_columns: rec.ignored_columns.clone(),
         skipped_nonfinite: rec.skipped_nonfinite,
         skipped_time: rec.skipped_time,
+        outliers: rec.outliers.clone(),
         contact_rows: prep.contact_rows,
         noise_floor: prep.floor,
         mismatch_found,

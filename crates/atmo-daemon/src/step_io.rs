@@ -1,0 +1,146 @@
+//! What one tick of the flight stack reads and writes: the inputs of
+//! [`crate::FlightStack::step`] and its outputs with the tick's status (the
+//! records the flight log stores and a replay compares).
+
+use atmo_core::control::WheelRates;
+use atmo_core::model::State;
+use atmo_mpc::SolverCuts;
+
+use crate::modes::Mode;
+
+/// A state estimate and the time it was measured.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Estimate {
+    pub stamp_ns: u64,
+    pub state: State,
+}
+
+/// Pilot (or scenario) inputs.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct PilotInput {
+    /// Velocity command, NED world frame, m/s (limited to the configured norm).
+    pub velocity: [f64; 3],
+    /// Yaw-rate command, rad/s (FRD: positive turns right).
+    pub yaw_rate: f64,
+    /// Throttle stick in [0, 1].
+    pub throttle: f64,
+    pub arm: bool,
+    pub offboard: bool,
+    pub mpc_enabled: bool,
+}
+
+/// Everything one tick sees.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StepInputs {
+    /// The flight stack's clock, ns.
+    pub now_ns: u64,
+    /// Latest estimate received (possibly old, possibly the same as last tick).
+    pub estimate: Option<Estimate>,
+    /// Tilt encoder counts (continuous), if a reading arrived.
+    pub tilt_counts: Option<f64>,
+    pub pilot: PilotInput,
+    /// Wheel contact signal.
+    pub ground_contact: bool,
+    /// NED z of the ground plane under the robot, m.
+    pub ground_z: f64,
+    /// A required driver stopped talking (the I/O layer's liveness check;
+    /// always false in simulation): fly the failsafe, do not take off.
+    pub driver_lost: bool,
+}
+
+/// Solver outcome, flattened for logs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SolverState {
+    /// The MPC did not run this tick.
+    #[default]
+    Idle,
+    Solved,
+    Degraded,
+    Fallback,
+    Failed,
+}
+
+impl SolverState {
+    pub fn code(self) -> u8 {
+        self as u8
+    }
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Idle => "idle",
+            Self::Solved => "solved",
+            Self::Degraded => "degraded",
+            Self::Fallback => "fallback",
+            Self::Failed => "failed",
+        }
+    }
+}
+
+/// Inputs rejected so far, by kind.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct RejectCounters {
+    /// Non-finite entries, stamps in the future or going backwards.
+    pub estimate: u64,
+    /// Non-finite or out-of-range encoder counts.
+    pub tilt: u64,
+    /// Non-finite or out-of-range pilot inputs.
+    pub pilot: u64,
+    /// Non-finite ground height.
+    pub ground: u64,
+}
+
+/// The status record of one tick (fixed size, copied into logs).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Status {
+    pub now_ns: u64,
+    pub mode: Mode,
+    /// Reason of the transition taken this tick, if any.
+    pub transition: Option<&'static str>,
+    pub alpha: f64,
+    /// Tilt used this tick, rad.
+    pub tilt: f64,
+    /// Tilt limit in force this tick, rad.
+    pub tilt_limit: f64,
+    /// Height of the base origin above the ground, m.
+    pub height: f64,
+    /// Age of the estimate used, s (infinite if none).
+    pub estimate_age: f64,
+    /// State used (the last good estimate).
+    pub state: State,
+    /// MPC reference for stage 0 (or the drive reference).
+    pub reference: State,
+    /// Predicted state at the next MPC stage.
+    pub predicted_next: State,
+    pub solver: SolverState,
+    pub mpc_failed_ticks: u32,
+    pub mpc_failures_total: u64,
+    /// Feedbacks that fell back from the homotopy to a full Clarabel solve, since start.
+    pub feedback_fallbacks_total: u64,
+    /// MPC feedback and preparation times, s (preparation: of the previous `prepare_next`).
+    pub feedback_time: f64,
+    pub preparation_time: f64,
+    pub solver_iterations: u32,
+    /// QP solves this tick: 1, or more when a mode change re-planned or
+    /// warmed the MPC up (its preparation solves once with the homotopy feedback).
+    pub qp_solves: u32,
+    /// Drive reference: forward speed m/s and yaw rate rad/s.
+    pub drive_velocity: [f64; 2],
+    /// Disturbance wrench the MPC predicts with (body force N, torque N m).
+    pub disturbance: [f64; 6],
+    pub rejected: RejectCounters,
+    /// Solves the wall-clock time limit cut since the last
+    /// [`crate::FlightStack::open_cut_window`] (the preparation before this tick
+    /// and this tick's feedback): logged so that a replay cuts them again.
+    pub solver_cuts: SolverCuts,
+}
+
+/// What one tick commands.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StepOutputs {
+    /// Normalized thruster commands, each in [0, 1].
+    pub thrust: [f64; 4],
+    /// Tilt velocity, rad/s, positive towards drive.
+    pub tilt_velocity: f64,
+    pub wheel_rates: WheelRates,
+    pub status: Status,
+}
