@@ -317,3 +317,44 @@ fn mcap_logs_are_read_and_truncated_ones_are_clear_errors() {
     let msg = message(&load_error(&empty));
     assert!(msg.contains("empty.mcap"), "{msg}");
 }
+
+/// Issue 21: a 10-million-row CSV was killed by the kernel at 24 GB
+/// resident. A recording past the row limit is refused at the line where
+/// the limit was passed, and a file past the size limit before it is read
+/// (a sparse file here: nothing is allocated for it).
+#[test]
+fn recordings_over_the_row_or_file_limit_are_refused() {
+    use atmo_explain::recording::{MAX_FILE_BYTES, MAX_ROWS};
+    let mut text = header();
+    text.push('\n');
+    for i in 0..=MAX_ROWS {
+        text.push_str(&row(i as f64 * 0.01));
+        text.push('\n');
+    }
+    let err = Recording::from_csv_str(&text, "long.csv")
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.starts_with(&format!(
+            "long.csv: line {}: more than {MAX_ROWS} rows",
+            MAX_ROWS + 2
+        )),
+        "{err}"
+    );
+    drop(text);
+
+    let path = temp_dir("limit").join("huge.csv");
+    std::fs::File::create(&path)
+        .unwrap()
+        .set_len(MAX_FILE_BYTES + 1)
+        .unwrap();
+    let err = message(&load_error(&path));
+    assert!(
+        err.contains(&format!(
+            "{} bytes, over the {MAX_FILE_BYTES}-byte limit",
+            MAX_FILE_BYTES + 1
+        )),
+        "{err}"
+    );
+    std::fs::remove_file(&path).unwrap();
+}
