@@ -44,7 +44,8 @@ const fn range(column: &'static str, min: f64, max: f64, hint: &'static str) -> 
 const POSITION: &str = "positions are metres from the origin (10 km at most)";
 const ANGLE: &str = "angles are radians (one turn either way at most), not degrees";
 const YAW: &str = "yaw is radians (an unwrapped yaw of up to 1000 rad is allowed), not degrees";
-const VELOCITY: &str = "velocities are m/s (100 m/s at most), not mm/s or cm/s";
+const VELOCITY: &str = "velocities are m/s (100 m/s at most), not mm/s or cm/s \
+                        (or the flight ran away)";
 const RATE: &str = "body rates are rad/s (100 rad/s at most), not deg/s";
 const COMMAND: &str = "rotor commands are normalized to [0, 1] (a 10 % margin is allowed), \
                        not PWM microseconds, percent or RPM";
