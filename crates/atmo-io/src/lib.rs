@@ -23,6 +23,7 @@ pub mod error;
 pub mod mcap_log;
 pub mod msg;
 pub mod output_dir;
+pub mod stamp_order;
 #[cfg(feature = "review")]
 pub mod review;
 #[cfg(feature = "ros2")]

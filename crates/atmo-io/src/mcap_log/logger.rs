@@ -181,6 +181,10 @@ struct Shared {
     /// Records the writer has taken off the queue (written or not).
     processed: AtomicU64,
     closed: AtomicBool,
+    /// Why the writer stopped before a finish request (a write error such
+    /// as a full disk), once it has.
+    failure: Mutex<Option<String>>,
+    failed: AtomicBool,
     topics: Mutex<Vec<String>>,
 }
 
@@ -264,6 +268,8 @@ impl McapLogger {
             dropped: AtomicU64::new(0),
             processed: AtomicU64::new(0),
             closed: AtomicBool::new(false),
+            failure: Mutex::new(None),
+            failed: AtomicBool::new(false),
             topics: Mutex::new(Vec::new()),
         });
         let handle = LoggerHandle {
@@ -413,6 +419,23 @@ impl LoggerHandle {
         self.shared.dropped.load(Ordering::Relaxed)
     }
 
+    /// Whether the writer has failed (a write error: the disk is full, the
+    /// file system gone). From then on every record is dropped and counted;
+    /// the callers go on (the control thread never waits for the log).
+    pub fn failed(&self) -> bool {
+        self.shared.failed.load(Ordering::Relaxed)
+    }
+
+    /// The writer's error, once it has [`Self::failed`] (locks: not for the
+    /// control thread).
+    pub fn failure(&self) -> Option<String> {
+        self.shared
+            .failure
+            .lock()
+            .ok()
+            .and_then(|failure| failure.clone())
+    }
+
     /// Records accepted into the queue so far.
     pub fn accepted(&self) -> u64 {
         self.shared.accepted.load(Ordering::Relaxed)
@@ -461,6 +484,20 @@ impl WriterLoop {
         let result = self.run_inner();
         // Whatever happened, stop accepting records.
         self.shared.closed.store(true, Ordering::SeqCst);
+        if let Err(e) = &result {
+            // What was queued when the write failed is lost too: counted.
+            let mut lost = 0;
+            while let Ok(command) = self.rx.try_recv() {
+                if matches!(command, Command::Message { .. }) {
+                    lost += 1;
+                }
+            }
+            self.shared.dropped.fetch_add(lost, Ordering::Relaxed);
+            if let Ok(mut failure) = self.shared.failure.lock() {
+                *failure = Some(e.to_string());
+            }
+            self.shared.failed.store(true, Ordering::SeqCst);
+        }
         result?;
         Ok(LogSummary {
             path: self.path.clone(),
