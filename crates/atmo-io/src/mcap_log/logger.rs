@@ -458,6 +458,21 @@ impl LoggerHandle {
     }
 }
 
+/// A write error of the log `file`: an I/O error as the OS reported it
+/// (`No space left on device`), not only as MCAP's generic I/O message.
+fn writer_error(file: &Path, source: mcap::McapError) -> IoError {
+    match source {
+        mcap::McapError::Io(source) => IoError::File {
+            file: file.to_path_buf(),
+            source,
+        },
+        source => IoError::Mcap {
+            file: file.to_path_buf(),
+            source,
+        },
+    }
+}
+
 struct WriterLoop {
     path: PathBuf,
     writer: mcap::Writer<BufWriter<File>>,
@@ -474,10 +489,7 @@ struct WriterLoop {
 
 impl WriterLoop {
     fn mcap_err(&self, source: mcap::McapError) -> IoError {
-        IoError::Mcap {
-            file: self.path.clone(),
-            source,
-        }
+        writer_error(&self.path, source)
     }
 
     fn run(mut self) -> Result<LogSummary> {
@@ -621,10 +633,7 @@ impl WriterLoop {
         *sequence = sequence.wrapping_add(1);
         self.writer
             .write_to_known_channel(&header, &self.buffer)
-            .map_err(|source| IoError::Mcap {
-                file: self.path.clone(),
-                source,
-            })?;
+            .map_err(|source| writer_error(&self.path, source))?;
         self.written += 1;
         Ok(())
     }
