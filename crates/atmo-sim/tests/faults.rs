@@ -9,6 +9,7 @@ use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
 use atmo_daemon::{Mode, SolverState};
+use atmo_mpc::settings::FeedbackMethod;
 use atmo_sim::closed_loop::{ControllerConfig, Summary, TickRecord, fly};
 use atmo_sim::scenario::Scenario;
 
@@ -74,12 +75,28 @@ fn clean() -> &'static Flight {
     CLEAN.get_or_init(|| fly_with(""))
 }
 
-/// The summary without its wall-clock time (bit-identical flights compare equal).
+/// The summary without its wall-clock times (run time, MPC feedback
+/// times): bit-identical flights compare equal.
 fn flown(summary: &Summary) -> Summary {
     Summary {
         wall_time_s: None,
+        feedback_time_median_s: 0.0,
+        feedback_time_max_s: 0.0,
         ..summary.clone()
     }
+}
+
+/// Whether two flights commanded the same, tick for tick and bit for bit
+/// (thrust, tilt velocity, wheels, mode; timings aside).
+fn same_commands(a: &Flight, b: &Flight) -> bool {
+    a.ticks.len() == b.ticks.len()
+        && a.ticks.iter().zip(&b.ticks).all(|(x, y)| {
+            let (x, y) = (&x.outputs, &y.outputs);
+            x.thrust == y.thrust
+                && x.tilt_velocity == y.tilt_velocity
+                && x.wheel_rates == y.wheel_rates
+                && x.status.mode == y.status.mode
+        })
 }
 
 /// When the clean landing enters `mode`, s.
@@ -140,29 +157,57 @@ fn short_estimate_dropout_is_flown_through() {
     assert!(max_age > 0.03 && max_age <= 0.05, "oldest estimate flown {max_age} s");
 }
 
-/// A dropout past the timeout: failsafe within a tick of the estimate going
-/// stale (open-loop 0.95 x hover trim, tilt back), back to flight once the
-/// estimates are back for 0.5 s and the tilt is back, then the landing again.
+/// A dropout past the timeout: failsafe at the first tick the estimate is
+/// stale (open-loop 0.95 x hover trim without an estimate, tilt back), back
+/// to flight once the estimates are back and the failsafe is 0.5 s old
+/// (`failsafe.recovery_time`) with the tilt back; then the landing again.
+/// Ended above z_varphi (0.3 s into the flight) the wheel landing meets
+/// the scenario's criteria; ended 0.5 s in, it lands on the wheels softly
+/// at 57 deg, under the 60 deg criterion (docs/faults.md: a dropout
+/// mid-morph ends in a crash, a known weakness).
 #[test]
 fn estimate_dropout_past_the_timeout_fails_safe_then_recovers_and_lands() {
-    let t = clean_entry(Mode::Flight) + 0.5;
-    let f = fly_with(&format!(
-        "[[faults.estimate_dropout]]\nt = {t}\nduration = 0.3"
-    ));
-    let failsafe = f.first_in(Mode::Failsafe, t).expect("no failsafe");
-    let stale_at = t + 0.05;
-    assert!(
-        failsafe.time >= stale_at - 0.01 && failsafe.time <= stale_at + 0.02,
-        "failsafe at {:.3} s, estimate stale from {stale_at:.3} s",
-        failsafe.time
-    );
-    assert!(failsafe.outputs.status.estimate_age > 0.05);
-    assert!(failsafe.outputs.tilt_velocity <= 0.0, "tilts back");
-    let recovered = f.first_in(Mode::Flight, failsafe.time).expect("no recovery");
-    assert!(recovered.time >= t + 0.3 + 0.5 - 0.01, "at {:.3}", recovered.time);
-    assert!(f.landed(), "{:#?}", f.summary);
-    let modes = f.modes();
-    assert!(modes.ends_with(&[Mode::Transition, Mode::Touchdown, Mode::Drive]), "{modes:?}");
+    for t in [0.3, 0.5] {
+        let f = fly_with(&format!(
+            "[[faults.estimate_dropout]]\nt = {t}\nduration = 0.3"
+        ));
+        let at = f
+            .ticks
+            .iter()
+            .position(|r| r.time >= t && r.outputs.status.mode == Mode::Failsafe)
+            .expect("no failsafe");
+        let (before, failsafe) = (&f.ticks[at - 1], &f.ticks[at]);
+        // The first tick whose estimate is stale, within the timeout of the dropout.
+        assert!(before.outputs.status.estimate_age <= 0.05);
+        assert!(failsafe.outputs.status.estimate_age > 0.05);
+        assert!(
+            failsafe.time > t && failsafe.time <= t + 0.05 + 1.0 / 150.0,
+            "failsafe at {:.3} s, dropout from {t} s",
+            failsafe.time
+        );
+        assert!(failsafe.outputs.tilt_velocity <= 0.0, "tilts back");
+        let recovered = f.first_in(Mode::Flight, failsafe.time).expect("no recovery");
+        assert!(
+            recovered.time >= failsafe.time + 0.5 - 1e-9 && recovered.time >= t + 0.3,
+            "recovered at {:.3} s",
+            recovered.time
+        );
+        let modes = f.modes();
+        assert!(
+            modes.ends_with(&[Mode::Transition, Mode::Touchdown, Mode::Drive]),
+            "{modes:?}"
+        );
+        let s = &f.summary;
+        println!(
+            "dropout at {t} s: touchdown {:?} deg, {:?} m/s",
+            s.touchdown_tilt_deg, s.impact_speed_mps
+        );
+        assert!(!s.crashed && s.impact_speed_mps.unwrap() <= 0.5, "{s:#?}");
+        assert!(s.touchdown_tilt_deg.unwrap() >= 55.0, "{s:#?}");
+        if t == 0.3 {
+            assert!(f.landed(), "{s:#?}");
+        }
+    }
 }
 
 /// A burst (estimates held, then delivered at once): the newest of the
@@ -179,10 +224,12 @@ fn estimate_burst_flies_the_newest_and_a_long_hold_fails_safe() {
     let age = after.outputs.status.estimate_age;
     assert!(age < 0.01, "estimate age after the burst {age} s");
 
-    let t = clean_entry(Mode::Flight) + 0.5;
-    let long = fly_with(&format!("[[faults.estimate_burst]]\nt = {t}\nduration = 0.3"));
-    let failsafe = long.first_in(Mode::Failsafe, t).expect("no failsafe");
-    assert!(failsafe.time < t + 0.08, "failsafe at {:.3}", failsafe.time);
+    // Held 0.3 s: the flight of the same dropout (the burst's older
+    // estimates are never flown, the newest is the first after the gap).
+    let long = fly_with("[[faults.estimate_burst]]\nt = 0.3\nduration = 0.3");
+    let dropout = fly_with("[[faults.estimate_dropout]]\nt = 0.3\nduration = 0.3");
+    assert!(long.first_in(Mode::Failsafe, 0.3).is_some());
+    assert!(same_commands(&long, &dropout));
     assert!(long.landed(), "{:#?}", long.summary);
 }
 
@@ -231,10 +278,7 @@ fn duplicated_estimates_are_dropped_and_counted_and_change_nothing() {
     assert!(io.faults.estimates_duplicated > 900, "{io:?}");
     assert_eq!(io.estimates_out_of_order, io.faults.estimates_duplicated);
     assert_eq!(flown(&f.summary), flown(&clean().summary));
-    assert_eq!(f.ticks.len(), clean().ticks.len());
-    for (a, b) in f.ticks.iter().zip(&clean().ticks) {
-        assert_eq!(a.outputs, b.outputs, "tick at {:.3} s", a.time);
-    }
+    assert!(same_commands(&f, clean()));
 }
 
 /// Estimates reordered in pairs through the descent: the overtaken one is
@@ -278,37 +322,51 @@ fn drivers_dying_mid_transition_fail_safe_and_stay_there() {
     );
 }
 
-/// The MPC's time limit hit by every solve: for fewer ticks than the grace
-/// (15) the stack flies the shifted plan (cuts and fallbacks counted) and
-/// lands; for longer, failsafe (MPC failed), recovery, landing.
-#[test]
-fn solver_time_limit_hit_repeatedly_cuts_counted_then_failsafe_past_the_grace() {
-    let t = clean_entry(Mode::Morphing) + 0.2;
-    let short = fly_with(&format!(
-        "[[faults.solver_overrun]]\nt = {t}\nduration = 0.05\niteration = 1"
-    ));
-    let cut_ticks = short
-        .ticks
+fn ticks_with_cuts(f: &Flight) -> usize {
+    f.ticks
         .iter()
         .filter(|r| r.outputs.status.solver_cuts.count > 0)
-        .count();
-    assert!(cut_ticks >= 6, "{cut_ticks} ticks with cuts");
-    let not_fresh = short
+        .count()
+}
+
+/// The MPC's time limit hit by every solve for 0.5 s (each cut after its
+/// first interior-point iteration). With the shipped homotopy feedback the
+/// cut is the preparation's Clarabel solve: the homotopy corrects it from
+/// the last working set to the exact QP solution, so the flight is the
+/// clean one bit for bit, every cut logged (`solver_cuts`, replayed). With
+/// the Clarabel feedback the feedback solve is cut too: the shifted plan
+/// is flown (`Fallback`, counted) for the grace of 15 ticks, then the MPC
+/// has failed: failsafe, recovery once the solves are whole again.
+#[test]
+fn solver_time_limit_hit_repeatedly_cuts_counted_then_failsafe_past_the_grace() {
+    let overrun = "[[faults.solver_overrun]]\nt = 0.3\nduration = 0.5\niteration = 1";
+    let homotopy = fly_with(overrun);
+    assert!(ticks_with_cuts(&homotopy) >= 74, "{}", ticks_with_cuts(&homotopy));
+    assert_eq!(flown(&homotopy.summary), flown(&clean().summary));
+    assert!(same_commands(&homotopy, clean()));
+
+    let mut controller = ControllerConfig::atmo().unwrap().deterministic();
+    controller.mpc.feedback.method = FeedbackMethod::Clarabel;
+    let mut ticks = Vec::new();
+    let summary = fly(&scenario(overrun), &controller, |r| ticks.push(*r)).unwrap();
+    let clarabel = Flight { summary, ticks };
+    let fallbacks: Vec<&TickRecord> = clarabel
         .ticks
         .iter()
-        .filter(|r| matches!(r.outputs.status.solver, SolverState::Fallback | SolverState::Failed))
-        .count();
-    assert!(not_fresh >= 1, "the cut solves were flown as fresh");
-    assert!(short.summary.mpc_failures >= 1);
-    assert_clean_landing(&short, "7 ticks of cut solves");
-
-    let t = clean_entry(Mode::Flight) + 0.5;
-    let long = fly_with(&format!(
-        "[[faults.solver_overrun]]\nt = {t}\nduration = 0.5\niteration = 1"
-    ));
-    let failsafe = long.first_in(Mode::Failsafe, t).expect("no failsafe");
-    assert!(failsafe.time < t + 0.5, "failsafe at {:.3}", failsafe.time);
-    assert!(long.landed(), "{:#?}", long.summary);
+        .filter(|r| r.outputs.status.solver == SolverState::Fallback)
+        .collect();
+    assert!(fallbacks.len() >= 15, "{} fallback ticks", fallbacks.len());
+    assert!(fallbacks[0].time >= 0.3 && fallbacks[0].time < 0.32);
+    let failsafe = clarabel.first_in(Mode::Failsafe, 0.3).expect("no failsafe");
+    let grace_end = fallbacks[0].time + 15.0 / 150.0;
+    assert!(
+        failsafe.time >= grace_end - 1e-6 && failsafe.time <= grace_end + 0.02,
+        "failsafe at {:.3} s, grace over at {grace_end:.3} s",
+        failsafe.time
+    );
+    assert!(clarabel.summary.mpc_failures >= 15);
+    assert!(clarabel.first_in(Mode::Flight, 0.8).is_some(), "no recovery");
+    println!("Clarabel feedback, solves cut for 0.5 s: {:?}", clarabel.summary);
 }
 
 /// The log's disk is full (`/dev/full`: every write fails with ENOSPC):
@@ -332,9 +390,12 @@ fn log_disk_full_flight_unaffected_records_dropped_and_counted() {
     })
     .unwrap();
     assert_eq!(flown(&summary), flown(&clean().summary));
-    assert_eq!(ticks.len(), clean().ticks.len());
-    // The writer fails at its first flush (0.5 s of wall clock) or at the
-    // end: wait for it, then everything logged is either written or counted.
+    let logged = Flight { summary, ticks };
+    assert!(same_commands(&logged, clean()));
+    let ticks = logged.ticks;
+    // The writer fails at its first write to the file (at start-up or at
+    // a flush): after the finish, everything logged is counted as dropped
+    // or was lost with the failed write.
     log.finish();
     let error = thread.join().unwrap_err().to_string();
     assert!(

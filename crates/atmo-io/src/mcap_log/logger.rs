@@ -329,13 +329,11 @@ impl LoggerHandle {
         if id == u16::MAX {
             return Err(IoError::Logger("too many channels".into()));
         }
-        self.tx
-            .send(Command::Register {
-                id,
-                topic: topic.to_string(),
-                type_name: M::TYPE_NAME,
-            })
-            .map_err(|_| IoError::Logger("the writer thread has stopped".into()))?;
+        self.send_setup(Command::Register {
+            id,
+            topic: topic.to_string(),
+            type_name: M::TYPE_NAME,
+        })?;
         Ok(Channel {
             id,
             _type: PhantomData,
@@ -370,10 +368,18 @@ impl LoggerHandle {
         })
     }
 
+    /// A start-up command. After a write failure (a full disk) it is
+    /// counted as dropped like every record, not refused: a log that cannot
+    /// be written never stops what it records ([`Self::failed`] tells).
     fn send_setup(&self, command: Command) -> Result<()> {
-        self.tx
-            .send(command)
-            .map_err(|_| IoError::Logger("the writer thread has stopped".into()))
+        match self.tx.send(command) {
+            Ok(()) => Ok(()),
+            Err(_) if self.failed() => {
+                self.shared.dropped.fetch_add(1, Ordering::Relaxed);
+                Ok(())
+            }
+            Err(_) => Err(IoError::Logger("the writer thread has stopped".into())),
+        }
     }
 
     /// Queues `message` for `channel`, stamped `log_time_ns` (also the
