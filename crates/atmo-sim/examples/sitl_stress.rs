@@ -10,6 +10,7 @@
 //! cargo build -p atmo-sim --bin atmo-sim --example sitl_stress
 //! target/debug/examples/sitl_stress --load 0
 //! target/debug/examples/sitl_stress --load 2
+//! target/debug/examples/sitl_stress --load 2 --fifo 50   # the daemon real-time (chrt)
 //! ```
 //!
 //! The binaries are taken from the example's own profile folder. Exit
@@ -58,10 +59,12 @@ fn daemon_config(dir: &Path, tag: &str) -> PathBuf {
             "iceoryx_prefix = \"\"",
             &format!("iceoryx_prefix = \"{tag}_\""),
         );
-    for name in ["robot", "flight", "mpc"] {
+    for (key, file) in [("robot", "atmo"), ("flight", "flight"), ("mpc", "mpc")] {
+        let shipped = format!("{key} = \"{file}.toml\"");
+        assert!(text.contains(&shipped), "config/daemon.toml: no `{shipped}`");
         text = text.replace(
-            &format!("{name} = \"{name}.toml\""),
-            &format!("{name} = \"{}\"", config.join(format!("{name}.toml")).display()),
+            &shipped,
+            &format!("{key} = \"{}\"", config.join(format!("{file}.toml")).display()),
         );
     }
     let path = dir.join("daemon.toml");
@@ -79,14 +82,17 @@ fn main() {
         busy_loop();
     }
     let mut load = 0usize;
+    // The daemon under `chrt --fifo <priority>` (real-time scheduling).
+    let mut fifo: Option<u32> = None;
     let mut out = std::env::temp_dir().join(format!("atmo-sitl-stress-{}", std::process::id()));
     let mut i = 1;
     while i < args.len() {
         match (args[i].as_str(), args.get(i + 1)) {
             ("--load", Some(n)) => load = n.parse().expect("--load: a number of processes"),
             ("--out", Some(dir)) => out = PathBuf::from(dir),
+            ("--fifo", Some(p)) => fifo = Some(p.parse().expect("--fifo: a SCHED_FIFO priority")),
             _ => {
-                eprintln!("usage: sitl_stress [--load N] [--out DIR]");
+                eprintln!("usage: sitl_stress [--load N] [--fifo PRIORITY] [--out DIR]");
                 std::process::exit(2);
             }
         }
@@ -107,10 +113,19 @@ fn main() {
     let tag = format!("atmo_stress_{}", std::process::id());
     let config = daemon_config(&out, &tag);
     let log = out.join("flight.mcap");
-    let domain = (230 + std::process::id() % 20).to_string();
+    // Away from 0 and from the SITL tests' domains (200..230).
+    let domain = (230 + std::process::id() % 3).to_string();
     let stderr = |name: &str| std::fs::File::create(out.join(format!("{name}.stderr"))).unwrap();
+    let mut daemon = match fifo {
+        Some(priority) => {
+            let mut c = Command::new("chrt");
+            c.args(["--fifo", &priority.to_string()]).arg(&daemon_bin);
+            c
+        }
+        None => Command::new(&daemon_bin),
+    };
     let mut daemon = Process(
-        Command::new(&daemon_bin)
+        daemon
             .args(["run", "--config"])
             .arg(&config)
             .arg("--log")
@@ -151,7 +166,17 @@ fn main() {
     };
     drop(busy);
 
-    let status: Vec<(u64, MpcStatus)> = read_topic(&log, "/atmo/status").unwrap();
+    let status: Vec<(u64, MpcStatus)> = match read_topic(&log, "/atmo/status") {
+        Ok(status) if !status.is_empty() => status,
+        other => {
+            eprintln!(
+                "no daemon log to read ({:?}); see {}/*.stderr",
+                other.err(),
+                out.display()
+            );
+            std::process::exit(1);
+        }
+    };
     // The armed flight: from the first tick out of `disarmed` on.
     let flown: Vec<&MpcStatus> = status
         .iter()
@@ -173,8 +198,9 @@ fn main() {
     }
     let us = |v: f64| v * 1e6;
     println!(
-        "load {load} busy-loop processes on {} CPUs; wall {:.1} s; {} ticks flown",
+        "load {load} busy-loop processes on {} CPUs, daemon {}; wall {:.1} s; {} ticks flown",
         std::thread::available_parallelism().map_or(0, std::num::NonZero::get),
+        fifo.map_or("SCHED_OTHER".to_string(), |p| format!("SCHED_FIFO {p}")),
         started.elapsed().as_secs_f64(),
         flown.len()
     );

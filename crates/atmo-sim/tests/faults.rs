@@ -410,3 +410,46 @@ fn log_disk_full_flight_unaffected_records_dropped_and_counted() {
     channels.log_tick(&log, 0, &ticks[0].inputs, &ticks[0].outputs, &Default::default());
     assert_eq!(log.dropped(), before + 2);
 }
+
+/// A `[faults]` table is checked like every config: the error names the
+/// scenario file and the key.
+#[test]
+fn a_bad_faults_table_is_refused_naming_the_file_and_the_key() {
+    let text = std::fs::read_to_string(scenario_path()).unwrap();
+    for (faults, key) in [
+        (
+            "[[faults.estimate_dropout]]\nt = 1.0\nduration = -0.1",
+            "faults.estimate_dropout[0].duration",
+        ),
+        (
+            "[[faults.estimate_latency]]\nt = 1.0\nduration = 0.5\ndelay = nan",
+            "faults.estimate_latency[0].delay",
+        ),
+        (
+            "[[faults.estimate_clock_jump]]\nt = 1.0\njump = -2000.0",
+            "faults.estimate_clock_jump[0].jump",
+        ),
+        (
+            "[faults.driver_death]\nmode = \"hover\"",
+            "faults.driver_death.mode",
+        ),
+        (
+            "[faults.driver_death]\ndelay = 0.1",
+            "faults.driver_death",
+        ),
+        (
+            "[[faults.solver_overrun]]\nt = 20.0\nduration = 0.1",
+            "faults.solver_overrun[0].t",
+        ),
+        ("[faults]\nestimate_dropouts = []", "estimate_dropouts"),
+    ] {
+        let err = Scenario::from_toml_str(&format!("{text}\n{faults}\n"), scenario_path())
+            .err()
+            .unwrap_or_else(|| panic!("accepted: {faults}"))
+            .to_string();
+        assert!(
+            err.contains("wheel_landing.toml") && err.contains(key),
+            "{faults}: {err}"
+        );
+    }
+}
