@@ -23,11 +23,11 @@ pub mod error;
 pub mod mcap_log;
 pub mod msg;
 pub mod output_dir;
-pub mod stamp_order;
 #[cfg(feature = "review")]
 pub mod review;
 #[cfg(feature = "ros2")]
 pub mod ros2;
+pub mod stamp_order;
 
 pub use error::{IoError, Result};
 

@@ -70,7 +70,11 @@ mod tests {
     use super::*;
 
     fn accepted(order: &mut StampOrder, stamps: &[u64]) -> Vec<u64> {
-        stamps.iter().copied().filter(|s| order.accept(*s)).collect()
+        stamps
+            .iter()
+            .copied()
+            .filter(|s| order.accept(*s))
+            .collect()
     }
 
     #[test]

@@ -425,5 +425,8 @@ fn a_full_disk_fails_the_writer_and_every_record_is_counted_never_blocked() {
     assert_eq!(log.dropped(), dropped + 100);
     let error = thread.join().unwrap_err().to_string();
     assert_eq!(error, failure);
-    println!("{sent} records offered before the failure; {}", log.dropped());
+    println!(
+        "{sent} records offered before the failure; {}",
+        log.dropped()
+    );
 }

@@ -61,10 +61,16 @@ fn daemon_config(dir: &Path, tag: &str) -> PathBuf {
         );
     for (key, file) in [("robot", "atmo"), ("flight", "flight"), ("mpc", "mpc")] {
         let shipped = format!("{key} = \"{file}.toml\"");
-        assert!(text.contains(&shipped), "config/daemon.toml: no `{shipped}`");
+        assert!(
+            text.contains(&shipped),
+            "config/daemon.toml: no `{shipped}`"
+        );
         text = text.replace(
             &shipped,
-            &format!("{key} = \"{}\"", config.join(format!("{file}.toml")).display()),
+            &format!(
+                "{key} = \"{}\"",
+                config.join(format!("{file}.toml")).display()
+            ),
         );
     }
     let path = dir.join("daemon.toml");
@@ -104,7 +110,11 @@ fn main() {
     let bin = me.parent().and_then(Path::parent).unwrap();
     let (daemon_bin, sim_bin) = (bin.join("atmo-daemon"), bin.join("atmo-sim"));
     for b in [&daemon_bin, &sim_bin] {
-        assert!(b.exists(), "{} is not built (see the example's doc)", b.display());
+        assert!(
+            b.exists(),
+            "{} is not built (see the example's doc)",
+            b.display()
+        );
     }
 
     let busy: Vec<Process> = (0..load)
@@ -223,7 +233,11 @@ fn main() {
     let summary = std::fs::read_to_string(out.join("sitl/summary.json")).unwrap_or_default();
     println!(
         "landing judged {} by the server; daemon exit {daemon_exit:?}; files in {}",
-        if served.success() { "a success" } else { "a failure" },
+        if served.success() {
+            "a success"
+        } else {
+            "a failure"
+        },
         out.display()
     );
     if !served.success() {

@@ -135,8 +135,8 @@ impl ControllerConfig {
     ///
     /// # Errors
     /// A file that cannot be read.
-    pub fn with_ground_effect(mut self, source: GroundEffectSource) -> Result<Self> {
-        self.files.set_ground_effect(&source).map_err(setup)?;
+    pub fn with_ground_effect(mut self, source: &GroundEffectSource) -> Result<Self> {
+        self.files.set_ground_effect(source).map_err(setup)?;
         self.reparse_mpc()
     }
 

@@ -167,13 +167,24 @@ impl FaultsConfig {
             ("estimate_reorder", &self.estimate_reorder),
         ] {
             for (i, w) in windows.iter().enumerate() {
-                check_window(&c, &format!("faults.{kind}[{i}]"), w.t, w.duration, duration)?;
+                check_window(
+                    &c,
+                    &format!("faults.{kind}[{i}]"),
+                    w.t,
+                    w.duration,
+                    duration,
+                )?;
             }
         }
         for (i, s) in self.estimate_latency.iter().enumerate() {
             let key = format!("faults.estimate_latency[{i}]");
             check_window(&c, &key, s.t, s.duration, duration)?;
-            c.range(&format!("{key}.delay"), s.delay, 1e-4..=MAX_FAULT_SPAN_S, "s")?;
+            c.range(
+                &format!("{key}.delay"),
+                s.delay,
+                1e-4..=MAX_FAULT_SPAN_S,
+                "s",
+            )?;
         }
         for (i, j) in self.estimate_clock_jump.iter().enumerate() {
             let key = format!("faults.estimate_clock_jump[{i}]");
@@ -239,7 +250,7 @@ pub struct FaultCounts {
 }
 
 fn ns(t: f64) -> u64 {
-    crate::sim_io::time_ns(t)
+    crate::sim_time::time_ns(t)
 }
 
 fn in_window(now_ns: u64, t: f64, duration: f64) -> bool {
@@ -440,7 +451,10 @@ mod tests {
     #[test]
     fn dropout_burst_latency_duplicate_and_reorder_shape_the_stream() {
         let none = fly_transport(&FaultsConfig::default(), 60);
-        assert_eq!(none, [(10, 5), (20, 15), (30, 25), (40, 35), (50, 45), (60, 55)]);
+        assert_eq!(
+            none,
+            [(10, 5), (20, 15), (30, 25), (40, 35), (50, 45), (60, 55)]
+        );
         let dropout = FaultsConfig {
             estimate_dropout: vec![window(0.02, 0.02)],
             ..FaultsConfig::default()
@@ -491,7 +505,10 @@ mod tests {
     #[test]
     fn clock_jump_steps_the_stamps_from_its_time_on() {
         let jump = FaultsConfig {
-            estimate_clock_jump: vec![ClockJump { t: 0.03, jump: -0.5 }],
+            estimate_clock_jump: vec![ClockJump {
+                t: 0.03,
+                jump: -0.5,
+            }],
             ..FaultsConfig::default()
         };
         let mut injector = FaultInjector::new(&jump);
@@ -548,8 +565,14 @@ mod tests {
             }],
             ..FaultsConfig::default()
         };
-        let e = bad.validate(Path::new("s.toml"), 10.0).unwrap_err().to_string();
-        assert!(e.contains("faults.estimate_latency[0].delay") && e.contains("s.toml"), "{e}");
+        let e = bad
+            .validate(Path::new("s.toml"), 10.0)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("faults.estimate_latency[0].delay") && e.contains("s.toml"),
+            "{e}"
+        );
         let both = FaultsConfig {
             driver_death: Some(DriverDeath {
                 t: Some(1.0),
@@ -558,7 +581,10 @@ mod tests {
             }),
             ..FaultsConfig::default()
         };
-        let e = both.validate(Path::new("s.toml"), 10.0).unwrap_err().to_string();
+        let e = both
+            .validate(Path::new("s.toml"), 10.0)
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("faults.driver_death"), "{e}");
         let mode = FaultsConfig {
             driver_death: Some(DriverDeath {
@@ -568,7 +594,13 @@ mod tests {
             }),
             ..FaultsConfig::default()
         };
-        let e = mode.validate(Path::new("s.toml"), 10.0).unwrap_err().to_string();
-        assert!(e.contains("faults.driver_death.mode") && e.contains("hovering"), "{e}");
+        let e = mode
+            .validate(Path::new("s.toml"), 10.0)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("faults.driver_death.mode") && e.contains("hovering"),
+            "{e}"
+        );
     }
 }

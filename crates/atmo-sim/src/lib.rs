@@ -23,6 +23,7 @@ pub use atmo_io::review::figure;
 pub mod monte_carlo;
 pub mod scenario;
 pub mod sim_io;
+pub mod sim_time;
 pub mod sitl;
 
 pub use error::{Result, SimError};

@@ -48,10 +48,7 @@ use crate::scenario::Scenario;
 /// Rate of the scenario's pilot stream (a radio link's frame rate), Hz.
 pub const PILOT_RATE_HZ: f64 = 50.0;
 
-/// Plant time in ns (the simulated clock's unit).
-pub fn time_ns(t: f64) -> u64 {
-    (t.max(0.0) * 1e9).round() as u64
-}
+pub use crate::sim_time::time_ns;
 
 /// The scenario's pilot inputs at `t`, as the flight stack reads them (the
 /// one place a scenario's `[[pilot]]` becomes a pilot input: the in-process

@@ -127,14 +127,15 @@ fn assert_clean_landing(flight: &Flight, what: &str) {
 fn the_clean_landing_lands_and_its_timeline() {
     let c = clean();
     for mode in FLOWN {
-        println!("clean landing: {} at {:.3} s", mode.name(), clean_entry(mode));
+        println!(
+            "clean landing: {} at {:.3} s",
+            mode.name(),
+            clean_entry(mode)
+        );
     }
     assert_clean_landing(c, "no fault");
     let io = c.last().io;
-    assert_eq!(
-        (io.estimates_out_of_order, io.estimate_clock_jumps),
-        (0, 0)
-    );
+    assert_eq!((io.estimates_out_of_order, io.estimate_clock_jumps), (0, 0));
     assert!(io.drivers_alive);
     assert!(io.faults.estimates_published > 14 * 100, "{io:?}");
 }
@@ -154,7 +155,10 @@ fn short_estimate_dropout_is_flown_through() {
         .iter()
         .map(|r| r.outputs.status.estimate_age)
         .fold(0.0, f64::max);
-    assert!(max_age > 0.03 && max_age <= 0.05, "oldest estimate flown {max_age} s");
+    assert!(
+        max_age > 0.03 && max_age <= 0.05,
+        "oldest estimate flown {max_age} s"
+    );
 }
 
 /// A dropout past the timeout: failsafe at the first tick the estimate is
@@ -186,7 +190,9 @@ fn estimate_dropout_past_the_timeout_fails_safe_then_recovers_and_lands() {
             failsafe.time
         );
         assert!(failsafe.outputs.tilt_velocity <= 0.0, "tilts back");
-        let recovered = f.first_in(Mode::Flight, failsafe.time).expect("no recovery");
+        let recovered = f
+            .first_in(Mode::Flight, failsafe.time)
+            .expect("no recovery");
         assert!(
             recovered.time >= failsafe.time + 0.5 - 1e-9 && recovered.time >= t + 0.3,
             "recovered at {:.3} s",
@@ -216,7 +222,9 @@ fn estimate_dropout_past_the_timeout_fails_safe_then_recovers_and_lands() {
 #[test]
 fn estimate_burst_flies_the_newest_and_a_long_hold_fails_safe() {
     let t = clean_entry(Mode::Morphing) + 0.2;
-    let short = fly_with(&format!("[[faults.estimate_burst]]\nt = {t}\nduration = 0.04"));
+    let short = fly_with(&format!(
+        "[[faults.estimate_burst]]\nt = {t}\nduration = 0.04"
+    ));
     assert_clean_landing(&short, "40 ms burst");
     assert!(short.last().io.faults.estimates_held >= 4);
     // The tick after the burst flies an estimate measured at its end.
@@ -311,7 +319,12 @@ fn drivers_dying_mid_transition_fail_safe_and_stay_there() {
         "driver loss at {:.3} s, transition at {transition:.3} s",
         dead.time
     );
-    assert_eq!(dead.outputs.status.mode, Mode::Failsafe, "{:?}", dead.outputs.status.transition);
+    assert_eq!(
+        dead.outputs.status.mode,
+        Mode::Failsafe,
+        "{:?}",
+        dead.outputs.status.transition
+    );
     for r in f.ticks.iter().filter(|r| r.time >= dead.time) {
         assert!(r.inputs.driver_lost);
         assert_eq!(r.outputs.status.mode, Mode::Failsafe, "at {:.3} s", r.time);
@@ -341,7 +354,11 @@ fn ticks_with_cuts(f: &Flight) -> usize {
 fn solver_time_limit_hit_repeatedly_cuts_counted_then_failsafe_past_the_grace() {
     let overrun = "[[faults.solver_overrun]]\nt = 0.3\nduration = 0.5\niteration = 1";
     let homotopy = fly_with(overrun);
-    assert!(ticks_with_cuts(&homotopy) >= 74, "{}", ticks_with_cuts(&homotopy));
+    assert!(
+        ticks_with_cuts(&homotopy) >= 74,
+        "{}",
+        ticks_with_cuts(&homotopy)
+    );
     assert_eq!(flown(&homotopy.summary), flown(&clean().summary));
     assert!(same_commands(&homotopy, clean()));
 
@@ -365,8 +382,14 @@ fn solver_time_limit_hit_repeatedly_cuts_counted_then_failsafe_past_the_grace() 
         failsafe.time
     );
     assert!(clarabel.summary.mpc_failures >= 15);
-    assert!(clarabel.first_in(Mode::Flight, 0.8).is_some(), "no recovery");
-    println!("Clarabel feedback, solves cut for 0.5 s: {:?}", clarabel.summary);
+    assert!(
+        clarabel.first_in(Mode::Flight, 0.8).is_some(),
+        "no recovery"
+    );
+    println!(
+        "Clarabel feedback, solves cut for 0.5 s: {:?}",
+        clarabel.summary
+    );
 }
 
 /// The log's disk is full (`/dev/full`: every write fails with ENOSPC):
@@ -407,7 +430,13 @@ fn log_disk_full_flight_unaffected_records_dropped_and_counted() {
     assert!(log.dropped() > 0, "nothing counted as dropped");
     // After the failure every record is refused at once and counted.
     let before = log.dropped();
-    channels.log_tick(&log, 0, &ticks[0].inputs, &ticks[0].outputs, &Default::default());
+    channels.log_tick(
+        &log,
+        0,
+        &ticks[0].inputs,
+        &ticks[0].outputs,
+        &atmo_io::msg::MpcStatus::default(),
+    );
     assert_eq!(log.dropped(), before + 2);
 }
 
@@ -433,10 +462,7 @@ fn a_bad_faults_table_is_refused_naming_the_file_and_the_key() {
             "[faults.driver_death]\nmode = \"hover\"",
             "faults.driver_death.mode",
         ),
-        (
-            "[faults.driver_death]\ndelay = 0.1",
-            "faults.driver_death",
-        ),
+        ("[faults.driver_death]\ndelay = 0.1", "faults.driver_death"),
         (
             "[[faults.solver_overrun]]\nt = 20.0\nduration = 0.1",
             "faults.solver_overrun[0].t",

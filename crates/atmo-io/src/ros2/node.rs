@@ -21,12 +21,12 @@ use super::{
     Ros2Publisher, Ros2StartOptions, Ros2Thread, RosClock, RosEstimate,
 };
 use crate::error::{IoError, Result};
-use crate::stamp_order::StampOrder;
 use crate::msg::frames::{odometry_to_state, vehicle_odometry_to_state};
 use crate::msg::{
     ActuatorMotors, Clock, DiagnosticArray, DiagnosticStatus, KeyValue, MpcStatus, Odometry,
     OffboardControlMode, PilotInput, PointStamped, RosMessage, Time, Twist, VehicleOdometry,
 };
+use crate::stamp_order::StampOrder;
 
 /// Whether a pilot input may be used: every number finite, throttle in [0, 1].
 fn pilot_is_valid(p: &PilotInput) -> bool {
