@@ -499,3 +499,35 @@ fn estimate_dropout_mid_morph_fails_safe_then_holds_below_z_star_until_tilted_an
     );
     assert!(f.landed(), "{:#?}", f.summary);
 }
+
+/// The injected cuts are logged like wall-clock ones: the flight log of a
+/// landing whose Clarabel feedback solves are cut for 0.5 s replays bit for
+/// bit with its logged cuts (`atmo-daemon replay`), and differs without them.
+#[test]
+fn injected_solver_cuts_are_logged_and_a_replay_repeats_them() {
+    use atmo_daemon::replay::{CutReplay, RecordedFlight, replay};
+    use atmo_sim::closed_loop::{STATUS_TOPIC, fly_logged};
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("issue21-faults");
+    std::fs::create_dir_all(&dir).unwrap();
+    let mut controller = ControllerConfig::atmo().unwrap().deterministic();
+    controller
+        .files
+        .set_mpc_value("feedback", "method", "clarabel")
+        .unwrap();
+    let mpc = dir.join("mpc_clarabel_feedback.toml");
+    std::fs::write(&mpc, &controller.files.mpc.text).unwrap();
+    let controller = controller.with_mpc_file(&mpc).unwrap();
+    assert_eq!(controller.mpc.feedback.method, FeedbackMethod::Clarabel);
+    let log = dir.join("solver_overrun.mcap");
+    let overrun = "[[faults.solver_overrun]]\nt = 0.3\nduration = 0.5\niteration = 1";
+    let (summary, _) = fly_logged(&scenario(overrun), &controller, &log, |_| {}).unwrap();
+    assert!(summary.mpc_failures >= 15, "{summary:?}");
+
+    let flight = RecordedFlight::read(&log, STATUS_TOPIC).unwrap();
+    let config = RecordedFlight::config(&flight.files).unwrap();
+    let report = replay(&flight, &config, CutReplay::AsLogged, |_| {}).unwrap();
+    assert_eq!(report.first_difference, None, "{report:?}");
+    assert_eq!(report.ticks, 2100);
+    let uncut = replay(&flight, &config, CutReplay::None, |_| {}).unwrap();
+    assert!(uncut.first_difference.is_some(), "the cuts changed nothing");
+}
