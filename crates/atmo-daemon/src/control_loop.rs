@@ -17,6 +17,8 @@ use std::sync::mpsc::{Receiver, SyncSender, sync_channel};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
+use atmo_mpc::SolverCuts;
+
 use crate::error::{DaemonError, Result};
 use crate::flight_stack::{FlightStack, StepInputs, StepOutputs};
 
@@ -200,7 +202,7 @@ impl ControlLoop {
             Some(inputs) => {
                 let outputs = stack.step(&inputs);
                 io.emit(&inputs, &outputs, &self.previous);
-                stack.open_cut_window(None);
+                stack.open_cut_window(io.cut_script());
                 stack.prepare_next();
                 true
             }
@@ -238,6 +240,12 @@ pub trait TickIo {
     /// The tick's outputs; `timing` is the previous tick's (the current one
     /// is still running).
     fn emit(&mut self, inputs: &StepInputs, outputs: &StepOutputs, timing: &TickTiming);
+    /// The time-limit cuts the next window of MPC solves must take
+    /// (`atmo_mpc::qp::cuts`): `None` (the wall clock decides) except where
+    /// a simulation injects solver overruns deterministically.
+    fn cut_script(&mut self) -> Option<SolverCuts> {
+        None
+    }
 }
 
 /// Tick I/O over std channels: the newest input wins; a full report

@@ -26,6 +26,11 @@ pub use crate::step_io::{
     Estimate, PilotInput, RejectCounters, SolverState, Status, StepInputs, StepOutputs,
 };
 
+/// Morphing hands over to the transition below z* once the tilt is within
+/// this of the flight limit, deg (a descent from z_varphi at the pilot's
+/// 0.3 m/s reaches the limit itself before z*).
+const TRANSITION_TILT_MARGIN_DEG: f64 = 5.0;
+
 /// SQP iterations spent re-planning on a mode change (a one-off cost of a
 /// few feedback times).
 const REPLAN_ITERATIONS: usize = 4;
@@ -121,6 +126,7 @@ impl FlightStack {
             morph_height: lim.morph_height,
             morph_hysteresis: settings.modes.morph_hysteresis,
             transition_height: lim.transition_height,
+            transition_min_tilt: lim.tilt_flight_max() - TRANSITION_TILT_MARGIN_DEG.to_radians(),
             thrust_cut_time: settings.modes.thrust_cut_time,
             failsafe_recovery_time: settings.failsafe.recovery_time,
             failsafe_recovery_tilt: settings.failsafe.recovery_tilt_deg.to_radians(),
@@ -560,9 +566,13 @@ impl FlightStack {
         let pilot = self.last_pilot;
         let mut v = Vector3::from(pilot.velocity);
         let ts = self.period();
+        let height = self.last_ground_z - state[idx::Z];
         match self.mode {
             Mode::Transition => v.z = self.settings.modes.transition_descent_speed,
             Mode::Failsafe => v = Vector3::zeros(),
+            // Below z* still folded (see `Thresholds::transition_min_tilt`):
+            // hold the height until tilted, then the transition descends.
+            Mode::Morphing if height < self.thresholds.transition_height => v.z = v.z.min(0.0),
             _ => {}
         }
         // Position reference: a carrot that moves at the commanded velocity

@@ -286,6 +286,7 @@ fn run(arg: &DaemonConfigArg, log_path: Option<PathBuf>, duration: Option<f64>) 
     let mut reported_mode = Mode::Disarmed.code();
     let mut reported_deaths = 0;
     let mut panicked = false;
+    let mut log_failure_reported = false;
     while !terminate.load(Ordering::Relaxed) {
         if !control.is_running() {
             panicked = true;
@@ -299,6 +300,16 @@ fn run(arg: &DaemonConfigArg, log_path: Option<PathBuf>, duration: Option<f64>) 
         if mode != reported_mode {
             reported_mode = mode;
             tracing::info!(mode = Mode::from_code(mode).map_or("?", Mode::name), "mode");
+        }
+        if !log_failure_reported && log.failed() {
+            // The control thread flies on; its records are dropped and
+            // counted (`io.log_dropped` in every status).
+            log_failure_reported = true;
+            tracing::error!(
+                log = %log_path.display(),
+                error = log.failure().unwrap_or_default(),
+                "the log cannot be written: flying on, its records dropped and counted"
+            );
         }
         let deaths = shared.driver_deaths.load(Ordering::Relaxed);
         if deaths != reported_deaths {
@@ -315,8 +326,9 @@ fn run(arg: &DaemonConfigArg, log_path: Option<PathBuf>, duration: Option<f64>) 
     let ticks = control.counters().ticks.load(Ordering::Relaxed);
     let stack = control.stop();
     log.finish();
-    let written = log_thread.join().context("finishing the log")?;
+    let written = log_thread.join();
     ros_thread.stop().context("stopping the ROS 2 node")?;
+    let written = written.with_context(|| format!("writing the log {}", log_path.display()))?;
     tracing::info!(
         ticks,
         log = %log_path.display(),

@@ -10,6 +10,7 @@
 //!                    thrust cut complete                      h > z_varphi + hysteresis  <----+  |
 //!                             |                                                                  | h < z*
 //!                        Touchdown <------------------- grounded ------------------------- Transition
+//!                                                              (h < z* once tilted near the flight limit)
 //!
 //! Failsafe: from Takeoff/Flight/Morphing/Transition on a stale estimate or an
 //! MPC failure past its grace; back to Flight once healthy and tilted back;
@@ -134,6 +135,11 @@ pub struct Thresholds {
     pub morph_hysteresis: f64,
     /// z*, m.
     pub transition_height: f64,
+    /// Tilt below which morphing does not hand over to the transition even
+    /// below z* (it holds its height instead), rad: a robot that reaches
+    /// z* with its arms folded (after a failsafe near the ground) cannot
+    /// tilt to the wheel-landing angle in the height left.
+    pub transition_min_tilt: f64,
     /// Seconds the thrust takes to ramp to zero after touchdown.
     pub thrust_cut_time: f64,
     /// Minimum time in failsafe before recovering, s.
@@ -253,8 +259,8 @@ pub const TRANSITIONS: &[Transition] = &[
     Transition {
         from: &[Mode::Morphing],
         to: Mode::Transition,
-        guard: |c, t| c.height < t.transition_height,
-        reason: "below z*",
+        guard: |c, t| c.height < t.transition_height && c.tilt >= t.transition_min_tilt,
+        reason: "below z* and tilted",
     },
     Transition {
         from: &[Mode::Touchdown],

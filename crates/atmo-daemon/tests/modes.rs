@@ -10,6 +10,7 @@ fn thresholds() -> Thresholds {
         morph_height: 1.2,
         morph_hysteresis: 0.1,
         transition_height: 0.45,
+        transition_min_tilt: 45f64.to_radians(),
         thrust_cut_time: 0.3,
         failsafe_recovery_time: 0.5,
         failsafe_recovery_tilt: 2f64.to_radians(),
@@ -357,12 +358,14 @@ fn morphing_to_flight_when_climbing_back_past_the_hysteresis() {
 }
 
 #[test]
-fn morphing_to_transition_below_z_star() {
+fn morphing_to_transition_below_z_star_once_tilted() {
+    let tilted = 46f64.to_radians();
     assert_eq!(
         step(
             Mode::Morphing,
             Conditions {
                 height: 0.44,
+                tilt: tilted,
                 ..flying()
             }
         ),
@@ -373,6 +376,19 @@ fn morphing_to_transition_below_z_star() {
             Mode::Morphing,
             Conditions {
                 height: 0.46,
+                tilt: tilted,
+                ..flying()
+            }
+        ),
+        Mode::Morphing
+    );
+    // Folded (after a failsafe near the ground): morphing holds on.
+    assert_eq!(
+        step(
+            Mode::Morphing,
+            Conditions {
+                height: 0.3,
+                tilt: 44f64.to_radians(),
                 ..flying()
             }
         ),

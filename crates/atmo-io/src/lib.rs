@@ -27,6 +27,7 @@ pub mod output_dir;
 pub mod review;
 #[cfg(feature = "ros2")]
 pub mod ros2;
+pub mod stamp_order;
 
 pub use error::{IoError, Result};
 

@@ -389,3 +389,44 @@ fn the_recover_command_line() {
     assert!(String::from_utf8_lossy(&missing.stderr).contains("/nonexistent.mcap"));
     std::fs::remove_dir_all(&dir).unwrap();
 }
+
+/// Issue 21, log disk full: on `/dev/full` every write fails with ENOSPC.
+/// The handle never blocks: records queued before the failure and every
+/// record after it are dropped and counted, `failed()` says so with the
+/// writer's error (the file and the OS's reason), and `join` returns it.
+#[cfg(target_os = "linux")]
+#[test]
+fn a_full_disk_fails_the_writer_and_every_record_is_counted_never_blocked() {
+    // Small chunks: the first chunk's write hits the full disk at once.
+    let options = LoggerOptions {
+        chunk_size: 1024,
+        ..LoggerOptions::default()
+    };
+    let (log, thread) = McapLogger::spawn("/dev/full", options).unwrap();
+    let channel = log.channel::<MpcStatus>("/atmo/status").unwrap();
+    let deadline = Instant::now() + Duration::from_secs(5);
+    let mut sent = 0u64;
+    while !log.failed() {
+        assert!(Instant::now() < deadline, "the writer never failed");
+        let _ = log.try_log(channel, sent, &status(sent));
+        sent += 1;
+        std::thread::sleep(Duration::from_micros(200));
+    }
+    let failure = log.failure().unwrap();
+    assert!(
+        failure.contains("/dev/full") && failure.contains("No space left on device"),
+        "{failure}"
+    );
+    // From now on each record is refused at once and counted.
+    let dropped = log.dropped();
+    for k in 0..100 {
+        assert!(!log.try_log(channel, sent + k, &status(k)));
+    }
+    assert_eq!(log.dropped(), dropped + 100);
+    let error = thread.join().unwrap_err().to_string();
+    assert_eq!(error, failure);
+    println!(
+        "{sent} records offered before the failure; {}",
+        log.dropped()
+    );
+}

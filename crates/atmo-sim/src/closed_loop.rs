@@ -27,7 +27,7 @@ use atmo_mpc::settings::GroundEffectSource;
 
 use crate::error::{Result, SimError};
 use crate::scenario::{Scenario, SuccessConfig};
-use crate::sim_io::{SimControl, SimIo, SimTick, terrain_z_below};
+use crate::sim_io::{SimControl, SimIo, SimIoCounts, SimTick, terrain_z_below};
 use atmo_plant::plant::Plant;
 
 /// One control tick as the runner saw it (what is logged and plotted).
@@ -43,6 +43,8 @@ pub struct TickRecord {
     pub truth_tilt: f64,
     /// True height of the base origin above the ground, m.
     pub truth_height: f64,
+    /// The simulated I/O's counters (order rule, injected faults).
+    pub io: SimIoCounts,
 }
 
 pub use atmo_io::review::landing::{LandingTracker, RunEnd, Summary};
@@ -133,8 +135,8 @@ impl ControllerConfig {
     ///
     /// # Errors
     /// A file that cannot be read.
-    pub fn with_ground_effect(mut self, source: GroundEffectSource) -> Result<Self> {
-        self.files.set_ground_effect(&source).map_err(setup)?;
+    pub fn with_ground_effect(mut self, source: &GroundEffectSource) -> Result<Self> {
+        self.files.set_ground_effect(source).map_err(setup)?;
         self.reparse_mpc()
     }
 
@@ -198,7 +200,7 @@ fn setup(e: impl std::fmt::Display) -> SimError {
 }
 
 /// The record of `tick`, with the plant's truth at it.
-fn record(tick: &SimTick, plant: &Plant) -> TickRecord {
+fn record(tick: &SimTick, plant: &Plant, io: SimIoCounts) -> TickRecord {
     let truth = plant.state();
     let ground = terrain_z_below(plant.plane(), truth[idx::X], truth[idx::Y]);
     TickRecord {
@@ -209,6 +211,7 @@ fn record(tick: &SimTick, plant: &Plant) -> TickRecord {
         truth,
         truth_tilt: plant.tilt(),
         truth_height: ground - truth[idx::Z],
+        io,
     }
 }
 
@@ -252,7 +255,7 @@ pub fn fly_observed(
         ground_z: terrain_z_below(plant.plane(), start[idx::X], start[idx::Y]),
         ..controller.inputs
     };
-    let io = SimIo::new(inputs, *plant.plane());
+    let io = SimIo::new(inputs, *plant.plane()).with_faults(&scenario.file.faults);
     let mut control = SimControl::new(tick_period(stack.period()), io);
     control.io.sense(&plant, scenario);
     on_plant(&truth_of(&plant));
@@ -272,7 +275,7 @@ pub fn fly_observed(
                     s.rejected.ground,
                 ],
             );
-            on_tick(&record(&tick, &plant));
+            on_tick(&record(&tick, &plant, control.io.counts()));
         }
         let (force, torque) = scenario.disturbance_at(plant.time());
         plant.set_external_wrench(force, torque)?;

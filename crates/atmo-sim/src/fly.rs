@@ -64,7 +64,7 @@ pub fn run(
     let with = |source: &GroundEffectSource, plans_tilt: bool| -> Result<ControllerConfig> {
         Ok(base
             .clone()
-            .with_ground_effect(source.clone())?
+            .with_ground_effect(source)?
             .with_tilt_plan(plans_tilt)?)
     };
     let none = GroundEffectSource::None;

@@ -7,6 +7,8 @@
 //!   plant in the daemon's own control loop, with a simulated clock and a
 //!   simulated `TickIo` ([`sim_io`]); [`monte_carlo`] runs many
 //!   randomized landings; [`figure`] draws the paper's Fig. 5A.
+//! - [`faults`]: a scenario's `[faults]`, injected on the closed loop's
+//!   input path (docs/faults.md).
 //! - [`sitl`]: `atmo-sim serve`, the plant behind the daemon's real
 //!   transports (ROS 2 motion capture, iceoryx2 drivers) in real time.
 //!
@@ -15,11 +17,13 @@
 
 pub mod closed_loop;
 pub mod error;
+pub mod faults;
 /// Fig. 5A (shared with `atmo-mcap summary`: atmo-io's review module).
 pub use atmo_io::review::figure;
 pub mod monte_carlo;
 pub mod scenario;
 pub mod sim_io;
+pub mod sim_time;
 pub mod sitl;
 
 pub use error::{Result, SimError};

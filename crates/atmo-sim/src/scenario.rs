@@ -19,6 +19,10 @@
 //!   (actuator commands for open-loop runs: rotors, or a scale of the
 //!   nominal hover trim at the current tilt, tilt rate, wheel rates).
 //!
+//! - `[faults]`: faults injected on the closed loop's input path (estimate
+//!   dropouts, bursts, latency, duplicates, reordering, clock jumps, dead
+//!   drivers, solver overruns: [`crate::faults`], docs/faults.md).
+//!
 //! Loading is strict like every config of the project: unknown keys are
 //! errors naming the file, line and key; values are range-checked and
 //! errors name the key.
@@ -33,6 +37,7 @@ use nalgebra::Vector3;
 use serde::Deserialize;
 
 use crate::error::{Result, SimError};
+use crate::faults::FaultsConfig;
 use atmo_plant::config::{EffectsConfig, PlantConfig, TerrainConfig};
 use atmo_plant::contact::{Plane, rim_lowest_point};
 use atmo_plant::plant::{Command, Event, InitialState, Plant};
@@ -164,6 +169,9 @@ pub struct ScenarioFile {
     /// What a closed-loop run of this scenario must achieve.
     #[serde(default)]
     pub success: SuccessConfig,
+    /// Faults injected on the closed loop's input path ([`crate::faults`]).
+    #[serde(default)]
+    pub faults: FaultsConfig,
 }
 
 /// `[success]`: the closed-loop pass criteria of a scenario.
@@ -325,6 +333,7 @@ impl ScenarioFile {
             0.0,
             1000.0,
         )?;
+        self.faults.validate(file, self.duration)?;
         check_times(&c, "pilot", self.pilot.iter().map(|p| p.t), self.duration)?;
         for (i, p) in self.pilot.iter().enumerate() {
             let k = format!("pilot[{i}]");

@@ -16,6 +16,14 @@
 //! | driver liveness| heartbeats                         | always alive (the simulated drivers answer)    |
 //! | ground height  | ROS 2 `/atmo/ground` while fresh, else the config constant | the scenario's terrain map at the *estimated* position, with each estimate (same timeout) |
 //!
+//! The estimate reaches the latch through the scenario's fault injector
+//! ([`crate::faults`]: a FIFO transport stamping each estimate with the
+//! estimator's clock) and the ROS 2 node's order rule
+//! ([`atmo_io::stamp_order`]: duplicates and reordered estimates dropped and
+//! counted, a backward clock jump taken as a new clock). With faults, the
+//! drivers can die (no liveness, no readings, nothing actuated) and the
+//! MPC's solves can be cut as the time limit cuts them.
+//!
 //! A source's sample is "accepted" when the runner calls [`SimIo::sense`]
 //! after a plant step; at the tick its age (plant time since acceptance)
 //! stamps it on the tick's clock, as the onboard I/O does with its
@@ -31,15 +39,16 @@ use atmo_daemon::{Estimate, FlightStack, PilotInput, StepInputs, StepOutputs};
 use atmo_plant::contact::Plane;
 use atmo_plant::plant::{Command, Plant};
 
+use atmo_io::stamp_order::StampOrder;
+use atmo_mpc::SolverCuts;
+
+use crate::faults::{FaultCounts, FaultInjector, FaultsConfig};
 use crate::scenario::Scenario;
 
 /// Rate of the scenario's pilot stream (a radio link's frame rate), Hz.
 pub const PILOT_RATE_HZ: f64 = 50.0;
 
-/// Plant time in ns (the simulated clock's unit).
-pub fn time_ns(t: f64) -> u64 {
-    (t.max(0.0) * 1e9).round() as u64
-}
+pub use crate::sim_time::time_ns;
 
 /// The scenario's pilot inputs at `t`, as the flight stack reads them (the
 /// one place a scenario's `[[pilot]]` becomes a pilot input: the in-process
@@ -115,6 +124,20 @@ pub struct SimIo {
     next_pilot_ns: u64,
     command: Command,
     last: Option<SimTick>,
+    faults: FaultInjector,
+    estimate_order: StampOrder,
+}
+
+/// The simulated I/O's counters after a tick (what the onboard daemon
+/// reports in `MpcStatus.io`).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct SimIoCounts {
+    /// Estimates dropped by the order rule (duplicates, reordered).
+    pub estimates_out_of_order: u64,
+    /// Backward steps of the estimator's clock taken as a new clock.
+    pub estimate_clock_jumps: u64,
+    pub drivers_alive: bool,
+    pub faults: FaultCounts,
 }
 
 impl SimIo {
@@ -132,6 +155,24 @@ impl SimIo {
             next_pilot_ns: 0,
             command: Command::idle(),
             last: None,
+            faults: FaultInjector::new(&FaultsConfig::default()),
+            estimate_order: StampOrder::default(),
+        }
+    }
+
+    /// Injects the scenario's `[faults]` (validated with the scenario).
+    #[must_use]
+    pub fn with_faults(mut self, faults: &FaultsConfig) -> Self {
+        self.faults = FaultInjector::new(faults);
+        self
+    }
+
+    pub fn counts(&self) -> SimIoCounts {
+        SimIoCounts {
+            estimates_out_of_order: self.estimate_order.out_of_order(),
+            estimate_clock_jumps: self.estimate_order.clock_jumps(),
+            drivers_alive: !self.faults.drivers_dead(self.now_ns),
+            faults: self.faults.counts(),
         }
     }
 
@@ -143,10 +184,16 @@ impl SimIo {
             && self.estimate_sequence != Some(e.sequence)
         {
             self.estimate_sequence = Some(e.sequence);
-            self.estimate = Some(Arrived {
-                value: e.state,
-                at_ns: self.now_ns,
-            });
+            self.faults
+                .publish(self.now_ns, time_ns(e.measured_at), e.state);
+        }
+        while let Some(e) = self.faults.next_delivery(self.now_ns) {
+            if self.estimate_order.accept(e.stamp_ns) {
+                self.estimate = Some(Arrived {
+                    value: e.state,
+                    at_ns: self.now_ns,
+                });
+            }
         }
         if self.now_ns >= self.next_pilot_ns {
             self.pilot = Some(Arrived {
@@ -154,6 +201,12 @@ impl SimIo {
                 at_ns: self.now_ns,
             });
             self.next_pilot_ns += self.pilot_period_ns;
+        }
+        if self.faults.drivers_dead(self.now_ns) {
+            // Silent drivers: no heartbeat, no reading, nothing actuated.
+            self.latch.drivers_alive(false);
+            self.command = Command::idle();
+            return;
         }
         if let Ok(counts) = plant.encoder_counts() {
             self.latch.tilt_counts(counts);
@@ -196,10 +249,15 @@ impl TickIo for SimIo {
     }
 
     fn emit(&mut self, inputs: &StepInputs, outputs: &StepOutputs, timing: &TickTiming) {
-        self.command = Command {
-            rotors: Input::from(outputs.thrust),
-            tilt_rate: outputs.tilt_velocity,
-            wheel_rates: outputs.wheel_rates,
+        self.faults.on_mode(outputs.status.mode, self.now_ns);
+        self.command = if self.faults.drivers_dead(self.now_ns) {
+            Command::idle()
+        } else {
+            Command {
+                rotors: Input::from(outputs.thrust),
+                tilt_rate: outputs.tilt_velocity,
+                wheel_rates: outputs.wheel_rates,
+            }
         };
         self.latch.mode(outputs.status.mode);
         self.last = Some(SimTick {
@@ -207,6 +265,10 @@ impl TickIo for SimIo {
             outputs: *outputs,
             timing: *timing,
         });
+    }
+
+    fn cut_script(&mut self) -> Option<SolverCuts> {
+        self.faults.cut_script(self.now_ns)
     }
 }
 

@@ -64,12 +64,12 @@ fn fitted_ground_effect_in_the_mpc_lands_steeper_than_the_nominal_mpc() {
     let base = ControllerConfig::atmo().unwrap().deterministic();
     let nominal = base
         .clone()
-        .with_ground_effect(GroundEffectSource::None)
+        .with_ground_effect(&GroundEffectSource::None)
         .unwrap()
         .with_tilt_plan(false)
         .unwrap();
     let informed = base
-        .with_ground_effect(GroundEffectSource::File(fitted))
+        .with_ground_effect(&GroundEffectSource::File(fitted))
         .unwrap()
         .with_tilt_plan(true)
         .unwrap();

@@ -167,7 +167,7 @@ fn a_ground_effect_file_is_logged_and_replayed_from_the_log() {
     let controller = ControllerConfig::atmo()
         .unwrap()
         .deterministic()
-        .with_ground_effect(GroundEffectSource::File(surface.clone()))
+        .with_ground_effect(&GroundEffectSource::File(surface.clone()))
         .unwrap()
         .with_tilt_plan(false)
         .unwrap();

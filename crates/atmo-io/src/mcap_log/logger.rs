@@ -181,6 +181,10 @@ struct Shared {
     /// Records the writer has taken off the queue (written or not).
     processed: AtomicU64,
     closed: AtomicBool,
+    /// Why the writer stopped before a finish request (a write error such
+    /// as a full disk), once it has.
+    failure: Mutex<Option<String>>,
+    failed: AtomicBool,
     topics: Mutex<Vec<String>>,
 }
 
@@ -264,6 +268,8 @@ impl McapLogger {
             dropped: AtomicU64::new(0),
             processed: AtomicU64::new(0),
             closed: AtomicBool::new(false),
+            failure: Mutex::new(None),
+            failed: AtomicBool::new(false),
             topics: Mutex::new(Vec::new()),
         });
         let handle = LoggerHandle {
@@ -323,13 +329,11 @@ impl LoggerHandle {
         if id == u16::MAX {
             return Err(IoError::Logger("too many channels".into()));
         }
-        self.tx
-            .send(Command::Register {
-                id,
-                topic: topic.to_string(),
-                type_name: M::TYPE_NAME,
-            })
-            .map_err(|_| IoError::Logger("the writer thread has stopped".into()))?;
+        self.send_setup(Command::Register {
+            id,
+            topic: topic.to_string(),
+            type_name: M::TYPE_NAME,
+        })?;
         Ok(Channel {
             id,
             _type: PhantomData,
@@ -364,10 +368,18 @@ impl LoggerHandle {
         })
     }
 
+    /// A start-up command. After a write failure (a full disk) it is
+    /// counted as dropped like every record, not refused: a log that cannot
+    /// be written never stops what it records ([`Self::failed`] tells).
     fn send_setup(&self, command: Command) -> Result<()> {
-        self.tx
-            .send(command)
-            .map_err(|_| IoError::Logger("the writer thread has stopped".into()))
+        match self.tx.send(command) {
+            Ok(()) => Ok(()),
+            Err(_) if self.failed() => {
+                self.shared.dropped.fetch_add(1, Ordering::Relaxed);
+                Ok(())
+            }
+            Err(_) => Err(IoError::Logger("the writer thread has stopped".into())),
+        }
     }
 
     /// Queues `message` for `channel`, stamped `log_time_ns` (also the
@@ -413,6 +425,23 @@ impl LoggerHandle {
         self.shared.dropped.load(Ordering::Relaxed)
     }
 
+    /// Whether the writer has failed (a write error: the disk is full, the
+    /// file system gone). From then on every record is dropped and counted;
+    /// the callers go on (the control thread never waits for the log).
+    pub fn failed(&self) -> bool {
+        self.shared.failed.load(Ordering::Relaxed)
+    }
+
+    /// The writer's error, once it has [`Self::failed`] (locks: not for the
+    /// control thread).
+    pub fn failure(&self) -> Option<String> {
+        self.shared
+            .failure
+            .lock()
+            .ok()
+            .and_then(|failure| failure.clone())
+    }
+
     /// Records accepted into the queue so far.
     pub fn accepted(&self) -> u64 {
         self.shared.accepted.load(Ordering::Relaxed)
@@ -435,6 +464,21 @@ impl LoggerHandle {
     }
 }
 
+/// A write error of the log `file`: an I/O error as the OS reported it
+/// (`No space left on device`), not only as MCAP's generic I/O message.
+fn writer_error(file: &Path, source: mcap::McapError) -> IoError {
+    match source {
+        mcap::McapError::Io(source) => IoError::File {
+            file: file.to_path_buf(),
+            source,
+        },
+        source => IoError::Mcap {
+            file: file.to_path_buf(),
+            source,
+        },
+    }
+}
+
 struct WriterLoop {
     path: PathBuf,
     writer: mcap::Writer<BufWriter<File>>,
@@ -451,16 +495,27 @@ struct WriterLoop {
 
 impl WriterLoop {
     fn mcap_err(&self, source: mcap::McapError) -> IoError {
-        IoError::Mcap {
-            file: self.path.clone(),
-            source,
-        }
+        writer_error(&self.path, source)
     }
 
     fn run(mut self) -> Result<LogSummary> {
         let result = self.run_inner();
         // Whatever happened, stop accepting records.
         self.shared.closed.store(true, Ordering::SeqCst);
+        if let Err(e) = &result {
+            // What was queued when the write failed is lost too: counted.
+            let mut lost = 0;
+            while let Ok(command) = self.rx.try_recv() {
+                if matches!(command, Command::Message { .. }) {
+                    lost += 1;
+                }
+            }
+            self.shared.dropped.fetch_add(lost, Ordering::Relaxed);
+            if let Ok(mut failure) = self.shared.failure.lock() {
+                *failure = Some(e.to_string());
+            }
+            self.shared.failed.store(true, Ordering::SeqCst);
+        }
         result?;
         Ok(LogSummary {
             path: self.path.clone(),
@@ -584,10 +639,7 @@ impl WriterLoop {
         *sequence = sequence.wrapping_add(1);
         self.writer
             .write_to_known_channel(&header, &self.buffer)
-            .map_err(|source| IoError::Mcap {
-                file: self.path.clone(),
-                source,
-            })?;
+            .map_err(|source| writer_error(&self.path, source))?;
         self.written += 1;
         Ok(())
     }

@@ -162,8 +162,12 @@ pub struct Ros2Counters {
     pub malformed: u64,
     /// Estimates with a non-finite or invalid field (NaN, bad quaternion, frame).
     pub invalid: u64,
-    /// Estimates whose stamp did not increase.
+    /// Estimates whose stamp did not increase (duplicates, reordered):
+    /// dropped ([`crate::stamp_order`]).
     pub stamp_backwards: u64,
+    /// Backward steps of the estimate stamps taken as a new estimator
+    /// clock ([`crate::stamp_order`]).
+    pub clock_jumps: u64,
     pub drive_received: u64,
     pub drive_rejected: u64,
     /// Pilot inputs that decoded, whatever their values.
@@ -194,6 +198,7 @@ struct Counters {
     malformed: AtomicU64,
     invalid: AtomicU64,
     stamp_backwards: AtomicU64,
+    clock_jumps: AtomicU64,
     drive_received: AtomicU64,
     drive_rejected: AtomicU64,
     pilot_received: AtomicU64,
@@ -217,6 +222,7 @@ impl Counters {
             malformed: g(&self.malformed),
             invalid: g(&self.invalid),
             stamp_backwards: g(&self.stamp_backwards),
+            clock_jumps: g(&self.clock_jumps),
             drive_received: g(&self.drive_received),
             drive_rejected: g(&self.drive_rejected),
             pilot_received: g(&self.pilot_received),

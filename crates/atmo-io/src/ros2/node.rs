@@ -26,6 +26,7 @@ use crate::msg::{
     ActuatorMotors, Clock, DiagnosticArray, DiagnosticStatus, KeyValue, MpcStatus, Odometry,
     OffboardControlMode, PilotInput, PointStamped, RosMessage, Time, Twist, VehicleOdometry,
 };
+use crate::stamp_order::StampOrder;
 
 /// Whether a pilot input may be used: every number finite, throttle in [0, 1].
 fn pilot_is_valid(p: &PilotInput) -> bool {
@@ -59,7 +60,8 @@ struct NodeThread {
     clock: Arc<RosClock>,
     counters: Arc<Counters>,
     stop: Arc<AtomicBool>,
-    last_stamp: Option<u64>,
+    /// The estimate stamps' order rule (duplicates, reordering, clock jumps).
+    estimate_order: StampOrder,
     started: Instant,
     /// `type_hash <topic>` = RIHS01 of each enabled topic's type.
     type_hashes: Vec<KeyValue>,
@@ -215,7 +217,7 @@ impl NodeThread {
             clock,
             counters,
             stop,
-            last_stamp: None,
+            estimate_order: StampOrder::default(),
             started: Instant::now(),
             type_hashes,
             _dds: dds,
@@ -292,12 +294,13 @@ impl NodeThread {
             + c.pilot_rejected
             + c.ground_rejected
             + c.clock_rejected;
-        let pairs: [(&str, u64); 17] = [
+        let pairs: [(&str, u64); 18] = [
             ("estimates_received", c.estimates_received),
             ("estimates_accepted", c.estimates_accepted),
             ("malformed", c.malformed),
             ("invalid", c.invalid),
             ("stamp_backwards", c.stamp_backwards),
+            ("clock_jumps", c.clock_jumps),
             ("drive_received", c.drive_received),
             ("drive_rejected", c.drive_rejected),
             ("pilot_received", c.pilot_received),
@@ -376,11 +379,14 @@ impl NodeThread {
                 }
                 Some(Ok((stamp_ns, state))) => {
                     bump(&self.counters.estimates_received);
-                    if self.last_stamp.is_some_and(|last| stamp_ns <= last) {
+                    let jumps = self.estimate_order.clock_jumps();
+                    if !self.estimate_order.accept(stamp_ns) {
                         bump(&self.counters.stamp_backwards);
                         continue;
                     }
-                    self.last_stamp = Some(stamp_ns);
+                    if self.estimate_order.clock_jumps() > jumps {
+                        bump(&self.counters.clock_jumps);
+                    }
                     bump(&self.counters.estimates_accepted);
                     let estimate = RosEstimate {
                         stamp_ns,
