@@ -9,6 +9,9 @@ use atmo_explain::synth::{Flight, Profile, record};
 use atmo_explain::{Explanation, Options, explain};
 use atmo_plant::config::{EffectsConfig, MotorLagConfig, PlantConfig};
 
+/// Changes a sample in place.
+type Poison = fn(&mut Sample);
+
 /// A 24 s cruise at 100 Hz (2400 rows) with a concealed motor lag.
 fn cruise_with_motor_lag() -> Recording {
     let robot = RobotConfig::atmo();
@@ -77,10 +80,10 @@ fn one_outlier_row_is_dropped_and_counted_and_the_verdict_stands() {
             "outlier_u1_1e20",
             "u1",
             1e20,
-            (|s: &mut Sample| s.u[0] = 1e20) as fn(&mut Sample),
+            (|s: &mut Sample| s.u[0] = 1e20) as Poison,
         ),
         ("outlier_vx_1e100", "vx", 1e100, |s: &mut Sample| {
-            s.x[6] = 1e100
+            s.x[6] = 1e100;
         }),
     ] {
         let ex = explain_poisoned(name, poison).unwrap();
@@ -116,7 +119,7 @@ fn a_column_in_the_wrong_unit_is_refused_naming_it() {
     let robot = RobotConfig::atmo();
     let dir = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("wrong_units");
     std::fs::create_dir_all(&dir).unwrap();
-    let cases: [(&str, fn(&mut Sample), &str); 3] = [
+    let cases: [(&str, Poison, &str); 3] = [
         (
             "pwm",
             |s| {

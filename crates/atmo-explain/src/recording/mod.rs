@@ -279,65 +279,20 @@ impl Recording {
                     .into(),
             ));
         };
-        let names: Vec<String> = header
-            .trim_start_matches('\u{feff}')
-            .split(',')
-            .map(|s| s.trim().trim_matches('"').to_string())
-            .collect();
-        let find = |name: &str| names.iter().position(|n| n == name);
-        let missing: Vec<&str> = REQUIRED_COLUMNS
-            .iter()
-            .copied()
-            .filter(|c| find(c).is_none())
-            .collect();
-        if !missing.is_empty() {
-            return Err(fail(format!(
-                "missing required column{} {} (header has: {})",
-                if missing.len() > 1 { "s" } else { "" },
-                missing
-                    .iter()
-                    .map(|m| format!("`{m}`"))
-                    .collect::<Vec<_>>()
-                    .join(", "),
-                names.join(", ")
-            )));
-        }
-        for (i, n) in names.iter().enumerate() {
-            if names[..i].contains(n) {
-                return Err(fail(format!("column `{n}` appears twice in the header")));
-            }
-        }
-        let required: Vec<usize> = REQUIRED_COLUMNS
-            .iter()
-            .map(|c| find(c).unwrap_or(0))
-            .collect();
-        let ground = find("ground_z");
-        let battery = find("battery_v");
-        let means: Vec<usize> = MEAN_COMMAND_COLUMNS
-            .iter()
-            .filter_map(|c| find(c))
-            .collect();
-        if !means.is_empty() && means.len() != 4 {
-            return Err(fail(format!(
-                "columns {}: give all four or none (header has: {})",
-                MEAN_COMMAND_COLUMNS.join(", "),
-                names.join(", ")
-            )));
-        }
-        let ignored_columns: Vec<String> = names
-            .iter()
-            .filter(|n| {
-                !REQUIRED_COLUMNS.contains(&n.as_str()) && !OPTIONAL_COLUMNS.contains(&n.as_str())
-            })
-            .cloned()
-            .collect();
-
+        let CsvColumns {
+            count,
+            required,
+            ground,
+            battery,
+            means,
+            ignored: ignored_columns,
+        } = csv_columns(header).map_err(&fail)?;
         let mut rec = Recording {
             source: file.clone(),
             ignored_columns,
             ..Recording::default()
         };
-        let mut fields: Vec<&str> = Vec::with_capacity(names.len());
+        let mut fields: Vec<&str> = Vec::with_capacity(count);
         let mut values = [0.0; 18];
         let mut last_t = f64::NEG_INFINITY;
         let mut last_line = 0;
@@ -472,6 +427,83 @@ impl Recording {
         d.sort_by(f64::total_cmp);
         d[d.len() / 2]
     }
+}
+
+/// Where a CSV header puts the columns the reader uses.
+struct CsvColumns {
+    count: usize,
+    /// Of [`REQUIRED_COLUMNS`], in order.
+    required: Vec<usize>,
+    ground: Option<usize>,
+    battery: Option<usize>,
+    /// Of [`MEAN_COMMAND_COLUMNS`]: all four or none.
+    means: Vec<usize>,
+    ignored: Vec<String>,
+}
+
+/// Reads the header row: every required column present once, the mean
+/// commands all four or none; otherwise the message naming what is wrong.
+fn csv_columns(header: &str) -> Result<CsvColumns, String> {
+    let names: Vec<String> = header
+        .trim_start_matches('\u{feff}')
+        .split(',')
+        .map(|s| s.trim().trim_matches('"').to_string())
+        .collect();
+    let find = |name: &str| names.iter().position(|n| n == name);
+    let missing: Vec<&str> = REQUIRED_COLUMNS
+        .iter()
+        .copied()
+        .filter(|c| find(c).is_none())
+        .collect();
+    if !missing.is_empty() {
+        return Err(format!(
+            "missing required column{} {} (header has: {})",
+            if missing.len() > 1 { "s" } else { "" },
+            missing
+                .iter()
+                .map(|m| format!("`{m}`"))
+                .collect::<Vec<_>>()
+                .join(", "),
+            names.join(", ")
+        ));
+    }
+    for (i, n) in names.iter().enumerate() {
+        if names[..i].contains(n) {
+            return Err(format!("column `{n}` appears twice in the header"));
+        }
+    }
+    let required: Vec<usize> = REQUIRED_COLUMNS
+        .iter()
+        .map(|c| find(c).unwrap_or(0))
+        .collect();
+    let ground = find("ground_z");
+    let battery = find("battery_v");
+    let means: Vec<usize> = MEAN_COMMAND_COLUMNS
+        .iter()
+        .filter_map(|c| find(c))
+        .collect();
+    if !means.is_empty() && means.len() != 4 {
+        return Err(format!(
+            "columns {}: give all four or none (header has: {})",
+            MEAN_COMMAND_COLUMNS.join(", "),
+            names.join(", ")
+        ));
+    }
+    let ignored_columns: Vec<String> = names
+        .iter()
+        .filter(|n| {
+            !REQUIRED_COLUMNS.contains(&n.as_str()) && !OPTIONAL_COLUMNS.contains(&n.as_str())
+        })
+        .cloned()
+        .collect();
+    Ok(CsvColumns {
+        count: names.len(),
+        required,
+        ground,
+        battery,
+        means,
+        ignored: ignored_columns,
+    })
 }
 
 /// The mean of the ticks' commands over each row's interval to the next

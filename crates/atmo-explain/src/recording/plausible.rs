@@ -224,7 +224,7 @@ mod tests {
 
     #[test]
     fn one_outlier_is_dropped_and_counted_a_unit_is_refused() {
-        let mut samples: Vec<Sample> = (0..200).map(|i| sample(i as f64 * 0.01)).collect();
+        let mut samples: Vec<Sample> = (0..200).map(|i| sample(f64::from(i) * 0.01)).collect();
         samples[17].x[6] = 1e100;
         samples[17].u[0] = 1e20;
         let out = drop_implausible(&mut samples, |i| format!("row {}", i + 1)).unwrap();
@@ -235,7 +235,7 @@ mod tests {
             "vx 1 (first at row 18: 1e100), u1 1 (first at row 18: 1e20)"
         );
 
-        let mut pwm: Vec<Sample> = (0..200).map(|i| sample(i as f64 * 0.01)).collect();
+        let mut pwm: Vec<Sample> = (0..200).map(|i| sample(f64::from(i) * 0.01)).collect();
         for s in &mut pwm {
             s.u = Input::from_element(1500.0);
             s.applied = s.u;
@@ -248,7 +248,7 @@ mod tests {
         );
         assert_eq!(pwm.len(), 200, "a refused recording is left as it was");
 
-        let mut degrees: Vec<Sample> = (0..200).map(|i| sample(i as f64 * 0.01)).collect();
+        let mut degrees: Vec<Sample> = (0..200).map(|i| sample(f64::from(i) * 0.01)).collect();
         for s in &mut degrees {
             s.varphi = 100.0;
         }
