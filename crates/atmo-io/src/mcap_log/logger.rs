@@ -7,7 +7,7 @@ use std::marker::PhantomData;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, AtomicU16, AtomicU64, Ordering};
 use std::sync::mpsc::{Receiver, RecvTimeoutError, SyncSender, TrySendError, sync_channel};
-use std::sync::{Arc, Mutex};
+use std::sync::{Arc, Mutex, OnceLock};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
@@ -182,9 +182,8 @@ struct Shared {
     processed: AtomicU64,
     closed: AtomicBool,
     /// Why the writer stopped before a finish request (a write error such
-    /// as a full disk), once it has.
-    failure: Mutex<Option<String>>,
-    failed: AtomicBool,
+    /// as a full disk), set once when it has (read without a lock).
+    failure: OnceLock<String>,
     topics: Mutex<Vec<String>>,
 }
 
@@ -268,8 +267,7 @@ impl McapLogger {
             dropped: AtomicU64::new(0),
             processed: AtomicU64::new(0),
             closed: AtomicBool::new(false),
-            failure: Mutex::new(None),
-            failed: AtomicBool::new(false),
+            failure: OnceLock::new(),
             topics: Mutex::new(Vec::new()),
         });
         let handle = LoggerHandle {
@@ -429,17 +427,12 @@ impl LoggerHandle {
     /// file system gone). From then on every record is dropped and counted;
     /// the callers go on (the control thread never waits for the log).
     pub fn failed(&self) -> bool {
-        self.shared.failed.load(Ordering::Relaxed)
+        self.shared.failure.get().is_some()
     }
 
-    /// The writer's error, once it has [`Self::failed`] (locks: not for the
-    /// control thread).
+    /// The writer's error, once it has [`Self::failed`].
     pub fn failure(&self) -> Option<String> {
-        self.shared
-            .failure
-            .lock()
-            .ok()
-            .and_then(|failure| failure.clone())
+        self.shared.failure.get().cloned()
     }
 
     /// Records accepted into the queue so far.
@@ -511,10 +504,7 @@ impl WriterLoop {
                 }
             }
             self.shared.dropped.fetch_add(lost, Ordering::Relaxed);
-            if let Ok(mut failure) = self.shared.failure.lock() {
-                *failure = Some(e.to_string());
-            }
-            self.shared.failed.store(true, Ordering::SeqCst);
+            let _ = self.shared.failure.set(e.to_string());
         }
         result?;
         Ok(LogSummary {
