@@ -5,10 +5,14 @@
 //! `dealloc`), so tests running in parallel in one binary never see each
 //! other's. A test binary installs it with
 //!
-//! ```ignore
+//! ```
 //! #[global_allocator]
 //! static GLOBAL: atmo_core::alloc_counter::CountingAllocator =
 //!     atmo_core::alloc_counter::CountingAllocator;
+//! # fn main() {
+//! # let (_, n) = atmo_core::alloc_counter::count(|| vec![0u8; 16]);
+//! # assert_eq!(n, 1);
+//! # }
 //! ```
 //!
 //! and measures with [`count`] (allocations of one call on this thread) or
