@@ -37,5 +37,40 @@ fn wheel_landing(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, wheel_landing);
+/// The flare's touchdown prediction (`atmo_daemon::flare::predict_touchdown`),
+/// run in each preparation of a flare's approach: from a hover 2 cm above
+/// the hold at 57 deg, level, on the default ground-effect surface.
+fn flare_prediction(c: &mut Criterion) {
+    use atmo_core::model::{State, idx};
+    use atmo_core::{Model, RobotConfig};
+    use atmo_daemon::flare::{TouchdownModel, predict_touchdown};
+    use atmo_daemon::ground_model::ground_surface;
+    use atmo_mpc::settings::GroundEffectSource;
+
+    let robot = RobotConfig::atmo();
+    let model = Model::new(&robot);
+    let surface = ground_surface(&GroundEffectSource::PlantDefault)
+        .expect("default surface")
+        .expect("a surface");
+    let touchdown = TouchdownModel {
+        model: &model,
+        surface: Some(&*surface),
+        ground_z: 0.0,
+        disturbance: nalgebra::Vector6::zeros(),
+        wheel_radius: robot.wheels.radius,
+        tilt_rate: robot.limits.tilt_rate_max,
+        tilt_max: robot.limits.tilt_transition_max(),
+        thrust: 0.9,
+    };
+    let mut state = State::zeros();
+    state[idx::Z] = -0.25;
+    let tilt = 57f64.to_radians();
+    let landed = predict_touchdown(&touchdown, &state, tilt, 0.01, 0.5);
+    assert!(landed.is_some(), "the benchmark's tilt-up touches down");
+    c.bench_function("flare/predict_touchdown", |b| {
+        b.iter(|| predict_touchdown(&touchdown, &state, tilt, 0.01, 0.5));
+    });
+}
+
+criterion_group!(benches, wheel_landing, flare_prediction);
 criterion_main!(benches);

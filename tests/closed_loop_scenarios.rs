@@ -66,7 +66,7 @@ fn assert_saturated_transition(s: &Summary) {
 }
 
 #[test]
-fn wheel_landing_of_fig5_lands_past_60_deg_softly_and_drives_on() {
+fn wheel_landing_of_fig5_lands_past_66_deg_softly_and_drives_on() {
     let s = fly_checked("wheel_landing");
     let s = {
         // The same flight through the MCAP logger: every tick is in the log.
@@ -112,6 +112,23 @@ fn wheel_landing_of_fig5_lands_past_60_deg_softly_and_drives_on() {
     };
     assert_wheel_landing(&s, 60.0);
     assert_saturated_transition(&s);
+    // Issue 17's targets for this landing (the flare, docs/landing.md):
+    // past the paper's 65 deg, soft, the thrust not saturated.
+    let tilt = s.touchdown_tilt_deg.unwrap_or(0.0);
+    let impact = s.impact_speed_mps.unwrap_or(f64::INFINITY);
+    assert!(
+        tilt >= 66.0,
+        "touchdown tilt {tilt:.2} deg, issue 17 wants >= 66"
+    );
+    assert!(
+        impact <= 0.35,
+        "impact {impact:.3} m/s, issue 17 wants <= 0.35"
+    );
+    assert!(
+        s.max_mean_thrust <= 0.95 + 1e-9,
+        "max mean thrust {:.3}",
+        s.max_mean_thrust
+    );
     assert!(
         s.drive_distance_m >= 1.0,
         "drove {:.2} m",
@@ -125,6 +142,8 @@ fn landing_with_forward_velocity_of_fig6c() {
     let s = fly_checked("landing_forward_velocity");
     assert_wheel_landing(&s, 60.0);
     assert_saturated_transition(&s);
+    // Issue 17: Fig. 6C lands past 64 deg (the flare, docs/landing.md).
+    assert_wheel_landing(&s, 64.0);
     assert!(
         s.drive_distance_m >= 1.0,
         "drove {:.2} m",
@@ -137,7 +156,8 @@ fn drive_takeoff_fly_land_of_fig6ab() {
     let s = fly_checked("drive_takeoff_land");
     let modes: Vec<&str> = s.mode_sequence.iter().map(String::as_str).collect();
     assert_eq!(&modes[..3], ["drive", "takeoff", "flight"], "{modes:?}");
-    assert_wheel_landing(&s, 60.0);
+    // Issue 17: Fig. 6A/B lands past 64 deg (paper: 58 deg for 6B).
+    assert_wheel_landing(&s, 64.0);
     assert!(
         s.drive_distance_m >= 1.0,
         "drove {:.2} m",

@@ -13,10 +13,11 @@
 use atmo_core::control::{DiffDrive, WheelRates, blending_alpha};
 use atmo_core::model::{Input, State, idx};
 use atmo_core::{Linkage, Model, RobotConfig};
-use atmo_mpc::{AlphaSchedule, Mpc, MpcSettings, Outcome, SolverCuts, TiltPlan};
+use atmo_mpc::{AlphaSchedule, Mpc, MpcSettings, Outcome, SolverCuts, TiltPlan, wheel_clearance};
 use nalgebra::Vector3;
 
 use crate::error::{DaemonError, Result};
+use crate::flare::{Flare, FlareSettings, TouchdownModel, approach, predict_touchdown};
 use crate::ground_model::{Surface, ground_surface};
 use crate::modes::{Conditions, Mode, Thresholds, next_mode};
 use crate::observer::{DisturbanceObserver, ObserverSettings};
@@ -34,6 +35,9 @@ const TRANSITION_TILT_MARGIN_DEG: f64 = 5.0;
 /// SQP iterations spent re-planning on a mode change (a one-off cost of a
 /// few feedback times).
 const REPLAN_ITERATIONS: usize = 4;
+
+/// The flare predicts its touchdown within this of its hold clearance, m.
+const PREDICTION_RANGE: f64 = 0.15;
 
 /// The flight stack.
 pub struct FlightStack {
@@ -77,6 +81,13 @@ pub struct FlightStack {
     wheel_radius: f64,
     /// The tilt rate of the MPC's last plan (when it plans the tilt).
     mpc_tilt_rate: Option<f64>,
+    /// The flare ending a planned-tilt transition (`None`: no flare).
+    flare_settings: Option<FlareSettings>,
+    flare: Flare,
+    /// The impact speed of a tilt-up begun at the last preparation's state.
+    flare_prediction: Option<f64>,
+    /// The MPC's thrust-gain surface (shared with it), for the prediction.
+    ground_effect: Option<Surface>,
 }
 
 impl FlightStack {
@@ -103,7 +114,15 @@ impl FlightStack {
         let linkage = Linkage::from_config(&robot.linkage, robot.limits.tilt_max())?;
         let plans_tilt = mpc_settings.tilt_plan.is_some_and(|t| t.enabled);
         let mut mpc = Mpc::new(model.clone(), mpc_settings)?;
-        mpc.set_ground_effect(surface);
+        let mut observer = DisturbanceObserver::new(ObserverSettings {
+            force_gain: settings.observer.force_gain,
+            torque_gain: settings.observer.torque_gain,
+            max_force: settings.observer.max_force,
+            max_torque: settings.observer.max_torque,
+        });
+        // The observer learns what the MPC's model leaves out: with its surface.
+        observer.set_ground_effect(surface.clone());
+        mpc.set_ground_effect(surface.clone());
         let steps = mpc.steps();
         let stage_dt = mpc.stage_dt();
         let alpha = AlphaSchedule::new(mpc.settings().cost.alpha_refresh_ticks);
@@ -158,17 +177,16 @@ impl FlightStack {
             last_preparation_time: 0.0,
             rejected: RejectCounters::default(),
             tilt_command: 0.0,
-            observer: DisturbanceObserver::new(ObserverSettings {
-                force_gain: settings.observer.force_gain,
-                torque_gain: settings.observer.torque_gain,
-                max_force: settings.observer.max_force,
-                max_torque: settings.observer.max_torque,
-            }),
+            observer,
             replan: false,
             plans_tilt,
             wheel_radius: robot.wheels.radius,
             mpc_tilt_rate: None,
+            flare_settings: (plans_tilt && settings.flare.enabled).then_some(settings.flare),
+            flare: Flare::default(),
+            flare_prediction: None,
             transition_limit: 0.0,
+            ground_effect: surface,
             model,
             settings,
         })
@@ -326,6 +344,12 @@ impl FlightStack {
 
         if mode == Mode::Transition {
             self.transition_limit = self.transition_limit.max(self.transition_schedule(height));
+            if let Some(flare) = self.flare_settings {
+                let clearance = self.flare_clearance(&state);
+                let predicted = self.flare_prediction;
+                self.flare
+                    .update(&flare, now, clearance, state[idx::VZ], predicted);
+            }
         }
         let limit = self.tilt_limit(mode);
         let tilt_velocity = self.limit_tilt_velocity(
@@ -367,6 +391,12 @@ impl FlightStack {
         let tilt_velocity = match self.mpc_tilt_rate.take() {
             // In the transition the MPC's plan decides, within the same limits.
             Some(rate) if mode == Mode::Transition && self.plans_tilt => {
+                // A committed flare tilts up at full speed whatever the plan.
+                let rate = if self.flare.committed() {
+                    self.tilt_rate_max
+                } else {
+                    rate
+                };
                 let planned = self.limit_tilt_velocity(rate, tilt, limit);
                 self.tilt_command = planned;
                 planned
@@ -394,6 +424,7 @@ impl FlightStack {
             && self.last_estimate.is_some();
         if learning {
             if let Some(est) = self.last_estimate {
+                self.observer.set_ground_height(self.last_ground_z);
                 self.observer.update(
                     &self.model,
                     est.stamp_ns,
@@ -423,6 +454,7 @@ impl FlightStack {
             self.touchdown_thrust = self.last_thrust;
         }
         self.transition_limit = self.flight_tilt_max;
+        self.flare.reset();
         if !mode.is_airborne_mode() {
             self.mpc_warm = false;
         }
@@ -601,9 +633,20 @@ impl FlightStack {
         if yaw_rate.abs() > 1e-9 {
             self.hold_yaw = state[idx::YAW];
         }
+        let flare = match (self.mode, self.flare_settings) {
+            (Mode::Transition, Some(f)) => Some((f, self.flare_clearance(state))),
+            _ => None,
+        };
         for (k, r) in self.reference.iter_mut().enumerate() {
             let t = k as f64 * self.stage_dt;
-            let pos = anchor + v * t;
+            let mut pos = anchor + v * t;
+            let mut vz = v.z;
+            if let Some((f, c0)) = flare {
+                // Down is +z: the reference sinks by the clearance it loses.
+                let (c, speed) = approach(&f, v.z, c0, t);
+                pos.z = state[idx::Z] + (c0 - c);
+                vz = speed;
+            }
             *r = State::zeros();
             r[idx::X] = pos.x;
             r[idx::Y] = pos.y;
@@ -611,7 +654,7 @@ impl FlightStack {
             r[idx::YAW] = self.hold_yaw + yaw_rate * t;
             r[idx::VX] = v.x;
             r[idx::VY] = v.y;
-            r[idx::VZ] = v.z;
+            r[idx::VZ] = vz;
             r[idx::WZ] = yaw_rate;
         }
     }
@@ -630,7 +673,12 @@ impl FlightStack {
             let plan = TiltPlan {
                 tilt_min: 0.0,
                 tilt_max: self.transition_tilt_max,
-                rate_min: -self.tilt_rate_max,
+                // The flare: the tilt only grows, then rises at full speed.
+                rate_min: match (self.flare_settings, self.flare.committed()) {
+                    (Some(_), true) => self.tilt_rate_max,
+                    (Some(_), false) => 0.0,
+                    (None, _) => -self.tilt_rate_max,
+                },
                 rate_max: self.tilt_rate_max,
                 wheel_radius: self.wheel_radius,
             };
@@ -643,6 +691,44 @@ impl FlightStack {
         let _ = self.mpc.set_alpha(alpha);
         let _ = self.mpc.set_disturbance(&self.observer.wrench());
         let _ = self.mpc.set_ground_height(self.last_ground_z);
+    }
+
+    /// In a flare's approach: the impact speed if the tilt-up began now
+    /// (`flare::predict_touchdown`, 10 ms steps, within 0.5 s).
+    fn predict_flare(&mut self, state: &State) {
+        self.flare_prediction = None;
+        let Some(flare) = self.flare_settings else {
+            return;
+        };
+        // Near the hold only: the prediction costs up to 50 RK4 steps.
+        let near = self.flare_clearance(state) < flare.hold_clearance + PREDICTION_RANGE;
+        if self.mode != Mode::Transition || self.flare.committed() || !near {
+            return;
+        }
+        let model = TouchdownModel {
+            model: &self.model,
+            surface: self.ground_effect.as_deref(),
+            ground_z: self.last_ground_z,
+            disturbance: self.observer.wrench(),
+            wheel_radius: self.wheel_radius,
+            tilt_rate: self.tilt_rate_max,
+            tilt_max: self.transition_tilt_max,
+            thrust: flare.predicted_thrust,
+        };
+        self.flare_prediction =
+            predict_touchdown(&model, state, self.last_tilt, 0.01, 0.5).map(|(_, v)| v);
+    }
+
+    /// The wheels' clearance above the ground input as if at the
+    /// transition's tilt limit, m (what the flare holds, `flare`).
+    fn flare_clearance(&self, state: &State) -> f64 {
+        wheel_clearance(
+            &self.model,
+            self.last_ground_z,
+            state,
+            self.transition_tilt_max,
+            self.wheel_radius,
+        )
     }
 
     /// Opens the window of MPC solves whose time-limit cuts the next
@@ -664,6 +750,7 @@ impl FlightStack {
         };
         self.fill_reference(&est.state);
         self.configure_mpc(&est.state);
+        self.predict_flare(&est.state);
         if let Ok(prep) = self.mpc.prepare() {
             self.last_preparation_time = prep.as_secs_f64();
         }

@@ -33,6 +33,7 @@
 pub mod cli;
 pub mod control_loop;
 pub mod error;
+pub mod flare;
 pub mod flight_log;
 pub mod flight_stack;
 pub mod ground_model;

@@ -14,9 +14,19 @@
 //!
 //! and the MPC predicts with `f + M_b^-1 d` (atmo-core `TiltedBody::with_disturbance`).
 //! The gains low-pass the estimate (time constant ~ dt / k).
+//!
+//! `f` is the MPC's own prediction model: with a ground-effect surface in
+//! the MPC ([`DisturbanceObserver::set_ground_effect`]) the observer
+//! predicts with the same surface, so that it learns only what the MPC does
+//! not know. (Learning the ground effect with the nominal model while the
+//! MPC also predicts it counted it twice: near the ground the MPC expected
+//! about 8 % more lift than there was and could not stop a descent.)
+
+use std::sync::Arc;
 
 use atmo_core::Model;
-use atmo_core::model::{Input, State, idx, rotation};
+use atmo_core::ground_effect::{GroundedBody, ThrustGainSurface};
+use atmo_core::model::{Input, State, idx, rk4_step, rotation};
 use nalgebra::{Vector3, Vector6};
 
 /// Observer gains and limits.
@@ -40,11 +50,14 @@ struct Sample {
 }
 
 /// The estimator state.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone)]
 pub struct DisturbanceObserver {
     settings: ObserverSettings,
     wrench: Vector6<f64>,
     previous: Option<Sample>,
+    /// The MPC's thrust-gain surface and the ground plane's z (NED, m).
+    ground_effect: Option<Arc<dyn ThrustGainSurface>>,
+    ground_z: f64,
 }
 
 impl DisturbanceObserver {
@@ -53,7 +66,19 @@ impl DisturbanceObserver {
             settings,
             wrench: Vector6::zeros(),
             previous: None,
+            ground_effect: None,
+            ground_z: 0.0,
         }
+    }
+
+    /// Predicts with this thrust-gain surface (the MPC's), `None`: nominal.
+    pub fn set_ground_effect(&mut self, surface: Option<Arc<dyn ThrustGainSurface>>) {
+        self.ground_effect = surface;
+    }
+
+    /// The ground plane under the robot, z (NED, m), for the surface.
+    pub fn set_ground_height(&mut self, ground_z: f64) {
+        self.ground_z = ground_z;
     }
 
     /// The current estimate (body force, torque about B).
@@ -102,7 +127,19 @@ impl DisturbanceObserver {
         let body = model
             .at_tilt(0.5 * (prev.tilt + tilt))
             .with_disturbance(self.wrench);
-        let predicted = body.rk4_step(&prev.state, applied, dt);
+        let predicted = match self.ground_effect.as_deref() {
+            Some(surface) => rk4_step(
+                &GroundedBody {
+                    body,
+                    surface,
+                    ground_z: self.ground_z,
+                },
+                &prev.state,
+                applied,
+                dt,
+            ),
+            None => body.rk4_step(&prev.state, applied, dt),
+        };
         let r = rotation(state[idx::YAW], state[idx::PITCH], state[idx::ROLL]);
         let dv = r.transpose()
             * Vector3::new(

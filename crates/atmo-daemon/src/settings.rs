@@ -6,6 +6,8 @@ use atmo_core::CoreError;
 use atmo_core::config_file::{Checker, ConfigFile};
 use serde::Deserialize;
 
+pub use crate::flare::FlareSettings;
+
 #[derive(Debug, Clone, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct FlightSettings {
@@ -15,6 +17,7 @@ pub struct FlightSettings {
     pub modes: ModeSettings,
     pub failsafe: FailsafeSettings,
     pub observer: ObserverConfig,
+    pub flare: FlareSettings,
     #[serde(rename = "loop")]
     pub control_loop: LoopSettings,
 }
@@ -171,6 +174,17 @@ impl ConfigFile for FlightSettings {
             1.0..=2000.0,
             "Hz",
         )?;
-        Ok(())
+        validate_flare(&c, &self.flare)
     }
+}
+
+fn validate_flare(c: &Checker, f: &FlareSettings) -> Result<(), CoreError> {
+    c.range("flare.hold_clearance", f.hold_clearance, -0.1..=0.5, "m")?;
+    c.range("flare.time_constant", f.time_constant, 0.01..=5.0, "s")?;
+    c.range("flare.hold_band", f.hold_band, 0.0..=0.5, "m")?;
+    c.range("flare.commit_speed", f.commit_speed, 0.0..=2.0, "m/s")?;
+    c.range("flare.hold_time", f.hold_time, 0.0..=10.0, "s")?;
+    c.range("flare.impact_speed", f.impact_speed, 0.0..=2.0, "m/s")?;
+    c.range("flare.predicted_thrust", f.predicted_thrust, 0.0..=1.0, "")?;
+    Ok(())
 }

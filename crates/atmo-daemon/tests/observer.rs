@@ -68,3 +68,59 @@ fn clamps_and_ignores_repeated_or_gapped_samples() {
     obs.reset();
     assert_eq!(obs.wrench(), Vector6::zeros());
 }
+
+/// Near the ground at 55 deg the plant's thrust gain is the MPC's surface.
+/// An observer that predicts with that surface learns nothing (the MPC
+/// already knows the lift); one that predicts with the nominal model
+/// learns the lift as a disturbance, which an MPC with the surface would
+/// then count twice (it did: docs/landing.md, "A bug found on the way").
+#[test]
+fn with_the_mpcs_surface_the_ground_effect_is_not_learned_twice() {
+    use atmo_core::ground_effect::GroundedBody;
+    use atmo_core::model::rk4_step;
+    use atmo_daemon::ground_model::ground_surface;
+    use atmo_mpc::settings::GroundEffectSource;
+
+    let model = Model::new(&RobotConfig::atmo());
+    let surface = ground_surface(&GroundEffectSource::PlantDefault)
+        .unwrap()
+        .unwrap();
+    let tilt = 55f64.to_radians();
+    let body = model.at_tilt(tilt);
+    let u = body.hover_trim();
+    let start = {
+        let mut x = State::zeros();
+        x[idx::Z] = -0.25;
+        x
+    };
+    let learned = |with_surface: bool| {
+        let mut obs = DisturbanceObserver::new(settings());
+        if with_surface {
+            obs.set_ground_effect(Some(surface.clone()));
+        }
+        obs.set_ground_height(0.0);
+        let plant = GroundedBody {
+            body,
+            surface: &*surface,
+            ground_z: 0.0,
+        };
+        let mut x = start;
+        for k in 0..400u64 {
+            obs.update(&model, k * 8_333_333, &x, tilt, &u);
+            x = rk4_step(&plant, &x, &u, 1.0 / 120.0);
+            if k % 20 == 0 {
+                x = start;
+                obs.pause();
+            }
+        }
+        obs.wrench()
+    };
+    let with = learned(true);
+    let without = learned(false);
+    assert!(with.amax() < 0.05, "with the surface: learned {with:?}");
+    // The nominal observer learns the lift (upwards: -z in the body frame).
+    assert!(
+        without[2] < -3.0,
+        "without the surface: learned {without:?}"
+    );
+}

@@ -135,7 +135,7 @@ pub mod tilt_model;
 
 pub use controller::{
     AlphaSchedule, DegradedCause, FailureCause, FeedbackPath, HomotopyFallback, Mpc, Outcome,
-    SqpReport, TickOutput, TickTimings, TiltPlan, wrap_angle,
+    SqpReport, TickOutput, TickTimings, TiltPlan, wheel_clearance, wrap_angle,
 };
 pub use error::{MpcError, Result};
 pub use homotopy::{Bound, BoxHomotopy, HomotopyStop};

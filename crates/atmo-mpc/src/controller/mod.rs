@@ -23,8 +23,8 @@ use crate::qp::cuts::SolverCuts;
 use crate::qp::{LinearizedHorizon, QpBackend, SolveReport};
 use crate::settings::{FeedbackMethod, Formulation, MpcSettings};
 
-pub use tilt_plan::TiltPlan;
 use tilt_plan::TiltPlanner;
+pub use tilt_plan::{TiltPlan, wheel_clearance};
 
 pub use outcome::{
     AlphaSchedule, DegradedCause, FailureCause, FeedbackPath, HomotopyFallback, Outcome, SqpReport,

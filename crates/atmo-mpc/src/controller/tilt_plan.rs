@@ -140,6 +140,27 @@ impl TiltPlanner {
     }
 }
 
+/// The wheels' clearance above the ground plane `z = ground_z` (NED, m) of
+/// the body in state `x` at tilt `varphi`: the lowest rotor hub's height
+/// minus the rim's reach `wheel_radius sin(varphi)` below it. Allocation-free.
+pub fn wheel_clearance(
+    model: &Model,
+    ground_z: f64,
+    x: &State,
+    varphi: f64,
+    wheel_radius: f64,
+) -> f64 {
+    let body = model.at_tilt(varphi);
+    let (sp, cp) = sin_cos(x[idx::PITCH]);
+    let (sr, cr) = sin_cos(x[idx::ROLL]);
+    let lowest_hub = body
+        .rotor_position
+        .iter()
+        .map(|r| ground_z - (x[idx::Z] - sp * r.x + cp * sr * r.y + cp * cr * r.z))
+        .fold(f64::INFINITY, f64::min);
+    lowest_hub - wheel_radius * sin_cos(varphi).0
+}
+
 /// Where the plan's wheels meet the ground: the fractional stage at which
 /// the clearance `c_k` first crosses zero, or the last stage.
 fn touchdown_stage(clearance: impl Iterator<Item = f64>, steps: usize) -> f64 {
@@ -290,15 +311,7 @@ impl Mpc {
 
     /// The wheels' clearance above the ground plane at a plan stage, m.
     fn clearance(&self, x: &State, varphi: f64, wheel_radius: f64) -> f64 {
-        let body = self.model.at_tilt(varphi);
-        let (sp, cp) = sin_cos(x[idx::PITCH]);
-        let (sr, cr) = sin_cos(x[idx::ROLL]);
-        let lowest_hub = body
-            .rotor_position
-            .iter()
-            .map(|r| self.ground_z - (x[idx::Z] - sp * r.x + cp * sr * r.y + cp * cr * r.z))
-            .fold(f64::INFINITY, f64::min);
-        lowest_hub - wheel_radius * sin_cos(varphi).0
+        wheel_clearance(&self.model, self.ground_z, x, varphi, wheel_radius)
     }
 
     /// The preparation's linearization for the tilt-planning QP: the

@@ -1,0 +1,259 @@
+//! The flare at the end of a planned-tilt transition (docs/landing.md).
+//!
+//! Past about 62 deg the thrust that is left (`thrust_max`, ground effect
+//! included) no longer holds the weight, so every degree beyond is bought
+//! with fall speed. The flare spends it where it costs least: the descent
+//! reference slows exponentially onto a hold clearance `c_hold` of the
+//! wheels above the ground,
+//!
+//! ```text
+//! d(t) = c(t) - c_hold,   d_dot = -min(v_desc, d / tau)
+//! ```
+//!
+//! (a constant descent at `v_desc` until `d = v_desc tau`, then an
+//! exponential), while the MPC tilts as far as its thrust holds the height.
+//! Once the wheels are within `hold_band` above the hold clearance and
+//! either the vertical speed is below `commit_speed`, or the hold has lasted
+//! `hold_time`, or they sink `hold_band` below it, the flare commits: the tilt rises at the mechanism's full
+//! speed to the transition limit (the MPC's tilt plan is pinned to it) and
+//! the wheels meet the ground a few centimetres later, at a tilt the robot
+//! could not have hovered at. Until then the planned tilt only grows: a
+//! tilt given back to stop the descent would have to be tilted again in the
+//! last centimetres, where there is no time for it.
+
+use atmo_core::Model;
+use atmo_core::ground_effect::{GroundedBody, ThrustGainSurface};
+use atmo_core::model::{Input, State, idx, rk4_step};
+use atmo_mpc::wheel_clearance;
+use nalgebra::Vector6;
+use serde::Deserialize;
+
+/// The flare's settings (`[flare]` of `config/flight.toml`).
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct FlareSettings {
+    /// Whether a planned-tilt transition ends in the flare.
+    pub enabled: bool,
+    /// Wheels' clearance the descent slows onto, m, measured as if the
+    /// thrusters stood at the transition's tilt limit (tilting lowers the
+    /// hubs and swings the rims down: the clearance the tilt-up ends at).
+    pub hold_clearance: f64,
+    /// Time constant of the exponential approach, s.
+    pub time_constant: f64,
+    /// Distance around the hold clearance counted as holding, m.
+    pub hold_band: f64,
+    /// Vertical speed below which a hold commits at once, m/s.
+    pub commit_speed: f64,
+    /// Longest hold before the flare commits anyway, s.
+    pub hold_time: f64,
+    /// The impact speed aimed at, m/s: the approach commits as soon as a
+    /// tilt-up begun now is predicted to touch down no faster.
+    pub impact_speed: f64,
+    /// Every rotor's command in that prediction (level, no motor lag: below
+    /// the MPC's bound, for the attitude control and the lag it leaves out).
+    pub predicted_thrust: f64,
+}
+
+/// What the robot and the MPC's model know, for [`predict_touchdown`].
+#[derive(Clone, Copy)]
+pub struct TouchdownModel<'a> {
+    pub model: &'a Model,
+    /// The MPC's thrust-gain surface (`None`: the nominal model).
+    pub surface: Option<&'a dyn ThrustGainSurface>,
+    /// NED z of the ground plane, m.
+    pub ground_z: f64,
+    /// The observer's body wrench (what the model leaves out).
+    pub disturbance: Vector6<f64>,
+    pub wheel_radius: f64,
+    /// The tilt-up: rate (rad/s) up to the limit (rad).
+    pub tilt_rate: f64,
+    pub tilt_max: f64,
+    /// Every rotor's command during the fall (the MPC's bound).
+    pub thrust: f64,
+}
+
+/// Touchdown tilt (rad) and vertical speed (m/s, down positive) if the
+/// tilt-up began now from `state` at `tilt`: level, every rotor at
+/// `thrust`, the tilt rising at full rate, integrated with RK4 in `dt` steps
+/// until the wheels touch (at most `horizon` s; `None` if they do not).
+/// Allocation-free; about 1 us per step.
+pub fn predict_touchdown(
+    m: &TouchdownModel<'_>,
+    state: &State,
+    tilt: f64,
+    dt: f64,
+    horizon: f64,
+) -> Option<(f64, f64)> {
+    let mut x = State::zeros();
+    x[idx::Z] = state[idx::Z];
+    x[idx::VZ] = state[idx::VZ];
+    let u = Input::from_element(m.thrust);
+    let mut varphi = tilt;
+    let mut t = 0.0;
+    while t < horizon {
+        if wheel_clearance(m.model, m.ground_z, &x, varphi, m.wheel_radius) <= 0.0 {
+            return Some((varphi, x[idx::VZ]));
+        }
+        let next_tilt = (varphi + m.tilt_rate * dt).min(m.tilt_max);
+        let body = m
+            .model
+            .at_tilt(0.5 * (varphi + next_tilt))
+            .with_disturbance(m.disturbance);
+        x = match m.surface {
+            Some(surface) => rk4_step(
+                &GroundedBody {
+                    body,
+                    surface,
+                    ground_z: m.ground_z,
+                },
+                &x,
+                &u,
+                dt,
+            ),
+            None => body.rk4_step(&x, &u, dt),
+        };
+        varphi = next_tilt;
+        t += dt;
+    }
+    None
+}
+
+/// Where the flare is.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Flare {
+    /// Since when (ns) the wheels are within the hold band.
+    holding_since: Option<u64>,
+    /// The tilt-up has begun (it is never taken back in this transition).
+    committed: bool,
+}
+
+impl Flare {
+    /// Back to the approach (a new transition).
+    pub fn reset(&mut self) {
+        *self = Self::default();
+    }
+
+    /// Whether the tilt-up has begun.
+    pub fn committed(&self) -> bool {
+        self.committed
+    }
+
+    /// One tick of the flare's logic: `clearance` of the wheels (m),
+    /// vertical speed `vz` (m/s, down positive), at time `now_ns`;
+    /// `predicted_impact`: [`predict_touchdown`]'s speed for a tilt-up now.
+    pub fn update(
+        &mut self,
+        s: &FlareSettings,
+        now_ns: u64,
+        clearance: f64,
+        vz: f64,
+        predicted_impact: Option<f64>,
+    ) -> bool {
+        if self.committed {
+            return true;
+        }
+        if predicted_impact.is_some_and(|v| v <= s.impact_speed) {
+            self.committed = true;
+            return true;
+        }
+        if clearance > s.hold_clearance + s.hold_band {
+            self.holding_since = None;
+            return false;
+        }
+        let since = *self.holding_since.get_or_insert(now_ns);
+        let held = now_ns.saturating_sub(since) as f64 * 1e-9;
+        // Sinking through the hold: the thrust cannot hold this tilt here,
+        // waiting would only land lower.
+        let sinking = clearance < s.hold_clearance - s.hold_band;
+        self.committed = vz.abs() <= s.commit_speed || held >= s.hold_time || sinking;
+        self.committed
+    }
+}
+
+/// The reference's clearance and descent speed (down positive) `t` seconds
+/// ahead of a clearance `c0`, descending at most at `v_desc` (see the module
+/// docs). Below the hold clearance the reference is the hold clearance.
+pub fn approach(s: &FlareSettings, v_desc: f64, c0: f64, t: f64) -> (f64, f64) {
+    let d0 = c0 - s.hold_clearance;
+    if d0 <= 0.0 {
+        return (s.hold_clearance, 0.0);
+    }
+    let tau = s.time_constant;
+    let knee = v_desc * tau;
+    let (d_knee, t_exp) = if d0 > knee {
+        let t_knee = (d0 - knee) / v_desc;
+        if t < t_knee {
+            return (c0 - v_desc * t, v_desc);
+        }
+        (knee, t - t_knee)
+    } else {
+        (d0, t)
+    };
+    let d = d_knee * (-t_exp / tau).exp();
+    (s.hold_clearance + d, d / tau)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const S: FlareSettings = FlareSettings {
+        enabled: true,
+        hold_clearance: 0.03,
+        time_constant: 0.2,
+        hold_band: 0.01,
+        commit_speed: 0.03,
+        hold_time: 0.3,
+        impact_speed: 0.3,
+        predicted_thrust: 0.9,
+    };
+
+    #[test]
+    fn the_approach_descends_at_the_speed_then_slows_onto_the_hold_clearance() {
+        // 0.5 m above the hold at 0.2 m/s: constant until 4 cm above it.
+        let (c, v) = approach(&S, 0.2, 0.53, 1.0);
+        assert!((c - 0.33).abs() < 1e-12 && (v - 0.2).abs() < 1e-12);
+        // Continuous at the knee, and the speed is the distance over tau after it.
+        let t_knee = (0.5 - 0.04) / 0.2;
+        let (c1, v1) = approach(&S, 0.2, 0.53, t_knee + 1e-9);
+        assert!((c1 - 0.07).abs() < 1e-6 && (v1 - 0.2).abs() < 1e-6);
+        let (c2, v2) = approach(&S, 0.2, 0.53, t_knee + 0.4);
+        assert!(((c2 - 0.03) / 0.2 - v2).abs() < 1e-12);
+        assert!(c2 > 0.03 && c2 < 0.04);
+        // Below the hold: back to it.
+        assert_eq!(approach(&S, 0.2, 0.01, 0.5), (0.03, 0.0));
+    }
+
+    #[test]
+    fn the_flare_commits_when_slow_in_the_band_or_after_the_hold_time() {
+        let mut f = Flare::default();
+        assert!(!f.update(&S, 0, 0.2, 0.0, None), "high: no commit");
+        assert!(
+            !f.update(&S, 1, 0.035, 0.1, None),
+            "in the band, still descending"
+        );
+        assert!(f.update(&S, 2, 0.035, 0.01, None), "slow in the band");
+        assert!(f.update(&S, 3, 0.5, 0.2, None), "committed stays committed");
+        let mut f = Flare::default();
+        assert!(!f.update(&S, 0, 0.035, 0.1, None));
+        assert!(!f.update(&S, 200_000_000, 0.035, 0.1, None));
+        assert!(
+            f.update(&S, 300_000_000, 0.035, 0.1, None),
+            "the hold time ran out"
+        );
+        let mut f = Flare::default();
+        assert!(!f.update(&S, 0, 0.035, 0.1, None));
+        assert!(
+            f.update(&S, 1, 0.019, 0.1, None),
+            "sinking through the hold"
+        );
+        let mut f = Flare::default();
+        assert!(!f.update(&S, 0, 0.2, 0.2, Some(0.31)));
+        assert!(
+            f.update(&S, 1, 0.2, 0.2, Some(0.29)),
+            "predicted to land slowly enough"
+        );
+        f.reset();
+        assert!(!f.committed());
+    }
+}
