@@ -719,6 +719,11 @@ impl FlightStack {
             predict_touchdown(&model, state, self.last_tilt, 0.01, 0.5).map(|(_, v)| v);
     }
 
+    /// Whether the flare of this transition has committed its tilt-up.
+    pub fn flare_committed(&self) -> bool {
+        self.flare.committed()
+    }
+
     /// The wheels' clearance above the ground input as if at the
     /// transition's tilt limit, m (what the flare holds, `flare`).
     fn flare_clearance(&self, state: &State) -> f64 {

@@ -61,6 +61,7 @@ fn flight_stack_allocations(ground_effect: GroundEffectSource) {
     let settings = FlightSettings::atmo();
     let mut mpc = deterministic(MpcSettings::atmo(&settings.mpc_preset).unwrap());
     mpc.model.ground_effect = ground_effect;
+    let planned_tilt = mpc.tilt_plan.is_some_and(|t| t.enabled) && settings.flare.enabled;
     let mut stack = FlightStack::new(&robot, mpc, settings).unwrap();
     let model = Model::new(&robot);
     let linkage = Linkage::from_config(&robot.linkage, robot.limits.tilt_max()).unwrap();
@@ -79,7 +80,8 @@ fn flight_stack_allocations(ground_effect: GroundEffectSource) {
     let clarabel_per_solve = clarabel_allocations_per_solve();
     let mut step_allocations = 0;
     let mut allowed = 0;
-    for tick in 0..400u64 {
+    let mut flared = false;
+    for tick in 0..1500u64 {
         let now_ns = 1_000_000_000 + tick * period_ns;
         let inputs = StepInputs {
             now_ns,
@@ -123,7 +125,10 @@ fn flight_stack_allocations(ground_effect: GroundEffectSource) {
             .at_tilt(tilt)
             .rk4_step(&x, &u, period_ns as f64 * 1e-9);
         tilt = (tilt + out.tilt_velocity * period_ns as f64 * 1e-9).clamp(0.0, 1.5);
-        if -x[idx::Z] < 0.25 {
+        flared |= stack.flare_committed();
+        // Down to the wheels' touchdown height at 70 deg (no ground here):
+        // through the flare's approach, its predictions and its tilt-up.
+        if -x[idx::Z] < 0.17 {
             break;
         }
     }
@@ -134,6 +139,10 @@ fn flight_stack_allocations(ground_effect: GroundEffectSource) {
     assert!(
         modes[Mode::Transition.code() as usize],
         "the descent must reach the transition: {modes:?}"
+    );
+    assert_eq!(
+        flared, planned_tilt,
+        "a planned-tilt transition must reach the flare's tilt-up"
     );
     assert!(
         step_allocations <= allowed,
@@ -231,7 +240,8 @@ fn control_loop_tick_does_not_allocate_after_start_up() {
     let clarabel_per_solve = clarabel_allocations_per_solve();
     let (mut allocations, mut allowed) = (0, 0);
     let mut modes = [false; 8];
-    for tick in 0..400u64 {
+    let mut flared = false;
+    for tick in 0..1500u64 {
         let now = control.next_deadline_ns();
         io.latch.estimate(Estimate {
             stamp_ns: now,
@@ -255,7 +265,10 @@ fn control_loop_tick_does_not_allocate_after_start_up() {
             .at_tilt(tilt)
             .rk4_step(&x, &u, period_ns as f64 * 1e-9);
         tilt = (tilt + io.tilt_velocity * period_ns as f64 * 1e-9).clamp(0.0, 1.5);
-        if -x[idx::Z] < 0.25 {
+        flared |= stack.flare_committed();
+        // Down to the wheels' touchdown height at 70 deg (no ground here):
+        // through the flare's approach, its predictions and its tilt-up.
+        if -x[idx::Z] < 0.17 {
             break;
         }
     }
@@ -263,6 +276,7 @@ fn control_loop_tick_does_not_allocate_after_start_up() {
         modes[Mode::Morphing.code() as usize] && modes[Mode::Transition.code() as usize],
         "{modes:?}"
     );
+    assert!(flared, "the transition must reach the flare's tilt-up");
     assert_eq!(control.previous().overruns_total, 0);
     assert!(
         allocations <= allowed,
