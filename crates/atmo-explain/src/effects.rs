@@ -98,11 +98,17 @@ impl Effect {
 
     /// Part of the nominal calibration of an approximate robot file (what
     /// every flight pins down: hover thrust, inertia, the command-to-thrust
-    /// curve, mass), reported apart from the physics found after it.
+    /// curve, mass, and the centre of mass, which every hover's rotor trim
+    /// fixes and which no hand-built robot's file has to the millimetre),
+    /// reported apart from the physics found after it.
     pub fn is_calibration(self) -> bool {
         matches!(
             self,
-            Effect::ThrustScale | Effect::ThrustCurve | Effect::InertiaError | Effect::MassError
+            Effect::ThrustScale
+                | Effect::ThrustCurve
+                | Effect::InertiaError
+                | Effect::MassError
+                | Effect::ComOffset
         )
     }
 

@@ -40,7 +40,7 @@ pub struct EffectReport {
     /// identifiability, held-out residual, 0.5 s prediction).
     pub decided_by: String,
     /// Part of the nominal calibration stage (thrust scale, thrust curve,
-    /// inertia, mass), not physics.
+    /// inertia, mass, centre of mass), not physics.
     pub calibration: bool,
 }
 
