@@ -673,11 +673,15 @@ impl FlightStack {
             let plan = TiltPlan {
                 tilt_min: 0.0,
                 tilt_max: self.transition_tilt_max,
-                // The flare: the tilt only grows, then rises at full speed.
-                rate_min: match (self.flare_settings, self.flare.committed()) {
-                    (Some(_), true) => self.tilt_rate_max,
-                    (Some(_), false) => 0.0,
-                    (None, _) => -self.tilt_rate_max,
+                // With the flare the planned tilt only grows. After its
+                // commit `step` commands the full rate whatever the plan says;
+                // the plan keeps the tilt as its decision, re-measured every
+                // tick (pinning the plan to the full rate was measured worse:
+                // docs/landing.md).
+                rate_min: if self.flare_settings.is_some() {
+                    0.0
+                } else {
+                    -self.tilt_rate_max
                 },
                 rate_max: self.tilt_rate_max,
                 wheel_radius: self.wheel_radius,
