@@ -24,8 +24,36 @@ use std::fmt::Debug;
 use nalgebra::Vector3;
 
 use crate::model::{
-    Dynamics, Input, InputJacobian, Linearization, State, TiltPartial, TiltedBody, idx, sin_cos,
+    Dynamics, Input, InputJacobian, Linearization, State, TiltPartial, TiltedBody, idx, rk4_step,
+    sin_cos,
 };
+
+/// One RK4 step of `body`, with the thrust gains of `surface` above the
+/// ground plane `z = ground_z` (NED, m) when there is a surface: the one
+/// step the MPC's model, the disturbance observer and the flare's
+/// touchdown prediction share.
+pub fn rk4_step_above_ground(
+    body: TiltedBody,
+    surface: Option<&dyn ThrustGainSurface>,
+    ground_z: f64,
+    x: &State,
+    u: &Input,
+    dt: f64,
+) -> State {
+    match surface {
+        Some(surface) => rk4_step(
+            &GroundedBody {
+                body,
+                surface,
+                ground_z,
+            },
+            x,
+            u,
+            dt,
+        ),
+        None => body.rk4_step(x, u, dt),
+    }
+}
 
 /// `g(h, varphi)` and its partials, at one point.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]

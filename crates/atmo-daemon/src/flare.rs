@@ -11,19 +11,21 @@
 //! ```
 //!
 //! (a constant descent at `v_desc` until `d = v_desc tau`, then an
-//! exponential), while the MPC tilts as far as its thrust holds the height.
-//! Once the wheels are within `hold_band` above the hold clearance and
-//! either the vertical speed is below `commit_speed`, or the hold has lasted
-//! `hold_time`, or they sink `hold_band` below it, the flare commits: the tilt rises at the mechanism's full
-//! speed to the transition limit (the MPC's tilt plan is pinned to it) and
-//! the wheels meet the ground a few centimetres later, at a tilt the robot
-//! could not have hovered at. Until then the planned tilt only grows: a
-//! tilt given back to stop the descent would have to be tilted again in the
-//! last centimetres, where there is no time for it.
+//! exponential), while the MPC tilts as far as its thrust holds the height;
+//! until the commit the planned tilt only grows (a tilt given back to stop
+//! the descent would have to be tilted again in the last centimetres, where
+//! there is no time for it). The flare commits when a full-speed tilt-up
+//! begun now is predicted to touch down at most at `impact_speed`
+//! ([`predict_touchdown`]), or once the wheels are within `hold_band` above
+//! the hold clearance and either slower than `commit_speed` or held there
+//! `hold_time`, or when they sink `hold_band` below it. Then the flight
+//! stack commands the tilt at the mechanism's full speed to the transition
+//! limit, whatever the MPC's plan says, and the wheels meet the ground a few
+//! centimetres later, at a tilt the robot could not have hovered at.
 
 use atmo_core::Model;
-use atmo_core::ground_effect::{GroundedBody, ThrustGainSurface};
-use atmo_core::model::{Input, State, idx, rk4_step};
+use atmo_core::ground_effect::{ThrustGainSurface, rk4_step_above_ground};
+use atmo_core::model::{Input, State, idx};
 use atmo_mpc::wheel_clearance;
 use nalgebra::Vector6;
 use serde::Deserialize;
@@ -68,7 +70,7 @@ pub struct TouchdownModel<'a> {
     /// The tilt-up: rate (rad/s) up to the limit (rad).
     pub tilt_rate: f64,
     pub tilt_max: f64,
-    /// Every rotor's command during the fall (the MPC's bound).
+    /// Every rotor's command during the fall (`predicted_thrust`).
     pub thrust: f64,
 }
 
@@ -91,7 +93,7 @@ pub fn predict_touchdown(
     let mut varphi = tilt;
     let mut t = 0.0;
     while t < horizon {
-        if wheel_clearance(m.model, m.ground_z, &x, varphi, m.wheel_radius) <= 0.0 {
+        if wheel_clearance(&m.model.at_tilt(varphi), m.ground_z, &x, m.wheel_radius) <= 0.0 {
             return Some((varphi, x[idx::VZ]));
         }
         let next_tilt = (varphi + m.tilt_rate * dt).min(m.tilt_max);
@@ -99,19 +101,7 @@ pub fn predict_touchdown(
             .model
             .at_tilt(0.5 * (varphi + next_tilt))
             .with_disturbance(m.disturbance);
-        x = match m.surface {
-            Some(surface) => rk4_step(
-                &GroundedBody {
-                    body,
-                    surface,
-                    ground_z: m.ground_z,
-                },
-                &x,
-                &u,
-                dt,
-            ),
-            None => body.rk4_step(&x, &u, dt),
-        };
+        x = rk4_step_above_ground(body, m.surface, m.ground_z, &x, &u, dt);
         varphi = next_tilt;
         t += dt;
     }

@@ -11,7 +11,7 @@
 //! after the outputs have been sent.
 
 use atmo_core::control::{DiffDrive, WheelRates, blending_alpha};
-use atmo_core::model::{Input, State, idx};
+use atmo_core::model::{Input, State, TiltedBody, idx};
 use atmo_core::{Linkage, Model, RobotConfig};
 use atmo_mpc::{AlphaSchedule, Mpc, MpcSettings, Outcome, SolverCuts, TiltPlan, wheel_clearance};
 use nalgebra::Vector3;
@@ -88,6 +88,9 @@ pub struct FlightStack {
     flare_prediction: Option<f64>,
     /// The MPC's thrust-gain surface (shared with it), for the prediction.
     ground_effect: Option<Surface>,
+    /// The body at the transition's tilt limit (the flare's clearance),
+    /// frozen once at start-up.
+    limit_body: TiltedBody,
 }
 
 impl FlightStack {
@@ -187,6 +190,7 @@ impl FlightStack {
             flare_prediction: None,
             transition_limit: 0.0,
             ground_effect: surface,
+            limit_body: model.at_tilt(lim.tilt_transition_max()),
             model,
             settings,
         })
@@ -732,10 +736,9 @@ impl FlightStack {
     /// transition's tilt limit, m (what the flare holds, `flare`).
     fn flare_clearance(&self, state: &State) -> f64 {
         wheel_clearance(
-            &self.model,
+            &self.limit_body,
             self.last_ground_z,
             state,
-            self.transition_tilt_max,
             self.wheel_radius,
         )
     }

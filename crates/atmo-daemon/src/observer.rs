@@ -25,8 +25,8 @@
 use std::sync::Arc;
 
 use atmo_core::Model;
-use atmo_core::ground_effect::{GroundedBody, ThrustGainSurface};
-use atmo_core::model::{Input, State, idx, rk4_step, rotation};
+use atmo_core::ground_effect::{ThrustGainSurface, rk4_step_above_ground};
+use atmo_core::model::{Input, State, idx, rotation};
 use nalgebra::{Vector3, Vector6};
 
 /// Observer gains and limits.
@@ -127,19 +127,14 @@ impl DisturbanceObserver {
         let body = model
             .at_tilt(0.5 * (prev.tilt + tilt))
             .with_disturbance(self.wrench);
-        let predicted = match self.ground_effect.as_deref() {
-            Some(surface) => rk4_step(
-                &GroundedBody {
-                    body,
-                    surface,
-                    ground_z: self.ground_z,
-                },
-                &prev.state,
-                applied,
-                dt,
-            ),
-            None => body.rk4_step(&prev.state, applied, dt),
-        };
+        let predicted = rk4_step_above_ground(
+            body,
+            self.ground_effect.as_deref(),
+            self.ground_z,
+            &prev.state,
+            applied,
+            dt,
+        );
         let r = rotation(state[idx::YAW], state[idx::PITCH], state[idx::ROLL]);
         let dv = r.transpose()
             * Vector3::new(

@@ -11,9 +11,9 @@ use std::f64::consts::{PI, TAU};
 use std::sync::Arc;
 use std::time::Duration;
 
-use atmo_core::ground_effect::{GroundedBody, ThrustGainSurface};
+use atmo_core::ground_effect::{GroundedBody, ThrustGainSurface, rk4_step_above_ground};
 use atmo_core::model::{
-    Input, Model, State, StepSensitivity, TiltedBody, idx, rk4_step, rk4_step_sensitivity,
+    Input, Model, State, StepSensitivity, TiltedBody, idx, rk4_step_sensitivity,
 };
 use clarabel::solver::SolverStatus;
 
@@ -411,10 +411,14 @@ impl Mpc {
 
     /// One RK4 step of the prediction model.
     fn step(&self, body: &TiltedBody, x: &State, u: &Input, dt: f64) -> State {
-        match self.grounded(body) {
-            Some(grounded) => rk4_step(&grounded, x, u, dt),
-            None => rk4_step(body, x, u, dt),
-        }
+        rk4_step_above_ground(
+            *body,
+            self.ground_effect.as_deref(),
+            self.ground_z,
+            x,
+            u,
+            dt,
+        )
     }
 
     /// One RK4 step of the prediction model with its exact sensitivities.

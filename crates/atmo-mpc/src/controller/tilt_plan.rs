@@ -43,7 +43,7 @@
 use std::f64::consts::FRAC_PI_2;
 
 use atmo_core::ground_effect::ThrustGainSurface;
-use atmo_core::model::{Input, Model, State, idx, rk4_step_sensitivity, sin_cos};
+use atmo_core::model::{Input, Model, State, TiltedBody, idx, rk4_step_sensitivity, sin_cos};
 
 use super::{Mpc, check_finite, hover_reference, wrap_angle};
 use crate::error::{MpcError, Result};
@@ -141,16 +141,10 @@ impl TiltPlanner {
 }
 
 /// The wheels' clearance above the ground plane `z = ground_z` (NED, m) of
-/// the body in state `x` at tilt `varphi`: the lowest rotor hub's height
-/// minus the rim's reach `wheel_radius sin(varphi)` below it. Allocation-free.
-pub fn wheel_clearance(
-    model: &Model,
-    ground_z: f64,
-    x: &State,
-    varphi: f64,
-    wheel_radius: f64,
-) -> f64 {
-    let body = model.at_tilt(varphi);
+/// `body` (frozen at its tilt `varphi`) in state `x`: the lowest rotor hub's
+/// height minus the rim's reach `wheel_radius sin(varphi)` below it.
+/// Allocation-free.
+pub fn wheel_clearance(body: &TiltedBody, ground_z: f64, x: &State, wheel_radius: f64) -> f64 {
     let (sp, cp) = sin_cos(x[idx::PITCH]);
     let (sr, cr) = sin_cos(x[idx::ROLL]);
     let lowest_hub = body
@@ -158,7 +152,7 @@ pub fn wheel_clearance(
         .iter()
         .map(|r| ground_z - (x[idx::Z] - sp * r.x + cp * sr * r.y + cp * cr * r.z))
         .fold(f64::INFINITY, f64::min);
-    lowest_hub - wheel_radius * sin_cos(varphi).0
+    lowest_hub - wheel_radius * sin_cos(body.varphi).0
 }
 
 /// Where the plan's wheels meet the ground: the fractional stage at which
@@ -311,7 +305,7 @@ impl Mpc {
 
     /// The wheels' clearance above the ground plane at a plan stage, m.
     fn clearance(&self, x: &State, varphi: f64, wheel_radius: f64) -> f64 {
-        wheel_clearance(&self.model, self.ground_z, x, varphi, wheel_radius)
+        wheel_clearance(&self.model.at_tilt(varphi), self.ground_z, x, wheel_radius)
     }
 
     /// The preparation's linearization for the tilt-planning QP: the
