@@ -402,39 +402,15 @@ fn push_ground_effect(raw: &mut [Vec<f64>], at: &Starts, row: &Row) {
     }
 }
 
-/// The four drag columns of one row (body-frame generalized accelerations
-/// per unit coefficient, before filtering): rotor drag in the disc planes
-/// and quadratic body drag along body x, y, z, on the velocity relative to
-/// the air (`wind`, NED).
-fn drag_terms(row: &Row, wind: &Vector3<f64>) -> [Vector6<f64>; 4] {
-    let (t, r, body) = (row.thrust, row.rot, &row.body);
+/// Rotor drag in the disc planes and quadratic body drag on the
+/// air-relative velocity (`wind` the current wind knob), and the wind
+/// columns (rotor drag per unit wind along world x and y).
+fn push_drag_and_wind(raw: &mut [Vec<f64>], at: &Starts, row: &Row, wind: &Vector3<f64>) {
+    let (t, r, body, k) = (row.thrust, row.rot, &row.body, row.k);
     let minv = &body.mass_matrix_inv;
     let w = row.rates();
     let v_air = r.transpose() * (row.velocity() - wind);
     let mut rotor_w = Vector6::zeros();
-    for i in 0..4 {
-        let n_i = &body.rotor_axis[i];
-        let r_i = &body.rotor_position[i];
-        let vi = v_air + w.cross(r_i);
-        let f = -(vi - n_i * vi.dot(n_i)) * t[i].max(0.0);
-        rotor_w += wrench(&f, &r_i.cross(&f));
-    }
-    let mut out = [minv * rotor_w, Vector6::zeros(), Vector6::zeros(), Vector6::zeros()];
-    for axis in 0..3 {
-        let mut f = Vector3::zeros();
-        f[axis] = -0.5 * AIR_DENSITY * v_air[axis].abs() * v_air[axis];
-        out[1 + axis] = minv * wrench(&f, &Vector3::zeros());
-    }
-    out
-}
-
-/// Drag on the air-relative velocity (`wind` the current wind knob), and
-/// the wind columns (rotor drag per unit wind along world x and y).
-fn push_drag_and_wind(raw: &mut [Vec<f64>], at: &Starts, row: &Row, wind: &Vector3<f64>) {
-    let (t, r, body, k) = (row.thrust, row.rot, &row.body, row.k);
-    for (j, term) in drag_terms(row, wind).iter().enumerate() {
-        push6(&mut raw[at.drag + j], k, term);
-    }
     let mut wind_cols = [Vector6::zeros(); 2];
     let wind_dirs = [
         r.transpose().column(0).into_owned(),
@@ -444,43 +420,27 @@ fn push_drag_and_wind(raw: &mut [Vec<f64>], at: &Starts, row: &Row, wind: &Vecto
         let n_i = &body.rotor_axis[i];
         let r_i = &body.rotor_position[i];
         let ti = t[i].max(0.0);
+        let vi = v_air + w.cross(r_i);
+        let f = -(vi - n_i * vi.dot(n_i)) * ti;
+        rotor_w += wrench(&f, &r_i.cross(&f));
         for (jw, dir) in wind_dirs.iter().enumerate() {
             let fw = (dir - n_i * dir.dot(n_i)) * ti;
             wind_cols[jw] += wrench(&fw, &r_i.cross(&fw));
         }
     }
-    for jw in 0..2 {
-        push6(&mut raw[at.wind + jw], k, &(body.mass_matrix_inv * wind_cols[jw]));
-    }
-}
-
-/// The four drag columns alone (filtered like the measurement) for the
-/// motor-lag `tau` and a wind: what the wind profile rebuilds per trial
-/// wind instead of every column.
-pub fn drag_columns(prep: &Prepared, rec: &Recording, tau: f64, wind: [f64; 2]) -> [Vec<f64>; 4] {
-    let n = prep.n;
-    let thrust = crate::data::lagged_commands(&prep.t, &prep.u_eff, tau);
-    let wind = Vector3::new(wind[0], wind[1], 0.0);
-    let mut raw: [Vec<f64>; 4] = std::array::from_fn(|_| vec![0.0; 6 * n]);
-    for (k, sample) in rec.samples.iter().enumerate().take(n) {
-        let row = Row {
+    push6(&mut raw[at.drag], k, &(minv * rotor_w));
+    for axis in 0..3 {
+        let mut f = Vector3::zeros();
+        f[axis] = -0.5 * AIR_DENSITY * v_air[axis].abs() * v_air[axis];
+        push6(
+            &mut raw[at.drag + 1 + axis],
             k,
-            sample,
-            thrust: &thrust[k],
-            command: &prep.u_eff[k],
-            body: prep.table.at(sample.varphi),
-            act: &prep.act[k],
-            rot: &prep.rot[k],
-        };
-        for (j, term) in drag_terms(&row, &wind).iter().enumerate() {
-            push6(&mut raw[j], k, term);
-        }
+            &(minv * wrench(&f, &Vector3::zeros())),
+        );
     }
-    raw.map(|r| {
-        let mut out = vec![0.0; 6 * n];
-        prep.smooth(&r, &mut out);
-        out
-    })
+    for jw in 0..2 {
+        push6(&mut raw[at.wind + jw], k, &(minv * wind_cols[jw]));
+    }
 }
 
 /// Mass properties (mass, inertia, centre-of-mass offset): the change of

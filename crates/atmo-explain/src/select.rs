@@ -378,14 +378,7 @@ pub fn fit_with_uncertainty(
     layout: &Layout,
     set: &[Effect],
 ) -> (Vec<usize>, DVector<f64>, DVector<f64>) {
-    fit_with_uncertainty_of(stats, columns_of(layout, set))
-}
-
-/// [`fit_with_uncertainty`] for the columns `idx`.
-pub fn fit_with_uncertainty_of(
-    stats: &Stats,
-    idx: Vec<usize>,
-) -> (Vec<usize>, DVector<f64>, DVector<f64>) {
+    let idx = columns_of(layout, set);
     let theta = stats.solve(&idx, &|_| true);
     let mut fold_thetas = Vec::new();
     for f in 0..FOLDS {

@@ -138,7 +138,9 @@ impl Default for TiltMechanismConfig {
 /// `[effects.drag]`: rotor drag (linear) and body drag (quadratic).
 ///
 /// Rotor i at hub velocity `v_i` relative to the air (body frame) feels
-/// `-k_r t_i (v_i - (v_i . n_i) n_i)` at its hub (t_i its normalized thrust);
+/// `-k_r t_i (v_i - (v_i . n_i) n_i) - k_a t_i (v_i . n_i) n_i` at its hub
+/// (t_i its normalized thrust): the in-plane H-force and the thrust lost
+/// to axial inflow (a rotor climbing into its own inflow, linearized);
 /// the body feels `-1/2 rho CdA_k |v_k| v_k` per body axis k at B.
 #[derive(Debug, Clone, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
@@ -148,6 +150,10 @@ pub struct DragConfig {
     /// N per (m/s) per rotor at full thrust.
     #[serde(default = "DragConfig::default_rotor")]
     pub rotor_drag: f64,
+    /// N per (m/s) of axial inflow per rotor at full thrust: the thrust
+    /// lost when the air comes through the disc against the thrust.
+    #[serde(default)]
+    pub axial_drag: f64,
     /// m^2, drag coefficient times area along body x, y, z.
     #[serde(default = "DragConfig::default_body")]
     pub body_cd_area: [f64; 3],
@@ -173,6 +179,7 @@ impl Default for DragConfig {
         Self {
             enabled: true,
             rotor_drag: Self::default_rotor(),
+            axial_drag: 0.0,
             body_cd_area: Self::default_body(),
             air_density: Self::default_rho(),
         }
@@ -658,6 +665,7 @@ impl EffectsConfig {
         if let Some(e) = &self.drag {
             let p = format!("{prefix}.drag");
             c.within(&format!("{p}.rotor_drag"), e.rotor_drag, 0.0, 100.0)?;
+            c.within(&format!("{p}.axial_drag"), e.axial_drag, 0.0, 100.0)?;
             for v in e.body_cd_area {
                 c.within(&format!("{p}.body_cd_area"), v, 0.0, 10.0)?;
             }

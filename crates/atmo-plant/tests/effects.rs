@@ -155,6 +155,44 @@ fn rotor_drag_opposes_the_in_plane_air_velocity() {
 }
 
 #[test]
+fn axial_inflow_takes_thrust_along_the_rotor_axes_only() {
+    let drag = DragConfig {
+        rotor_drag: 0.0,
+        axial_drag: 0.8,
+        body_cd_area: [0.0; 3],
+        ..DragConfig::default()
+    };
+    let effects = EffectsConfig {
+        drag: Some(drag.clone()),
+        ..EffectsConfig::none()
+    };
+    // Climbing at 1.5 m/s (NED z up is negative) with a 2 m/s sideways
+    // velocity: level rotors see the climb as axial inflow, the sideways
+    // velocity in their planes (no in-plane drag here).
+    let mut x = level_at(5.0);
+    x[idx::VZ] = -1.5;
+    x[idx::VY] = 2.0;
+    let p = plant(effects, x, 0.0);
+    let u = Input::repeat(0.5);
+    let got = p.body_derivative(&Command::rotors(u)).unwrap();
+    let body = truth_model().at_tilt(0.0);
+    let mut force = nalgebra::Vector3::zeros();
+    let mut torque = nalgebra::Vector3::zeros();
+    for (n, r) in body.rotor_axis.iter().zip(&body.rotor_position) {
+        let v = nalgebra::Vector3::new(0.0, 2.0, -1.5);
+        let f = -n * n.dot(&v) * drag.axial_drag * 0.5;
+        force += f;
+        torque += r.cross(&f);
+    }
+    assert!(force.y.abs() < 1e-12, "no in-plane force: {force}");
+    // The rotors push up (-z); climbing into their inflow loses thrust: +z.
+    assert!(force.z > 0.0, "a climb loses thrust: {force}");
+    let extra = nalgebra::Vector6::new(force.x, force.y, force.z, torque.x, torque.y, torque.z);
+    let expected = TiltedBodyExt::with_extra(&body, &x, &u, &extra);
+    assert!((got - expected).norm() < 1e-12, "{got} vs {expected}");
+}
+
+#[test]
 fn gusts_follow_their_one_minus_cosine_profile() {
     let wind = WindConfig {
         turbulence_std: [0.0; 3],

@@ -75,7 +75,8 @@ pub(super) fn drag_wrench(
         }
         let n = &body.rotor_axis[i];
         let vi = v_air + w.cross(&body.rotor_position[i]);
-        let fi = -(vi - n * vi.dot(n)) * (drag.rotor_drag * t[i].max(0.0));
+        let axial = n * vi.dot(n);
+        let fi = -((vi - axial) * drag.rotor_drag + axial * drag.axial_drag) * t[i].max(0.0);
         force += fi;
         torque += body.rotor_position[i].cross(&fi);
     }
