@@ -6,7 +6,7 @@
 //! | --- | --- | --- |
 //! | `ground_effect` | gain table over hub height {0.25, 0.35, 0.45, 0.6} m x tilt {40..70} deg (0 at 0.75 m), classical `R_p^2` below 30 deg | `sum_i phi(h_i, varphi) A e_i t_i` |
 //! | `motor_lag` | time constant tau | `A (lag_tau(u) - u)` (profiled) |
-//! | `drag` | rotor drag k_r, body Cd A (x, y, z) | `-sum_i t_i P_i v_i` at the hubs, `-rho/2 \|v_k\| v_k` |
+//! | `drag` | rotor drag k_r (in the disc plane), axial k_a, body Cd A (x, y, z) | `-sum_i t_i P_i v_i`, `-sum_i t_i (1 - P_i) v_i` at the hubs, `-rho/2 \|v_k\| v_k` |
 //! | `wind` | steady wind (x, y) | `k_r sum_i t_i P_i R^T e_j` |
 //! | `thrust_scale` | s | `A t` |
 //! | `thrust_curve` | f, thrust `(1 - f) t + f t^2` | `A (t^2 - t)` (per rotor) |
@@ -31,6 +31,8 @@ pub const GE_HEIGHTS: [f64; 5] = [0.25, 0.35, 0.45, 0.6, 0.75];
 pub const GE_TILTS_DEG: [f64; 4] = [40.0, 50.0, 60.0, 70.0];
 /// Below this tilt (deg) the classical law alone applies; blended up to 40.
 pub const GE_CLASSICAL_BELOW_DEG: f64 = 30.0;
+/// Drag coefficients: rotor drag, axial drag, body Cd A along x, y, z.
+pub const DRAG_WIDTH: usize = 5;
 /// Air density used for body drag (kg/m^3).
 pub const AIR_DENSITY: f64 = 1.225;
 
@@ -83,7 +85,9 @@ impl Effect {
         match self {
             Effect::GroundEffect => "thrust gain T/T_inf - 1 over rotor hub height and tilt",
             Effect::MotorLag => "first-order lag from command to thrust",
-            Effect::Drag => "linear rotor drag in the disc plane, quadratic body drag",
+            Effect::Drag => {
+                "linear rotor drag in the disc plane, thrust lost to axial inflow, quadratic body drag"
+            }
             Effect::Wind => "steady wind: drag acts on the air-relative velocity",
             Effect::ThrustScale => "thrust coefficient kT off by a constant factor",
             Effect::ThrustCurve => {
@@ -116,7 +120,7 @@ impl Effect {
     pub fn width(self) -> usize {
         match self {
             Effect::GroundEffect => 17,
-            Effect::Drag => 4,
+            Effect::Drag => DRAG_WIDTH,
             Effect::Wind | Effect::ComOffset => 2,
             _ => 1,
         }
@@ -138,6 +142,7 @@ impl Effect {
             Effect::MotorLag => vec!["scale of the lag term (1 = lag as fitted)".into()],
             Effect::Drag => vec![
                 "rotor_drag, N/(m/s)".into(),
+                "axial_drag, N/(m/s)".into(),
                 "body_cd_area_x, m^2".into(),
                 "body_cd_area_y, m^2".into(),
                 "body_cd_area_z, m^2".into(),
@@ -402,15 +407,45 @@ fn push_ground_effect(raw: &mut [Vec<f64>], at: &Starts, row: &Row) {
     }
 }
 
-/// Rotor drag in the disc planes and quadratic body drag on the
-/// air-relative velocity (`wind` the current wind knob), and the wind
-/// columns (rotor drag per unit wind along world x and y).
-fn push_drag_and_wind(raw: &mut [Vec<f64>], at: &Starts, row: &Row, wind: &Vector3<f64>) {
-    let (t, r, body, k) = (row.thrust, row.rot, &row.body, row.k);
+/// The drag columns of one row (body-frame generalized accelerations per
+/// unit coefficient, before filtering): rotor drag in the disc planes,
+/// thrust lost to axial inflow, and quadratic body drag along body x, y,
+/// z, on the velocity relative to the air (`wind`, NED).
+fn drag_terms(row: &Row, wind: &Vector3<f64>) -> [Vector6<f64>; DRAG_WIDTH] {
+    let (t, r, body) = (row.thrust, row.rot, &row.body);
     let minv = &body.mass_matrix_inv;
     let w = row.rates();
     let v_air = r.transpose() * (row.velocity() - wind);
     let mut rotor_w = Vector6::zeros();
+    let mut axial_w = Vector6::zeros();
+    for i in 0..4 {
+        let n_i = &body.rotor_axis[i];
+        let r_i = &body.rotor_position[i];
+        let vi = v_air + w.cross(r_i);
+        let axial = n_i * vi.dot(n_i);
+        let f = -(vi - axial) * t[i].max(0.0);
+        rotor_w += wrench(&f, &r_i.cross(&f));
+        let f = -axial * t[i].max(0.0);
+        axial_w += wrench(&f, &r_i.cross(&f));
+    }
+    let mut out = [Vector6::zeros(); DRAG_WIDTH];
+    out[0] = minv * rotor_w;
+    out[1] = minv * axial_w;
+    for axis in 0..3 {
+        let mut f = Vector3::zeros();
+        f[axis] = -0.5 * AIR_DENSITY * v_air[axis].abs() * v_air[axis];
+        out[2 + axis] = minv * wrench(&f, &Vector3::zeros());
+    }
+    out
+}
+
+/// Drag on the air-relative velocity (`wind` the current wind knob), and
+/// the wind columns (rotor drag per unit wind along world x and y).
+fn push_drag_and_wind(raw: &mut [Vec<f64>], at: &Starts, row: &Row, wind: &Vector3<f64>) {
+    let (t, r, body, k) = (row.thrust, row.rot, &row.body, row.k);
+    for (j, term) in drag_terms(row, wind).iter().enumerate() {
+        push6(&mut raw[at.drag + j], k, term);
+    }
     let mut wind_cols = [Vector6::zeros(); 2];
     let wind_dirs = [
         r.transpose().column(0).into_owned(),
@@ -420,27 +455,48 @@ fn push_drag_and_wind(raw: &mut [Vec<f64>], at: &Starts, row: &Row, wind: &Vecto
         let n_i = &body.rotor_axis[i];
         let r_i = &body.rotor_position[i];
         let ti = t[i].max(0.0);
-        let vi = v_air + w.cross(r_i);
-        let f = -(vi - n_i * vi.dot(n_i)) * ti;
-        rotor_w += wrench(&f, &r_i.cross(&f));
         for (jw, dir) in wind_dirs.iter().enumerate() {
             let fw = (dir - n_i * dir.dot(n_i)) * ti;
             wind_cols[jw] += wrench(&fw, &r_i.cross(&fw));
         }
     }
-    push6(&mut raw[at.drag], k, &(minv * rotor_w));
-    for axis in 0..3 {
-        let mut f = Vector3::zeros();
-        f[axis] = -0.5 * AIR_DENSITY * v_air[axis].abs() * v_air[axis];
-        push6(
-            &mut raw[at.drag + 1 + axis],
-            k,
-            &(minv * wrench(&f, &Vector3::zeros())),
-        );
-    }
     for jw in 0..2 {
-        push6(&mut raw[at.wind + jw], k, &(minv * wind_cols[jw]));
+        push6(&mut raw[at.wind + jw], k, &(body.mass_matrix_inv * wind_cols[jw]));
     }
+}
+
+/// The drag columns alone (filtered like the measurement) for the
+/// motor-lag `tau` and a wind: what the wind profile rebuilds per trial
+/// wind instead of every column.
+pub fn drag_columns(
+    prep: &Prepared,
+    rec: &Recording,
+    tau: f64,
+    wind: [f64; 2],
+) -> [Vec<f64>; DRAG_WIDTH] {
+    let n = prep.n;
+    let thrust = crate::data::lagged_commands(&prep.t, &prep.u_eff, tau);
+    let wind = Vector3::new(wind[0], wind[1], 0.0);
+    let mut raw: [Vec<f64>; DRAG_WIDTH] = std::array::from_fn(|_| vec![0.0; 6 * n]);
+    for (k, sample) in rec.samples.iter().enumerate().take(n) {
+        let row = Row {
+            k,
+            sample,
+            thrust: &thrust[k],
+            command: &prep.u_eff[k],
+            body: prep.table.at(sample.varphi),
+            act: &prep.act[k],
+            rot: &prep.rot[k],
+        };
+        for (j, term) in drag_terms(&row, &wind).iter().enumerate() {
+            push6(&mut raw[j], k, term);
+        }
+    }
+    raw.map(|r| {
+        let mut out = vec![0.0; 6 * n];
+        prep.smooth(&r, &mut out);
+        out
+    })
 }
 
 /// Mass properties (mass, inertia, centre-of-mass offset): the change of

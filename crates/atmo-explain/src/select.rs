@@ -38,6 +38,9 @@ pub struct Stats {
     pub entries: Vec<usize>,
     /// Prior (penalty) matrix added to the normal equations of a fit.
     pub prior: DMatrix<f64>,
+    /// Columns whose coefficient is physically non-negative (drag): a fit
+    /// that wants them negative gets them at 0 instead (active set).
+    pub nonneg: Vec<bool>,
 }
 
 /// Segments: contiguous stretches of about `max(2 s, T / 50)`; `seg_of[k]`
@@ -156,6 +159,7 @@ impl Stats {
             yy,
             entries,
             prior: DMatrix::zeros(p, p),
+            nonneg: vec![false; p],
         }
     }
 
@@ -176,8 +180,38 @@ impl Stats {
         self.g.len()
     }
 
-    /// Solves on the segments `use_seg` for the columns `idx` (ridge-stabilized).
+    /// Solves on the segments `use_seg` for the columns `idx`
+    /// (ridge-stabilized), the [`Stats::nonneg`] columns at least 0: while
+    /// one of them comes out negative, the most negative is fixed at 0 and
+    /// the rest solved again (at most one pass per such column).
     pub fn solve(&self, idx: &[usize], use_seg: &dyn Fn(usize) -> bool) -> DVector<f64> {
+        let mut free: Vec<usize> = (0..idx.len()).collect();
+        loop {
+            let sub: Vec<usize> = free.iter().map(|&a| idx[a]).collect();
+            let theta = self.solve_unconstrained(&sub, use_seg);
+            let worst = free
+                .iter()
+                .enumerate()
+                .filter(|(_, a)| self.nonneg[idx[**a]])
+                .map(|(pos, _)| (pos, theta[pos]))
+                .filter(|(_, v)| *v < 0.0)
+                .min_by(|x, y| x.1.total_cmp(&y.1));
+            match worst {
+                Some((pos, _)) => {
+                    free.remove(pos);
+                }
+                None => {
+                    let mut out = DVector::zeros(idx.len());
+                    for (pos, &a) in free.iter().enumerate() {
+                        out[a] = theta[pos];
+                    }
+                    return out;
+                }
+            }
+        }
+    }
+
+    fn solve_unconstrained(&self, idx: &[usize], use_seg: &dyn Fn(usize) -> bool) -> DVector<f64> {
         let q = idx.len();
         if q == 0 {
             return DVector::zeros(0);
@@ -378,7 +412,14 @@ pub fn fit_with_uncertainty(
     layout: &Layout,
     set: &[Effect],
 ) -> (Vec<usize>, DVector<f64>, DVector<f64>) {
-    let idx = columns_of(layout, set);
+    fit_with_uncertainty_of(stats, columns_of(layout, set))
+}
+
+/// [`fit_with_uncertainty`] for the columns `idx`.
+pub fn fit_with_uncertainty_of(
+    stats: &Stats,
+    idx: Vec<usize>,
+) -> (Vec<usize>, DVector<f64>, DVector<f64>) {
     let theta = stats.solve(&idx, &|_| true);
     let mut fold_thetas = Vec::new();
     for f in 0..FOLDS {

@@ -23,7 +23,7 @@ use crate::effects::Effect;
 use crate::physical::Physical;
 use crate::recording::Recording;
 use crate::replay::{self, ReplayError};
-use crate::select::{self, FOLDS, fold_of};
+use crate::select::{FOLDS, fold_of};
 use crate::stages::report::effect_parameters;
 use crate::stages::{Fit, Residuals};
 use crate::{HORIZON, Result};
@@ -33,12 +33,13 @@ pub const PREDICTION_MARGIN: f64 = 0.01;
 
 /// Physical range of a parameter (by effect and parameter name), the
 /// table of docs/explain.md. Ground-effect gains share one range.
-pub const RANGES: [(&str, &str, f64, f64); 15] = [
+pub const RANGES: [(&str, &str, f64, f64); 16] = [
     ("ground_effect", "gain", -0.5, 3.0),
     ("ground_effect", "rotor_radius^2", 0.0, 0.36),
     ("motor_lag", "time_constant", 0.005, 0.2),
     ("motor_lag", "lag_term_scale", 0.5, 1.5),
     ("drag", "rotor_drag", 0.0, 5.0),
+    ("drag", "axial_drag", 0.0, 5.0),
     ("drag", "body_cd_area", 0.0, 1.0),
     ("wind", "steady", -15.0, 15.0),
     ("thrust_scale", "scale_minus_one", -0.5, 0.5),
@@ -126,7 +127,7 @@ impl Decision {
 /// The per-fold plant files of the fit restricted to `set` (refitted on
 /// the same regressors), the wind knob included.
 fn fold_configs(fit: &Fit, set: &[Effect], robot: &RobotConfig) -> Vec<PlantConfig> {
-    let idx = select::columns_for(&fit.layout, set);
+    let idx = fit.columns_of(set);
     (0..FOLDS)
         .map(|f| {
             let theta = fit.stats.solve(&idx, &|s| fold_of(s) != f);
@@ -314,34 +315,28 @@ fn thrust_to_mass(fit: &Fit) -> (f64, f64) {
     (ratio(&fit.theta), sd)
 }
 
-/// Wind without an identified rotor drag: only the product is identified
-/// (no airspeed variation to separate them).
+/// Wind without an identified drag: the wind speed is only known through
+/// a drag coefficient (no airspeed variation to separate them), so what is
+/// identified is the steady force, not the wind behind it.
 fn wind_failure(fit: &Fit, e: Effect) -> Option<String> {
     if e != Effect::Wind {
         return None;
     }
     let drag = effect_parameters(fit, Effect::Drag, true);
-    let kr = drag.iter().find(|p| p.name == "rotor_drag")?;
-    let status = param_status(kr.value, kr.std, range_of("drag", "rotor_drag"));
-    if status == ParamStatus::Identified {
+    let identified = |p: &crate::explanation::Parameter| {
+        param_status(p.value, p.std, range_of("drag", &p.name)) == ParamStatus::Identified
+    };
+    if drag.iter().any(identified) {
         return None;
     }
-    let c = fit.layout.columns(Effect::Wind).start;
-    // The column's coefficient is rotor_drag x (wind - the refined knob).
-    let coef = |j: usize| {
-        fit.idx
-            .iter()
-            .position(|i| *i == c + j)
-            .map_or(0.0, |p| fit.theta[p])
-            + kr.value * fit.knobs.wind[j]
-    };
+    let listed: Vec<String> = drag
+        .iter()
+        .map(|p| format!("{} = {:.4} +- {:.4}", p.name, p.value, p.std.unwrap_or(f64::NAN)))
+        .collect();
     Some(format!(
-        "drag and wind not separable (rotor_drag = {:.4} +- {:.4} not identified): the identified \
-         combination is rotor_drag x wind = ({:.4}, {:.4}) N per unit command",
-        kr.value,
-        kr.std.unwrap_or(f64::NAN),
-        coef(0),
-        coef(1)
+        "drag and wind not separable (no drag coefficient identified: {}): the steady \
+         force is identified, not the wind speed behind it",
+        listed.join(", ")
     ))
 }
 

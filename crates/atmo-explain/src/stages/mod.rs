@@ -18,6 +18,7 @@ mod report;
 mod residuals;
 mod select;
 mod validate;
+pub(crate) mod wind;
 
 #[cfg(test)]
 mod tests;
@@ -29,3 +30,4 @@ pub use report::{Findings, effect_reports, gain_grid, notes, plot_series, report
 pub use residuals::Residuals;
 pub use select::{BaseRegressors, LagProfile, Selection, profile_motor_lag, select_effects};
 pub use validate::{Validation, validate};
+pub use wind::WindProfile;

@@ -150,6 +150,20 @@ pub(crate) fn effect_parameters(fit: &Fit, e: Effect, selected: bool) -> Vec<Par
                 "1 (1 = consistent)",
             ),
         ],
+        Effect::Wind if selected && fit.wind.is_some() => {
+            let sd = fit.wind.as_ref().map_or([f64::NAN; 2], |p| p.sd);
+            ["x", "y"]
+                .iter()
+                .enumerate()
+                .map(|(j, axis)| Parameter {
+                    identified: true,
+                    name: format!("steady_{axis}"),
+                    value: fit.knobs.wind[j],
+                    std: Some(sd[j]),
+                    unit: "m/s (NED)".into(),
+                })
+                .collect()
+        }
         Effect::Wind => {
             let kr = coef(layout.columns(Effect::Drag).start).0;
             ["x", "y"]
@@ -197,11 +211,12 @@ pub(crate) fn effect_parameters(fit: &Fit, e: Effect, selected: bool) -> Vec<Par
                 Effect::Drag => (
                     &[
                         "rotor_drag",
+                        "axial_drag",
                         "body_cd_area_x",
                         "body_cd_area_y",
                         "body_cd_area_z",
                     ],
-                    &["N/(m/s)", "m^2", "m^2", "m^2"],
+                    &["N/(m/s)", "N/(m/s)", "m^2", "m^2", "m^2"],
                 ),
                 Effect::ComOffset => (&["offset_x", "offset_y"], &["m", "m"]),
                 Effect::ThrustScale => (&["scale_minus_one"], &["1"]),

@@ -156,13 +156,23 @@ pub struct Selection {
     pub steps: Vec<Step>,
 }
 
+/// What the wind is profiled with before the selection: the drag and the
+/// calibration every flight needs.
+const WIND_PROFILE_COMPANIONS: [Effect; 5] = [
+    Effect::Drag,
+    Effect::Wind,
+    Effect::ThrustScale,
+    Effect::ThrustCurve,
+    Effect::ComOffset,
+];
+
 /// Selects among all candidates with the lag column at `tau`: pass 1 on
 /// the nominal accelerations and floor weights, and, when it selected
 /// anything, pass 2 on the pass-1 model's accelerations and weights.
 pub fn select_effects(res: &Residuals, rec: &Recording, tau: f64) -> Selection {
     let prep = &res.prep;
     let active = res.all_segments();
-    let knobs = Knobs {
+    let mut knobs = Knobs {
         tau,
         wind: [0.0; 2],
     };
@@ -173,6 +183,26 @@ pub fn select_effects(res: &Residuals, rec: &Recording, tau: f64) -> Selection {
     let mut accel = prep.nominal.clone();
     let mut columns = build_columns(prep, rec, &knobs, &accel);
     let mut stats = stats_of(&columns, &weights, &res.seg_of, res.nseg);
+    // The drag candidate on the air-relative velocity: a steady wind is
+    // only a candidate if the drag at some wind explains its force, which
+    // the linear columns at no wind cannot show (body and axial drag are
+    // not linear in it); otherwise other candidates take the wind's force.
+    let pre = crate::stages::wind::profile_wind(
+        prep,
+        rec,
+        tau,
+        &layout,
+        &columns.data,
+        &stats,
+        &WIND_PROFILE_COMPANIONS,
+        &weights,
+        &res.seg_of,
+    );
+    if pre.wind[0].hypot(pre.wind[1]) < crate::stages::wind::SEARCH_LIMIT - 1.0 {
+        knobs.wind = pre.wind;
+        columns = build_columns(prep, rec, &knobs, &accel);
+        stats = stats_of(&columns, &weights, &res.seg_of, res.nseg);
+    }
     let (mut chosen, mut steps) = select::select(&stats, &layout, &Effect::ALL, &active);
     if !chosen.is_empty() {
         let idx = select::columns_for(&layout, &chosen);
@@ -232,6 +262,9 @@ pub(crate) fn stats_of(
 ) -> Stats {
     let cols: Vec<&[f64]> = columns.data.iter().map(Vec::as_slice).collect();
     let mut stats = Stats::build(&cols, &columns.resid, weights, seg_of, nseg);
+    for j in columns.layout.columns(Effect::Drag) {
+        stats.nonneg[j] = true;
+    }
     let ge = columns.layout.columns(Effect::GroundEffect);
     let mut diag: Vec<f64> = ge
         .clone()

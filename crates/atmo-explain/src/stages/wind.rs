@@ -1,0 +1,327 @@
+//! The steady wind, profiled (part of stage 4, fit).
+//!
+//! Drag acts on the velocity relative to the air, `v - w`. The rotor-drag
+//! part is linear in it, so `k_r w` is a linear coefficient (the wind
+//! columns the selection uses); but the wind speed behind it is only
+//! `k_r w / k_r`, and where the rotor drag is small (a real airframe in a
+//! fan's flow pushed mostly by body drag, `rho/2 C_d A |v - w| (v - w)`)
+//! that quotient is noise: 776 m/s was printed on a real flight. So the
+//! wind is a nonlinear parameter like the motor-lag time constant and is
+//! profiled: for a trial wind only the drag columns are rebuilt, the
+//! other selected effects' columns are not touched, and
+//!
+//! ```text
+//! RSS(w) = min_theta |W (r - X_fixed theta_f - X_drag(w) theta_d)|^2
+//! ```
+//!
+//! is minimized over `w` on a polar grid (speeds to [`SEARCH_LIMIT`], past
+//! the physical range, so that a fit at or beyond the bound is seen as
+//! such) refined by a pattern search. The delete-a-fold jackknife of the
+//! wind comes from the same profile restricted to the other folds, each
+//! minimized on a local quadratic fit around the optimum (a fold whose
+//! profile is not convex there gives an infinite deviation: not
+//! identified).
+
+use nalgebra::{DMatrix, DVector, SMatrix, SVector};
+
+use crate::data::Prepared;
+use crate::effects::{DRAG_WIDTH, Effect, Layout, drag_columns};
+use crate::recording::Recording;
+use crate::select::{self, FOLDS, Stats, fold_of};
+
+/// Largest trial wind speed (m/s): past the 15 m/s physical bound.
+pub const SEARCH_LIMIT: f64 = 24.0;
+/// Speeds of the coarse polar grid (m/s).
+const COARSE_SPEED_STEP: f64 = 3.0;
+/// Directions of the coarse polar grid.
+const COARSE_DIRECTIONS: usize = 16;
+/// First and last step of the pattern search (m/s).
+const PATTERN_STEPS: (f64, f64) = (1.5, 0.05);
+/// Spacing of the local grid the jackknife's quadratics are fitted on (m/s).
+const LOCAL_SPACING: f64 = 0.5;
+
+/// The profiled wind.
+#[derive(Debug, Clone)]
+pub struct WindProfile {
+    /// The wind of the least residual (NED x, y), m/s.
+    pub wind: [f64; 2],
+    /// Delete-a-fold jackknife deviation (infinite where a fold's profile
+    /// has no minimum near the optimum).
+    pub sd: [f64; 2],
+    /// Residual sum of squares at the optimum and without wind (weighted).
+    pub rss: f64,
+    pub rss_no_wind: f64,
+    /// Trial winds evaluated.
+    pub evaluations: usize,
+}
+
+/// The selected effects' statistics with the drag columns rebuilt per
+/// trial wind.
+struct Profiler<'a> {
+    prep: &'a Prepared,
+    rec: &'a Recording,
+    tau: f64,
+    fixed: Vec<&'a [f64]>,
+    /// The fixed columns' statistics (sub-blocks of the selection's).
+    fixed_stats: Stats,
+    resid: &'a [f64],
+    weights: &'a [f64],
+    seg_of: &'a [Option<usize>],
+    evaluations: usize,
+}
+
+impl Profiler<'_> {
+    /// Statistics of `[fixed, drag(wind)]`.
+    fn stats_at(&mut self, wind: [f64; 2]) -> Stats {
+        self.evaluations += 1;
+        let drag = drag_columns(self.prep, self.rec, self.tau, wind);
+        let pf = self.fixed.len();
+        let p = pf + DRAG_WIDTH;
+        let nseg = self.fixed_stats.nseg();
+        let mut out = Stats {
+            p,
+            g: vec![DMatrix::zeros(p, p); nseg],
+            b: vec![DVector::zeros(p); nseg],
+            yy: self.fixed_stats.yy.clone(),
+            entries: self.fixed_stats.entries.clone(),
+            prior: DMatrix::zeros(p, p),
+            nonneg: self
+                .fixed_stats
+                .nonneg
+                .iter()
+                .copied()
+                .chain([true; DRAG_WIDTH])
+                .collect(),
+        };
+        out.prior
+            .view_mut((0, 0), (pf, pf))
+            .copy_from(&self.fixed_stats.prior);
+        for s in 0..nseg {
+            out.g[s]
+                .view_mut((0, 0), (pf, pf))
+                .copy_from(&self.fixed_stats.g[s]);
+            out.b[s].rows_mut(0, pf).copy_from(&self.fixed_stats.b[s]);
+        }
+        let mut xf = vec![0.0; pf];
+        for (k, seg) in self.seg_of.iter().enumerate() {
+            let Some(s) = *seg else { continue };
+            let mut gdd = SMatrix::<f64, DRAG_WIDTH, DRAG_WIDTH>::zeros();
+            let mut bd = SVector::<f64, DRAG_WIDTH>::zeros();
+            let (g, b) = (&mut out.g[s], &mut out.b[s]);
+            for c in 0..6 {
+                let i = 6 * k + c;
+                let w = self.weights[i];
+                let xd: [f64; DRAG_WIDTH] = std::array::from_fn(|m| drag[m][i] * w);
+                if xd.iter().all(|v| *v == 0.0) {
+                    continue;
+                }
+                for (j, col) in self.fixed.iter().enumerate() {
+                    xf[j] = col[i] * w;
+                }
+                let y = self.resid[i] * w;
+                for m in 0..DRAG_WIDTH {
+                    bd[m] += xd[m] * y;
+                    for l in m..DRAG_WIDTH {
+                        gdd[(m, l)] += xd[m] * xd[l];
+                    }
+                    for (j, x) in xf.iter().enumerate() {
+                        g[(j, pf + m)] += x * xd[m];
+                    }
+                }
+            }
+            for m in 0..DRAG_WIDTH {
+                b[pf + m] += bd[m];
+                for l in m..DRAG_WIDTH {
+                    g[(pf + m, pf + l)] += gdd[(m, l)];
+                    g[(pf + l, pf + m)] = g[(pf + m, pf + l)];
+                }
+                for j in 0..pf {
+                    g[(pf + m, j)] = g[(j, pf + m)];
+                }
+            }
+        }
+        out
+    }
+
+    /// Residual sums of squares at `wind`: on all segments, and per fold
+    /// on the other folds (fitted and scored there).
+    fn rss(&mut self, wind: [f64; 2]) -> (f64, [f64; FOLDS]) {
+        let stats = self.stats_at(wind);
+        let all: Vec<usize> = (0..stats.p).collect();
+        let score = |use_seg: &dyn Fn(usize) -> bool| {
+            let theta = stats.solve(&all, use_seg);
+            (0..stats.nseg())
+                .filter(|&s| use_seg(s))
+                .map(|s| stats.sse(&all, &theta, s))
+                .sum::<f64>()
+        };
+        let total = score(&|_| true);
+        let folds = std::array::from_fn(|f| score(&|s| fold_of(s) != f));
+        (total, folds)
+    }
+}
+
+/// Profiles the wind for the selected effects `chosen` (drag included),
+/// given the selection's columns and statistics (built without wind).
+#[allow(clippy::too_many_arguments)]
+pub fn profile_wind(
+    prep: &Prepared,
+    rec: &Recording,
+    tau: f64,
+    layout: &Layout,
+    columns: &[Vec<f64>],
+    stats: &Stats,
+    chosen: &[Effect],
+    weights: &[f64],
+    seg_of: &[Option<usize>],
+) -> WindProfile {
+    let rest: Vec<Effect> = chosen
+        .iter()
+        .copied()
+        .filter(|e| !matches!(e, Effect::Drag | Effect::Wind))
+        .collect();
+    let fixed_idx = select::columns_for(layout, &rest);
+    let sub = |m: &DMatrix<f64>| m.select_rows(&fixed_idx).select_columns(&fixed_idx);
+    let fixed_stats = Stats {
+        p: fixed_idx.len(),
+        g: stats.g.iter().map(sub).collect(),
+        b: stats.b.iter().map(|b| b.select_rows(&fixed_idx)).collect(),
+        yy: stats.yy.clone(),
+        entries: stats.entries.clone(),
+        prior: sub(&stats.prior),
+        nonneg: fixed_idx.iter().map(|&j| stats.nonneg[j]).collect(),
+    };
+    let mut prof = Profiler {
+        prep,
+        rec,
+        tau,
+        fixed: fixed_idx.iter().map(|&j| columns[j].as_slice()).collect(),
+        fixed_stats,
+        resid: &prep.resid,
+        weights,
+        seg_of,
+        evaluations: 0,
+    };
+    // Coarse polar grid.
+    let rss_no_wind = prof.rss([0.0; 2]).0;
+    let mut best = ([0.0; 2], rss_no_wind);
+    let mut speed = COARSE_SPEED_STEP;
+    while speed <= SEARCH_LIMIT + 1e-9 {
+        for d in 0..COARSE_DIRECTIONS {
+            let a = std::f64::consts::TAU * d as f64 / COARSE_DIRECTIONS as f64;
+            let w = [speed * a.cos(), speed * a.sin()];
+            let r = prof.rss(w).0;
+            if r < best.1 {
+                best = (w, r);
+            }
+        }
+        speed += COARSE_SPEED_STEP;
+    }
+    // Pattern search.
+    let mut step = PATTERN_STEPS.0;
+    while step >= PATTERN_STEPS.1 {
+        let mut moved = false;
+        for (dx, dy) in [(1, 0), (-1, 0), (0, 1), (0, -1), (1, 1), (1, -1), (-1, 1), (-1, -1)] {
+            let w = [
+                best.0[0] + step * f64::from(dx),
+                best.0[1] + step * f64::from(dy),
+            ];
+            if w[0].hypot(w[1]) > SEARCH_LIMIT {
+                continue;
+            }
+            let r = prof.rss(w).0;
+            if r < best.1 {
+                best = (w, r);
+                moved = true;
+            }
+        }
+        if !moved {
+            step *= 0.5;
+        }
+    }
+    // Jackknife: each fold's profile on a local 5 x 5 grid, its quadratic's
+    // minimum.
+    let mut points = Vec::with_capacity(25);
+    for i in -2..=2 {
+        for j in -2..=2 {
+            let d = [LOCAL_SPACING * f64::from(i), LOCAL_SPACING * f64::from(j)];
+            let (_, folds) = prof.rss([best.0[0] + d[0], best.0[1] + d[1]]);
+            points.push((d, folds));
+        }
+    }
+    let fold_winds: Vec<Option<[f64; 2]>> = (0..FOLDS)
+        .map(|f| {
+            let pts: Vec<([f64; 2], f64)> = points.iter().map(|(d, r)| (*d, r[f])).collect();
+            quadratic_minimum(&pts).map(|d| [best.0[0] + d[0], best.0[1] + d[1]])
+        })
+        .collect();
+    let sd = jackknife_sd(&fold_winds);
+    WindProfile {
+        wind: best.0,
+        sd,
+        rss: best.1,
+        rss_no_wind,
+        evaluations: prof.evaluations,
+    }
+}
+
+/// The minimum of the least-squares quadratic through `(d, r)` points, if
+/// the quadratic is convex.
+fn quadratic_minimum(points: &[([f64; 2], f64)]) -> Option<[f64; 2]> {
+    let n = points.len();
+    let x = DMatrix::from_fn(n, 6, |i, j| {
+        let [a, b] = points[i].0;
+        [1.0, a, b, a * a, a * b, b * b][j]
+    });
+    let y = DVector::from_iterator(n, points.iter().map(|p| p.1));
+    let c = (x.transpose() * &x).cholesky()?.solve(&(x.transpose() * y));
+    // r = c0 + c1 a + c2 b + c3 a^2 + c4 ab + c5 b^2: gradient 0 at H d = -g.
+    let h = nalgebra::Matrix2::new(2.0 * c[3], c[4], c[4], 2.0 * c[5]);
+    if h[(0, 0)] <= 0.0 || h.determinant() <= 0.0 {
+        return None;
+    }
+    let d = h.try_inverse()? * nalgebra::Vector2::new(-c[1], -c[2]);
+    d.iter().all(|v| v.is_finite()).then(|| [d[0], d[1]])
+}
+
+/// Delete-a-fold jackknife deviation of the fold estimates (infinite if any
+/// fold has none).
+fn jackknife_sd(folds: &[Option<[f64; 2]>]) -> [f64; 2] {
+    let Some(w): Option<Vec<[f64; 2]>> = folds.iter().copied().collect() else {
+        return [f64::INFINITY; 2];
+    };
+    let k = w.len() as f64;
+    if k < 2.0 {
+        return [f64::INFINITY; 2];
+    }
+    std::array::from_fn(|j| {
+        let mean = w.iter().map(|x| x[j]).sum::<f64>() / k;
+        ((k - 1.0) / k * w.iter().map(|x| (x[j] - mean).powi(2)).sum::<f64>()).sqrt()
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_quadratic_minimum_of_a_bowl_is_its_centre_and_a_saddle_has_none() {
+        let bowl: Vec<([f64; 2], f64)> = (-2..=2)
+            .flat_map(|i| (-2..=2).map(move |j| [0.5 * f64::from(i), 0.5 * f64::from(j)]))
+            .map(|d| (d, 3.0 + 2.0 * (d[0] - 0.3).powi(2) + (d[1] + 0.7).powi(2)))
+            .collect();
+        let m = quadratic_minimum(&bowl).expect("a bowl has a minimum");
+        assert!((m[0] - 0.3).abs() < 1e-9 && (m[1] + 0.7).abs() < 1e-9, "{m:?}");
+        let saddle: Vec<([f64; 2], f64)> =
+            bowl.iter().map(|(d, _)| (*d, d[0] * d[0] - d[1] * d[1])).collect();
+        assert!(quadratic_minimum(&saddle).is_none());
+    }
+
+    #[test]
+    fn a_fold_without_a_minimum_makes_the_deviation_infinite() {
+        let sd = jackknife_sd(&[Some([1.0, 2.0]), None, Some([1.0, 2.0])]);
+        assert!(sd.iter().all(|s| s.is_infinite()));
+        let sd = jackknife_sd(&[Some([1.0, 0.0]), Some([3.0, 0.0])]);
+        assert!((sd[0] - 1.0).abs() < 1e-12 && sd[1] == 0.0, "{sd:?}");
+    }
+}
