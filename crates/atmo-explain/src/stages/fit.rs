@@ -1,6 +1,6 @@
 //! Stage 4, fit: the selected effects' coefficients on all data, their
 //! delete-a-fold jackknife deviations and the per-fold fits (for held-out
-//! predictions), with the wind profiled in the drag regressors
+//! predictions), at the wind profiled before the selection
 //! ([`super::wind`]).
 
 use nalgebra::DVector;
@@ -10,14 +10,12 @@ use crate::physical::Physical;
 use crate::recording::Recording;
 use crate::select::{self, Stats, fold_of};
 use crate::stages::select::stats_of;
-use crate::stages::wind::{WindProfile, profile_wind};
+use crate::stages::wind::WindProfile;
 use crate::stages::{Residuals, Selection};
 
-/// Gauss-Newton steps of the wind on the rotor-drag columns after the
-/// profile.
+/// Gauss-Newton steps of the wind on the rotor-drag columns when no wind
+/// was profiled.
 const WIND_REFINEMENTS: usize = 3;
-/// Least rotor drag (N/(m/s) per unit command) for that polish.
-const MIN_POLISH_ROTOR_DRAG: f64 = 0.05;
 
 /// The fitted model.
 #[derive(Debug, Clone)]
@@ -27,8 +25,9 @@ pub struct Fit {
     pub chosen: Vec<Effect>,
     /// Regressor settings: motor-lag tau and the profiled wind.
     pub knobs: Knobs,
-    /// The wind's profile, when wind was selected: the wind is the knob,
-    /// not a linear coefficient (its columns stay out of the fit).
+    /// The wind's profile (before the selection), when wind was selected
+    /// at it: the wind is the knob, not a linear coefficient (its columns
+    /// stay out of the fit).
     pub wind: Option<WindProfile>,
     pub columns: Columns,
     pub stats: Stats,
@@ -122,6 +121,7 @@ pub fn fit_effects(res: &Residuals, rec: &Recording, sel: Selection) -> Fit {
         mut columns,
         mut stats,
         mut chosen,
+        wind: wind_profile,
         ..
     } = sel;
     let prep = &res.prep;
@@ -134,41 +134,26 @@ pub fn fit_effects(res: &Residuals, rec: &Recording, sel: Selection) -> Fit {
         chosen.push(Effect::Wind);
     }
     chosen.sort();
-    // The wind is profiled in the drag regressors (body drag is quadratic
-    // in it); the other columns do not depend on it.
+    // The wind profiled before the selection is the wind of the fit (its
+    // drag columns were built at it). Without one, the rotor drag's linear
+    // wind columns are fed back (Gauss-Newton on `k_r w`).
     let wind = if chosen.contains(&Effect::Wind) {
-        let p = profile_wind(
-            prep,
-            rec,
-            knobs.tau,
-            &layout,
-            &columns.data,
-            &stats,
-            &chosen,
-            &weights,
-            &res.seg_of,
-        );
-        knobs.wind = p.wind;
-        drop(columns);
-        columns = build_columns(prep, rec, &knobs, &accel);
-        stats = stats_of(&columns, &weights, &res.seg_of, res.nseg);
-        // Polish on the rotor drag's part of the wind (Gauss-Newton on
-        // its linear columns) where the rotor drag carries it: the body
-        // drag's part is biased by the velocity noise (errors in variables:
-        // E[|v + n| (v + n)] is not |v| v), the rotor drag's is not.
-        for _ in 0..WIND_REFINEMENTS {
-            let (idx, theta, _) = select::fit_with_uncertainty(&stats, &layout, &chosen);
-            let phys = Physical::from_theta(&layout, &chosen, &idx, &theta, knobs.tau);
-            let w = phys.wind.unwrap_or([0.0; 2]);
-            let kr = phys.drag.map_or(0.0, |d| d[0]);
-            if kr <= MIN_POLISH_ROTOR_DRAG {
-                break;
+        if wind_profile.is_none() {
+            for _ in 0..WIND_REFINEMENTS {
+                let (idx, theta, _) = select::fit_with_uncertainty(&stats, &layout, &chosen);
+                let phys = Physical::from_theta(&layout, &chosen, &idx, &theta, knobs.tau);
+                let w = phys.wind.unwrap_or([0.0; 2]);
+                let kr = phys.drag.map_or(0.0, |d| d[0]);
+                if kr <= 1e-3 {
+                    break;
+                }
+                knobs.wind = [knobs.wind[0] + w[0], knobs.wind[1] + w[1]];
+                drop(columns);
+                columns = build_columns(prep, rec, &knobs, &accel);
+                stats = stats_of(&columns, &weights, &res.seg_of, res.nseg);
             }
-            knobs.wind = [knobs.wind[0] + w[0], knobs.wind[1] + w[1]];
-            columns = build_columns(prep, rec, &knobs, &accel);
-            stats = stats_of(&columns, &weights, &res.seg_of, res.nseg);
         }
-        Some(p)
+        wind_profile
     } else {
         None
     };

@@ -12,6 +12,7 @@ use crate::locate;
 use crate::recording::Recording;
 use crate::select::{self, Stats, Step};
 use crate::stages::Residuals;
+use crate::stages::wind::WindProfile;
 
 /// Motor-lag time constants of the profile (s): 4 ms x 1.4^i.
 fn profile_taus() -> Vec<f64> {
@@ -142,8 +143,11 @@ pub(crate) fn best_tau_for_test(profile: &[(f64, f64)]) -> f64 {
 #[derive(Debug, Clone)]
 pub struct Selection {
     pub layout: Layout,
-    /// The regressors' nonlinear settings (tau from the profile, no wind).
+    /// The regressors' nonlinear settings (tau and the wind from their
+    /// profiles).
     pub knobs: Knobs,
+    /// The wind's profile, when its optimum lies inside the search.
+    pub wind: Option<WindProfile>,
     /// Filtered accelerations the mass-property columns use: the nominal
     /// model's, plus the pass-1 fit when anything was selected.
     pub accel: Vec<f64>,
@@ -155,16 +159,6 @@ pub struct Selection {
     pub chosen: Vec<Effect>,
     pub steps: Vec<Step>,
 }
-
-/// What the wind is profiled with before the selection: the drag and the
-/// calibration every flight needs.
-const WIND_PROFILE_COMPANIONS: [Effect; 5] = [
-    Effect::Drag,
-    Effect::Wind,
-    Effect::ThrustScale,
-    Effect::ThrustCurve,
-    Effect::ComOffset,
-];
 
 /// Selects among all candidates with the lag column at `tau`: pass 1 on
 /// the nominal accelerations and floor weights, and, when it selected
@@ -194,15 +188,15 @@ pub fn select_effects(res: &Residuals, rec: &Recording, tau: f64) -> Selection {
         &layout,
         &columns.data,
         &stats,
-        &WIND_PROFILE_COMPANIONS,
         &weights,
         &res.seg_of,
     );
-    if pre.wind[0].hypot(pre.wind[1]) < crate::stages::wind::SEARCH_LIMIT - 1.0 {
+    let wind = pre.is_interior().then(|| {
         knobs.wind = pre.wind;
         columns = build_columns(prep, rec, &knobs, &accel);
         stats = stats_of(&columns, &weights, &res.seg_of, res.nseg);
-    }
+        pre
+    });
     let (mut chosen, mut steps) = select::select(&stats, &layout, &Effect::ALL, &active);
     if !chosen.is_empty() {
         let idx = select::columns_for(&layout, &chosen);
@@ -236,6 +230,7 @@ pub fn select_effects(res: &Residuals, rec: &Recording, tau: f64) -> Selection {
     Selection {
         layout,
         knobs,
+        wind,
         accel,
         weights,
         columns,

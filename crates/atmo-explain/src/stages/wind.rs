@@ -1,36 +1,55 @@
-//! The steady wind, profiled (part of stage 4, fit).
+//! The steady wind, profiled before the selection (part of stage 3).
 //!
-//! Drag acts on the velocity relative to the air, `v - w`. The rotor-drag
-//! part is linear in it, so `k_r w` is a linear coefficient (the wind
-//! columns the selection uses); but the wind speed behind it is only
-//! `k_r w / k_r`, and where the rotor drag is small (a real airframe in a
-//! fan's flow pushed mostly by body drag, `rho/2 C_d A |v - w| (v - w)`)
-//! that quotient is noise: 776 m/s was printed on a real flight. So the
-//! wind is a nonlinear parameter like the motor-lag time constant and is
-//! profiled: for a trial wind only the drag columns are rebuilt, the
-//! other selected effects' columns are not touched, and
+//! Drag acts on the velocity relative to the air, `v - w`. The rotor drag
+//! is linear in it, so `k_r w` has linear columns; but the wind behind them
+//! is `k_r w / k_r`, noise where the rotor drag is small (776 m/s was
+//! printed on a real flight), and a wind that acts through the thrust lost
+//! to axial inflow has no linear column at no wind at all. Selected at no
+//! wind, a real wind's force was taken by the ground effect, the motor
+//! lag, the inertia and the thrust scale (docs/explain.md). So the wind is
+//! a nonlinear parameter, like the motor-lag time constant, profiled
+//! before the selection:
 //!
 //! ```text
-//! RSS(w) = min_theta |W (r - X_fixed theta_f - X_drag(w) theta_d)|^2
+//! RSS(w) = min_theta |W_F (r - X_cal theta_c - X_lin(w) theta_d)|^2
 //! ```
 //!
-//! is minimized over `w` on a polar grid (speeds to [`SEARCH_LIMIT`], past
-//! the physical range, so that a fit at or beyond the bound is seen as
-//! such) refined by a pattern search. The delete-a-fold jackknife of the
-//! wind comes from the same profile restricted to the other folds, each
+//! - `X_lin(w)`: the linear drag columns at the trial wind, rotor drag in
+//!   the disc plane and thrust lost to axial inflow, both proportional to
+//!   the rotor's thrust (coefficients held non-negative). The quadratic
+//!   body drag is left out of the profile: its wind dependence is biased by
+//!   the velocity noise (`E[|v + n| (v + n)]` is not `|v| v`) and, quadratic
+//!   in a trial wind, it fits almost anything at a large one.
+//! - `X_cal`: the calibration a flight always needs beside it (thrust scale
+//!   and curve, [`PROFILE_COMPANIONS`]).
+//! - `W_F`: the force channels only. A steady wind acts through forces; the
+//!   drag's torques hang on arm lengths and inertias that approximate robot
+//!   files guess, and the differential rotor terms of a large trial wind
+//!   then fit the torque model's errors.
+//!
+//! `RSS` is minimized on a polar grid (speeds to [`SEARCH_LIMIT`], past the
+//! physical range, so that a fit at or beyond the bound is seen as such)
+//! refined by a pattern search. The delete-a-fold jackknife of the wind
+//! comes from the same profile restricted to the other folds, each
 //! minimized on a local quadratic fit around the optimum (a fold whose
 //! profile is not convex there gives an infinite deviation: not
-//! identified).
+//! identified). The selection and the fit then build every drag column at
+//! the profiled wind.
 
 use nalgebra::{DMatrix, DVector, SMatrix, SVector};
 
 use crate::data::Prepared;
-use crate::effects::{DRAG_WIDTH, Effect, Layout, drag_columns};
+use crate::effects::{Effect, Layout, drag_columns};
 use crate::recording::Recording;
 use crate::select::{self, FOLDS, Stats, fold_of};
 
 /// Largest trial wind speed (m/s): past the 15 m/s physical bound.
 pub const SEARCH_LIMIT: f64 = 24.0;
+/// The linear drag columns (rotor drag in the disc plane, axial inflow):
+/// the first two of the drag effect's.
+const LINEAR_DRAG: usize = 2;
+/// The calibration profiled with the drag.
+pub const PROFILE_COMPANIONS: [Effect; 2] = [Effect::ThrustScale, Effect::ThrustCurve];
 /// Speeds of the coarse polar grid (m/s).
 const COARSE_SPEED_STEP: f64 = 3.0;
 /// Directions of the coarse polar grid.
@@ -55,6 +74,13 @@ pub struct WindProfile {
     pub evaluations: usize,
 }
 
+impl WindProfile {
+    /// The optimum lies inside the search (not at its edge).
+    pub fn is_interior(&self) -> bool {
+        self.wind[0].hypot(self.wind[1]) < SEARCH_LIMIT - COARSE_SPEED_STEP / 2.0
+    }
+}
+
 /// The selected effects' statistics with the drag columns rebuilt per
 /// trial wind.
 struct Profiler<'a> {
@@ -76,7 +102,7 @@ impl Profiler<'_> {
         self.evaluations += 1;
         let drag = drag_columns(self.prep, self.rec, self.tau, wind);
         let pf = self.fixed.len();
-        let p = pf + DRAG_WIDTH;
+        let p = pf + LINEAR_DRAG;
         let nseg = self.fixed_stats.nseg();
         let mut out = Stats {
             p,
@@ -90,7 +116,7 @@ impl Profiler<'_> {
                 .nonneg
                 .iter()
                 .copied()
-                .chain([true; DRAG_WIDTH])
+                .chain([true; LINEAR_DRAG])
                 .collect(),
         };
         out.prior
@@ -105,13 +131,13 @@ impl Profiler<'_> {
         let mut xf = vec![0.0; pf];
         for (k, seg) in self.seg_of.iter().enumerate() {
             let Some(s) = *seg else { continue };
-            let mut gdd = SMatrix::<f64, DRAG_WIDTH, DRAG_WIDTH>::zeros();
-            let mut bd = SVector::<f64, DRAG_WIDTH>::zeros();
+            let mut gdd = SMatrix::<f64, LINEAR_DRAG, LINEAR_DRAG>::zeros();
+            let mut bd = SVector::<f64, LINEAR_DRAG>::zeros();
             let (g, b) = (&mut out.g[s], &mut out.b[s]);
             for c in 0..6 {
                 let i = 6 * k + c;
                 let w = self.weights[i];
-                let xd: [f64; DRAG_WIDTH] = std::array::from_fn(|m| drag[m][i] * w);
+                let xd: [f64; LINEAR_DRAG] = std::array::from_fn(|m| drag[m][i] * w);
                 if xd.iter().all(|v| *v == 0.0) {
                     continue;
                 }
@@ -119,9 +145,9 @@ impl Profiler<'_> {
                     xf[j] = col[i] * w;
                 }
                 let y = self.resid[i] * w;
-                for m in 0..DRAG_WIDTH {
+                for m in 0..LINEAR_DRAG {
                     bd[m] += xd[m] * y;
-                    for l in m..DRAG_WIDTH {
+                    for l in m..LINEAR_DRAG {
                         gdd[(m, l)] += xd[m] * xd[l];
                     }
                     for (j, x) in xf.iter().enumerate() {
@@ -129,9 +155,9 @@ impl Profiler<'_> {
                     }
                 }
             }
-            for m in 0..DRAG_WIDTH {
+            for m in 0..LINEAR_DRAG {
                 b[pf + m] += bd[m];
-                for l in m..DRAG_WIDTH {
+                for l in m..LINEAR_DRAG {
                     g[(pf + m, pf + l)] += gdd[(m, l)];
                     g[(pf + l, pf + m)] = g[(pf + m, pf + l)];
                 }
@@ -161,9 +187,8 @@ impl Profiler<'_> {
     }
 }
 
-/// Profiles the wind for the selected effects `chosen` (drag included),
-/// given the selection's columns and statistics (built without wind).
-#[allow(clippy::too_many_arguments)]
+/// Profiles the wind with the linear drag and [`PROFILE_COMPANIONS`],
+/// given the columns and statistics built at no wind.
 pub fn profile_wind(
     prep: &Prepared,
     rec: &Recording,
@@ -171,34 +196,28 @@ pub fn profile_wind(
     layout: &Layout,
     columns: &[Vec<f64>],
     stats: &Stats,
-    chosen: &[Effect],
     weights: &[f64],
     seg_of: &[Option<usize>],
 ) -> WindProfile {
-    let rest: Vec<Effect> = chosen
-        .iter()
-        .copied()
-        .filter(|e| !matches!(e, Effect::Drag | Effect::Wind))
-        .collect();
+    let rest = PROFILE_COMPANIONS;
     let fixed_idx = select::columns_for(layout, &rest);
-    let sub = |m: &DMatrix<f64>| m.select_rows(&fixed_idx).select_columns(&fixed_idx);
-    let fixed_stats = Stats {
-        p: fixed_idx.len(),
-        g: stats.g.iter().map(sub).collect(),
-        b: stats.b.iter().map(|b| b.select_rows(&fixed_idx)).collect(),
-        yy: stats.yy.clone(),
-        entries: stats.entries.clone(),
-        prior: sub(&stats.prior),
-        nonneg: fixed_idx.iter().map(|&j| stats.nonneg[j]).collect(),
-    };
+    let force_weights: Vec<f64> = weights
+        .iter()
+        .enumerate()
+        .map(|(i, w)| if i % 6 < 3 { *w } else { 0.0 })
+        .collect();
+    let fixed: Vec<&[f64]> = fixed_idx.iter().map(|&j| columns[j].as_slice()).collect();
+    let mut fixed_stats = Stats::build(&fixed, &prep.resid, &force_weights, seg_of, stats.nseg());
+    fixed_stats.prior = stats.prior.select_rows(&fixed_idx).select_columns(&fixed_idx);
+    fixed_stats.nonneg = fixed_idx.iter().map(|&j| stats.nonneg[j]).collect();
     let mut prof = Profiler {
         prep,
         rec,
         tau,
-        fixed: fixed_idx.iter().map(|&j| columns[j].as_slice()).collect(),
+        fixed,
         fixed_stats,
         resid: &prep.resid,
-        weights,
+        weights: &force_weights,
         seg_of,
         evaluations: 0,
     };
