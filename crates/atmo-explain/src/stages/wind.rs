@@ -47,7 +47,7 @@ use crate::select::{self, FOLDS, Stats, fold_of};
 pub const SEARCH_LIMIT: f64 = 24.0;
 /// The linear drag columns (rotor drag in the disc plane, axial inflow):
 /// the first two of the drag effect's.
-const LINEAR_DRAG: usize = 2;
+const LINEAR_DRAG: usize = 5;
 /// The calibration profiled with the drag.
 pub const PROFILE_COMPANIONS: [Effect; 2] = [Effect::ThrustScale, Effect::ThrustCurve];
 /// Speeds of the coarse polar grid (m/s).
@@ -55,9 +55,9 @@ const COARSE_SPEED_STEP: f64 = 3.0;
 /// Directions of the coarse polar grid.
 const COARSE_DIRECTIONS: usize = 16;
 /// First and last step of the pattern search (m/s).
-const PATTERN_STEPS: (f64, f64) = (1.5, 0.05);
+const PATTERN_STEPS: (f64, f64) = (1.5, 0.005);
 /// Spacing of the local grid the jackknife's quadratics are fitted on (m/s).
-const LOCAL_SPACING: f64 = 0.5;
+const LOCAL_SPACING: f64 = 0.1;
 
 /// The profiled wind.
 #[derive(Debug, Clone)]
