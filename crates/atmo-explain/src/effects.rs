@@ -465,36 +465,39 @@ fn push_drag_and_wind(raw: &mut [Vec<f64>], at: &Starts, row: &Row, wind: &Vecto
     }
 }
 
-/// The drag columns alone (filtered like the measurement) for the
-/// motor-lag `tau` and a wind: what the wind profile rebuilds per trial
-/// wind instead of every column.
+/// The drag columns alone (filtered like the measurement) for the rotor
+/// thrusts `thrust` and a wind, on the stretches `runs` (0 elsewhere):
+/// what the wind profile rebuilds per trial wind instead of every column.
 pub fn drag_columns(
     prep: &Prepared,
     rec: &Recording,
-    tau: f64,
+    thrust: &[Input],
     wind: [f64; 2],
+    runs: &[(usize, usize)],
 ) -> [Vec<f64>; DRAG_WIDTH] {
     let n = prep.n;
-    let thrust = crate::data::lagged_commands(&prep.t, &prep.u_eff, tau);
     let wind = Vector3::new(wind[0], wind[1], 0.0);
     let mut raw: [Vec<f64>; DRAG_WIDTH] = std::array::from_fn(|_| vec![0.0; 6 * n]);
-    for (k, sample) in rec.samples.iter().enumerate().take(n) {
-        let row = Row {
-            k,
-            sample,
-            thrust: &thrust[k],
-            command: &prep.u_eff[k],
-            body: prep.table.at(sample.varphi),
-            act: &prep.act[k],
-            rot: &prep.rot[k],
-        };
-        for (j, term) in drag_terms(&row, &wind).iter().enumerate() {
-            push6(&mut raw[j], k, term);
+    for &(s, e) in runs {
+        for k in s..e {
+            let sample = &rec.samples[k];
+            let row = Row {
+                k,
+                sample,
+                thrust: &thrust[k],
+                command: &prep.u_eff[k],
+                body: prep.table.at(sample.varphi),
+                act: &prep.act[k],
+                rot: &prep.rot[k],
+            };
+            for (j, term) in drag_terms(&row, &wind).iter().enumerate() {
+                push6(&mut raw[j], k, term);
+            }
         }
     }
     raw.map(|r| {
         let mut out = vec![0.0; 6 * n];
-        prep.smooth(&r, &mut out);
+        prep.smooth_runs(&r, &mut out, runs);
         out
     })
 }

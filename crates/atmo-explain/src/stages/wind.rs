@@ -38,11 +38,18 @@
 
 use nalgebra::{DMatrix, DVector, SMatrix, SVector};
 
+use atmo_core::model::Input;
+
 use crate::data::Prepared;
 use crate::effects::{Effect, Layout, drag_columns};
 use crate::recording::Recording;
 use crate::select::{self, FOLDS, Stats, fold_of};
 
+/// Most rows the profile uses (a long recording is profiled on evenly
+/// spaced stretches of it: the wind is one steady vector).
+const PROFILE_MAX_ROWS: usize = 15_000;
+/// Rows of one such stretch.
+const PROFILE_STRETCH_ROWS: usize = 1_500;
 /// Largest trial wind speed (m/s): past the 15 m/s physical bound.
 pub const SEARCH_LIMIT: f64 = 24.0;
 /// The linear drag columns (rotor drag in the disc plane, axial inflow):
@@ -86,13 +93,16 @@ impl WindProfile {
 struct Profiler<'a> {
     prep: &'a Prepared,
     rec: &'a Recording,
-    tau: f64,
+    /// Rotor thrusts (commands lagged by the profiled motor lag).
+    thrust: Vec<Input>,
+    /// The stretches profiled, and the segment of each row used in them.
+    stretches: Vec<(usize, usize)>,
+    seg_of: Vec<Option<usize>>,
     fixed: Vec<&'a [f64]>,
-    /// The fixed columns' statistics (sub-blocks of the selection's).
+    /// The fixed columns' statistics on the rows used.
     fixed_stats: Stats,
     resid: &'a [f64],
-    weights: &'a [f64],
-    seg_of: &'a [Option<usize>],
+    weights: Vec<f64>,
     evaluations: usize,
 }
 
@@ -100,7 +110,7 @@ impl Profiler<'_> {
     /// Statistics of `[fixed, drag(wind)]`.
     fn stats_at(&mut self, wind: [f64; 2]) -> Stats {
         self.evaluations += 1;
-        let drag = drag_columns(self.prep, self.rec, self.tau, wind);
+        let drag = drag_columns(self.prep, self.rec, &self.thrust, wind, &self.stretches);
         let pf = self.fixed.len();
         let p = pf + LINEAR_DRAG;
         let nseg = self.fixed_stats.nseg();
@@ -201,24 +211,26 @@ pub fn profile_wind(
 ) -> WindProfile {
     let rest = PROFILE_COMPANIONS;
     let fixed_idx = select::columns_for(layout, &rest);
-    let force_weights: Vec<f64> = weights
+    let weights: Vec<f64> = weights
         .iter()
         .enumerate()
         .map(|(i, w)| if i % 6 < 3 { *w } else { 0.0 })
         .collect();
+    let (stretches, seg_of) = stretches(prep, seg_of);
     let fixed: Vec<&[f64]> = fixed_idx.iter().map(|&j| columns[j].as_slice()).collect();
-    let mut fixed_stats = Stats::build(&fixed, &prep.resid, &force_weights, seg_of, stats.nseg());
+    let mut fixed_stats = Stats::build(&fixed, &prep.resid, &weights, &seg_of, stats.nseg());
     fixed_stats.prior = stats.prior.select_rows(&fixed_idx).select_columns(&fixed_idx);
     fixed_stats.nonneg = fixed_idx.iter().map(|&j| stats.nonneg[j]).collect();
     let mut prof = Profiler {
         prep,
         rec,
-        tau,
+        thrust: crate::data::lagged_commands(&prep.t, &prep.u_eff, tau),
+        stretches,
+        seg_of,
         fixed,
         fixed_stats,
         resid: &prep.resid,
-        weights: &force_weights,
-        seg_of,
+        weights,
         evaluations: 0,
     };
     // Coarse polar grid.
@@ -282,6 +294,40 @@ pub fn profile_wind(
         rss_no_wind,
         evaluations: prof.evaluations,
     }
+}
+
+/// The stretches of the runs the profile uses and the segment of each row
+/// in them: every run up to [`PROFILE_MAX_ROWS`] rows in all; past that,
+/// evenly spaced stretches of [`PROFILE_STRETCH_ROWS`], each row at least
+/// the filter's half window from a stretch's ends (where its filtered
+/// columns equal the whole run's).
+fn stretches(
+    prep: &Prepared,
+    seg_of: &[Option<usize>],
+) -> (Vec<(usize, usize)>, Vec<Option<usize>>) {
+    let total: usize = prep.runs.iter().map(|(s, e)| e - s).sum();
+    if total <= PROFILE_MAX_ROWS {
+        return (prep.runs.clone(), seg_of.to_vec());
+    }
+    let pieces: Vec<(usize, usize)> = prep
+        .runs
+        .iter()
+        .flat_map(|&(s, e)| {
+            (s..e)
+                .step_by(PROFILE_STRETCH_ROWS)
+                .map(move |a| (a, (a + PROFILE_STRETCH_ROWS).min(e)))
+        })
+        .filter(|(a, b)| b - a > 2 * prep.half + 1)
+        .collect();
+    let keep = (pieces.len() * PROFILE_STRETCH_ROWS).div_ceil(PROFILE_MAX_ROWS).max(1);
+    let chosen: Vec<(usize, usize)> = pieces.into_iter().step_by(keep).collect();
+    let mut used = vec![None; seg_of.len()];
+    for &(a, b) in &chosen {
+        for k in a + prep.half..b - prep.half {
+            used[k] = seg_of[k];
+        }
+    }
+    (chosen, used)
 }
 
 /// The minimum of the least-squares quadratic through `(d, r)` points, if
