@@ -12,6 +12,7 @@
 //! | `thrust_curve` | f, thrust `(1 - f) t + f t^2` | `A (t^2 - t)` (per rotor) |
 //! | `battery_sag` | thrust loss per energy | `-E(t) A t` |
 //! | `com_offset` | d_x, d_y | first-order change of `M` and gravity torque |
+//! | `thrust_axis` | turn about body x, y | `e_j x A_F t` at B |
 //! | `inertia_error` | inertia scale - 1 | `-[0; I w_dot + w x I w]` |
 //! | `mass_error` | mass scale - 1 | `[m g_b - m a - ...; c x (g_b - a)]` |
 //!
@@ -47,12 +48,13 @@ pub enum Effect {
     ThrustCurve,
     BatterySag,
     ComOffset,
+    ThrustAxis,
     InertiaError,
     MassError,
 }
 
 impl Effect {
-    pub const ALL: [Effect; 10] = [
+    pub const ALL: [Effect; 11] = [
         Effect::GroundEffect,
         Effect::MotorLag,
         Effect::Drag,
@@ -61,6 +63,7 @@ impl Effect {
         Effect::ThrustCurve,
         Effect::BatterySag,
         Effect::ComOffset,
+        Effect::ThrustAxis,
         Effect::InertiaError,
         Effect::MassError,
     ];
@@ -75,6 +78,7 @@ impl Effect {
             Effect::ThrustCurve => "thrust_curve",
             Effect::BatterySag => "battery_sag",
             Effect::ComOffset => "com_offset",
+            Effect::ThrustAxis => "thrust_axis",
             Effect::InertiaError => "inertia_error",
             Effect::MassError => "mass_error",
         }
@@ -95,6 +99,7 @@ impl Effect {
             }
             Effect::BatterySag => "thrust scale falling with the energy drawn",
             Effect::ComOffset => "centre of mass shifted in the body x-y plane",
+            Effect::ThrustAxis => "thrust turned against the measured body frame",
             Effect::InertiaError => "inertia about B off by a factor",
             Effect::MassError => "mass (and first moment) off by a factor",
         }
@@ -103,7 +108,10 @@ impl Effect {
     /// Part of the nominal calibration of an approximate robot file (what
     /// every flight pins down: hover thrust, inertia, the command-to-thrust
     /// curve, mass, and the centre of mass, which every hover's rotor trim
-    /// fixes and which no hand-built robot's file has to the millimetre),
+    /// fixes and which no hand-built robot's file has to the millimetre,
+    /// and the thrust axis against the measured body frame, which a
+    /// motion-capture frame a degree off the rotor plane turns: in a hover
+    /// at constant heading a steady sideways push that is not a wind),
     /// reported apart from the physics found after it.
     pub fn is_calibration(self) -> bool {
         matches!(
@@ -113,6 +121,7 @@ impl Effect {
                 | Effect::InertiaError
                 | Effect::MassError
                 | Effect::ComOffset
+                | Effect::ThrustAxis
         )
     }
 
@@ -121,7 +130,7 @@ impl Effect {
         match self {
             Effect::GroundEffect => 17,
             Effect::Drag => DRAG_WIDTH,
-            Effect::Wind | Effect::ComOffset => 2,
+            Effect::Wind | Effect::ComOffset | Effect::ThrustAxis => 2,
             _ => 1,
         }
     }
@@ -152,6 +161,7 @@ impl Effect {
             Effect::ThrustCurve => vec!["quadratic share f of the thrust curve".into()],
             Effect::BatterySag => vec!["thrust loss per unit energy, 1/s".into()],
             Effect::ComOffset => vec!["offset_x, m".into(), "offset_y, m".into()],
+            Effect::ThrustAxis => vec!["tilt_x, rad".into(), "tilt_y, rad".into()],
             Effect::InertiaError => vec!["inertia scale - 1".into()],
             Effect::MassError => vec!["mass scale - 1".into()],
         }
@@ -271,6 +281,7 @@ struct Starts {
     thrust_curve: usize,
     battery: usize,
     com: usize,
+    thrust_axis: usize,
     inertia: usize,
     mass: usize,
 }
@@ -287,6 +298,7 @@ impl Starts {
             thrust_curve: at(Effect::ThrustCurve),
             battery: at(Effect::BatterySag),
             com: at(Effect::ComOffset),
+            thrust_axis: at(Effect::ThrustAxis),
             inertia: at(Effect::InertiaError),
             mass: at(Effect::MassError),
         }
@@ -368,8 +380,9 @@ pub fn build_columns(prep: &Prepared, rec: &Recording, knobs: &Knobs, accel: &[f
     filter_columns(prep, &layout, &at, raw, &lag_raw, &direct)
 }
 
-/// Thrust scale, thrust curve, battery sag (thrust times the energy drawn so far) and
-/// motor lag (difference of thrust and command) for the current tau.
+/// Thrust scale, thrust curve, battery sag (thrust times the energy drawn so far),
+/// motor lag (difference of thrust and command) for the current tau, and
+/// the thrust axis turned.
 fn push_thrust_terms(
     raw: &mut [Vec<f64>],
     lag_raw: &mut [f64],
@@ -383,6 +396,15 @@ fn push_thrust_terms(
     push6(&mut raw[at.thrust_curve], row.k, &(row.act * curve));
     push6(&mut raw[at.battery], row.k, &(-bt * energy));
     push6(lag_raw, row.k, &(row.act * (row.thrust - row.command)));
+    let thrust = row.body.thrust_force * row.thrust;
+    for j in 0..2 {
+        let f = Vector3::ith(j, 1.0).cross(&thrust);
+        push6(
+            &mut raw[at.thrust_axis + j],
+            row.k,
+            &(row.body.mass_matrix_inv * wrench(&f, &Vector3::zeros())),
+        );
+    }
 }
 
 /// Ground effect: each rotor's basis at its hub height, times its thrust.
@@ -461,7 +483,11 @@ fn push_drag_and_wind(raw: &mut [Vec<f64>], at: &Starts, row: &Row, wind: &Vecto
         }
     }
     for jw in 0..2 {
-        push6(&mut raw[at.wind + jw], k, &(body.mass_matrix_inv * wind_cols[jw]));
+        push6(
+            &mut raw[at.wind + jw],
+            k,
+            &(body.mass_matrix_inv * wind_cols[jw]),
+        );
     }
 }
 

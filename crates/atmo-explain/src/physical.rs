@@ -29,6 +29,7 @@ pub(crate) struct Physical {
     pub(crate) thrust_curve: Option<f64>,
     pub(crate) battery: Option<f64>,
     pub(crate) com: Option<[f64; 2]>,
+    pub(crate) thrust_axis: Option<[f64; 2]>,
     pub(crate) inertia: Option<f64>,
     pub(crate) mass: Option<f64>,
 }
@@ -71,6 +72,7 @@ impl Physical {
                 Effect::ThrustCurve => out.thrust_curve = Some(v[0]),
                 Effect::BatterySag => out.battery = Some(v[0]),
                 Effect::ComOffset => out.com = Some([v[0], v[1]]),
+                Effect::ThrustAxis => out.thrust_axis = Some([v[0], v[1]]),
                 Effect::InertiaError => out.inertia = Some(v[0]),
                 Effect::MassError => out.mass = Some(v[0]),
             }
@@ -207,6 +209,13 @@ impl Physical {
                 s,
                 "\n[effects.com_offset]\noffset = [{}]",
                 fmt(&[c[0].clamp(-0.1, 0.1), c[1].clamp(-0.1, 0.1), 0.0])
+            );
+        }
+        if let Some(t) = self.thrust_axis {
+            let _ = writeln!(
+                s,
+                "\n[effects.thrust_axis]\ntilt = [{}]",
+                fmt(&[t[0].clamp(-0.2, 0.2), t[1].clamp(-0.2, 0.2)])
             );
         }
         if self.thrust_scale.is_some() || self.mass.is_some() || self.inertia.is_some() {

@@ -38,9 +38,9 @@ pub struct Stats {
     pub entries: Vec<usize>,
     /// Prior (penalty) matrix added to the normal equations of a fit.
     pub prior: DMatrix<f64>,
-    /// Columns whose coefficient is physically non-negative (drag): a fit
-    /// that wants them negative gets them at 0 instead (active set).
-    pub nonneg: Vec<bool>,
+    /// Physical bounds of each column's coefficient (infinite for most):
+    /// a fit that wants one beyond gets it at the bound (active set).
+    pub bounds: Vec<(f64, f64)>,
 }
 
 /// Segments: contiguous stretches of about `max(2 s, T / 50)`; `seg_of[k]`
@@ -159,7 +159,7 @@ impl Stats {
             yy,
             entries,
             prior: DMatrix::zeros(p, p),
-            nonneg: vec![false; p],
+            bounds: vec![(f64::NEG_INFINITY, f64::INFINITY); p],
         }
     }
 
@@ -181,37 +181,76 @@ impl Stats {
     }
 
     /// Solves on the segments `use_seg` for the columns `idx`
-    /// (ridge-stabilized), the [`Stats::nonneg`] columns at least 0: while
-    /// one of them comes out negative, the most negative is fixed at 0 and
-    /// the rest solved again (at most one pass per such column).
+    /// (ridge-stabilized) within the [`Stats::bounds`]: while a coefficient
+    /// comes out beyond its bound, the farthest one (relative to its
+    /// range's width, or its size for a one-sided range) is fixed at the
+    /// bound and the rest solved again (at most one pass per column).
     pub fn solve(&self, idx: &[usize], use_seg: &dyn Fn(usize) -> bool) -> DVector<f64> {
-        let mut free: Vec<usize> = (0..idx.len()).collect();
+        let mut fixed: Vec<Option<f64>> = vec![None; idx.len()];
         loop {
-            let sub: Vec<usize> = free.iter().map(|&a| idx[a]).collect();
-            let theta = self.solve_unconstrained(&sub, use_seg);
-            let worst = free
-                .iter()
-                .enumerate()
-                .filter(|(_, a)| self.nonneg[idx[**a]])
-                .map(|(pos, _)| (pos, theta[pos]))
-                .filter(|(_, v)| *v < 0.0)
-                .min_by(|x, y| x.1.total_cmp(&y.1));
+            let theta = self.solve_unconstrained(idx, &fixed, use_seg);
+            let violation = |a: usize| {
+                let (lo, hi) = self.bounds[idx[a]];
+                let v = theta[a];
+                let scale = if (hi - lo).is_finite() {
+                    hi - lo
+                } else {
+                    v.abs().max(1e-300)
+                };
+                if v < lo {
+                    Some(((lo - v) / scale, lo))
+                } else if v > hi {
+                    Some(((v - hi) / scale, hi))
+                } else {
+                    None
+                }
+            };
+            let worst = (0..idx.len())
+                .filter(|&a| fixed[a].is_none())
+                .filter_map(|a| violation(a).map(|(d, b)| (a, d, b)))
+                .max_by(|x, y| x.1.total_cmp(&y.1));
             match worst {
-                Some((pos, _)) => {
-                    free.remove(pos);
-                }
-                None => {
-                    let mut out = DVector::zeros(idx.len());
-                    for (pos, &a) in free.iter().enumerate() {
-                        out[a] = theta[pos];
-                    }
-                    return out;
-                }
+                Some((a, _, bound)) => fixed[a] = Some(bound),
+                None => return theta,
             }
         }
     }
 
-    fn solve_unconstrained(&self, idx: &[usize], use_seg: &dyn Fn(usize) -> bool) -> DVector<f64> {
+    /// The least-squares coefficients of the columns `idx` with those of
+    /// `fixed` held at their values.
+    fn solve_unconstrained(
+        &self,
+        idx: &[usize],
+        fixed: &[Option<f64>],
+        use_seg: &dyn Fn(usize) -> bool,
+    ) -> DVector<f64> {
+        let free: Vec<usize> = (0..idx.len()).filter(|&a| fixed[a].is_none()).collect();
+        let theta_free = self.solve_free(idx, &free, fixed, use_seg);
+        let mut out = DVector::zeros(idx.len());
+        for (a, v) in fixed.iter().enumerate() {
+            if let Some(v) = v {
+                out[a] = *v;
+            }
+        }
+        for (pos, &a) in free.iter().enumerate() {
+            out[a] = theta_free[pos];
+        }
+        out
+    }
+
+    fn solve_free(
+        &self,
+        all: &[usize],
+        free: &[usize],
+        fixed: &[Option<f64>],
+        use_seg: &dyn Fn(usize) -> bool,
+    ) -> DVector<f64> {
+        let idx: Vec<usize> = free.iter().map(|&a| all[a]).collect();
+        let held: Vec<(usize, f64)> = fixed
+            .iter()
+            .enumerate()
+            .filter_map(|(a, v)| v.map(|v| (all[a], v)))
+            .collect();
         let q = idx.len();
         if q == 0 {
             return DVector::zeros(0);
@@ -227,11 +266,17 @@ impl Stats {
                 for (c, &j) in idx.iter().enumerate() {
                     g[(a, c)] += self.g[s][(i, j)];
                 }
+                for &(j, v) in &held {
+                    b[a] -= self.g[s][(i, j)] * v;
+                }
             }
         }
         for (a, &i) in idx.iter().enumerate() {
             for (c, &j) in idx.iter().enumerate() {
                 g[(a, c)] += self.prior[(i, j)];
+            }
+            for &(j, v) in &held {
+                b[a] -= self.prior[(i, j)] * v;
             }
         }
         let max_diag = (0..q).map(|a| g[(a, a)]).fold(0.0, f64::max).max(1e-300);

@@ -33,13 +33,14 @@ pub const PREDICTION_MARGIN: f64 = 0.01;
 
 /// Physical range of a parameter (by effect and parameter name), the
 /// table of docs/explain.md. Ground-effect gains share one range.
-pub const RANGES: [(&str, &str, f64, f64); 16] = [
+pub const RANGES: [(&str, &str, f64, f64); 17] = [
     ("ground_effect", "gain", -0.5, 3.0),
     ("ground_effect", "rotor_radius^2", 0.0, 0.36),
     ("motor_lag", "time_constant", 0.005, 0.2),
     ("motor_lag", "lag_term_scale", 0.5, 1.5),
     ("drag", "rotor_drag", 0.0, 5.0),
     ("drag", "axial_drag", 0.0, 5.0),
+    ("thrust_axis", "tilt", -0.1, 0.1),
     ("drag", "body_cd_area", 0.0, 1.0),
     ("wind", "steady", -15.0, 15.0),
     ("thrust_scale", "scale_minus_one", -0.5, 0.5),
@@ -331,7 +332,14 @@ fn wind_failure(fit: &Fit, e: Effect) -> Option<String> {
     }
     let listed: Vec<String> = drag
         .iter()
-        .map(|p| format!("{} = {:.4} +- {:.4}", p.name, p.value, p.std.unwrap_or(f64::NAN)))
+        .map(|p| {
+            format!(
+                "{} = {:.4} +- {:.4}",
+                p.name,
+                p.value,
+                p.std.unwrap_or(f64::NAN)
+            )
+        })
         .collect();
     Some(format!(
         "drag and wind not separable (no drag coefficient identified: {}): the steady \

@@ -68,7 +68,8 @@ impl Fit {
         if !chosen.contains(&Effect::Wind) {
             self.wind = None;
         }
-        let (idx, theta, sd) = select::fit_with_uncertainty_of(&self.stats, self.columns_of(&chosen));
+        let (idx, theta, sd) =
+            select::fit_with_uncertainty_of(&self.stats, self.columns_of(&chosen));
         let mut physical =
             Physical::from_theta(&self.layout, &chosen, &idx, &theta, self.knobs.tau);
         if let Some(w) = physical.wind.as_mut() {
@@ -129,8 +130,7 @@ pub fn fit_effects(res: &Residuals, rec: &Recording, sel: Selection) -> Fit {
     if chosen.contains(&Effect::Wind) && !chosen.contains(&Effect::Drag) {
         chosen.push(Effect::Drag);
     }
-    if chosen.contains(&Effect::Drag) && !chosen.contains(&Effect::Wind) && knobs.wind != [0.0; 2]
-    {
+    if chosen.contains(&Effect::Drag) && !chosen.contains(&Effect::Wind) && knobs.wind != [0.0; 2] {
         chosen.push(Effect::Wind);
     }
     chosen.sort();

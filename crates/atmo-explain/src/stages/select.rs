@@ -257,8 +257,14 @@ pub(crate) fn stats_of(
 ) -> Stats {
     let cols: Vec<&[f64]> = columns.data.iter().map(Vec::as_slice).collect();
     let mut stats = Stats::build(&cols, &columns.resid, weights, seg_of, nseg);
-    for j in columns.layout.columns(Effect::Drag) {
-        stats.nonneg[j] = true;
+    for e in [Effect::Drag, Effect::ThrustAxis] {
+        let names = e.coefficient_names();
+        for (j, name) in columns.layout.columns(e).zip(names) {
+            let name = name.split(',').next().unwrap_or_default();
+            if let Some(range) = crate::stages::range_of(e.name(), name) {
+                stats.bounds[j] = range;
+            }
+        }
     }
     let ge = columns.layout.columns(Effect::GroundEffect);
     let mut diag: Vec<f64> = ge

@@ -21,7 +21,8 @@
 //!   the velocity noise (`E[|v + n| (v + n)]` is not `|v| v`) and, quadratic
 //!   in a trial wind, it fits almost anything at a large one.
 //! - `X_cal`: the calibration a flight always needs beside it (thrust scale
-//!   and curve, [`PROFILE_COMPANIONS`]).
+//!   and curve, the thrust axis: [`PROFILE_COMPANIONS`]). A constant
+//!   sideways force is the thrust axis's, not a wind's.
 //! - `W_F`: the force channels only. A steady wind acts through forces; the
 //!   drag's torques hang on arm lengths and inertias that approximate robot
 //!   files guess, and the differential rotor terms of a large trial wind
@@ -56,7 +57,8 @@ pub const SEARCH_LIMIT: f64 = 24.0;
 /// the first two of the drag effect's.
 const LINEAR_DRAG: usize = 5;
 /// The calibration profiled with the drag.
-pub const PROFILE_COMPANIONS: [Effect; 2] = [Effect::ThrustScale, Effect::ThrustCurve];
+pub const PROFILE_COMPANIONS: [Effect; 3] =
+    [Effect::ThrustScale, Effect::ThrustCurve, Effect::ThrustAxis];
 /// Speeds of the coarse polar grid (m/s).
 const COARSE_SPEED_STEP: f64 = 3.0;
 /// Directions of the coarse polar grid.
@@ -99,6 +101,8 @@ struct Profiler<'a> {
     stretches: Vec<(usize, usize)>,
     seg_of: Vec<Option<usize>>,
     fixed: Vec<&'a [f64]>,
+    /// Bounds of the drag coefficients profiled.
+    drag_bounds: [(f64, f64); LINEAR_DRAG],
     /// The fixed columns' statistics on the rows used.
     fixed_stats: Stats,
     resid: &'a [f64],
@@ -121,12 +125,12 @@ impl Profiler<'_> {
             yy: self.fixed_stats.yy.clone(),
             entries: self.fixed_stats.entries.clone(),
             prior: DMatrix::zeros(p, p),
-            nonneg: self
+            bounds: self
                 .fixed_stats
-                .nonneg
+                .bounds
                 .iter()
                 .copied()
-                .chain([true; LINEAR_DRAG])
+                .chain(self.drag_bounds)
                 .collect(),
         };
         out.prior
@@ -219,8 +223,13 @@ pub fn profile_wind(
     let (stretches, seg_of) = stretches(prep, seg_of);
     let fixed: Vec<&[f64]> = fixed_idx.iter().map(|&j| columns[j].as_slice()).collect();
     let mut fixed_stats = Stats::build(&fixed, &prep.resid, &weights, &seg_of, stats.nseg());
-    fixed_stats.prior = stats.prior.select_rows(&fixed_idx).select_columns(&fixed_idx);
-    fixed_stats.nonneg = fixed_idx.iter().map(|&j| stats.nonneg[j]).collect();
+    fixed_stats.prior = stats
+        .prior
+        .select_rows(&fixed_idx)
+        .select_columns(&fixed_idx);
+    fixed_stats.bounds = fixed_idx.iter().map(|&j| stats.bounds[j]).collect();
+    let drag = layout.columns(Effect::Drag).start;
+    let drag_bounds = std::array::from_fn(|m| stats.bounds[drag + m]);
     let mut prof = Profiler {
         prep,
         rec,
@@ -228,6 +237,7 @@ pub fn profile_wind(
         stretches,
         seg_of,
         fixed,
+        drag_bounds,
         fixed_stats,
         resid: &prep.resid,
         weights,
@@ -252,7 +262,16 @@ pub fn profile_wind(
     let mut step = PATTERN_STEPS.0;
     while step >= PATTERN_STEPS.1 {
         let mut moved = false;
-        for (dx, dy) in [(1, 0), (-1, 0), (0, 1), (0, -1), (1, 1), (1, -1), (-1, 1), (-1, -1)] {
+        for (dx, dy) in [
+            (1, 0),
+            (-1, 0),
+            (0, 1),
+            (0, -1),
+            (1, 1),
+            (1, -1),
+            (-1, 1),
+            (-1, -1),
+        ] {
             let w = [
                 best.0[0] + step * f64::from(dx),
                 best.0[1] + step * f64::from(dy),
@@ -319,7 +338,9 @@ fn stretches(
         })
         .filter(|(a, b)| b - a > 2 * prep.half + 1)
         .collect();
-    let keep = (pieces.len() * PROFILE_STRETCH_ROWS).div_ceil(PROFILE_MAX_ROWS).max(1);
+    let keep = (pieces.len() * PROFILE_STRETCH_ROWS)
+        .div_ceil(PROFILE_MAX_ROWS)
+        .max(1);
     let chosen: Vec<(usize, usize)> = pieces.into_iter().step_by(keep).collect();
     let mut used = vec![None; seg_of.len()];
     for &(a, b) in &chosen {
@@ -376,9 +397,14 @@ mod tests {
             .map(|d| (d, 3.0 + 2.0 * (d[0] - 0.3).powi(2) + (d[1] + 0.7).powi(2)))
             .collect();
         let m = quadratic_minimum(&bowl).expect("a bowl has a minimum");
-        assert!((m[0] - 0.3).abs() < 1e-9 && (m[1] + 0.7).abs() < 1e-9, "{m:?}");
-        let saddle: Vec<([f64; 2], f64)> =
-            bowl.iter().map(|(d, _)| (*d, d[0] * d[0] - d[1] * d[1])).collect();
+        assert!(
+            (m[0] - 0.3).abs() < 1e-9 && (m[1] + 0.7).abs() < 1e-9,
+            "{m:?}"
+        );
+        let saddle: Vec<([f64; 2], f64)> = bowl
+            .iter()
+            .map(|(d, _)| (*d, d[0] * d[0] - d[1] * d[1]))
+            .collect();
         assert!(quadratic_minimum(&saddle).is_none());
     }
 
