@@ -61,6 +61,39 @@ pub fn range_of(effect: &str, name: &str) -> Option<(f64, f64)> {
         .map(|(_, _, lo, hi)| (*lo, *hi))
 }
 
+/// The physical range of each linear coefficient of `e`, from
+/// [`RANGES`]; unbounded where the coefficient is not the parameter
+/// itself (the wind's `k_r w` products, the battery's loss per energy).
+/// The fit holds every coefficient inside its range (`Stats::bounds`), so
+/// an absurd value of one effect cannot stand in for another effect's
+/// force during the selection.
+pub fn coefficient_bounds(e: Effect) -> Vec<(f64, f64)> {
+    let range = |p: &str| range_of(e.name(), p).unwrap_or((f64::NEG_INFINITY, f64::INFINITY));
+    match e {
+        Effect::GroundEffect => (0..16)
+            .map(|_| range("gain"))
+            .chain([range("rotor_radius^2")])
+            .collect(),
+        Effect::MotorLag => vec![range("lag_term_scale")],
+        Effect::Drag => vec![
+            range("rotor_drag"),
+            range("axial_drag"),
+            range("body_cd_area"),
+            range("body_cd_area"),
+            range("body_cd_area"),
+        ],
+        Effect::ThrustAxis => vec![range("tilt"); 2],
+        Effect::ThrustScale => vec![range("scale_minus_one")],
+        Effect::ThrustCurve => vec![range("quadratic_share")],
+        Effect::ComOffset => vec![range("offset"); 2],
+        Effect::InertiaError => vec![range("inertia_scale_minus_one")],
+        Effect::MassError => vec![range("mass_scale_minus_one")],
+        Effect::Wind | Effect::BatterySag => {
+            vec![(f64::NEG_INFINITY, f64::INFINITY); e.width()]
+        }
+    }
+}
+
 /// What the acceptance tests said about one parameter.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum ParamStatus {
@@ -82,7 +115,11 @@ pub fn param_status(value: f64, std: Option<f64>, range: Option<(f64, f64)>) -> 
             return ParamStatus::NotIdentified;
         }
     }
-    if std.is_some() && sd.partial_cmp(&value.abs()) != Some(std::cmp::Ordering::Less) {
+    // An uncertainty that is not a number (no fold estimate) says nothing
+    // is pinned down.
+    if std.is_some_and(|s| !s.is_finite())
+        || (std.is_some() && sd.partial_cmp(&value.abs()) != Some(std::cmp::Ordering::Less))
+    {
         return ParamStatus::NotIdentified;
     }
     ParamStatus::Identified
@@ -385,6 +422,18 @@ mod tests {
         let r = Some((-0.5, 0.5));
         assert_eq!(param_status(0.1, Some(0.01), r), ParamStatus::Identified);
         assert_eq!(param_status(0.1, Some(0.2), r), ParamStatus::NotIdentified);
+        assert_eq!(
+            param_status(0.1, Some(f64::INFINITY), r),
+            ParamStatus::NotIdentified
+        );
+        assert_eq!(
+            param_status(0.1, Some(f64::NAN), r),
+            ParamStatus::NotIdentified
+        );
+        assert_eq!(
+            param_status(0.9, Some(f64::INFINITY), r),
+            ParamStatus::OutOfRange
+        );
         assert_eq!(param_status(0.5, Some(0.01), r), ParamStatus::NotIdentified);
         assert_eq!(param_status(-0.95, Some(0.3), r), ParamStatus::OutOfRange);
         assert_eq!(

@@ -257,13 +257,10 @@ pub(crate) fn stats_of(
 ) -> Stats {
     let cols: Vec<&[f64]> = columns.data.iter().map(Vec::as_slice).collect();
     let mut stats = Stats::build(&cols, &columns.resid, weights, seg_of, nseg);
-    for e in [Effect::Drag, Effect::ThrustAxis] {
-        let names = e.coefficient_names();
-        for (j, name) in columns.layout.columns(e).zip(names) {
-            let name = name.split(',').next().unwrap_or_default();
-            if let Some(range) = crate::stages::range_of(e.name(), name) {
-                stats.bounds[j] = range;
-            }
+    for e in Effect::ALL {
+        let bounds = crate::stages::coefficient_bounds(e);
+        for (j, b) in columns.layout.columns(e).zip(bounds) {
+            stats.bounds[j] = b;
         }
     }
     let ge = columns.layout.columns(Effect::GroundEffect);
