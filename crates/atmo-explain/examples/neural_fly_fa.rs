@@ -100,7 +100,16 @@ fn main() {
     drop(base);
     let selection = select_effects(&res, &rec, lag.tau);
     let fit = fit_effects(&res, &rec, selection);
-    let (fit, _) = accept_effects(&rec, &robot, &res, fit, starts).unwrap();
+    if let Some(w) = &fit.wind {
+        println!(
+            "  wind profile: ({:.2}, {:.2}) +- ({:.2}, {:.2}) m/s, weighted RSS {:.4e} against {:.4e} without wind, {} trials",
+            w.wind[0], w.wind[1], w.sd[0], w.sd[1], w.rss, w.rss_no_wind, w.evaluations
+        );
+    }
+    let (fit, decisions) = accept_effects(&rec, &robot, &res, fit, starts).unwrap();
+    for (e, d) in &decisions {
+        println!("  {}: {}", e.name(), d.describe());
+    }
     let validation = validate(&rec, &robot, &res, &mismatch, &fit, starts).unwrap();
     let prep = &res.prep;
     let mass = prep.table.at(0.0).mass;

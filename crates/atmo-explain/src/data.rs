@@ -147,10 +147,18 @@ impl Prepared {
     /// along each run, differentiate with the filter, rotate back. Rows
     /// outside `fit` get 0.
     pub fn smooth(&self, g: &[f64], out: &mut [f64]) {
+        self.smooth_runs(g, out, &self.runs);
+    }
+
+    /// [`Prepared::smooth`] along the given stretches of runs only: inside
+    /// a stretch, `half` rows or more from its ends, the result is the
+    /// run's (the integral differs by a constant, which the derivative
+    /// filter does not see).
+    pub fn smooth_runs(&self, g: &[f64], out: &mut [f64], runs: &[(usize, usize)]) {
         out.fill(0.0);
         let h = self.half;
         let mut integ: Vec<[f64; 6]> = Vec::new();
-        for &(s, e) in &self.runs {
+        for &(s, e) in runs {
             if e - s < 2 * h + 1 {
                 continue;
             }

@@ -6,12 +6,13 @@
 //! | --- | --- | --- |
 //! | `ground_effect` | gain table over hub height {0.25, 0.35, 0.45, 0.6} m x tilt {40..70} deg (0 at 0.75 m), classical `R_p^2` below 30 deg | `sum_i phi(h_i, varphi) A e_i t_i` |
 //! | `motor_lag` | time constant tau | `A (lag_tau(u) - u)` (profiled) |
-//! | `drag` | rotor drag k_r, body Cd A (x, y, z) | `-sum_i t_i P_i v_i` at the hubs, `-rho/2 \|v_k\| v_k` |
+//! | `drag` | rotor drag k_r (in the disc plane), axial k_a, body Cd A (x, y, z) | `-sum_i t_i P_i v_i`, `-sum_i t_i (1 - P_i) v_i` at the hubs, `-rho/2 \|v_k\| v_k` |
 //! | `wind` | steady wind (x, y) | `k_r sum_i t_i P_i R^T e_j` |
 //! | `thrust_scale` | s | `A t` |
 //! | `thrust_curve` | f, thrust `(1 - f) t + f t^2` | `A (t^2 - t)` (per rotor) |
 //! | `battery_sag` | thrust loss per energy | `-E(t) A t` |
 //! | `com_offset` | d_x, d_y | first-order change of `M` and gravity torque |
+//! | `thrust_axis` | turn about body x, y | `e_j x A_F t` at B |
 //! | `inertia_error` | inertia scale - 1 | `-[0; I w_dot + w x I w]` |
 //! | `mass_error` | mass scale - 1 | `[m g_b - m a - ...; c x (g_b - a)]` |
 //!
@@ -31,6 +32,8 @@ pub const GE_HEIGHTS: [f64; 5] = [0.25, 0.35, 0.45, 0.6, 0.75];
 pub const GE_TILTS_DEG: [f64; 4] = [40.0, 50.0, 60.0, 70.0];
 /// Below this tilt (deg) the classical law alone applies; blended up to 40.
 pub const GE_CLASSICAL_BELOW_DEG: f64 = 30.0;
+/// Drag coefficients: rotor drag, axial drag, body Cd A along x, y, z.
+pub const DRAG_WIDTH: usize = 5;
 /// Air density used for body drag (kg/m^3).
 pub const AIR_DENSITY: f64 = 1.225;
 
@@ -45,12 +48,13 @@ pub enum Effect {
     ThrustCurve,
     BatterySag,
     ComOffset,
+    ThrustAxis,
     InertiaError,
     MassError,
 }
 
 impl Effect {
-    pub const ALL: [Effect; 10] = [
+    pub const ALL: [Effect; 11] = [
         Effect::GroundEffect,
         Effect::MotorLag,
         Effect::Drag,
@@ -59,6 +63,7 @@ impl Effect {
         Effect::ThrustCurve,
         Effect::BatterySag,
         Effect::ComOffset,
+        Effect::ThrustAxis,
         Effect::InertiaError,
         Effect::MassError,
     ];
@@ -73,6 +78,7 @@ impl Effect {
             Effect::ThrustCurve => "thrust_curve",
             Effect::BatterySag => "battery_sag",
             Effect::ComOffset => "com_offset",
+            Effect::ThrustAxis => "thrust_axis",
             Effect::InertiaError => "inertia_error",
             Effect::MassError => "mass_error",
         }
@@ -83,7 +89,9 @@ impl Effect {
         match self {
             Effect::GroundEffect => "thrust gain T/T_inf - 1 over rotor hub height and tilt",
             Effect::MotorLag => "first-order lag from command to thrust",
-            Effect::Drag => "linear rotor drag in the disc plane, quadratic body drag",
+            Effect::Drag => {
+                "linear rotor drag in the disc plane, thrust lost to axial inflow, quadratic body drag"
+            }
             Effect::Wind => "steady wind: drag acts on the air-relative velocity",
             Effect::ThrustScale => "thrust coefficient kT off by a constant factor",
             Effect::ThrustCurve => {
@@ -91,6 +99,7 @@ impl Effect {
             }
             Effect::BatterySag => "thrust scale falling with the energy drawn",
             Effect::ComOffset => "centre of mass shifted in the body x-y plane",
+            Effect::ThrustAxis => "thrust turned against the measured body frame",
             Effect::InertiaError => "inertia about B off by a factor",
             Effect::MassError => "mass (and first moment) off by a factor",
         }
@@ -99,7 +108,10 @@ impl Effect {
     /// Part of the nominal calibration of an approximate robot file (what
     /// every flight pins down: hover thrust, inertia, the command-to-thrust
     /// curve, mass, and the centre of mass, which every hover's rotor trim
-    /// fixes and which no hand-built robot's file has to the millimetre),
+    /// fixes and which no hand-built robot's file has to the millimetre,
+    /// and the thrust axis against the measured body frame, which a
+    /// motion-capture frame a degree off the rotor plane turns: in a hover
+    /// at constant heading a steady sideways push that is not a wind),
     /// reported apart from the physics found after it.
     pub fn is_calibration(self) -> bool {
         matches!(
@@ -109,6 +121,7 @@ impl Effect {
                 | Effect::InertiaError
                 | Effect::MassError
                 | Effect::ComOffset
+                | Effect::ThrustAxis
         )
     }
 
@@ -116,8 +129,8 @@ impl Effect {
     pub fn width(self) -> usize {
         match self {
             Effect::GroundEffect => 17,
-            Effect::Drag => 4,
-            Effect::Wind | Effect::ComOffset => 2,
+            Effect::Drag => DRAG_WIDTH,
+            Effect::Wind | Effect::ComOffset | Effect::ThrustAxis => 2,
             _ => 1,
         }
     }
@@ -138,6 +151,7 @@ impl Effect {
             Effect::MotorLag => vec!["scale of the lag term (1 = lag as fitted)".into()],
             Effect::Drag => vec![
                 "rotor_drag, N/(m/s)".into(),
+                "axial_drag, N/(m/s)".into(),
                 "body_cd_area_x, m^2".into(),
                 "body_cd_area_y, m^2".into(),
                 "body_cd_area_z, m^2".into(),
@@ -147,6 +161,7 @@ impl Effect {
             Effect::ThrustCurve => vec!["quadratic share f of the thrust curve".into()],
             Effect::BatterySag => vec!["thrust loss per unit energy, 1/s".into()],
             Effect::ComOffset => vec!["offset_x, m".into(), "offset_y, m".into()],
+            Effect::ThrustAxis => vec!["tilt_x, rad".into(), "tilt_y, rad".into()],
             Effect::InertiaError => vec!["inertia scale - 1".into()],
             Effect::MassError => vec!["mass scale - 1".into()],
         }
@@ -266,6 +281,7 @@ struct Starts {
     thrust_curve: usize,
     battery: usize,
     com: usize,
+    thrust_axis: usize,
     inertia: usize,
     mass: usize,
 }
@@ -282,6 +298,7 @@ impl Starts {
             thrust_curve: at(Effect::ThrustCurve),
             battery: at(Effect::BatterySag),
             com: at(Effect::ComOffset),
+            thrust_axis: at(Effect::ThrustAxis),
             inertia: at(Effect::InertiaError),
             mass: at(Effect::MassError),
         }
@@ -363,8 +380,9 @@ pub fn build_columns(prep: &Prepared, rec: &Recording, knobs: &Knobs, accel: &[f
     filter_columns(prep, &layout, &at, raw, &lag_raw, &direct)
 }
 
-/// Thrust scale, thrust curve, battery sag (thrust times the energy drawn so far) and
-/// motor lag (difference of thrust and command) for the current tau.
+/// Thrust scale, thrust curve, battery sag (thrust times the energy drawn so far),
+/// motor lag (difference of thrust and command) for the current tau, and
+/// the thrust axis turned.
 fn push_thrust_terms(
     raw: &mut [Vec<f64>],
     lag_raw: &mut [f64],
@@ -378,6 +396,15 @@ fn push_thrust_terms(
     push6(&mut raw[at.thrust_curve], row.k, &(row.act * curve));
     push6(&mut raw[at.battery], row.k, &(-bt * energy));
     push6(lag_raw, row.k, &(row.act * (row.thrust - row.command)));
+    let thrust = row.body.thrust_force * row.thrust;
+    for j in 0..2 {
+        let f = Vector3::ith(j, 1.0).cross(&thrust);
+        push6(
+            &mut raw[at.thrust_axis + j],
+            row.k,
+            &(row.body.mass_matrix_inv * wrench(&f, &Vector3::zeros())),
+        );
+    }
 }
 
 /// Ground effect: each rotor's basis at its hub height, times its thrust.
@@ -402,15 +429,45 @@ fn push_ground_effect(raw: &mut [Vec<f64>], at: &Starts, row: &Row) {
     }
 }
 
-/// Rotor drag in the disc planes and quadratic body drag on the
-/// air-relative velocity (`wind` the current wind knob), and the wind
-/// columns (rotor drag per unit wind along world x and y).
-fn push_drag_and_wind(raw: &mut [Vec<f64>], at: &Starts, row: &Row, wind: &Vector3<f64>) {
-    let (t, r, body, k) = (row.thrust, row.rot, &row.body, row.k);
+/// The drag columns of one row (body-frame generalized accelerations per
+/// unit coefficient, before filtering): rotor drag in the disc planes,
+/// thrust lost to axial inflow, and quadratic body drag along body x, y,
+/// z, on the velocity relative to the air (`wind`, NED).
+fn drag_terms(row: &Row, wind: &Vector3<f64>) -> [Vector6<f64>; DRAG_WIDTH] {
+    let (t, r, body) = (row.thrust, row.rot, &row.body);
     let minv = &body.mass_matrix_inv;
     let w = row.rates();
     let v_air = r.transpose() * (row.velocity() - wind);
     let mut rotor_w = Vector6::zeros();
+    let mut axial_w = Vector6::zeros();
+    for i in 0..4 {
+        let n_i = &body.rotor_axis[i];
+        let r_i = &body.rotor_position[i];
+        let vi = v_air + w.cross(r_i);
+        let axial = n_i * vi.dot(n_i);
+        let f = -(vi - axial) * t[i].max(0.0);
+        rotor_w += wrench(&f, &r_i.cross(&f));
+        let f = -axial * t[i].max(0.0);
+        axial_w += wrench(&f, &r_i.cross(&f));
+    }
+    let mut out = [Vector6::zeros(); DRAG_WIDTH];
+    out[0] = minv * rotor_w;
+    out[1] = minv * axial_w;
+    for axis in 0..3 {
+        let mut f = Vector3::zeros();
+        f[axis] = -0.5 * AIR_DENSITY * v_air[axis].abs() * v_air[axis];
+        out[2 + axis] = minv * wrench(&f, &Vector3::zeros());
+    }
+    out
+}
+
+/// Drag on the air-relative velocity (`wind` the current wind knob), and
+/// the wind columns (rotor drag per unit wind along world x and y).
+fn push_drag_and_wind(raw: &mut [Vec<f64>], at: &Starts, row: &Row, wind: &Vector3<f64>) {
+    let (t, r, body, k) = (row.thrust, row.rot, &row.body, row.k);
+    for (j, term) in drag_terms(row, wind).iter().enumerate() {
+        push6(&mut raw[at.drag + j], k, term);
+    }
     let mut wind_cols = [Vector6::zeros(); 2];
     let wind_dirs = [
         r.transpose().column(0).into_owned(),
@@ -420,27 +477,55 @@ fn push_drag_and_wind(raw: &mut [Vec<f64>], at: &Starts, row: &Row, wind: &Vecto
         let n_i = &body.rotor_axis[i];
         let r_i = &body.rotor_position[i];
         let ti = t[i].max(0.0);
-        let vi = v_air + w.cross(r_i);
-        let f = -(vi - n_i * vi.dot(n_i)) * ti;
-        rotor_w += wrench(&f, &r_i.cross(&f));
         for (jw, dir) in wind_dirs.iter().enumerate() {
             let fw = (dir - n_i * dir.dot(n_i)) * ti;
             wind_cols[jw] += wrench(&fw, &r_i.cross(&fw));
         }
     }
-    push6(&mut raw[at.drag], k, &(minv * rotor_w));
-    for axis in 0..3 {
-        let mut f = Vector3::zeros();
-        f[axis] = -0.5 * AIR_DENSITY * v_air[axis].abs() * v_air[axis];
+    for jw in 0..2 {
         push6(
-            &mut raw[at.drag + 1 + axis],
+            &mut raw[at.wind + jw],
             k,
-            &(minv * wrench(&f, &Vector3::zeros())),
+            &(body.mass_matrix_inv * wind_cols[jw]),
         );
     }
-    for jw in 0..2 {
-        push6(&mut raw[at.wind + jw], k, &(minv * wind_cols[jw]));
+}
+
+/// The drag columns alone (filtered like the measurement) for the rotor
+/// thrusts `thrust` and a wind, on the stretches `runs` (0 elsewhere):
+/// what the wind profile rebuilds per trial wind instead of every column.
+pub fn drag_columns(
+    prep: &Prepared,
+    rec: &Recording,
+    thrust: &[Input],
+    wind: [f64; 2],
+    runs: &[(usize, usize)],
+) -> [Vec<f64>; DRAG_WIDTH] {
+    let n = prep.n;
+    let wind = Vector3::new(wind[0], wind[1], 0.0);
+    let mut raw: [Vec<f64>; DRAG_WIDTH] = std::array::from_fn(|_| vec![0.0; 6 * n]);
+    for &(s, e) in runs {
+        for k in s..e {
+            let sample = &rec.samples[k];
+            let row = Row {
+                k,
+                sample,
+                thrust: &thrust[k],
+                command: &prep.u_eff[k],
+                body: prep.table.at(sample.varphi),
+                act: &prep.act[k],
+                rot: &prep.rot[k],
+            };
+            for (j, term) in drag_terms(&row, &wind).iter().enumerate() {
+                push6(&mut raw[j], k, term);
+            }
+        }
     }
+    raw.map(|r| {
+        let mut out = vec![0.0; 6 * n];
+        prep.smooth_runs(&r, &mut out, runs);
+        out
+    })
 }
 
 /// Mass properties (mass, inertia, centre-of-mass offset): the change of

@@ -8,7 +8,7 @@ use atmo_core::config::ArmInertiaConvention;
 use atmo_plant::ground_effect::GroundEffectConfig;
 use nalgebra::DVector;
 
-use crate::effects::{self, Effect, GE_HEIGHTS, GE_TILTS_DEG, Layout};
+use crate::effects::{self, DRAG_WIDTH, Effect, GE_HEIGHTS, GE_TILTS_DEG, Layout};
 
 /// The robot file's name of an arm-inertia convention.
 pub(crate) fn convention_name(c: ArmInertiaConvention) -> &'static str {
@@ -23,12 +23,13 @@ pub(crate) fn convention_name(c: ArmInertiaConvention) -> &'static str {
 pub(crate) struct Physical {
     pub(crate) ge: Option<Vec<f64>>,
     pub(crate) tau: Option<f64>,
-    pub(crate) drag: Option<[f64; 4]>,
+    pub(crate) drag: Option<[f64; DRAG_WIDTH]>,
     pub(crate) wind: Option<[f64; 2]>,
     pub(crate) thrust_scale: Option<f64>,
     pub(crate) thrust_curve: Option<f64>,
     pub(crate) battery: Option<f64>,
     pub(crate) com: Option<[f64; 2]>,
+    pub(crate) thrust_axis: Option<[f64; 2]>,
     pub(crate) inertia: Option<f64>,
     pub(crate) mass: Option<f64>,
 }
@@ -58,7 +59,7 @@ impl Physical {
             match e {
                 Effect::GroundEffect => out.ge = Some(v),
                 Effect::MotorLag => out.tau = Some(tau),
-                Effect::Drag => out.drag = Some([v[0], v[1], v[2], v[3]]),
+                Effect::Drag => out.drag = Some(std::array::from_fn(|j| v[j])),
                 Effect::Wind => {
                     let kr = get(Effect::Drag)[0];
                     out.wind = Some(if kr.abs() > 1e-3 {
@@ -71,6 +72,7 @@ impl Physical {
                 Effect::ThrustCurve => out.thrust_curve = Some(v[0]),
                 Effect::BatterySag => out.battery = Some(v[0]),
                 Effect::ComOffset => out.com = Some([v[0], v[1]]),
+                Effect::ThrustAxis => out.thrust_axis = Some([v[0], v[1]]),
                 Effect::InertiaError => out.inertia = Some(v[0]),
                 Effect::MassError => out.mass = Some(v[0]),
             }
@@ -167,15 +169,16 @@ impl Physical {
             );
         }
         if self.drag.is_some() || self.wind.is_some() {
-            let d = self.drag.unwrap_or([0.0; 4]);
+            let d = self.drag.unwrap_or([0.0; DRAG_WIDTH]);
             let _ = writeln!(
                 s,
-                "\n[effects.drag]\nrotor_drag = {:.6}\nbody_cd_area = [{}]\nair_density = {}",
+                "\n[effects.drag]\nrotor_drag = {:.6}\naxial_drag = {:.6}\nbody_cd_area = [{}]\nair_density = {}",
                 d[0].clamp(0.0, 100.0),
+                d[1].clamp(0.0, 100.0),
                 fmt(&[
-                    d[1].clamp(0.0, 10.0),
                     d[2].clamp(0.0, 10.0),
-                    d[3].clamp(0.0, 10.0)
+                    d[3].clamp(0.0, 10.0),
+                    d[4].clamp(0.0, 10.0)
                 ]),
                 effects::AIR_DENSITY
             );
@@ -206,6 +209,13 @@ impl Physical {
                 s,
                 "\n[effects.com_offset]\noffset = [{}]",
                 fmt(&[c[0].clamp(-0.1, 0.1), c[1].clamp(-0.1, 0.1), 0.0])
+            );
+        }
+        if let Some(t) = self.thrust_axis {
+            let _ = writeln!(
+                s,
+                "\n[effects.thrust_axis]\ntilt = [{}]",
+                fmt(&[t[0].clamp(-0.2, 0.2), t[1].clamp(-0.2, 0.2)])
             );
         }
         if self.thrust_scale.is_some() || self.mass.is_some() || self.inertia.is_some() {

@@ -38,6 +38,9 @@ pub struct Stats {
     pub entries: Vec<usize>,
     /// Prior (penalty) matrix added to the normal equations of a fit.
     pub prior: DMatrix<f64>,
+    /// Physical bounds of each column's coefficient (infinite for most):
+    /// a fit that wants one beyond gets it at the bound (active set).
+    pub bounds: Vec<(f64, f64)>,
 }
 
 /// Segments: contiguous stretches of about `max(2 s, T / 50)`; `seg_of[k]`
@@ -156,6 +159,7 @@ impl Stats {
             yy,
             entries,
             prior: DMatrix::zeros(p, p),
+            bounds: vec![(f64::NEG_INFINITY, f64::INFINITY); p],
         }
     }
 
@@ -176,8 +180,77 @@ impl Stats {
         self.g.len()
     }
 
-    /// Solves on the segments `use_seg` for the columns `idx` (ridge-stabilized).
+    /// Solves on the segments `use_seg` for the columns `idx`
+    /// (ridge-stabilized) within the [`Stats::bounds`]: while a coefficient
+    /// comes out beyond its bound, the farthest one (relative to its
+    /// range's width, or its size for a one-sided range) is fixed at the
+    /// bound and the rest solved again (at most one pass per column).
     pub fn solve(&self, idx: &[usize], use_seg: &dyn Fn(usize) -> bool) -> DVector<f64> {
+        let mut fixed: Vec<Option<f64>> = vec![None; idx.len()];
+        loop {
+            let theta = self.solve_unconstrained(idx, &fixed, use_seg);
+            let violation = |a: usize| {
+                let (lo, hi) = self.bounds[idx[a]];
+                let v = theta[a];
+                let scale = if (hi - lo).is_finite() {
+                    hi - lo
+                } else {
+                    v.abs().max(1e-300)
+                };
+                if v < lo {
+                    Some(((lo - v) / scale, lo))
+                } else if v > hi {
+                    Some(((v - hi) / scale, hi))
+                } else {
+                    None
+                }
+            };
+            let worst = (0..idx.len())
+                .filter(|&a| fixed[a].is_none())
+                .filter_map(|a| violation(a).map(|(d, b)| (a, d, b)))
+                .max_by(|x, y| x.1.total_cmp(&y.1));
+            match worst {
+                Some((a, _, bound)) => fixed[a] = Some(bound),
+                None => return theta,
+            }
+        }
+    }
+
+    /// The least-squares coefficients of the columns `idx` with those of
+    /// `fixed` held at their values.
+    fn solve_unconstrained(
+        &self,
+        idx: &[usize],
+        fixed: &[Option<f64>],
+        use_seg: &dyn Fn(usize) -> bool,
+    ) -> DVector<f64> {
+        let free: Vec<usize> = (0..idx.len()).filter(|&a| fixed[a].is_none()).collect();
+        let theta_free = self.solve_free(idx, &free, fixed, use_seg);
+        let mut out = DVector::zeros(idx.len());
+        for (a, v) in fixed.iter().enumerate() {
+            if let Some(v) = v {
+                out[a] = *v;
+            }
+        }
+        for (pos, &a) in free.iter().enumerate() {
+            out[a] = theta_free[pos];
+        }
+        out
+    }
+
+    fn solve_free(
+        &self,
+        all: &[usize],
+        free: &[usize],
+        fixed: &[Option<f64>],
+        use_seg: &dyn Fn(usize) -> bool,
+    ) -> DVector<f64> {
+        let idx: Vec<usize> = free.iter().map(|&a| all[a]).collect();
+        let held: Vec<(usize, f64)> = fixed
+            .iter()
+            .enumerate()
+            .filter_map(|(a, v)| v.map(|v| (all[a], v)))
+            .collect();
         let q = idx.len();
         if q == 0 {
             return DVector::zeros(0);
@@ -193,11 +266,17 @@ impl Stats {
                 for (c, &j) in idx.iter().enumerate() {
                     g[(a, c)] += self.g[s][(i, j)];
                 }
+                for &(j, v) in &held {
+                    b[a] -= self.g[s][(i, j)] * v;
+                }
             }
         }
         for (a, &i) in idx.iter().enumerate() {
             for (c, &j) in idx.iter().enumerate() {
                 g[(a, c)] += self.prior[(i, j)];
+            }
+            for &(j, v) in &held {
+                b[a] -= self.prior[(i, j)] * v;
             }
         }
         let max_diag = (0..q).map(|a| g[(a, a)]).fold(0.0, f64::max).max(1e-300);
@@ -378,7 +457,14 @@ pub fn fit_with_uncertainty(
     layout: &Layout,
     set: &[Effect],
 ) -> (Vec<usize>, DVector<f64>, DVector<f64>) {
-    let idx = columns_of(layout, set);
+    fit_with_uncertainty_of(stats, columns_of(layout, set))
+}
+
+/// [`fit_with_uncertainty`] for the columns `idx`.
+pub fn fit_with_uncertainty_of(
+    stats: &Stats,
+    idx: Vec<usize>,
+) -> (Vec<usize>, DVector<f64>, DVector<f64>) {
     let theta = stats.solve(&idx, &|_| true);
     let mut fold_thetas = Vec::new();
     for f in 0..FOLDS {

@@ -56,13 +56,14 @@ pub struct EffectsConfig {
     pub wind: Option<WindConfig>,
     pub battery_sag: Option<BatterySagConfig>,
     pub com_offset: Option<ComOffsetConfig>,
+    pub thrust_axis: Option<ThrustAxisConfig>,
     pub mass_error: Option<MassErrorConfig>,
     pub sensors: Option<SensorsConfig>,
     pub ground_contact: Option<GroundContactConfig>,
 }
 
 /// Names of every effect, as written in `[effects.<name>]`.
-pub const EFFECT_NAMES: [&str; 11] = [
+pub const EFFECT_NAMES: [&str; 12] = [
     "ground_effect",
     "motor_lag",
     "thrust_curve",
@@ -71,6 +72,7 @@ pub const EFFECT_NAMES: [&str; 11] = [
     "wind",
     "battery_sag",
     "com_offset",
+    "thrust_axis",
     "mass_error",
     "sensors",
     "ground_contact",
@@ -282,6 +284,21 @@ impl Default for BatterySagConfig {
             sag: Self::default_sag(),
         }
     }
+}
+
+/// `[effects.thrust_axis]`: the thrust turned by the small rotation
+/// `tilt = (about body x, about body y)` (rad) against the body frame the
+/// pose is measured in: the body feels `tilt x F_T` at B besides the
+/// thrust `F_T`. What a motion-capture body frame a degree or two off the
+/// rotor plane, or rotors mounted that much off, look like.
+#[derive(Debug, Clone, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct ThrustAxisConfig {
+    #[serde(default = "default_true")]
+    pub enabled: bool,
+    /// rad, about body x and y.
+    #[serde(default)]
+    pub tilt: [f64; 2],
 }
 
 /// `[effects.com_offset]`: the real mass distribution shifted by `offset`
@@ -596,6 +613,7 @@ impl EffectsConfig {
             wind: Some(WindConfig::default()),
             battery_sag: Some(BatterySagConfig::default()),
             com_offset: Some(ComOffsetConfig::default()),
+            thrust_axis: None,
             mass_error: Some(MassErrorConfig::default()),
             sensors: Some(SensorsConfig::default()),
             ground_contact: Some(GroundContactConfig::default()),
@@ -617,6 +635,7 @@ impl EffectsConfig {
             wind: pick(self.wind.as_ref(), over.wind.as_ref()),
             battery_sag: pick(self.battery_sag.as_ref(), over.battery_sag.as_ref()),
             com_offset: pick(self.com_offset.as_ref(), over.com_offset.as_ref()),
+            thrust_axis: pick(self.thrust_axis.as_ref(), over.thrust_axis.as_ref()),
             mass_error: pick(self.mass_error.as_ref(), over.mass_error.as_ref()),
             sensors: pick(self.sensors.as_ref(), over.sensors.as_ref()),
             ground_contact: pick(self.ground_contact.as_ref(), over.ground_contact.as_ref()),
@@ -634,6 +653,7 @@ impl EffectsConfig {
             self.wind.as_ref().is_some_and(|e| e.enabled),
             self.battery_sag.as_ref().is_some_and(|e| e.enabled),
             self.com_offset.as_ref().is_some_and(|e| e.enabled),
+            self.thrust_axis.as_ref().is_some_and(|e| e.enabled),
             self.mass_error.as_ref().is_some_and(|e| e.enabled),
             self.sensors.as_ref().is_some_and(|e| e.enabled),
             self.ground_contact.as_ref().is_some_and(|e| e.enabled),
@@ -695,6 +715,11 @@ impl EffectsConfig {
             c.within(&format!("{p}.used_wh"), e.used_wh, 0.0, e.capacity_wh)?;
             c.positive(&format!("{p}.full_power_w"), e.full_power_w)?;
             c.within(&format!("{p}.sag"), e.sag, 0.0, 0.9)?;
+        }
+        if let Some(e) = &self.thrust_axis {
+            for v in e.tilt {
+                c.within(&format!("{prefix}.thrust_axis.tilt"), v, -0.2, 0.2)?;
+            }
         }
         if let Some(e) = &self.com_offset {
             for v in e.offset {

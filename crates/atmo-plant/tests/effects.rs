@@ -7,7 +7,7 @@ use atmo_core::config::ArmInertiaConvention;
 use atmo_core::model::{Input, Model, State, idx};
 use atmo_plant::config::{
     ComOffsetConfig, DragConfig, EffectsConfig, GustConfig, MassErrorConfig, SensorsConfig,
-    TerrainConfig, WindConfig,
+    TerrainConfig, ThrustAxisConfig, WindConfig,
 };
 use atmo_plant::plant::{Command, InitialState, Plant};
 use common::{level_at, plant_with, robot};
@@ -188,6 +188,31 @@ fn axial_inflow_takes_thrust_along_the_rotor_axes_only() {
     // The rotors push up (-z); climbing into their inflow loses thrust: +z.
     assert!(force.z > 0.0, "a climb loses thrust: {force}");
     let extra = nalgebra::Vector6::new(force.x, force.y, force.z, torque.x, torque.y, torque.z);
+    let expected = TiltedBodyExt::with_extra(&body, &x, &u, &extra);
+    assert!((got - expected).norm() < 1e-12, "{got} vs {expected}");
+}
+
+#[test]
+fn a_turned_thrust_axis_pushes_sideways_by_the_rotation_times_the_thrust() {
+    let tilt = [0.02, -0.03];
+    let effects = EffectsConfig {
+        thrust_axis: Some(ThrustAxisConfig {
+            enabled: true,
+            tilt,
+        }),
+        ..EffectsConfig::none()
+    };
+    let x = level_at(5.0);
+    let p = plant(effects, x, 0.0);
+    let u = Input::repeat(0.5);
+    let got = p.body_derivative(&Command::rotors(u)).unwrap();
+    let body = truth_model().at_tilt(0.0);
+    let thrust = body.thrust_force * u;
+    let f = nalgebra::Vector3::new(tilt[0], tilt[1], 0.0).cross(&thrust);
+    // Level rotors push along -z: about +x the thrust turns towards +y,
+    // about +y towards -x.
+    assert!(f.y > 0.0 && f.x > 0.0, "{f}");
+    let extra = nalgebra::Vector6::new(f.x, f.y, f.z, 0.0, 0.0, 0.0);
     let expected = TiltedBodyExt::with_extra(&body, &x, &u, &extra);
     assert!((got - expected).norm() < 1e-12, "{got} vs {expected}");
 }

@@ -23,7 +23,7 @@ use crate::effects::Effect;
 use crate::physical::Physical;
 use crate::recording::Recording;
 use crate::replay::{self, ReplayError};
-use crate::select::{self, FOLDS, fold_of};
+use crate::select::{FOLDS, fold_of};
 use crate::stages::report::effect_parameters;
 use crate::stages::{Fit, Residuals};
 use crate::{HORIZON, Result};
@@ -33,12 +33,14 @@ pub const PREDICTION_MARGIN: f64 = 0.01;
 
 /// Physical range of a parameter (by effect and parameter name), the
 /// table of docs/explain.md. Ground-effect gains share one range.
-pub const RANGES: [(&str, &str, f64, f64); 15] = [
+pub const RANGES: [(&str, &str, f64, f64); 17] = [
     ("ground_effect", "gain", -0.5, 3.0),
     ("ground_effect", "rotor_radius^2", 0.0, 0.36),
     ("motor_lag", "time_constant", 0.005, 0.2),
     ("motor_lag", "lag_term_scale", 0.5, 1.5),
     ("drag", "rotor_drag", 0.0, 5.0),
+    ("drag", "axial_drag", 0.0, 5.0),
+    ("thrust_axis", "tilt", -0.1, 0.1),
     ("drag", "body_cd_area", 0.0, 1.0),
     ("wind", "steady", -15.0, 15.0),
     ("thrust_scale", "scale_minus_one", -0.5, 0.5),
@@ -57,6 +59,39 @@ pub fn range_of(effect: &str, name: &str) -> Option<(f64, f64)> {
         .iter()
         .find(|(e, p, ..)| *e == effect && !p.is_empty() && name.starts_with(p))
         .map(|(_, _, lo, hi)| (*lo, *hi))
+}
+
+/// The physical range of each linear coefficient of `e`, from
+/// [`RANGES`]; unbounded where the coefficient is not the parameter
+/// itself (the wind's `k_r w` products, the battery's loss per energy).
+/// The fit holds every coefficient inside its range (`Stats::bounds`), so
+/// an absurd value of one effect cannot stand in for another effect's
+/// force during the selection.
+pub fn coefficient_bounds(e: Effect) -> Vec<(f64, f64)> {
+    let range = |p: &str| range_of(e.name(), p).unwrap_or((f64::NEG_INFINITY, f64::INFINITY));
+    match e {
+        Effect::GroundEffect => (0..16)
+            .map(|_| range("gain"))
+            .chain([range("rotor_radius^2")])
+            .collect(),
+        Effect::MotorLag => vec![range("lag_term_scale")],
+        Effect::Drag => vec![
+            range("rotor_drag"),
+            range("axial_drag"),
+            range("body_cd_area"),
+            range("body_cd_area"),
+            range("body_cd_area"),
+        ],
+        Effect::ThrustAxis => vec![range("tilt"); 2],
+        Effect::ThrustScale => vec![range("scale_minus_one")],
+        Effect::ThrustCurve => vec![range("quadratic_share")],
+        Effect::ComOffset => vec![range("offset"); 2],
+        Effect::InertiaError => vec![range("inertia_scale_minus_one")],
+        Effect::MassError => vec![range("mass_scale_minus_one")],
+        Effect::Wind | Effect::BatterySag => {
+            vec![(f64::NEG_INFINITY, f64::INFINITY); e.width()]
+        }
+    }
 }
 
 /// What the acceptance tests said about one parameter.
@@ -80,7 +115,11 @@ pub fn param_status(value: f64, std: Option<f64>, range: Option<(f64, f64)>) -> 
             return ParamStatus::NotIdentified;
         }
     }
-    if std.is_some() && sd.partial_cmp(&value.abs()) != Some(std::cmp::Ordering::Less) {
+    // An uncertainty that is not a number (no fold estimate) says nothing
+    // is pinned down.
+    if std.is_some_and(|s| !s.is_finite())
+        || (std.is_some() && sd.partial_cmp(&value.abs()) != Some(std::cmp::Ordering::Less))
+    {
         return ParamStatus::NotIdentified;
     }
     ParamStatus::Identified
@@ -126,7 +165,7 @@ impl Decision {
 /// The per-fold plant files of the fit restricted to `set` (refitted on
 /// the same regressors), the wind knob included.
 fn fold_configs(fit: &Fit, set: &[Effect], robot: &RobotConfig) -> Vec<PlantConfig> {
-    let idx = select::columns_for(&fit.layout, set);
+    let idx = fit.columns_of(set);
     (0..FOLDS)
         .map(|f| {
             let theta = fit.stats.solve(&idx, &|s| fold_of(s) != f);
@@ -314,34 +353,35 @@ fn thrust_to_mass(fit: &Fit) -> (f64, f64) {
     (ratio(&fit.theta), sd)
 }
 
-/// Wind without an identified rotor drag: only the product is identified
-/// (no airspeed variation to separate them).
+/// Wind without an identified drag: the wind speed is only known through
+/// a drag coefficient (no airspeed variation to separate them), so what is
+/// identified is the steady force, not the wind behind it.
 fn wind_failure(fit: &Fit, e: Effect) -> Option<String> {
     if e != Effect::Wind {
         return None;
     }
     let drag = effect_parameters(fit, Effect::Drag, true);
-    let kr = drag.iter().find(|p| p.name == "rotor_drag")?;
-    let status = param_status(kr.value, kr.std, range_of("drag", "rotor_drag"));
-    if status == ParamStatus::Identified {
+    let identified = |p: &crate::explanation::Parameter| {
+        param_status(p.value, p.std, range_of("drag", &p.name)) == ParamStatus::Identified
+    };
+    if drag.iter().any(identified) {
         return None;
     }
-    let c = fit.layout.columns(Effect::Wind).start;
-    // The column's coefficient is rotor_drag x (wind - the refined knob).
-    let coef = |j: usize| {
-        fit.idx
-            .iter()
-            .position(|i| *i == c + j)
-            .map_or(0.0, |p| fit.theta[p])
-            + kr.value * fit.knobs.wind[j]
-    };
+    let listed: Vec<String> = drag
+        .iter()
+        .map(|p| {
+            format!(
+                "{} = {:.4} +- {:.4}",
+                p.name,
+                p.value,
+                p.std.unwrap_or(f64::NAN)
+            )
+        })
+        .collect();
     Some(format!(
-        "drag and wind not separable (rotor_drag = {:.4} +- {:.4} not identified): the identified \
-         combination is rotor_drag x wind = ({:.4}, {:.4}) N per unit command",
-        kr.value,
-        kr.std.unwrap_or(f64::NAN),
-        coef(0),
-        coef(1)
+        "drag and wind not separable (no drag coefficient identified: {}): the steady \
+         force is identified, not the wind speed behind it",
+        listed.join(", ")
     ))
 }
 
@@ -382,6 +422,18 @@ mod tests {
         let r = Some((-0.5, 0.5));
         assert_eq!(param_status(0.1, Some(0.01), r), ParamStatus::Identified);
         assert_eq!(param_status(0.1, Some(0.2), r), ParamStatus::NotIdentified);
+        assert_eq!(
+            param_status(0.1, Some(f64::INFINITY), r),
+            ParamStatus::NotIdentified
+        );
+        assert_eq!(
+            param_status(0.1, Some(f64::NAN), r),
+            ParamStatus::NotIdentified
+        );
+        assert_eq!(
+            param_status(0.9, Some(f64::INFINITY), r),
+            ParamStatus::OutOfRange
+        );
         assert_eq!(param_status(0.5, Some(0.01), r), ParamStatus::NotIdentified);
         assert_eq!(param_status(-0.95, Some(0.3), r), ParamStatus::OutOfRange);
         assert_eq!(

@@ -1,6 +1,7 @@
 //! Stage 4, fit: the selected effects' coefficients on all data, their
 //! delete-a-fold jackknife deviations and the per-fold fits (for held-out
-//! predictions), with the wind refined in the drag regressors.
+//! predictions), at the wind profiled before the selection
+//! ([`super::wind`]).
 
 use nalgebra::DVector;
 
@@ -9,9 +10,11 @@ use crate::physical::Physical;
 use crate::recording::Recording;
 use crate::select::{self, Stats, fold_of};
 use crate::stages::select::stats_of;
+use crate::stages::wind::WindProfile;
 use crate::stages::{Residuals, Selection};
 
-/// How many times the wind is fed back into the drag regressors.
+/// Gauss-Newton steps of the wind on the rotor-drag columns when no wind
+/// was profiled.
 const WIND_REFINEMENTS: usize = 3;
 
 /// The fitted model.
@@ -20,8 +23,12 @@ pub struct Fit {
     pub layout: Layout,
     /// The effects in the model (drag added when wind was selected), sorted.
     pub chosen: Vec<Effect>,
-    /// Regressor settings: motor-lag tau and the refined wind.
+    /// Regressor settings: motor-lag tau and the profiled wind.
     pub knobs: Knobs,
+    /// The wind's profile (before the selection), when wind was selected
+    /// at it: the wind is the knob, not a linear coefficient (its columns
+    /// stay out of the fit).
+    pub wind: Option<WindProfile>,
     pub columns: Columns,
     pub stats: Stats,
     /// Columns of `chosen`, their coefficients on all data and jackknife
@@ -58,7 +65,11 @@ impl Fit {
     pub fn restrict(&mut self, kept: &[Effect]) {
         let mut chosen = kept.to_vec();
         chosen.sort();
-        let (idx, theta, sd) = select::fit_with_uncertainty(&self.stats, &self.layout, &chosen);
+        if !chosen.contains(&Effect::Wind) {
+            self.wind = None;
+        }
+        let (idx, theta, sd) =
+            select::fit_with_uncertainty_of(&self.stats, self.columns_of(&chosen));
         let mut physical =
             Physical::from_theta(&self.layout, &chosen, &idx, &theta, self.knobs.tau);
         if let Some(w) = physical.wind.as_mut() {
@@ -73,6 +84,12 @@ impl Fit {
         self.theta = theta;
         self.sd = sd;
         self.physical = physical;
+    }
+
+    /// The fit's columns of the effects `set`: the wind, when profiled, is
+    /// the knob and has none.
+    pub fn columns_of(&self, set: &[Effect]) -> Vec<usize> {
+        model_columns(&self.layout, set, self.wind.is_some())
     }
 
     /// The held-out prediction of the fitted effects: entry `i` of the
@@ -105,31 +122,43 @@ pub fn fit_effects(res: &Residuals, rec: &Recording, sel: Selection) -> Fit {
         mut columns,
         mut stats,
         mut chosen,
+        wind: wind_profile,
         ..
     } = sel;
     let prep = &res.prep;
-    // Wind is defined relative to drag.
+    // Wind is defined relative to drag, and drag at a wind claims it.
     if chosen.contains(&Effect::Wind) && !chosen.contains(&Effect::Drag) {
         chosen.push(Effect::Drag);
     }
-    chosen.sort();
-    // Refine the wind in the drag regressors (body drag is quadratic in it).
-    if chosen.contains(&Effect::Wind) {
-        for _ in 0..WIND_REFINEMENTS {
-            let (idx, theta, _) = select::fit_with_uncertainty(&stats, &layout, &chosen);
-            let phys = Physical::from_theta(&layout, &chosen, &idx, &theta, knobs.tau);
-            let w = phys.wind.unwrap_or([0.0; 2]);
-            let kr = phys.drag.map_or(0.0, |d| d[0]);
-            if kr <= 1e-3 {
-                break;
-            }
-            knobs.wind = [knobs.wind[0] + w[0], knobs.wind[1] + w[1]];
-            drop(columns);
-            columns = build_columns(prep, rec, &knobs, &accel);
-            stats = stats_of(&columns, &weights, &res.seg_of, res.nseg);
-        }
+    if chosen.contains(&Effect::Drag) && !chosen.contains(&Effect::Wind) && knobs.wind != [0.0; 2] {
+        chosen.push(Effect::Wind);
     }
-    let (idx, theta, sd) = select::fit_with_uncertainty(&stats, &layout, &chosen);
+    chosen.sort();
+    // The wind profiled before the selection is the wind of the fit (its
+    // drag columns were built at it). Without one, the rotor drag's linear
+    // wind columns are fed back (Gauss-Newton on `k_r w`).
+    let wind = if chosen.contains(&Effect::Wind) {
+        if wind_profile.is_none() {
+            for _ in 0..WIND_REFINEMENTS {
+                let (idx, theta, _) = select::fit_with_uncertainty(&stats, &layout, &chosen);
+                let phys = Physical::from_theta(&layout, &chosen, &idx, &theta, knobs.tau);
+                let w = phys.wind.unwrap_or([0.0; 2]);
+                let kr = phys.drag.map_or(0.0, |d| d[0]);
+                if kr <= 1e-3 {
+                    break;
+                }
+                knobs.wind = [knobs.wind[0] + w[0], knobs.wind[1] + w[1]];
+                drop(columns);
+                columns = build_columns(prep, rec, &knobs, &accel);
+                stats = stats_of(&columns, &weights, &res.seg_of, res.nseg);
+            }
+        }
+        wind_profile
+    } else {
+        None
+    };
+    let idx = model_columns(&layout, &chosen, wind.is_some());
+    let (idx, theta, sd) = select::fit_with_uncertainty_of(&stats, idx);
     let mut physical = Physical::from_theta(&layout, &chosen, &idx, &theta, knobs.tau);
     if let Some(w) = physical.wind.as_mut() {
         w[0] += knobs.wind[0];
@@ -142,6 +171,7 @@ pub fn fit_effects(res: &Residuals, rec: &Recording, sel: Selection) -> Fit {
         layout,
         chosen,
         knobs,
+        wind,
         columns,
         stats,
         idx,
@@ -150,4 +180,14 @@ pub fn fit_effects(res: &Residuals, rec: &Recording, sel: Selection) -> Fit {
         fold_theta,
         physical,
     }
+}
+
+/// Columns of the effects `set`, without the wind's when it is profiled.
+fn model_columns(layout: &Layout, set: &[Effect], wind_profiled: bool) -> Vec<usize> {
+    let set: Vec<Effect> = set
+        .iter()
+        .copied()
+        .filter(|e| !(wind_profiled && *e == Effect::Wind))
+        .collect();
+    select::columns_for(layout, &set)
 }

@@ -18,14 +18,18 @@ mod report;
 mod residuals;
 mod select;
 mod validate;
+pub(crate) mod wind;
 
 #[cfg(test)]
 mod tests;
 
-pub use accept::{Decision, ParamStatus, RANGES, accept_effects, param_status, range_of};
+pub use accept::{
+    Decision, ParamStatus, RANGES, accept_effects, coefficient_bounds, param_status, range_of,
+};
 pub use fit::{Fit, fit_effects};
 pub use locate::{Mismatch, locate_mismatch, rms_table};
 pub use report::{Findings, effect_reports, gain_grid, notes, plot_series, report, verdict};
 pub use residuals::Residuals;
 pub use select::{BaseRegressors, LagProfile, Selection, profile_motor_lag, select_effects};
 pub use validate::{Validation, validate};
+pub use wind::WindProfile;

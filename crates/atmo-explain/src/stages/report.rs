@@ -38,15 +38,22 @@ pub fn effect_reports(
     decisions: &[(Effect, Decision)],
 ) -> (Vec<EffectReport>, Vec<(String, String)>) {
     let active = vec![true; fit.stats.nseg()];
-    let (stats, layout, chosen) = (&fit.stats, &fit.layout, &fit.chosen);
-    let cv = |set: &[Effect]| stats.cv(&select::columns_for(layout, set), &active);
+    let (stats, chosen) = (&fit.stats, &fit.chosen);
+    let cv = |set: &[Effect]| stats.cv(&fit.columns_of(set), &active);
     let entries = stats.entries_in(&active).max(1) as f64;
     let cv_sel = stats.cv(&fit.idx, &active);
     let mut reports = Vec::new();
     let mut pairs: Vec<(String, String)> = Vec::new();
     for &e in &Effect::ALL {
         let selected = chosen.contains(&e);
-        let conf = confidence.iter().find(|c| c.0 == e).map_or(0.0, |c| c.1);
+        // A profiled wind is the knob of the drag's columns: one finding
+        // with the drag, whose inclusion frequency is its confidence.
+        let of = if e == Effect::Wind && fit.wind.is_some() {
+            Effect::Drag
+        } else {
+            e
+        };
+        let conf = confidence.iter().find(|c| c.0 == of).map_or(0.0, |c| c.1);
         let gain = if selected {
             let rest: Vec<Effect> = chosen.iter().copied().filter(|x| *x != e).collect();
             (cv(&rest) - cv_sel) / entries
@@ -150,6 +157,20 @@ pub(crate) fn effect_parameters(fit: &Fit, e: Effect, selected: bool) -> Vec<Par
                 "1 (1 = consistent)",
             ),
         ],
+        Effect::Wind if selected && fit.wind.is_some() => {
+            let sd = fit.wind.as_ref().map_or([f64::NAN; 2], |p| p.sd);
+            ["x", "y"]
+                .iter()
+                .enumerate()
+                .map(|(j, axis)| Parameter {
+                    identified: true,
+                    name: format!("steady_{axis}"),
+                    value: fit.knobs.wind[j],
+                    std: Some(sd[j]),
+                    unit: "m/s (NED)".into(),
+                })
+                .collect()
+        }
         Effect::Wind => {
             let kr = coef(layout.columns(Effect::Drag).start).0;
             ["x", "y"]
@@ -197,13 +218,15 @@ pub(crate) fn effect_parameters(fit: &Fit, e: Effect, selected: bool) -> Vec<Par
                 Effect::Drag => (
                     &[
                         "rotor_drag",
+                        "axial_drag",
                         "body_cd_area_x",
                         "body_cd_area_y",
                         "body_cd_area_z",
                     ],
-                    &["N/(m/s)", "m^2", "m^2", "m^2"],
+                    &["N/(m/s)", "N/(m/s)", "m^2", "m^2", "m^2"],
                 ),
                 Effect::ComOffset => (&["offset_x", "offset_y"], &["m", "m"]),
+                Effect::ThrustAxis => (&["tilt_x", "tilt_y"], &["rad", "rad"]),
                 Effect::ThrustScale => (&["scale_minus_one"], &["1"]),
                 Effect::ThrustCurve => (&["quadratic_share"], &["1"]),
                 Effect::InertiaError => (&["inertia_scale_minus_one"], &["1"]),

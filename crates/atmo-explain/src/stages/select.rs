@@ -12,6 +12,7 @@ use crate::locate;
 use crate::recording::Recording;
 use crate::select::{self, Stats, Step};
 use crate::stages::Residuals;
+use crate::stages::wind::WindProfile;
 
 /// Motor-lag time constants of the profile (s): 4 ms x 1.4^i.
 fn profile_taus() -> Vec<f64> {
@@ -142,8 +143,11 @@ pub(crate) fn best_tau_for_test(profile: &[(f64, f64)]) -> f64 {
 #[derive(Debug, Clone)]
 pub struct Selection {
     pub layout: Layout,
-    /// The regressors' nonlinear settings (tau from the profile, no wind).
+    /// The regressors' nonlinear settings (tau and the wind from their
+    /// profiles).
     pub knobs: Knobs,
+    /// The wind's profile, when its optimum lies inside the search.
+    pub wind: Option<WindProfile>,
     /// Filtered accelerations the mass-property columns use: the nominal
     /// model's, plus the pass-1 fit when anything was selected.
     pub accel: Vec<f64>,
@@ -162,7 +166,7 @@ pub struct Selection {
 pub fn select_effects(res: &Residuals, rec: &Recording, tau: f64) -> Selection {
     let prep = &res.prep;
     let active = res.all_segments();
-    let knobs = Knobs {
+    let mut knobs = Knobs {
         tau,
         wind: [0.0; 2],
     };
@@ -173,6 +177,26 @@ pub fn select_effects(res: &Residuals, rec: &Recording, tau: f64) -> Selection {
     let mut accel = prep.nominal.clone();
     let mut columns = build_columns(prep, rec, &knobs, &accel);
     let mut stats = stats_of(&columns, &weights, &res.seg_of, res.nseg);
+    // The drag candidate on the air-relative velocity: a steady wind is
+    // only a candidate if the drag at some wind explains its force, which
+    // the linear columns at no wind cannot show (body and axial drag are
+    // not linear in it); otherwise other candidates take the wind's force.
+    let pre = crate::stages::wind::profile_wind(
+        prep,
+        rec,
+        tau,
+        &layout,
+        &columns.data,
+        &stats,
+        &weights,
+        &res.seg_of,
+    );
+    let wind = pre.is_interior().then(|| {
+        knobs.wind = pre.wind;
+        columns = build_columns(prep, rec, &knobs, &accel);
+        stats = stats_of(&columns, &weights, &res.seg_of, res.nseg);
+        pre
+    });
     let (mut chosen, mut steps) = select::select(&stats, &layout, &Effect::ALL, &active);
     if !chosen.is_empty() {
         let idx = select::columns_for(&layout, &chosen);
@@ -206,6 +230,7 @@ pub fn select_effects(res: &Residuals, rec: &Recording, tau: f64) -> Selection {
     Selection {
         layout,
         knobs,
+        wind,
         accel,
         weights,
         columns,
@@ -232,6 +257,12 @@ pub(crate) fn stats_of(
 ) -> Stats {
     let cols: Vec<&[f64]> = columns.data.iter().map(Vec::as_slice).collect();
     let mut stats = Stats::build(&cols, &columns.resid, weights, seg_of, nseg);
+    for e in Effect::ALL {
+        let bounds = crate::stages::coefficient_bounds(e);
+        for (j, b) in columns.layout.columns(e).zip(bounds) {
+            stats.bounds[j] = b;
+        }
+    }
     let ge = columns.layout.columns(Effect::GroundEffect);
     let mut diag: Vec<f64> = ge
         .clone()

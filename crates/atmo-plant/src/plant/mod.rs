@@ -183,6 +183,8 @@ pub struct Plant {
     wind: Option<Wind>,
     battery: Option<BatterySagConfig>,
     com_offset: Option<Vector3<f64>>,
+    /// Rotation vector (body x, y) of the thrust against the body frame.
+    thrust_axis: Option<Vector3<f64>>,
     mass_error: Option<(f64, f64)>,
     contact: Option<(ContactLaw, Drive, GroundContactConfig)>,
     corners: [Vector3<f64>; 8],
@@ -285,6 +287,11 @@ impl Plant {
             .as_ref()
             .filter(|e| e.enabled)
             .map(|e| Vector3::from(e.offset));
+        let thrust_axis = fx
+            .thrust_axis
+            .as_ref()
+            .filter(|e| e.enabled)
+            .map(|e| Vector3::new(e.tilt[0], e.tilt[1], 0.0));
         let mass_error = fx
             .mass_error
             .as_ref()
@@ -365,6 +372,7 @@ impl Plant {
             wind,
             battery,
             com_offset,
+            thrust_axis,
             mass_error,
             contact,
             corners,

@@ -662,6 +662,11 @@ impl Plant {
             }
         }
 
+        if let Some(tilt) = &self.thrust_axis {
+            let f = tilt.cross(&(body.thrust_force * u_eff));
+            extra += Vector6::new(f.x, f.y, f.z, 0.0, 0.0, 0.0);
+        }
+
         let acc = accelerations(body, &x, &att, &u_eff, &extra);
         d.fixed_rows_mut::<12>(0)
             .copy_from(&state_derivative(&x, &att, &acc));

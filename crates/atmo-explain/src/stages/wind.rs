@@ -1,0 +1,418 @@
+//! The steady wind, profiled before the selection (part of stage 3).
+//!
+//! Drag acts on the velocity relative to the air, `v - w`. The rotor drag
+//! is linear in it, so `k_r w` has linear columns; but the wind behind them
+//! is `k_r w / k_r`, noise where the rotor drag is small (776 m/s was
+//! printed on a real flight), and a wind that acts through the thrust lost
+//! to axial inflow has no linear column at no wind at all. Selected at no
+//! wind, a real wind's force was taken by the ground effect, the motor
+//! lag, the inertia and the thrust scale (docs/explain.md). So the wind is
+//! a nonlinear parameter, like the motor-lag time constant, profiled
+//! before the selection:
+//!
+//! ```text
+//! RSS(w) = min_theta |W_F (r - X_cal theta_c - X_lin(w) theta_d)|^2
+//! ```
+//!
+//! - `X_lin(w)`: the linear drag columns at the trial wind, rotor drag in
+//!   the disc plane and thrust lost to axial inflow, both proportional to
+//!   the rotor's thrust (coefficients held non-negative). The quadratic
+//!   body drag is left out of the profile: its wind dependence is biased by
+//!   the velocity noise (`E[|v + n| (v + n)]` is not `|v| v`) and, quadratic
+//!   in a trial wind, it fits almost anything at a large one.
+//! - `X_cal`: the calibration a flight always needs beside it (thrust scale
+//!   and curve, the thrust axis: [`PROFILE_COMPANIONS`]). A constant
+//!   sideways force is the thrust axis's, not a wind's.
+//! - `W_F`: the force channels only. A steady wind acts through forces; the
+//!   drag's torques hang on arm lengths and inertias that approximate robot
+//!   files guess, and the differential rotor terms of a large trial wind
+//!   then fit the torque model's errors.
+//!
+//! `RSS` is minimized on a polar grid (speeds to [`SEARCH_LIMIT`], past the
+//! physical range, so that a fit at or beyond the bound is seen as such)
+//! refined by a pattern search. The delete-a-fold jackknife of the wind
+//! comes from the same profile restricted to the other folds, each
+//! minimized on a local quadratic fit around the optimum (a fold whose
+//! profile is not convex there gives an infinite deviation: not
+//! identified). The selection and the fit then build every drag column at
+//! the profiled wind.
+
+use nalgebra::{DMatrix, DVector, SMatrix, SVector};
+
+use atmo_core::model::Input;
+
+use crate::data::Prepared;
+use crate::effects::{Effect, Layout, drag_columns};
+use crate::recording::Recording;
+use crate::select::{self, FOLDS, Stats, fold_of};
+
+/// Most rows the profile uses (a long recording is profiled on evenly
+/// spaced stretches of it: the wind is one steady vector).
+const PROFILE_MAX_ROWS: usize = 15_000;
+/// Rows of one such stretch.
+const PROFILE_STRETCH_ROWS: usize = 1_500;
+/// Largest trial wind speed (m/s): past the 15 m/s physical bound.
+pub const SEARCH_LIMIT: f64 = 24.0;
+/// The linear drag columns (rotor drag in the disc plane, axial inflow):
+/// the first two of the drag effect's.
+const LINEAR_DRAG: usize = 5;
+/// The calibration profiled with the drag.
+pub const PROFILE_COMPANIONS: [Effect; 3] =
+    [Effect::ThrustScale, Effect::ThrustCurve, Effect::ThrustAxis];
+/// Speeds of the coarse polar grid (m/s).
+const COARSE_SPEED_STEP: f64 = 3.0;
+/// Directions of the coarse polar grid.
+const COARSE_DIRECTIONS: usize = 16;
+/// First and last step of the pattern search (m/s).
+const PATTERN_STEPS: (f64, f64) = (1.5, 0.005);
+/// Spacing of the local grid the jackknife's quadratics are fitted on (m/s).
+const LOCAL_SPACING: f64 = 0.1;
+
+/// The profiled wind.
+#[derive(Debug, Clone)]
+pub struct WindProfile {
+    /// The wind of the least residual (NED x, y), m/s.
+    pub wind: [f64; 2],
+    /// Delete-a-fold jackknife deviation (infinite where a fold's profile
+    /// has no minimum near the optimum).
+    pub sd: [f64; 2],
+    /// Residual sum of squares at the optimum and without wind (weighted).
+    pub rss: f64,
+    pub rss_no_wind: f64,
+    /// Trial winds evaluated.
+    pub evaluations: usize,
+}
+
+impl WindProfile {
+    /// The optimum lies inside the search (not at its edge).
+    pub fn is_interior(&self) -> bool {
+        self.wind[0].hypot(self.wind[1]) < SEARCH_LIMIT - COARSE_SPEED_STEP / 2.0
+    }
+}
+
+/// The selected effects' statistics with the drag columns rebuilt per
+/// trial wind.
+struct Profiler<'a> {
+    prep: &'a Prepared,
+    rec: &'a Recording,
+    /// Rotor thrusts (commands lagged by the profiled motor lag).
+    thrust: Vec<Input>,
+    /// The stretches profiled, and the segment of each row used in them.
+    stretches: Vec<(usize, usize)>,
+    seg_of: Vec<Option<usize>>,
+    fixed: Vec<&'a [f64]>,
+    /// Bounds of the drag coefficients profiled.
+    drag_bounds: [(f64, f64); LINEAR_DRAG],
+    /// The fixed columns' statistics on the rows used.
+    fixed_stats: Stats,
+    resid: &'a [f64],
+    weights: Vec<f64>,
+    evaluations: usize,
+}
+
+impl Profiler<'_> {
+    /// Statistics of `[fixed, drag(wind)]`.
+    fn stats_at(&mut self, wind: [f64; 2]) -> Stats {
+        self.evaluations += 1;
+        let drag = drag_columns(self.prep, self.rec, &self.thrust, wind, &self.stretches);
+        let pf = self.fixed.len();
+        let p = pf + LINEAR_DRAG;
+        let nseg = self.fixed_stats.nseg();
+        let mut out = Stats {
+            p,
+            g: vec![DMatrix::zeros(p, p); nseg],
+            b: vec![DVector::zeros(p); nseg],
+            yy: self.fixed_stats.yy.clone(),
+            entries: self.fixed_stats.entries.clone(),
+            prior: DMatrix::zeros(p, p),
+            bounds: self
+                .fixed_stats
+                .bounds
+                .iter()
+                .copied()
+                .chain(self.drag_bounds)
+                .collect(),
+        };
+        out.prior
+            .view_mut((0, 0), (pf, pf))
+            .copy_from(&self.fixed_stats.prior);
+        for s in 0..nseg {
+            out.g[s]
+                .view_mut((0, 0), (pf, pf))
+                .copy_from(&self.fixed_stats.g[s]);
+            out.b[s].rows_mut(0, pf).copy_from(&self.fixed_stats.b[s]);
+        }
+        let mut xf = vec![0.0; pf];
+        for (k, seg) in self.seg_of.iter().enumerate() {
+            let Some(s) = *seg else { continue };
+            let mut gdd = SMatrix::<f64, LINEAR_DRAG, LINEAR_DRAG>::zeros();
+            let mut bd = SVector::<f64, LINEAR_DRAG>::zeros();
+            let (g, b) = (&mut out.g[s], &mut out.b[s]);
+            for c in 0..6 {
+                let i = 6 * k + c;
+                let w = self.weights[i];
+                let xd: [f64; LINEAR_DRAG] = std::array::from_fn(|m| drag[m][i] * w);
+                if xd.iter().all(|v| *v == 0.0) {
+                    continue;
+                }
+                for (j, col) in self.fixed.iter().enumerate() {
+                    xf[j] = col[i] * w;
+                }
+                let y = self.resid[i] * w;
+                for m in 0..LINEAR_DRAG {
+                    bd[m] += xd[m] * y;
+                    for l in m..LINEAR_DRAG {
+                        gdd[(m, l)] += xd[m] * xd[l];
+                    }
+                    for (j, x) in xf.iter().enumerate() {
+                        g[(j, pf + m)] += x * xd[m];
+                    }
+                }
+            }
+            for m in 0..LINEAR_DRAG {
+                b[pf + m] += bd[m];
+                for l in m..LINEAR_DRAG {
+                    g[(pf + m, pf + l)] += gdd[(m, l)];
+                    g[(pf + l, pf + m)] = g[(pf + m, pf + l)];
+                }
+                for j in 0..pf {
+                    g[(pf + m, j)] = g[(j, pf + m)];
+                }
+            }
+        }
+        out
+    }
+
+    /// Residual sums of squares at `wind`: on all segments, and per fold
+    /// on the other folds (fitted and scored there).
+    fn rss(&mut self, wind: [f64; 2]) -> (f64, [f64; FOLDS]) {
+        let stats = self.stats_at(wind);
+        let all: Vec<usize> = (0..stats.p).collect();
+        let score = |use_seg: &dyn Fn(usize) -> bool| {
+            let theta = stats.solve(&all, use_seg);
+            (0..stats.nseg())
+                .filter(|&s| use_seg(s))
+                .map(|s| stats.sse(&all, &theta, s))
+                .sum::<f64>()
+        };
+        let total = score(&|_| true);
+        let folds = std::array::from_fn(|f| score(&|s| fold_of(s) != f));
+        (total, folds)
+    }
+}
+
+/// Profiles the wind with the linear drag and [`PROFILE_COMPANIONS`],
+/// given the columns and statistics built at no wind.
+pub fn profile_wind(
+    prep: &Prepared,
+    rec: &Recording,
+    tau: f64,
+    layout: &Layout,
+    columns: &[Vec<f64>],
+    stats: &Stats,
+    weights: &[f64],
+    seg_of: &[Option<usize>],
+) -> WindProfile {
+    let rest = PROFILE_COMPANIONS;
+    let fixed_idx = select::columns_for(layout, &rest);
+    let weights: Vec<f64> = weights
+        .iter()
+        .enumerate()
+        .map(|(i, w)| if i % 6 < 3 { *w } else { 0.0 })
+        .collect();
+    let (stretches, seg_of) = stretches(prep, seg_of);
+    let fixed: Vec<&[f64]> = fixed_idx.iter().map(|&j| columns[j].as_slice()).collect();
+    let mut fixed_stats = Stats::build(&fixed, &prep.resid, &weights, &seg_of, stats.nseg());
+    fixed_stats.prior = stats
+        .prior
+        .select_rows(&fixed_idx)
+        .select_columns(&fixed_idx);
+    fixed_stats.bounds = fixed_idx.iter().map(|&j| stats.bounds[j]).collect();
+    let drag = layout.columns(Effect::Drag).start;
+    let drag_bounds = std::array::from_fn(|m| stats.bounds[drag + m]);
+    let mut prof = Profiler {
+        prep,
+        rec,
+        thrust: crate::data::lagged_commands(&prep.t, &prep.u_eff, tau),
+        stretches,
+        seg_of,
+        fixed,
+        drag_bounds,
+        fixed_stats,
+        resid: &prep.resid,
+        weights,
+        evaluations: 0,
+    };
+    // Coarse polar grid.
+    let rss_no_wind = prof.rss([0.0; 2]).0;
+    let mut best = ([0.0; 2], rss_no_wind);
+    let mut speed = COARSE_SPEED_STEP;
+    while speed <= SEARCH_LIMIT + 1e-9 {
+        for d in 0..COARSE_DIRECTIONS {
+            let a = std::f64::consts::TAU * d as f64 / COARSE_DIRECTIONS as f64;
+            let w = [speed * a.cos(), speed * a.sin()];
+            let r = prof.rss(w).0;
+            if r < best.1 {
+                best = (w, r);
+            }
+        }
+        speed += COARSE_SPEED_STEP;
+    }
+    // Pattern search.
+    let mut step = PATTERN_STEPS.0;
+    while step >= PATTERN_STEPS.1 {
+        let mut moved = false;
+        for (dx, dy) in [
+            (1, 0),
+            (-1, 0),
+            (0, 1),
+            (0, -1),
+            (1, 1),
+            (1, -1),
+            (-1, 1),
+            (-1, -1),
+        ] {
+            let w = [
+                best.0[0] + step * f64::from(dx),
+                best.0[1] + step * f64::from(dy),
+            ];
+            if w[0].hypot(w[1]) > SEARCH_LIMIT {
+                continue;
+            }
+            let r = prof.rss(w).0;
+            if r < best.1 {
+                best = (w, r);
+                moved = true;
+            }
+        }
+        if !moved {
+            step *= 0.5;
+        }
+    }
+    // Jackknife: each fold's profile on a local 5 x 5 grid, its quadratic's
+    // minimum.
+    let mut points = Vec::with_capacity(25);
+    for i in -2..=2 {
+        for j in -2..=2 {
+            let d = [LOCAL_SPACING * f64::from(i), LOCAL_SPACING * f64::from(j)];
+            let (_, folds) = prof.rss([best.0[0] + d[0], best.0[1] + d[1]]);
+            points.push((d, folds));
+        }
+    }
+    let fold_winds: Vec<Option<[f64; 2]>> = (0..FOLDS)
+        .map(|f| {
+            let pts: Vec<([f64; 2], f64)> = points.iter().map(|(d, r)| (*d, r[f])).collect();
+            quadratic_minimum(&pts).map(|d| [best.0[0] + d[0], best.0[1] + d[1]])
+        })
+        .collect();
+    let sd = jackknife_sd(&fold_winds);
+    WindProfile {
+        wind: best.0,
+        sd,
+        rss: best.1,
+        rss_no_wind,
+        evaluations: prof.evaluations,
+    }
+}
+
+/// The stretches of the runs the profile uses and the segment of each row
+/// in them: every run up to [`PROFILE_MAX_ROWS`] rows in all; past that,
+/// evenly spaced stretches of [`PROFILE_STRETCH_ROWS`], each row at least
+/// the filter's half window from a stretch's ends (where its filtered
+/// columns equal the whole run's).
+fn stretches(
+    prep: &Prepared,
+    seg_of: &[Option<usize>],
+) -> (Vec<(usize, usize)>, Vec<Option<usize>>) {
+    let total: usize = prep.runs.iter().map(|(s, e)| e - s).sum();
+    if total <= PROFILE_MAX_ROWS {
+        return (prep.runs.clone(), seg_of.to_vec());
+    }
+    let pieces: Vec<(usize, usize)> = prep
+        .runs
+        .iter()
+        .flat_map(|&(s, e)| {
+            (s..e)
+                .step_by(PROFILE_STRETCH_ROWS)
+                .map(move |a| (a, (a + PROFILE_STRETCH_ROWS).min(e)))
+        })
+        .filter(|(a, b)| b - a > 2 * prep.half + 1)
+        .collect();
+    let keep = (pieces.len() * PROFILE_STRETCH_ROWS)
+        .div_ceil(PROFILE_MAX_ROWS)
+        .max(1);
+    let chosen: Vec<(usize, usize)> = pieces.into_iter().step_by(keep).collect();
+    let mut used = vec![None; seg_of.len()];
+    for &(a, b) in &chosen {
+        for k in a + prep.half..b - prep.half {
+            used[k] = seg_of[k];
+        }
+    }
+    (chosen, used)
+}
+
+/// The minimum of the least-squares quadratic through `(d, r)` points, if
+/// the quadratic is convex.
+fn quadratic_minimum(points: &[([f64; 2], f64)]) -> Option<[f64; 2]> {
+    let n = points.len();
+    let x = DMatrix::from_fn(n, 6, |i, j| {
+        let [a, b] = points[i].0;
+        [1.0, a, b, a * a, a * b, b * b][j]
+    });
+    let y = DVector::from_iterator(n, points.iter().map(|p| p.1));
+    let c = (x.transpose() * &x).cholesky()?.solve(&(x.transpose() * y));
+    // r = c0 + c1 a + c2 b + c3 a^2 + c4 ab + c5 b^2: gradient 0 at H d = -g.
+    let h = nalgebra::Matrix2::new(2.0 * c[3], c[4], c[4], 2.0 * c[5]);
+    if h[(0, 0)] <= 0.0 || h.determinant() <= 0.0 {
+        return None;
+    }
+    let d = h.try_inverse()? * nalgebra::Vector2::new(-c[1], -c[2]);
+    d.iter().all(|v| v.is_finite()).then(|| [d[0], d[1]])
+}
+
+/// Delete-a-fold jackknife deviation of the fold estimates (infinite if any
+/// fold has none).
+fn jackknife_sd(folds: &[Option<[f64; 2]>]) -> [f64; 2] {
+    let Some(w): Option<Vec<[f64; 2]>> = folds.iter().copied().collect() else {
+        return [f64::INFINITY; 2];
+    };
+    let k = w.len() as f64;
+    if k < 2.0 {
+        return [f64::INFINITY; 2];
+    }
+    std::array::from_fn(|j| {
+        let mean = w.iter().map(|x| x[j]).sum::<f64>() / k;
+        ((k - 1.0) / k * w.iter().map(|x| (x[j] - mean).powi(2)).sum::<f64>()).sqrt()
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_quadratic_minimum_of_a_bowl_is_its_centre_and_a_saddle_has_none() {
+        let bowl: Vec<([f64; 2], f64)> = (-2..=2)
+            .flat_map(|i| (-2..=2).map(move |j| [0.5 * f64::from(i), 0.5 * f64::from(j)]))
+            .map(|d| (d, 3.0 + 2.0 * (d[0] - 0.3).powi(2) + (d[1] + 0.7).powi(2)))
+            .collect();
+        let m = quadratic_minimum(&bowl).expect("a bowl has a minimum");
+        assert!(
+            (m[0] - 0.3).abs() < 1e-9 && (m[1] + 0.7).abs() < 1e-9,
+            "{m:?}"
+        );
+        let saddle: Vec<([f64; 2], f64)> = bowl
+            .iter()
+            .map(|(d, _)| (*d, d[0] * d[0] - d[1] * d[1]))
+            .collect();
+        assert!(quadratic_minimum(&saddle).is_none());
+    }
+
+    #[test]
+    fn a_fold_without_a_minimum_makes_the_deviation_infinite() {
+        let sd = jackknife_sd(&[Some([1.0, 2.0]), None, Some([1.0, 2.0])]);
+        assert!(sd.iter().all(|s| s.is_infinite()));
+        let sd = jackknife_sd(&[Some([1.0, 0.0]), Some([3.0, 0.0])]);
+        assert!((sd[0] - 1.0).abs() < 1e-12 && sd[1] == 0.0, "{sd:?}");
+    }
+}
