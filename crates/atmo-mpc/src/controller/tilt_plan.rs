@@ -17,8 +17,10 @@
 //!
 //! The landing objective, "the largest tilt at touchdown for a bounded
 //! impact speed": along the plan the wheels' clearance
-//! `c_k = min_i h_i(xbar_k, varphibar_k) - R_w sin(varphibar_k)` (hub
-//! heights above the ground plane minus the rim's reach) predicts the
+//! `c_k = min_i [h_i(xbar_k, varphibar_k) - R_w sqrt(1 - (n . a_i)^2)]` (hub
+//! heights above the ground plane along its normal `n` minus the rim's
+//! reach towards it; `R_w sin(varphibar_k)` on level ground, see
+//! [`wheel_clearance`]) predicts the
 //! touchdown at the fractional stage `s*` where it crosses zero (the last
 //! stage when it does not within the horizon). The cost adds
 //!
@@ -43,7 +45,9 @@
 use std::f64::consts::FRAC_PI_2;
 
 use atmo_core::ground_effect::ThrustGainSurface;
-use atmo_core::model::{Input, Model, State, TiltedBody, idx, rk4_step_sensitivity, sin_cos};
+use atmo_core::GroundPlane;
+use atmo_core::model::{Input, Model, State, TiltedBody, idx, rk4_step_sensitivity, rotation};
+use nalgebra::Vector3;
 
 use super::{Mpc, check_finite, hover_reference, wrap_angle};
 use crate::error::{MpcError, Result};
@@ -140,19 +144,25 @@ impl TiltPlanner {
     }
 }
 
-/// The wheels' clearance above the ground plane `z = ground_z` (NED, m) of
-/// `body` (frozen at its tilt `varphi`) in state `x`: the lowest rotor hub's
-/// height minus the rim's reach `wheel_radius sin(varphi)` below it.
-/// Allocation-free.
-pub fn wheel_clearance(body: &TiltedBody, ground_z: f64, x: &State, wheel_radius: f64) -> f64 {
-    let (sp, cp) = sin_cos(x[idx::PITCH]);
-    let (sr, cr) = sin_cos(x[idx::ROLL]);
-    let lowest_hub = body
-        .rotor_position
+/// The wheels' clearance above the ground plane `ground` of `body` (frozen
+/// at its tilt) in state `x`: over the four wheels, the smallest distance of
+/// a rim to the plane, each hub's signed height above the plane (along its
+/// normal) minus the rim's reach towards it, `R_w sqrt(1 - (n . a_i)^2)`
+/// (a rim of radius `R_w` about the hub, in the plane normal to the wheel's
+/// axle `a_i`, the rotor axis, in the world frame). On level ground with a
+/// level body the reach is `R_w sin(varphi)`. Allocation-free.
+pub fn wheel_clearance(body: &TiltedBody, ground: &GroundPlane, x: &State, wheel_radius: f64) -> f64 {
+    let rot = rotation(x[idx::YAW], x[idx::PITCH], x[idx::ROLL]);
+    let base = Vector3::new(x[idx::X], x[idx::Y], x[idx::Z]);
+    body.rotor_position
         .iter()
-        .map(|r| ground_z - (x[idx::Z] - sp * r.x + cp * sr * r.y + cp * cr * r.z))
-        .fold(f64::INFINITY, f64::min);
-    lowest_hub - wheel_radius * sin_cos(body.varphi).0
+        .zip(&body.rotor_axis)
+        .map(|(r, a)| {
+            let along = ground.normal.dot(&(rot * a));
+            let reach = wheel_radius * (1.0 - along * along).max(0.0).sqrt();
+            ground.height(&(base + rot * r)) - reach
+        })
+        .fold(f64::INFINITY, f64::min)
 }
 
 /// Where the plan's wheels meet the ground: the fractional stage at which
@@ -305,7 +315,7 @@ impl Mpc {
 
     /// The wheels' clearance above the ground plane at a plan stage, m.
     fn clearance(&self, x: &State, varphi: f64, wheel_radius: f64) -> f64 {
-        wheel_clearance(&self.model.at_tilt(varphi), self.ground_z, x, wheel_radius)
+        wheel_clearance(&self.model.at_tilt(varphi), &self.ground, x, wheel_radius)
     }
 
     /// The preparation's linearization for the tilt-planning QP: the
@@ -427,7 +437,66 @@ impl Mpc {
 
 #[cfg(test)]
 mod tests {
-    use super::touchdown_stage;
+    use super::{GroundPlane, State, Vector3, idx, touchdown_stage, wheel_clearance};
+    use atmo_core::{Model, RobotConfig};
+
+    #[test]
+    fn clearance_on_a_slope_is_the_lowest_rim_towards_the_plane() {
+        // Hand-computed: hubs at (+-0.2, +-0.15, 0.05) m (body), the wheels'
+        // axles (+-sin 70, 0, -cos 70) (the sign of the hub's x), base 0.5 m
+        // above the origin, level, yaw 0; the ground a 25 deg slope through
+        // the origin rising to +x, n = (-sin 25, 0, -cos 25). Uphill hubs:
+        // n . p = 0.2 (-sin 25) + 0.45 cos 25 = 0.3233149 m, reach
+        // 0.125 sqrt(1 - cos(95 deg)^2) = 0.1245243 m; downhill:
+        // 0.4923622 m and 0.125 sqrt(1 - cos(45 deg)^2) = 0.0883883 m.
+        let phi = 70f64.to_radians();
+        let mut body = Model::new(&RobotConfig::atmo()).at_tilt(phi);
+        for (i, (x, y)) in [(0.2, 0.15), (0.2, -0.15), (-0.2, 0.15), (-0.2, -0.15)]
+            .into_iter()
+            .enumerate()
+        {
+            body.rotor_position[i] = Vector3::new(x, y, 0.05);
+            body.rotor_axis[i] = Vector3::new(f64::signum(x) * phi.sin(), 0.0, -phi.cos());
+        }
+        let s = 25f64.to_radians();
+        let slope =
+            GroundPlane::new(Vector3::zeros(), Vector3::new(-s.sin(), 0.0, -s.cos())).unwrap();
+        let mut x = State::zeros();
+        x[idx::Z] = -0.5;
+        let c = wheel_clearance(&body, &slope, &x, 0.125);
+        assert!((c - 0.198_790_514_556_884).abs() < 1e-12, "{c}");
+        // The level ground measures hub heights minus R sin(70 deg): 0.45 - 0.1174616.
+        let level = wheel_clearance(&body, &GroundPlane::level(0.0), &x, 0.125);
+        assert!((level - (0.45 - 0.125 * phi.sin())).abs() < 1e-12, "{level}");
+        // Facing east (yaw 90 deg) the hubs lie across the slope: the
+        // highest-ground hubs are those at world x = +0.15.
+        x[idx::YAW] = std::f64::consts::FRAC_PI_2;
+        let across = wheel_clearance(&body, &slope, &x, 0.125);
+        let reach = 0.125 * (1.0 - (s.cos() * phi.cos()).powi(2)).sqrt();
+        let expected = -0.15 * s.sin() + 0.45 * s.cos() - reach;
+        assert!((across - expected).abs() < 1e-12, "{across} {expected}");
+    }
+
+    #[test]
+    fn level_clearance_is_the_lowest_hub_minus_the_rim_reach_of_the_tilt() {
+        // The model's own body (any tilt, level attitude): the hub heights
+        // minus R_w sin(varphi), as before the plane.
+        let model = Model::new(&RobotConfig::atmo());
+        let mut x = State::zeros();
+        x[idx::Z] = -0.4;
+        x[idx::YAW] = 0.7;
+        for deg in [0.0, 30.0, 50.0, 62.0, 70.0, 90.0] {
+            let body = model.at_tilt(f64::to_radians(deg));
+            let lowest = body
+                .rotor_position
+                .iter()
+                .map(|r| -0.1 - (x[idx::Z] + r.z))
+                .fold(f64::INFINITY, f64::min);
+            let expected = lowest - 0.125 * body.varphi.sin();
+            let c = wheel_clearance(&body, &GroundPlane::level(-0.1), &x, 0.125);
+            assert!((c - expected).abs() < 1e-12, "{deg} deg: {c} vs {expected}");
+        }
+    }
 
     #[test]
     fn touchdown_is_interpolated_where_the_clearance_crosses_zero() {
