@@ -77,6 +77,7 @@ impl Loop {
             pilot: self.pilot,
             ground_contact: false,
             ground_z: 0.0,
+            ground_normal: None,
             driver_lost: false,
         }
     }

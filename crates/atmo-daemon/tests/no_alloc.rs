@@ -93,6 +93,7 @@ fn flight_stack_allocations(ground_effect: GroundEffectSource) {
             pilot,
             ground_contact: false,
             ground_z: 0.0,
+            ground_normal: None,
             driver_lost: false,
         };
         // The first ticks warm the MPC up (start-up); count from tick 20 on.
@@ -319,6 +320,7 @@ fn logging_a_tick_does_not_allocate() {
         pilot: PilotInput::default(),
         ground_contact: false,
         ground_z: 0.0,
+        ground_normal: None,
         driver_lost: false,
     };
     let outputs = stack.step(&inputs);
