@@ -46,7 +46,9 @@ use std::f64::consts::FRAC_PI_2;
 
 use atmo_core::ground_effect::ThrustGainSurface;
 use atmo_core::GroundPlane;
-use atmo_core::model::{Input, Model, State, TiltedBody, idx, rk4_step_sensitivity, rotation};
+use atmo_core::model::{
+    Input, Model, State, TiltedBody, idx, rk4_step_sensitivity, rotation, sin_cos,
+};
 use nalgebra::Vector3;
 
 use super::{Mpc, check_finite, hover_reference, wrap_angle};
@@ -147,20 +149,29 @@ impl TiltPlanner {
 /// The wheels' clearance above the ground plane `ground` of `body` (frozen
 /// at its tilt) in state `x`: over the four wheels, the smallest distance of
 /// a rim to the plane, each hub's signed height above the plane (along its
-/// normal) minus the rim's reach towards it, `R_w sqrt(1 - (n . a_i)^2)`
+/// normal `n`) minus the rim's reach towards it, `R_w sqrt(1 - (n . a_i)^2)`
 /// (a rim of radius `R_w` about the hub, in the plane normal to the wheel's
-/// axle `a_i`, the rotor axis, in the world frame). On level ground with a
-/// level body the reach is `R_w sin(varphi)`. Allocation-free.
+/// axle `a_i`, the rotor axis). The hubs are placed with the full attitude;
+/// the axles with the heading only (the rim's reach at a level attitude, as
+/// the level-ground clearance always took it: the landing is flown level).
+/// On level ground this is the lowest hub's height minus `R_w sin(varphi)`.
+/// Allocation-free.
 pub fn wheel_clearance(body: &TiltedBody, ground: &GroundPlane, x: &State, wheel_radius: f64) -> f64 {
     let rot = rotation(x[idx::YAW], x[idx::PITCH], x[idx::ROLL]);
-    let base = Vector3::new(x[idx::X], x[idx::Y], x[idx::Z]);
+    let (sy, cy) = sin_cos(x[idx::YAW]);
+    let n = &ground.normal;
     body.rotor_position
         .iter()
         .zip(&body.rotor_axis)
         .map(|(r, a)| {
-            let along = ground.normal.dot(&(rot * a));
+            let hub = Vector3::new(
+                x[idx::X] + rot.row(0).transpose().dot(r),
+                x[idx::Y] + rot.row(1).transpose().dot(r),
+                x[idx::Z] + rot[(2, 0)] * r.x + rot[(2, 1)] * r.y + rot[(2, 2)] * r.z,
+            );
+            let along = n.z * a.z + n.x * (cy * a.x - sy * a.y) + n.y * (sy * a.x + cy * a.y);
             let reach = wheel_radius * (1.0 - along * along).max(0.0).sqrt();
-            ground.height(&(base + rot * r)) - reach
+            ground.height(&hub) - reach
         })
         .fold(f64::INFINITY, f64::min)
 }
