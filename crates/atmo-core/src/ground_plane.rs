@@ -49,7 +49,11 @@ impl GroundPlane {
         if !point.iter().all(|v| v.is_finite()) {
             return Err(CoreError::OutOfRange {
                 quantity: "ground plane point (NED, m)",
-                value: point.iter().copied().find(|v| !v.is_finite()).unwrap_or(0.0),
+                value: point
+                    .iter()
+                    .copied()
+                    .find(|v| !v.is_finite())
+                    .unwrap_or(0.0),
                 min: f64::MIN,
                 max: f64::MAX,
             });
@@ -143,7 +147,7 @@ mod tests {
             Vector3::new(f64::NAN, 0.0, -1.0),
             Vector3::new(0.0, f64::INFINITY, -1.0),
             Vector3::zeros(),
-            Vector3::new(0.0, 0.0, 1.0),                   // points into the ground
+            Vector3::new(0.0, 0.0, 1.0), // points into the ground
             Vector3::new(-36f64.to_radians().sin(), 0.0, -36f64.to_radians().cos()), // too steep
         ] {
             assert!(GroundPlane::new(p, n).is_err(), "{n:?}");

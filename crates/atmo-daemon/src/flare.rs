@@ -23,9 +23,9 @@
 //! limit, whatever the MPC's plan says, and the wheels meet the ground a few
 //! centimetres later, at a tilt the robot could not have hovered at.
 
-use atmo_core::{GroundPlane, Model};
 use atmo_core::ground_effect::{ThrustGainSurface, rk4_step_above_ground};
 use atmo_core::model::{Input, State, idx};
+use atmo_core::{GroundPlane, Model};
 use atmo_mpc::wheel_clearance;
 use nalgebra::Vector6;
 use serde::Deserialize;

@@ -11,8 +11,8 @@
 //! after the outputs have been sent.
 
 use atmo_core::control::{DiffDrive, WheelRates, blending_alpha};
-use atmo_core::model::{Input, State, TiltedBody, idx};
 use atmo_core::ground_plane::{LEVEL_NORMAL, unit_ground_normal};
+use atmo_core::model::{Input, State, TiltedBody, idx};
 use atmo_core::{GroundPlane, Linkage, Model, RobotConfig};
 use atmo_mpc::{AlphaSchedule, Mpc, MpcSettings, Outcome, SolverCuts, TiltPlan, wheel_clearance};
 use nalgebra::Vector3;

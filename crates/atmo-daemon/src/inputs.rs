@@ -356,12 +356,20 @@ mod tests {
         l.ground_plane(-0.2, n, 100 * MS);
         let fresh = l.assemble(1100 * MS);
         assert_eq!(
-            (fresh.inputs.ground_z, fresh.inputs.ground_normal, fresh.ground_stale),
+            (
+                fresh.inputs.ground_z,
+                fresh.inputs.ground_normal,
+                fresh.ground_stale
+            ),
             (-0.2, Some(n), false)
         );
         let stale = l.assemble(1101 * MS);
         assert_eq!(
-            (stale.inputs.ground_z, stale.inputs.ground_normal, stale.ground_stale),
+            (
+                stale.inputs.ground_z,
+                stale.inputs.ground_normal,
+                stale.ground_stale
+            ),
             (-0.5, None, true)
         );
         // A normal alone (its own topic) with a fresh height: stale normal, level.

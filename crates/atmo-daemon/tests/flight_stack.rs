@@ -242,7 +242,11 @@ fn bad_ground_planes_are_rejected_counted_and_the_last_good_one_held() {
         inputs.ground_normal = Some(normal);
         let out = lp.stack.step(&inputs);
         assert_eq!(out.status.rejected.ground, k as u64 + 1, "{normal:?}");
-        assert_eq!(height(&out), before, "the last good plane holds: {normal:?}");
+        assert_eq!(
+            height(&out),
+            before,
+            "the last good plane holds: {normal:?}"
+        );
     }
     // A 25 deg slope, any length: taken, height and all.
     let slope = 25f64.to_radians();

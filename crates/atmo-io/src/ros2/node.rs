@@ -17,8 +17,8 @@ use super::dds::{
     reliable_qos, spawn_node_thread, stream_qos, subscription, take_burst,
 };
 use super::{
-    Counters, DriveCommand, GroundHeight, GroundNormal, Outgoing, PilotCommand, Ros2Config, Ros2Inputs, Ros2Node,
-    Ros2Publisher, Ros2StartOptions, Ros2Thread, RosClock, RosEstimate,
+    Counters, DriveCommand, GroundHeight, GroundNormal, Outgoing, PilotCommand, Ros2Config,
+    Ros2Inputs, Ros2Node, Ros2Publisher, Ros2StartOptions, Ros2Thread, RosClock, RosEstimate,
 };
 use crate::error::{IoError, Result};
 use crate::msg::frames::{odometry_to_state, vehicle_odometry_to_state};

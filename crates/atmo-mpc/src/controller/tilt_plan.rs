@@ -44,8 +44,8 @@
 
 use std::f64::consts::FRAC_PI_2;
 
-use atmo_core::ground_effect::ThrustGainSurface;
 use atmo_core::GroundPlane;
+use atmo_core::ground_effect::ThrustGainSurface;
 use atmo_core::model::{
     Input, Model, State, TiltedBody, idx, rk4_step_sensitivity, rotation, sin_cos,
 };
@@ -156,7 +156,12 @@ impl TiltPlanner {
 /// the level-ground clearance always took it: the landing is flown level).
 /// On level ground this is the lowest hub's height minus `R_w sin(varphi)`.
 /// Allocation-free.
-pub fn wheel_clearance(body: &TiltedBody, ground: &GroundPlane, x: &State, wheel_radius: f64) -> f64 {
+pub fn wheel_clearance(
+    body: &TiltedBody,
+    ground: &GroundPlane,
+    x: &State,
+    wheel_radius: f64,
+) -> f64 {
     let rot = rotation(x[idx::YAW], x[idx::PITCH], x[idx::ROLL]);
     let (sy, cy) = sin_cos(x[idx::YAW]);
     let n = &ground.normal;
@@ -478,7 +483,10 @@ mod tests {
         assert!((c - 0.198_790_514_556_884).abs() < 1e-12, "{c}");
         // The level ground measures hub heights minus R sin(70 deg): 0.45 - 0.1174616.
         let level = wheel_clearance(&body, &GroundPlane::level(0.0), &x, 0.125);
-        assert!((level - (0.45 - 0.125 * phi.sin())).abs() < 1e-12, "{level}");
+        assert!(
+            (level - (0.45 - 0.125 * phi.sin())).abs() < 1e-12,
+            "{level}"
+        );
         // Facing east (yaw 90 deg) the hubs lie across the slope: the
         // highest-ground hubs are those at world x = +0.15.
         x[idx::YAW] = std::f64::consts::FRAC_PI_2;
