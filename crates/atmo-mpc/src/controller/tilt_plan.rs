@@ -154,8 +154,8 @@ impl TiltPlanner {
 /// axle `a_i`, the rotor axis). The hubs are placed with the full attitude;
 /// the axles with the heading only (the rim's reach at a level attitude, as
 /// the level-ground clearance always took it: the landing is flown level).
-/// On level ground this is the lowest hub's height minus `R_w sin(varphi)`.
-/// Allocation-free.
+/// On level ground this is, bit for bit, the lowest hub's height minus
+/// `R_w sin(varphi)` (tested). Allocation-free.
 pub fn wheel_clearance(
     body: &TiltedBody,
     ground: &GroundPlane,
@@ -453,7 +453,7 @@ impl Mpc {
 
 #[cfg(test)]
 mod tests {
-    use super::{GroundPlane, State, Vector3, idx, touchdown_stage, wheel_clearance};
+    use super::{GroundPlane, State, Vector3, idx, sin_cos, touchdown_stage, wheel_clearance};
     use atmo_core::{Model, RobotConfig};
 
     #[test]
@@ -498,22 +498,29 @@ mod tests {
 
     #[test]
     fn level_clearance_is_the_lowest_hub_minus_the_rim_reach_of_the_tilt() {
-        // The model's own body (any tilt, level attitude): the hub heights
-        // minus R_w sin(varphi), as before the plane.
+        // The model's own body (any tilt and attitude) on level ground: bit
+        // for bit the clearance before the ground plane, hub heights with the
+        // attitude minus R_w sin(varphi) (the reach at a level attitude).
         let model = Model::new(&RobotConfig::atmo());
         let mut x = State::zeros();
         x[idx::Z] = -0.4;
         x[idx::YAW] = 0.7;
-        for deg in [0.0, 30.0, 50.0, 62.0, 70.0, 90.0] {
-            let body = model.at_tilt(f64::to_radians(deg));
-            let lowest = body
-                .rotor_position
-                .iter()
-                .map(|r| -0.1 - (x[idx::Z] + r.z))
-                .fold(f64::INFINITY, f64::min);
-            let expected = lowest - 0.125 * body.varphi.sin();
-            let c = wheel_clearance(&body, &GroundPlane::level(-0.1), &x, 0.125);
-            assert!((c - expected).abs() < 1e-12, "{deg} deg: {c} vs {expected}");
+        for (pitch, roll) in [(0.0, 0.0), (0.05, -0.03), (-0.1, 0.08)] {
+            x[idx::PITCH] = pitch;
+            x[idx::ROLL] = roll;
+            let (sp, cp) = sin_cos(pitch);
+            let (sr, cr) = sin_cos(roll);
+            for deg in [0.0, 30.0, 50.0, 62.0, 70.0, 90.0] {
+                let body = model.at_tilt(f64::to_radians(deg));
+                let lowest = body
+                    .rotor_position
+                    .iter()
+                    .map(|r| -0.1 - (x[idx::Z] - sp * r.x + cp * sr * r.y + cp * cr * r.z))
+                    .fold(f64::INFINITY, f64::min);
+                let expected = lowest - 0.125 * sin_cos(body.varphi).0;
+                let c = wheel_clearance(&body, &GroundPlane::level(-0.1), &x, 0.125);
+                assert_eq!(c, expected, "{deg} deg, pitch {pitch}, roll {roll}");
+            }
         }
     }
 
