@@ -55,7 +55,7 @@ fn flare_prediction(c: &mut Criterion) {
     let touchdown = TouchdownModel {
         model: &model,
         surface: Some(&*surface),
-        ground_z: 0.0,
+        ground: atmo_core::GroundPlane::level(0.0),
         disturbance: nalgebra::Vector6::zeros(),
         wheel_radius: robot.wheels.radius,
         tilt_rate: robot.limits.tilt_rate_max,

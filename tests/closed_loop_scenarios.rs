@@ -167,8 +167,10 @@ fn drive_takeoff_fly_land_of_fig6ab() {
 #[test]
 fn landing_on_a_25_deg_slope_of_fig6d() {
     let s = fly_checked("landing_slope_25deg");
-    // The scenario's criterion on a slope is 55 deg (see its [success]).
-    assert_wheel_landing(&s, 55.0);
+    // Issue 17: at least 60 deg on the slope too. The flight stack measures
+    // the wheels' clearance against the ground plane (height and normal
+    // from the terrain); measured 64.59 deg at 0.25 m/s (docs/landing.md).
+    assert_wheel_landing(&s, 60.0);
 }
 
 #[test]

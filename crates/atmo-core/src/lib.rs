@@ -14,6 +14,8 @@
 //!   Jacobians, RK4 with exact sensitivities, hover trim.
 //! - [`ground_effect`]: the model above a ground plane, rotor thrust times
 //!   `1 + g(h_i, varphi)` with its exact Jacobians (the surface is a trait).
+//! - [`ground_plane`]: the ground under the robot as a plane (a point and its
+//!   unit normal), with the checks a ground input must pass.
 //! - [`limits`]: critical angle `cos varphi_c = m g / T_max`, largest tilt for a
 //!   thrust reserve, the tilt where the hover trim saturates.
 //! - [`control`]: the paper's blending `alpha = f(h) cos varphi`, the tilt
@@ -29,6 +31,7 @@ pub mod config_file;
 pub mod control;
 pub mod error;
 pub mod ground_effect;
+pub mod ground_plane;
 pub mod limits;
 pub mod linkage;
 pub mod model;
@@ -37,5 +40,6 @@ pub mod validate;
 pub use config::RobotConfig;
 pub use config_file::ConfigFile;
 pub use error::{CoreError, Result};
+pub use ground_plane::GroundPlane;
 pub use linkage::Linkage;
 pub use model::{Input, Model, NU, NX, State, TiltedBody};

@@ -23,9 +23,9 @@
 //! limit, whatever the MPC's plan says, and the wheels meet the ground a few
 //! centimetres later, at a tilt the robot could not have hovered at.
 
-use atmo_core::Model;
 use atmo_core::ground_effect::{ThrustGainSurface, rk4_step_above_ground};
 use atmo_core::model::{Input, State, idx};
+use atmo_core::{GroundPlane, Model};
 use atmo_mpc::wheel_clearance;
 use nalgebra::Vector6;
 use serde::Deserialize;
@@ -62,8 +62,9 @@ pub struct TouchdownModel<'a> {
     pub model: &'a Model,
     /// The MPC's thrust-gain surface (`None`: the nominal model).
     pub surface: Option<&'a dyn ThrustGainSurface>,
-    /// NED z of the ground plane, m.
-    pub ground_z: f64,
+    /// The ground plane (the wheels touch it; the ground effect is measured
+    /// from the horizontal plane through its point).
+    pub ground: GroundPlane,
     /// The observer's body wrench (what the model leaves out).
     pub disturbance: Vector6<f64>,
     pub wheel_radius: f64,
@@ -75,7 +76,8 @@ pub struct TouchdownModel<'a> {
 }
 
 /// Touchdown tilt (rad) and vertical speed (m/s, down positive) if the
-/// tilt-up began now from `state` at `tilt`: level, every rotor at
+/// tilt-up began now from `state` at `tilt`: level (at the state's heading
+/// and position, falling straight down), every rotor at
 /// `thrust`, the tilt rising at full rate, integrated with RK4 in `dt` steps
 /// until the wheels touch (at most `horizon` s; `None` if they do not).
 /// Allocation-free; about 1 us per step.
@@ -87,13 +89,14 @@ pub fn predict_touchdown(
     horizon: f64,
 ) -> Option<(f64, f64)> {
     let mut x = State::zeros();
-    x[idx::Z] = state[idx::Z];
-    x[idx::VZ] = state[idx::VZ];
+    for i in [idx::X, idx::Y, idx::Z, idx::YAW, idx::VZ] {
+        x[i] = state[i];
+    }
     let u = Input::from_element(m.thrust);
     let mut varphi = tilt;
     let mut t = 0.0;
     while t < horizon {
-        if wheel_clearance(&m.model.at_tilt(varphi), m.ground_z, &x, m.wheel_radius) <= 0.0 {
+        if wheel_clearance(&m.model.at_tilt(varphi), &m.ground, &x, m.wheel_radius) <= 0.0 {
             return Some((varphi, x[idx::VZ]));
         }
         let next_tilt = (varphi + m.tilt_rate * dt).min(m.tilt_max);
@@ -101,7 +104,7 @@ pub fn predict_touchdown(
             .model
             .at_tilt(0.5 * (varphi + next_tilt))
             .with_disturbance(m.disturbance);
-        x = rk4_step_above_ground(body, m.surface, m.ground_z, &x, &u, dt);
+        x = rk4_step_above_ground(body, m.surface, m.ground.point.z, &x, &u, dt);
         varphi = next_tilt;
         t += dt;
     }

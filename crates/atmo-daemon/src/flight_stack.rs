@@ -11,8 +11,9 @@
 //! after the outputs have been sent.
 
 use atmo_core::control::{DiffDrive, WheelRates, blending_alpha};
+use atmo_core::ground_plane::{LEVEL_NORMAL, unit_ground_normal};
 use atmo_core::model::{Input, State, TiltedBody, idx};
-use atmo_core::{Linkage, Model, RobotConfig};
+use atmo_core::{GroundPlane, Linkage, Model, RobotConfig};
 use atmo_mpc::{AlphaSchedule, Mpc, MpcSettings, Outcome, SolverCuts, TiltPlan, wheel_clearance};
 use nalgebra::Vector3;
 
@@ -63,6 +64,8 @@ pub struct FlightStack {
     last_tilt: f64,
     last_pilot: PilotInput,
     last_ground_z: f64,
+    /// Unit normal of the last good ground plane (NED, out of the ground).
+    last_ground_normal: Vector3<f64>,
     last_thrust: Input,
     touchdown_thrust: Input,
     /// Moving position reference (see `fill_reference`).
@@ -173,6 +176,7 @@ impl FlightStack {
             last_tilt: 0.0,
             last_pilot: PilotInput::default(),
             last_ground_z: 0.0,
+            last_ground_normal: Vector3::from(LEVEL_NORMAL),
             last_thrust: Input::zeros(),
             touchdown_thrust: Input::zeros(),
             carrot: Vector3::zeros(),
@@ -257,10 +261,19 @@ impl FlightStack {
         } else {
             self.rejected.pilot += 1;
         }
-        if inputs.ground_z.is_finite() {
-            self.last_ground_z = inputs.ground_z;
-        } else {
-            self.rejected.ground += 1;
+        // The ground plane is taken or rejected whole: a finite height and,
+        // if there is one, a normal that `unit_ground_normal` accepts.
+        let normal = inputs
+            .ground_normal
+            .map_or(Ok(Vector3::from(LEVEL_NORMAL)), |n| {
+                unit_ground_normal(Vector3::from(n))
+            });
+        match normal {
+            Ok(normal) if inputs.ground_z.is_finite() => {
+                self.last_ground_z = inputs.ground_z;
+                self.last_ground_normal = normal;
+            }
+            _ => self.rejected.ground += 1,
         }
     }
 
@@ -698,7 +711,16 @@ impl FlightStack {
         }
         let _ = self.mpc.set_alpha(alpha);
         let _ = self.mpc.set_disturbance(&self.observer.wrench());
-        let _ = self.mpc.set_ground_height(self.last_ground_z);
+        let _ = self.mpc.set_ground_plane(&self.ground_plane(state));
+    }
+
+    /// The ground plane under the robot in `state`: through the ground
+    /// height below its base origin, with the last good normal.
+    fn ground_plane(&self, state: &State) -> GroundPlane {
+        GroundPlane {
+            point: Vector3::new(state[idx::X], state[idx::Y], self.last_ground_z),
+            normal: self.last_ground_normal,
+        }
     }
 
     /// In a flare's approach: the impact speed if the tilt-up began now
@@ -716,7 +738,7 @@ impl FlightStack {
         let model = TouchdownModel {
             model: &self.model,
             surface: self.ground_effect.as_deref(),
-            ground_z: self.last_ground_z,
+            ground: self.ground_plane(state),
             disturbance: self.observer.wrench(),
             wheel_radius: self.wheel_radius,
             tilt_rate: self.tilt_rate_max,
@@ -732,12 +754,12 @@ impl FlightStack {
         self.flare.committed()
     }
 
-    /// The wheels' clearance above the ground input as if at the
+    /// The wheels' clearance above the ground plane input as if at the
     /// transition's tilt limit, m (what the flare holds, `flare`).
     fn flare_clearance(&self, state: &State) -> f64 {
         wheel_clearance(
             &self.limit_body,
-            self.last_ground_z,
+            &self.ground_plane(state),
             state,
             self.wheel_radius,
         )

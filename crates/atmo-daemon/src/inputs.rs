@@ -23,6 +23,11 @@
 //!   younger than `ground_timeout`; before a source has spoken, and when it
 //!   has been silent longer than that (counted as stale), the configured
 //!   constant.
+//! - Ground normal: the unit normal of the ground plane (NED, pointing out
+//!   of the ground), from a source of its own (a terrain map, a slope
+//!   estimate, a topic), by the same rule with the same timeout; without a
+//!   fresh normal the ground is level (`None`). The flight stack checks it
+//!   (see [`StepInputs::ground_normal`]).
 
 use std::time::Duration;
 
@@ -71,8 +76,8 @@ pub struct Assembled {
     pub pilot_stale: bool,
     /// No estimate young enough to fly on.
     pub estimate_stale: bool,
-    /// A ground-height source spoke, but too long ago: the tick uses the
-    /// configured ground height.
+    /// A ground-height (or ground-normal) source spoke, but too long ago: the
+    /// tick uses the configured ground height (level ground).
     pub ground_stale: bool,
 }
 
@@ -90,6 +95,8 @@ pub struct InputLatch {
     drivers_alive: bool,
     /// The newest ground height and when it arrived (tick clock).
     ground: Option<(f64, u64)>,
+    /// The newest ground normal and when it arrived (tick clock).
+    ground_normal: Option<([f64; 3], u64)>,
     mode: Mode,
 }
 
@@ -127,6 +134,7 @@ impl InputLatch {
             contact: false,
             drivers_alive: true,
             ground: None,
+            ground_normal: None,
             mode: Mode::Disarmed,
         }
     }
@@ -172,6 +180,19 @@ impl InputLatch {
         self.ground = Some((z, received_ns));
     }
 
+    /// A ground normal arrived at `received_ns`: the unit normal of the
+    /// ground plane under the robot, NED, pointing out of the ground.
+    pub fn ground_normal(&mut self, normal: [f64; 3], received_ns: u64) {
+        self.ground_normal = Some((normal, received_ns));
+    }
+
+    /// A ground plane arrived at `received_ns` (one source for both: a
+    /// terrain map): its NED z under the robot and its unit normal.
+    pub fn ground_plane(&mut self, z: f64, normal: [f64; 3], received_ns: u64) {
+        self.ground_z(z, received_ns);
+        self.ground_normal(normal, received_ns);
+    }
+
     /// The mode the last tick ended in (drive commands count only in
     /// [`Mode::Drive`]).
     pub fn mode(&mut self, mode: Mode) {
@@ -192,9 +213,13 @@ impl InputLatch {
             now_ns.saturating_sub(e.stamp_ns) as f64 * 1e-9 <= self.settings.estimate_timeout
         });
         let yaw = self.estimate.map_or(0.0, |e| e.state[idx::YAW]);
+        let ground_timeout = ns(self.settings.ground_timeout);
         let fresh_ground = self
             .ground
-            .filter(|&(_, at)| now_ns.saturating_sub(at) <= ns(self.settings.ground_timeout));
+            .filter(|&(_, at)| now_ns.saturating_sub(at) <= ground_timeout);
+        let fresh_normal = self
+            .ground_normal
+            .filter(|&(_, at)| now_ns.saturating_sub(at) <= ground_timeout);
         Assembled {
             inputs: StepInputs {
                 now_ns,
@@ -203,11 +228,13 @@ impl InputLatch {
                 pilot: self.pilot_now(now_ns, yaw, pilot_stale),
                 ground_contact: self.contact,
                 ground_z: fresh_ground.map_or(self.settings.ground_z, |(z, _)| z),
+                ground_normal: fresh_normal.map(|(n, _)| n),
                 driver_lost: !self.drivers_alive,
             },
             pilot_stale,
             estimate_stale,
-            ground_stale: self.ground.is_some() && fresh_ground.is_none(),
+            ground_stale: (self.ground.is_some() && fresh_ground.is_none())
+                || (self.ground_normal.is_some() && fresh_normal.is_none()),
         }
     }
 
@@ -319,6 +346,39 @@ mod tests {
         assert_eq!((stale.inputs.ground_z, stale.ground_stale), (-0.5, true));
         l.ground_z(-0.3, 1200 * MS);
         assert_eq!(l.assemble(1200 * MS).inputs.ground_z, -0.3, "back");
+    }
+
+    #[test]
+    fn ground_normal_is_level_unless_a_source_is_fresh() {
+        let mut l = latch();
+        assert_eq!(l.assemble(0).inputs.ground_normal, None, "level by default");
+        let n = [-0.2, 0.0, -0.9];
+        l.ground_plane(-0.2, n, 100 * MS);
+        let fresh = l.assemble(1100 * MS);
+        assert_eq!(
+            (
+                fresh.inputs.ground_z,
+                fresh.inputs.ground_normal,
+                fresh.ground_stale
+            ),
+            (-0.2, Some(n), false)
+        );
+        let stale = l.assemble(1101 * MS);
+        assert_eq!(
+            (
+                stale.inputs.ground_z,
+                stale.inputs.ground_normal,
+                stale.ground_stale
+            ),
+            (-0.5, None, true)
+        );
+        // A normal alone (its own topic) with a fresh height: stale normal, level.
+        l.ground_z(-0.3, 1200 * MS);
+        let normal_stale = l.assemble(1200 * MS);
+        assert_eq!(normal_stale.inputs.ground_normal, None);
+        assert!(normal_stale.ground_stale, "the normal's source went silent");
+        l.ground_normal(n, 1300 * MS);
+        assert_eq!(l.assemble(1300 * MS).inputs.ground_normal, Some(n), "back");
     }
 
     #[test]

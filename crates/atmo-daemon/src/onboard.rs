@@ -28,7 +28,10 @@
 //! driver ports' liveness timeout sets `driver_lost`: failsafe in the air,
 //! no take-off. The ground height comes from the ground topic
 //! (`[ros2.topics] ground`, [`atmo_io::ros2::GroundHeight`]) while it is
-//! younger than `ground_timeout_ms`, else from the config's `ground_z`.
+//! younger than `ground_timeout_ms`, else from the config's `ground_z`; the
+//! ground plane's normal from the ground-normal topic (`[ros2.topics]
+//! ground_normal`, [`atmo_io::ros2::GroundNormal`]) by the same timeout,
+//! else the ground is level.
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -337,6 +340,10 @@ impl TickIo for OnboardIo {
         if let Some(g) = self.ros_in.latest_ground() {
             let received = stamp_on_tick_clock(deadline_ns, g.received);
             self.latch.ground_z(g.z, received);
+        }
+        if let Some(n) = self.ros_in.latest_ground_normal() {
+            let received = stamp_on_tick_clock(deadline_ns, n.received);
+            self.latch.ground_normal(n.normal, received);
         }
         while let Some(p) = self.ros_in.latest_pilot() {
             let received = stamp_on_tick_clock(deadline_ns, p.received);

@@ -41,8 +41,14 @@ pub struct StepInputs {
     pub pilot: PilotInput,
     /// Wheel contact signal.
     pub ground_contact: bool,
-    /// NED z of the ground plane under the robot, m.
+    /// NED z of the ground plane under the robot (its base origin), m.
     pub ground_z: f64,
+    /// Unit normal of the ground plane through that point, NED, pointing
+    /// out of the ground (level: `[0, 0, -1]`); `None`: level ground. A
+    /// normal that is not finite, shorter than 1e-6 or steeper than
+    /// [`atmo_core::ground_plane::MAX_GROUND_SLOPE_DEG`] is rejected with
+    /// the plane (see [`RejectCounters::ground`]).
+    pub ground_normal: Option<[f64; 3]>,
     /// A required driver stopped talking (the I/O layer's liveness check;
     /// always false in simulation): fly the failsafe, do not take off.
     pub driver_lost: bool,
@@ -85,7 +91,8 @@ pub struct RejectCounters {
     pub tilt: u64,
     /// Non-finite or out-of-range pilot inputs.
     pub pilot: u64,
-    /// Non-finite ground height.
+    /// Ground planes: a non-finite height, or a normal that is not finite,
+    /// shorter than 1e-6 or steeper than 35 deg (the last good plane holds).
     pub ground: u64,
 }
 

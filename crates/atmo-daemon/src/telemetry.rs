@@ -32,6 +32,8 @@ pub fn inputs_message(tick: u64, inputs: &StepInputs, cuts: &SolverCuts) -> Tick
         solver_cut_solve: cuts.solve,
         solver_cut_iteration: cuts.iteration,
         solver_cut_overflow: cuts.overflow,
+        has_ground_normal: inputs.ground_normal.is_some(),
+        ground_normal: inputs.ground_normal.unwrap_or([0.0; 3]),
     }
 }
 
@@ -58,6 +60,7 @@ pub fn inputs_from_message(m: &TickInputs) -> StepInputs {
         pilot: pilot_from_message(&m.pilot),
         ground_contact: m.ground_contact,
         ground_z: m.ground_z,
+        ground_normal: m.has_ground_normal.then_some(m.ground_normal),
         driver_lost: m.driver_lost,
     }
 }

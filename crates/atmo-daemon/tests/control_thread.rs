@@ -38,6 +38,7 @@ fn ticks_on_its_own_thread_and_drops_instead_of_blocking() {
             pilot: PilotInput::default(),
             ground_contact: false,
             ground_z: 0.0,
+            ground_normal: None,
             driver_lost: false,
         })
         .unwrap();

@@ -77,6 +77,7 @@ impl Loop {
             pilot: self.pilot,
             ground_contact: false,
             ground_z: 0.0,
+            ground_normal: None,
             driver_lost: false,
         }
     }
@@ -219,6 +220,41 @@ fn non_finite_and_out_of_range_inputs_are_rejected_counted_and_held() {
     let out = lp.stack.step(&inputs);
     assert_eq!(out.status.rejected.estimate, 2);
     assert_eq!(out.status.rejected.pilot, 1);
+}
+
+#[test]
+fn bad_ground_planes_are_rejected_counted_and_the_last_good_one_held() {
+    let mut lp = Loop::new(1.5);
+    lp.run(0.2);
+    let mut inputs = lp.inputs();
+    let height = |out: &StepOutputs| out.status.height;
+    let before = height(&lp.stack.step(&inputs));
+    let steep = 36f64.to_radians();
+    let bad = [
+        [f64::NAN, 0.0, -1.0],
+        [0.0, 0.0, 0.0],
+        [0.0, 0.0, 1.0], // into the ground
+        [-steep.sin(), 0.0, -steep.cos()],
+    ];
+    for (k, normal) in bad.into_iter().enumerate() {
+        inputs.now_ns += 1000;
+        inputs.ground_z = -0.2;
+        inputs.ground_normal = Some(normal);
+        let out = lp.stack.step(&inputs);
+        assert_eq!(out.status.rejected.ground, k as u64 + 1, "{normal:?}");
+        assert_eq!(
+            height(&out),
+            before,
+            "the last good plane holds: {normal:?}"
+        );
+    }
+    // A 25 deg slope, any length: taken, height and all.
+    let slope = 25f64.to_radians();
+    inputs.now_ns += 1000;
+    inputs.ground_normal = Some([-2.0 * slope.sin(), 0.0, -2.0 * slope.cos()]);
+    let out = lp.stack.step(&inputs);
+    assert_eq!(out.status.rejected.ground, 4);
+    assert!((height(&out) - (before - 0.2)).abs() < 1e-12);
 }
 
 #[test]

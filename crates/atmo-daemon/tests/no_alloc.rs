@@ -46,17 +46,28 @@ fn clarabel_allocations_per_solve() -> usize {
 
 #[test]
 fn flight_stack_step_does_not_allocate_after_start_up() {
-    flight_stack_allocations(GroundEffectSource::None);
+    flight_stack_allocations(GroundEffectSource::None, None);
 }
 
 /// The same with the ground effect in the MPC's model (its surface is read
 /// at start-up; each preparation evaluates it 16 times per stage).
 #[test]
 fn flight_stack_step_with_ground_effect_model_does_not_allocate() {
-    flight_stack_allocations(GroundEffectSource::PlantDefault);
+    flight_stack_allocations(GroundEffectSource::PlantDefault, None);
 }
 
-fn flight_stack_allocations(ground_effect: GroundEffectSource) {
+/// The same on a 25 deg slope (the ground plane's normal checked every
+/// tick, the clearances measured against the plane).
+#[test]
+fn flight_stack_step_on_a_sloped_ground_plane_does_not_allocate() {
+    let s = 25f64.to_radians();
+    flight_stack_allocations(
+        GroundEffectSource::PlantDefault,
+        Some([-s.sin(), 0.0, -s.cos()]),
+    );
+}
+
+fn flight_stack_allocations(ground_effect: GroundEffectSource, ground_normal: Option<[f64; 3]>) {
     let robot = RobotConfig::atmo();
     let settings = FlightSettings::atmo();
     let mut mpc = deterministic(MpcSettings::atmo(&settings.mpc_preset).unwrap());
@@ -93,6 +104,7 @@ fn flight_stack_allocations(ground_effect: GroundEffectSource) {
             pilot,
             ground_contact: false,
             ground_z: 0.0,
+            ground_normal,
             driver_lost: false,
         };
         // The first ticks warm the MPC up (start-up); count from tick 20 on.
@@ -319,6 +331,7 @@ fn logging_a_tick_does_not_allocate() {
         pilot: PilotInput::default(),
         ground_contact: false,
         ground_z: 0.0,
+        ground_normal: None,
         driver_lost: false,
     };
     let outputs = stack.step(&inputs);

@@ -115,6 +115,7 @@ fn onboard_tick_io_allocates_nothing_of_its_own() {
         pilot: PilotInput::default(),
         ground_contact: false,
         ground_z: 0.0,
+        ground_normal: None,
         driver_lost: false,
     });
 

@@ -16,7 +16,7 @@ use atmo_core::model::State;
 use atmo_io::msg::frames::{odometry_to_state, state_to_odometry};
 use atmo_io::msg::{
     Clock, DiagnosticArray, MpcStatus, Odometry, Point, PointStamped, Time, Twist, Vector3,
-    VehicleOdometry,
+    Vector3Stamped, VehicleOdometry,
 };
 use atmo_io::ros2::{
     Ros2Config, Ros2Counters, Ros2Node, Ros2StartOptions, TopicConfig, domain_id_from_env,
@@ -402,7 +402,7 @@ fn px4_vehicle_odometry_as_the_estimate() {
 /// `use_sim_time`: ROS time is 0 until a `/clock` arrives, then the newest
 /// one (also when it jumps back); an invalid time is rejected and counted.
 /// The ground topic's heights (ENU, up) come out as NED z; a NaN height is
-/// rejected and counted.
+/// rejected and counted. So do the ground normals (ENU to NED).
 #[test]
 fn sim_time_follows_clock_and_ground_heights_come_out_ned() {
     let domain = domain() + 3;
@@ -436,6 +436,14 @@ fn sim_time_follows_clock_and_ground_heights_come_out_ned() {
         )
         .unwrap();
     let ground_pub = peer.create_publisher::<PointStamped>(&t, None).unwrap();
+    let t = peer
+        .create_topic(
+            &topic_name("/atmo/ground_normal"),
+            MessageTypeName::new("geometry_msgs", "Vector3Stamped"),
+            &qos,
+        )
+        .unwrap();
+    let normal_pub = peer.create_publisher::<Vector3Stamped>(&t, None).unwrap();
     let clock = |sec, nanosec| Clock {
         clock: Time { sec, nanosec },
     };
@@ -487,6 +495,36 @@ fn sim_time_follows_clock_and_ground_heights_come_out_ned() {
         "the valid height counts too"
     );
     assert!(c.clock_received >= 3);
+
+    // A slope rising to the north: ENU (0, -sin, cos) is NED (-sin, 0, -cos).
+    let normal = |x, y, z| Vector3Stamped {
+        vector: Vector3 { x, y, z },
+        ..Vector3Stamped::default()
+    };
+    let mut got = None;
+    wait_for("a ground normal", Duration::from_secs(10), || {
+        normal_pub.publish(normal(0.0, -0.5, 0.75)).unwrap();
+        got = inputs.latest_ground_normal();
+        got.is_some()
+    });
+    assert_eq!(got.unwrap().normal, [-0.5, 0.0, -0.75], "ENU -> NED");
+    wait_for(
+        "a non-finite ground normal counted",
+        Duration::from_secs(5),
+        || {
+            normal_pub.publish(normal(0.0, f64::INFINITY, 1.0)).unwrap();
+            inputs.counters().ground_normal_rejected > 0
+        },
+    );
+    std::thread::sleep(Duration::from_millis(50));
+    assert!(
+        inputs
+            .latest_ground_normal()
+            .is_none_or(|g| g.normal == [-0.5, 0.0, -0.75]),
+        "a non-finite normal never reaches the control thread"
+    );
+    let c = inputs.counters();
+    assert!(c.ground_normal_received > c.ground_normal_rejected);
     thread.stop().unwrap();
 }
 

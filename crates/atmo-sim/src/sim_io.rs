@@ -15,6 +15,7 @@
 //! | contact        | iceoryx2 driver port               | the plant's contact signal                     |
 //! | driver liveness| heartbeats                         | always alive (the simulated drivers answer)    |
 //! | ground height  | ROS 2 `/atmo/ground` while fresh, else the config constant | the scenario's terrain map at the *estimated* position, with each estimate (same timeout) |
+//! | ground normal  | ROS 2 `/atmo/ground_normal` while fresh, else level | the scenario's terrain plane's normal, with each height |
 //!
 //! The estimate reaches the latch through the scenario's fault injector
 //! ([`crate::faults`]: a FIFO transport stamping each estimate with the
@@ -238,9 +239,11 @@ impl TickIo for SimIo {
                 stamp_ns: self.stamp(deadline_ns, e.at_ns),
                 state: e.value,
             });
-            // The terrain map, looked up where the robot believes it is.
+            // The terrain map, looked up where the robot believes it is:
+            // the plane's height there and its normal.
             let z = terrain_z_below(&self.plane, e.value[idx::X], e.value[idx::Y]);
-            self.latch.ground_z(z, self.stamp(deadline_ns, e.at_ns));
+            let stamp = self.stamp(deadline_ns, e.at_ns);
+            self.latch.ground_plane(z, self.plane.normal.into(), stamp);
         }
         if let Some(p) = self.pilot.take() {
             self.latch.pilot(p.value, self.stamp(deadline_ns, p.at_ns));

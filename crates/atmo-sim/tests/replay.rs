@@ -92,6 +92,41 @@ fn one_changed_mpc_weight_reports_the_first_differing_tick_and_field() {
 }
 
 #[test]
+fn a_slope_landing_logs_the_ground_normal_and_replays_bit_for_bit() {
+    // Issue 17: the ground plane's normal is a tick input, logged with it.
+    let scenario =
+        Scenario::load(repo().join("config/scenarios/landing_slope_25deg.toml")).unwrap();
+    let controller = ControllerConfig::atmo().unwrap().deterministic();
+    let path = dir().join("landing_slope_25deg.mcap");
+    fly_logged(&scenario, &controller, &path, |_| {}).unwrap();
+    let mut flight = RecordedFlight::read(&path, STATUS_TOPIC).unwrap();
+    let s = 25f64.to_radians();
+    let with_normal: Vec<_> = flight
+        .inputs
+        .iter()
+        .filter(|i| i.has_ground_normal)
+        .collect();
+    assert!(with_normal.len() > 1000, "{}", with_normal.len());
+    for i in with_normal {
+        let n = i.ground_normal;
+        assert!(
+            (n[0] + s.sin()).abs() < 1e-12 && n[1].abs() < 1e-12 && (n[2] + s.cos()).abs() < 1e-12,
+            "{n:?}"
+        );
+    }
+    let config = RecordedFlight::config(&flight.files).unwrap();
+    let report = replay(&flight, &config, CutReplay::AsLogged, |_| {}).unwrap();
+    assert_eq!(report.first_difference, None, "{report:?}");
+    // Without the normal (as a log before it would read) the ground is
+    // level and the flare's clearance differs: the replay tells.
+    for i in &mut flight.inputs {
+        i.has_ground_normal = false;
+    }
+    let level = replay(&flight, &config, CutReplay::AsLogged, |_| {}).unwrap();
+    assert!(level.first_difference.is_some(), "{level:?}");
+}
+
+#[test]
 fn a_log_cut_mid_flight_replays_to_its_last_complete_tick() {
     let (log, _) = landing();
     let bytes = std::fs::read(log).unwrap();

@@ -128,7 +128,12 @@ pub struct TickTiming {
 /// `atmo_msgs/msg/TickInputs`: everything one tick of the flight stack
 /// consumed (see the `.msg`). `Copy` and allocation-free: built on the
 /// control thread, serialized elsewhere.
-#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+///
+/// Logs written before the ground normal (issue 17) end after
+/// `solver_cut_overflow`; they decode with `has_ground_normal = false`
+/// (level ground, what those flight stacks assumed), so that old flight
+/// logs still replay.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize)]
 #[allow(clippy::struct_excessive_bools)] // the wire layout: presence flags and two signals
 pub struct TickInputs {
     pub tick: u64,
@@ -150,6 +155,85 @@ pub struct TickInputs {
     pub solver_cut_solve: [u8; 12],
     pub solver_cut_iteration: [u32; 12],
     pub solver_cut_overflow: u32,
+    /// Whether the tick had a ground normal (else: level ground).
+    pub has_ground_normal: bool,
+    /// The ground plane's unit normal, NED, out of the ground.
+    pub ground_normal: [f64; 3],
+}
+
+const TICK_INPUTS_FIELDS: &[&str] = &[
+    "tick",
+    "clock_ns",
+    "has_estimate",
+    "estimate_received_ns",
+    "estimate",
+    "has_tilt_counts",
+    "tilt_counts",
+    "pilot",
+    "ground_contact",
+    "ground_z",
+    "driver_lost",
+    "solver_cut_count",
+    "solver_cut_solve",
+    "solver_cut_iteration",
+    "solver_cut_overflow",
+    "has_ground_normal",
+    "ground_normal",
+];
+
+impl<'de> Deserialize<'de> for TickInputs {
+    fn deserialize<D: Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
+        deserializer.deserialize_struct("TickInputs", TICK_INPUTS_FIELDS, TickInputsVisitor)
+    }
+}
+
+/// Field order as in the `.msg`; the ground normal's fields may be absent
+/// (a log written before them).
+struct TickInputsVisitor;
+
+impl<'de> serde::de::Visitor<'de> for TickInputsVisitor {
+    type Value = TickInputs;
+
+    fn expecting(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("atmo_msgs/msg/TickInputs")
+    }
+
+    fn visit_seq<A: serde::de::SeqAccess<'de>>(self, mut seq: A) -> Result<TickInputs, A::Error> {
+        fn next<'de, A: serde::de::SeqAccess<'de>, T: Deserialize<'de>>(
+            seq: &mut A,
+            field: &'static str,
+        ) -> Result<T, A::Error> {
+            seq.next_element()?
+                .ok_or_else(|| A::Error::missing_field(field))
+        }
+        let mut m = TickInputs {
+            tick: next(&mut seq, "tick")?,
+            clock_ns: next(&mut seq, "clock_ns")?,
+            has_estimate: next(&mut seq, "has_estimate")?,
+            estimate_received_ns: next(&mut seq, "estimate_received_ns")?,
+            estimate: next(&mut seq, "estimate")?,
+            has_tilt_counts: next(&mut seq, "has_tilt_counts")?,
+            tilt_counts: next(&mut seq, "tilt_counts")?,
+            pilot: next(&mut seq, "pilot")?,
+            ground_contact: next(&mut seq, "ground_contact")?,
+            ground_z: next(&mut seq, "ground_z")?,
+            driver_lost: next(&mut seq, "driver_lost")?,
+            solver_cut_count: next(&mut seq, "solver_cut_count")?,
+            solver_cut_solve: next(&mut seq, "solver_cut_solve")?,
+            solver_cut_iteration: next(&mut seq, "solver_cut_iteration")?,
+            solver_cut_overflow: next(&mut seq, "solver_cut_overflow")?,
+            has_ground_normal: false,
+            ground_normal: [0.0; 3],
+        };
+        // A log before the ground normal ends here: the payload is used up,
+        // reading on fails, and the message is the old one (level ground).
+        // Anything else left over is refused by `decode`'s length check.
+        if let Ok(Some(has)) = seq.next_element::<bool>() {
+            m.has_ground_normal = has;
+            m.ground_normal = next(&mut seq, "ground_normal")?;
+        }
+        Ok(m)
+    }
 }
 
 /// `atmo_msgs/msg/SimTruth`: the simulator's truth after a plant step.

@@ -38,6 +38,10 @@ const DEFINITIONS: &[(&str, &str)] = &[
         include_str!("../../msg/geometry_msgs/PointStamped.msg"),
     ),
     (
+        "geometry_msgs/Vector3Stamped",
+        include_str!("../../msg/geometry_msgs/Vector3Stamped.msg"),
+    ),
+    (
         "rosgraph_msgs/Clock",
         include_str!("../../msg/rosgraph_msgs/Clock.msg"),
     ),

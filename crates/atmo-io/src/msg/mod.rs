@@ -32,6 +32,7 @@ pub use px4::{ActuatorMotors, OffboardControlMode, VehicleOdometry};
 pub use standard::{
     Clock, DiagnosticArray, DiagnosticStatus, Header, KeyValue, Odometry, Point, PointStamped,
     Pose, PoseWithCovariance, Quaternion, Time, Twist, TwistWithCovariance, Vector3,
+    Vector3Stamped,
 };
 pub use type_hash::{hashed_description, type_hash};
 

@@ -173,6 +173,15 @@ pub struct PointStamped {
     pub point: Point,
 }
 
+/// `geometry_msgs/msg/Vector3Stamped`: the ground normal input (the unit
+/// normal of the ground plane under the robot, ENU world frame, pointing
+/// out of the ground).
+#[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
+pub struct Vector3Stamped {
+    pub header: Header,
+    pub vector: Vector3,
+}
+
 /// `rosgraph_msgs/msg/Clock`: ROS time when `use_sim_time` is set.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
 pub struct Clock {
@@ -200,4 +209,5 @@ ros_message!(KeyValue, "diagnostic_msgs/msg/KeyValue");
 ros_message!(DiagnosticStatus, "diagnostic_msgs/msg/DiagnosticStatus");
 ros_message!(DiagnosticArray, "diagnostic_msgs/msg/DiagnosticArray");
 ros_message!(PointStamped, "geometry_msgs/msg/PointStamped");
+ros_message!(Vector3Stamped, "geometry_msgs/msg/Vector3Stamped");
 ros_message!(Clock, "rosgraph_msgs/msg/Clock");

@@ -591,7 +591,25 @@ fn tick_inputs_and_sim_truth_layouts() {
         body.extend(iteration.to_le_bytes());
     }
     body.extend(1u32.to_le_bytes());
+    // A log written before the ground normal ends here: it decodes as level ground.
+    let mut old = CDR_LE_HEADER.to_vec();
+    old.extend(&body);
+    let decoded: TickInputs = decode("/old", &old).unwrap();
+    assert_eq!(decoded, m);
+    assert!(!decoded.has_ground_normal);
+    // The ground normal: a presence flag, three float64 aligned to 8.
+    m.has_ground_normal = true;
+    m.ground_normal = [-0.25, 0.0, -0.5];
+    body.push(1);
+    while body.len() % 8 != 0 {
+        body.push(0);
+    }
+    body.extend(f64s(&[-0.25, 0.0, -0.5]));
     round_trip(&m, &body);
+    // A payload cut inside the normal is refused, not read as an old one.
+    let mut cut = CDR_LE_HEADER.to_vec();
+    cut.extend(&body[..body.len() - 8]);
+    assert!(decode::<TickInputs>("/cut", &cut).is_err());
     assert_eq!(
         super::definitions::fields("atmo_msgs", definition(TickInputs::TYPE_NAME).unwrap())
             .iter()
@@ -612,7 +630,9 @@ fn tick_inputs_and_sim_truth_layouts() {
             "solver_cut_count",
             "solver_cut_solve",
             "solver_cut_iteration",
-            "solver_cut_overflow"
+            "solver_cut_overflow",
+            "has_ground_normal",
+            "ground_normal"
         ]
     );
     let truth = SimTruth {

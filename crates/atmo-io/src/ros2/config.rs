@@ -8,7 +8,7 @@ use serde::Deserialize;
 use crate::error::{IoError, Result};
 use crate::msg::{
     ActuatorMotors, Clock, DiagnosticArray, MpcStatus, Odometry, OffboardControlMode, PilotInput,
-    PointStamped, RosMessage, Twist, VehicleOdometry,
+    PointStamped, RosMessage, Twist, Vector3Stamped, VehicleOdometry,
 };
 
 /// The node's settings: a `[ros2]`-style table (or a whole file).
@@ -68,6 +68,11 @@ pub struct Topics {
     /// In: the ground height (`geometry_msgs/msg/PointStamped`, ENU world
     /// frame: `point.z` is the height of the ground under the robot, up).
     pub ground: TopicConfig,
+    /// In: the ground plane's normal (`geometry_msgs/msg/Vector3Stamped`,
+    /// ENU world frame: the unit normal of the ground under the robot,
+    /// pointing out of the ground, so `vector.z > 0`). Optional: while no
+    /// fresh normal arrives the ground is level.
+    pub ground_normal: TopicConfig,
     /// In, with `use_sim_time` only: ROS time (`rosgraph_msgs/msg/Clock`).
     pub clock: TopicConfig,
 }
@@ -94,6 +99,7 @@ impl Default for Topics {
             ),
             diagnostics: topic("/diagnostics", DiagnosticArray::TYPE_NAME),
             ground: topic("/atmo/ground", PointStamped::TYPE_NAME),
+            ground_normal: topic("/atmo/ground_normal", Vector3Stamped::TYPE_NAME),
             clock: topic("/clock", Clock::TYPE_NAME),
         }
     }
@@ -169,7 +175,7 @@ impl ConfigFile for Ros2Config {
                 )
                 .into());
         }
-        let roles: [(&str, &TopicConfig, &[&str]); 9] = [
+        let roles: [(&str, &TopicConfig, &[&str]); 10] = [
             ("topics.status", &t.status, &[MpcStatus::TYPE_NAME]),
             (
                 "topics.estimate",
@@ -198,6 +204,11 @@ impl ConfigFile for Ros2Config {
                 &[DiagnosticArray::TYPE_NAME],
             ),
             ("topics.ground", &t.ground, &[PointStamped::TYPE_NAME]),
+            (
+                "topics.ground_normal",
+                &t.ground_normal,
+                &[Vector3Stamped::TYPE_NAME],
+            ),
             ("topics.clock", &t.clock, &[Clock::TYPE_NAME]),
         ];
         let mut names: Vec<&str> = Vec::new();

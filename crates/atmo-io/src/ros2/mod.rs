@@ -44,7 +44,9 @@
 //! (`atmo_msgs/msg/PilotInput`, NED velocity, FRD yaw rate) are accepted
 //! only if every number is finite and the throttle is in [0, 1]. Drive
 //! commands need finite values, ground heights (`geometry_msgs/PointStamped`,
-//! ENU: `point.z` up, handed on as NED z) a finite `point.z`.
+//! ENU: `point.z` up, handed on as NED z) a finite `point.z`, ground normals
+//! (`geometry_msgs/Vector3Stamped`, ENU, handed on as NED) finite components
+//! (the flight stack checks the rest: length, slope).
 //!
 //! ROS time ([`Ros2Inputs::ros_time_ns`], the stamps of the status and the
 //! diagnostics) is the wall clock, or with `use_sim_time` the newest
@@ -132,6 +134,17 @@ pub struct GroundHeight {
     pub received: Instant,
 }
 
+/// A ground normal accepted from ROS 2 (`topics.ground_normal`): every
+/// component finite; NED, so the message's ENU `(x, y, z)` as `(y, x, -z)`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct GroundNormal {
+    /// The ground plane's normal under the robot, NED, out of the ground
+    /// (not normalized here: the flight stack normalizes and checks it).
+    pub normal: [f64; 3],
+    /// When the node thread accepted it.
+    pub received: Instant,
+}
+
 /// ROS time as the node keeps it: the wall clock, or with `use_sim_time`
 /// the newest `/clock` (0 until one arrives, as ROS 2 does). Shared by the
 /// node thread (which writes `/clock`) and the control thread (which reads
@@ -178,6 +191,10 @@ pub struct Ros2Counters {
     pub ground_received: u64,
     /// Ground heights with a non-finite `point.z`.
     pub ground_rejected: u64,
+    /// Ground normals that decoded, whatever their values.
+    pub ground_normal_received: u64,
+    /// Ground normals with a non-finite component.
+    pub ground_normal_rejected: u64,
     /// `/clock` messages that decoded (`use_sim_time` only).
     pub clock_received: u64,
     /// `/clock` messages with a negative or invalid time.
@@ -205,6 +222,8 @@ struct Counters {
     pilot_rejected: AtomicU64,
     ground_received: AtomicU64,
     ground_rejected: AtomicU64,
+    ground_normal_received: AtomicU64,
+    ground_normal_rejected: AtomicU64,
     clock_received: AtomicU64,
     clock_rejected: AtomicU64,
     inputs_dropped: AtomicU64,
@@ -229,6 +248,8 @@ impl Counters {
             pilot_rejected: g(&self.pilot_rejected),
             ground_received: g(&self.ground_received),
             ground_rejected: g(&self.ground_rejected),
+            ground_normal_received: g(&self.ground_normal_received),
+            ground_normal_rejected: g(&self.ground_normal_rejected),
             clock_received: g(&self.clock_received),
             clock_rejected: g(&self.clock_rejected),
             inputs_dropped: g(&self.inputs_dropped),
@@ -291,6 +312,7 @@ pub struct Ros2Inputs {
     drive: Receiver<DriveCommand>,
     pilot: Receiver<PilotCommand>,
     ground: Receiver<GroundHeight>,
+    ground_normal: Receiver<GroundNormal>,
     clock: Arc<RosClock>,
     counters: Arc<Counters>,
 }
@@ -314,6 +336,11 @@ impl Ros2Inputs {
     /// The newest ground height accepted since the last call, if any.
     pub fn latest_ground(&mut self) -> Option<GroundHeight> {
         self.ground.try_iter().last()
+    }
+
+    /// The newest ground normal accepted since the last call, if any.
+    pub fn latest_ground_normal(&mut self) -> Option<GroundNormal> {
+        self.ground_normal.try_iter().last()
     }
 
     /// ROS time now, ns since the epoch: the wall clock, or with

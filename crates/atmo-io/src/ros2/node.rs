@@ -17,14 +17,15 @@ use super::dds::{
     reliable_qos, spawn_node_thread, stream_qos, subscription, take_burst,
 };
 use super::{
-    Counters, DriveCommand, GroundHeight, Outgoing, PilotCommand, Ros2Config, Ros2Inputs, Ros2Node,
-    Ros2Publisher, Ros2StartOptions, Ros2Thread, RosClock, RosEstimate,
+    Counters, DriveCommand, GroundHeight, GroundNormal, Outgoing, PilotCommand, Ros2Config,
+    Ros2Inputs, Ros2Node, Ros2Publisher, Ros2StartOptions, Ros2Thread, RosClock, RosEstimate,
 };
 use crate::error::{IoError, Result};
 use crate::msg::frames::{odometry_to_state, vehicle_odometry_to_state};
 use crate::msg::{
     ActuatorMotors, Clock, DiagnosticArray, DiagnosticStatus, KeyValue, MpcStatus, Odometry,
-    OffboardControlMode, PilotInput, PointStamped, RosMessage, Time, Twist, VehicleOdometry,
+    OffboardControlMode, PilotInput, PointStamped, RosMessage, Time, Twist, Vector3Stamped,
+    VehicleOdometry,
 };
 use crate::stamp_order::StampOrder;
 
@@ -50,6 +51,7 @@ struct NodeThread {
     drive: Option<Subscription<Twist>>,
     pilot: Option<Subscription<PilotInput>>,
     ground: Option<Subscription<PointStamped>>,
+    ground_normal: Option<Subscription<Vector3Stamped>>,
     /// `topics.clock`, with `use_sim_time` only.
     clock_sub: Option<Subscription<Clock>>,
     out_rx: Receiver<Outgoing>,
@@ -57,6 +59,7 @@ struct NodeThread {
     drive_tx: SyncSender<DriveCommand>,
     pilot_tx: SyncSender<PilotCommand>,
     ground_tx: SyncSender<GroundHeight>,
+    ground_normal_tx: SyncSender<GroundNormal>,
     clock: Arc<RosClock>,
     counters: Arc<Counters>,
     stop: Arc<AtomicBool>,
@@ -82,6 +85,7 @@ fn topic_type_hashes(config: &Ros2Config) -> Result<Vec<KeyValue>> {
         &topics.offboard_mode,
         &topics.diagnostics,
         &topics.ground,
+        &topics.ground_normal,
     ];
     let clock = config.use_sim_time.then_some(&topics.clock);
     all.into_iter()
@@ -113,6 +117,7 @@ impl Ros2Node {
         let (drive_tx, drive_rx) = sync_channel(16);
         let (pilot_tx, pilot_rx) = sync_channel(16);
         let (ground_tx, ground_rx) = sync_channel(16);
+        let (ground_normal_tx, ground_normal_rx) = sync_channel(16);
         let clock = Arc::new(RosClock {
             use_sim_time: config.use_sim_time,
             sim_ns: 0.into(),
@@ -123,6 +128,7 @@ impl Ros2Node {
             drive_tx,
             pilot_tx,
             ground_tx,
+            ground_normal_tx,
             clock: Arc::clone(&clock),
         };
         let thread_counters = Arc::clone(&counters);
@@ -143,6 +149,7 @@ impl Ros2Node {
                 drive: drive_rx,
                 pilot: pilot_rx,
                 ground: ground_rx,
+                ground_normal: ground_normal_rx,
                 clock,
                 counters,
             },
@@ -158,6 +165,7 @@ struct NodeChannels {
     drive_tx: SyncSender<DriveCommand>,
     pilot_tx: SyncSender<PilotCommand>,
     ground_tx: SyncSender<GroundHeight>,
+    ground_normal_tx: SyncSender<GroundNormal>,
     clock: Arc<RosClock>,
 }
 
@@ -184,6 +192,7 @@ impl NodeThread {
         let drive = subscription::<Twist>(node, &t.drive_command)?;
         let pilot = subscription::<PilotInput>(node, &t.pilot)?;
         let ground = subscription::<PointStamped>(node, &t.ground)?;
+        let ground_normal = subscription::<Vector3Stamped>(node, &t.ground_normal)?;
         let clock_sub = if config.use_sim_time {
             subscription::<Clock>(node, &t.clock)?
         } else {
@@ -196,6 +205,7 @@ impl NodeThread {
             drive_tx,
             pilot_tx,
             ground_tx,
+            ground_normal_tx,
             clock,
         } = channels;
         Ok(Self {
@@ -208,12 +218,14 @@ impl NodeThread {
             drive,
             pilot,
             ground,
+            ground_normal,
             clock_sub,
             out_rx,
             estimate_tx,
             drive_tx,
             pilot_tx,
             ground_tx,
+            ground_normal_tx,
             clock,
             counters,
             stop,
@@ -233,6 +245,7 @@ impl NodeThread {
             self.take_drive();
             self.take_pilot();
             self.take_ground();
+            self.take_ground_normal();
             self.take_clock();
             if Instant::now() >= next_diagnostics {
                 self.publish(Outgoing::Diagnostics(Box::default()));
@@ -248,6 +261,7 @@ impl NodeThread {
             drive,
             pilot,
             ground,
+            ground_normal,
             clock_sub,
             _dds: dds,
             ..
@@ -261,6 +275,7 @@ impl NodeThread {
             drive,
             pilot,
             ground,
+            ground_normal,
             clock_sub,
         ))
     }
@@ -293,8 +308,9 @@ impl NodeThread {
             + c.drive_rejected
             + c.pilot_rejected
             + c.ground_rejected
+            + c.ground_normal_rejected
             + c.clock_rejected;
-        let pairs: [(&str, u64); 18] = [
+        let pairs: [(&str, u64); 20] = [
             ("estimates_received", c.estimates_received),
             ("estimates_accepted", c.estimates_accepted),
             ("malformed", c.malformed),
@@ -307,6 +323,8 @@ impl NodeThread {
             ("pilot_rejected", c.pilot_rejected),
             ("ground_received", c.ground_received),
             ("ground_rejected", c.ground_rejected),
+            ("ground_normal_received", c.ground_normal_received),
+            ("ground_normal_rejected", c.ground_normal_rejected),
             ("clock_received", c.clock_received),
             ("clock_rejected", c.clock_rejected),
             ("inputs_dropped", c.inputs_dropped),
@@ -468,6 +486,25 @@ impl NodeThread {
             |ground: PointStamped| {
                 ground.point.z.is_finite().then(|| GroundHeight {
                     z: -ground.point.z,
+                    received: Instant::now(),
+                })
+            },
+        );
+    }
+
+    fn take_ground_normal(&self) {
+        let c = &self.counters;
+        self.take_input(
+            self.ground_normal.as_ref(),
+            &c.ground_normal_received,
+            &c.ground_normal_rejected,
+            &self.ground_normal_tx,
+            |normal: Vector3Stamped| {
+                let v = normal.vector;
+                // ENU to NED: (east, north, up) -> (north, east, down).
+                let ned = [v.y, v.x, -v.z];
+                ned.iter().all(|c| c.is_finite()).then(|| GroundNormal {
+                    normal: ned,
                     received: Instant::now(),
                 })
             },

@@ -79,8 +79,12 @@ pub struct Mpc {
     disturbance: nalgebra::Vector6<f64>,
     /// Thrust-gain surface near the ground (`None`: the nominal model).
     ground_effect: Option<Arc<dyn ThrustGainSurface>>,
-    /// NED z of the ground plane, m.
+    /// NED z of the ground under the robot, m: the horizontal plane the
+    /// ground effect is measured from.
     ground_z: f64,
+    /// The ground plane the wheels' clearance is measured against (the
+    /// touchdown of a tilt plan): level at `ground_z` unless set.
+    ground: atmo_core::GroundPlane,
     /// The tilt-planning QP (when `[tilt_plan]` is configured).
     tilt: Option<Box<TiltPlanner>>,
 }
@@ -133,6 +137,7 @@ impl Mpc {
             disturbance: nalgebra::Vector6::zeros(),
             ground_effect: None,
             ground_z: 0.0,
+            ground: atmo_core::GroundPlane::level(0.0),
             settings,
         })
     }
@@ -387,10 +392,34 @@ impl Mpc {
     }
 
     /// Sets the NED z of the (horizontal) ground plane the ground effect is
-    /// measured from, for the next preparations.
+    /// measured from, for the next preparations; the wheels' clearance is
+    /// measured against the level ground there.
     pub fn set_ground_height(&mut self, ground_z: f64) -> Result<()> {
         check_finite("ground height", 0, &[ground_z])?;
         self.ground_z = ground_z;
+        self.ground = atmo_core::GroundPlane::level(ground_z);
+        Ok(())
+    }
+
+    /// Sets the ground plane for the next preparations: the wheels'
+    /// clearance of a tilt plan is measured against it, the ground effect
+    /// from the horizontal plane through its point (the ground under the
+    /// robot; the thrust-gain surface is a function of the height only).
+    /// Refuses a non-finite plane or a normal that is not of unit length.
+    pub fn set_ground_plane(&mut self, ground: &atmo_core::GroundPlane) -> Result<()> {
+        check_finite("ground plane point", 0, ground.point.as_slice())?;
+        check_finite("ground plane normal", 0, ground.normal.as_slice())?;
+        let norm = ground.normal.norm();
+        if (norm - 1.0).abs() > 1e-9 {
+            return Err(MpcError::OutOfRange {
+                what: "ground plane normal length",
+                value: norm,
+                min: 1.0,
+                max: 1.0,
+            });
+        }
+        self.ground_z = ground.point.z;
+        self.ground = *ground;
         Ok(())
     }
 

@@ -17,8 +17,10 @@
 //!
 //! The landing objective, "the largest tilt at touchdown for a bounded
 //! impact speed": along the plan the wheels' clearance
-//! `c_k = min_i h_i(xbar_k, varphibar_k) - R_w sin(varphibar_k)` (hub
-//! heights above the ground plane minus the rim's reach) predicts the
+//! `c_k = min_i [h_i(xbar_k, varphibar_k) - R_w sqrt(1 - (n . a_i)^2)]` (hub
+//! heights above the ground plane along its normal `n` minus the rim's
+//! reach towards it; `R_w sin(varphibar_k)` on level ground, see
+//! [`wheel_clearance`]) predicts the
 //! touchdown at the fractional stage `s*` where it crosses zero (the last
 //! stage when it does not within the horizon). The cost adds
 //!
@@ -42,8 +44,12 @@
 
 use std::f64::consts::FRAC_PI_2;
 
+use atmo_core::GroundPlane;
 use atmo_core::ground_effect::ThrustGainSurface;
-use atmo_core::model::{Input, Model, State, TiltedBody, idx, rk4_step_sensitivity, sin_cos};
+use atmo_core::model::{
+    Input, Model, State, TiltedBody, idx, rk4_step_sensitivity, rotation, sin_cos,
+};
+use nalgebra::Vector3;
 
 use super::{Mpc, check_finite, hover_reference, wrap_angle};
 use crate::error::{MpcError, Result};
@@ -140,19 +146,39 @@ impl TiltPlanner {
     }
 }
 
-/// The wheels' clearance above the ground plane `z = ground_z` (NED, m) of
-/// `body` (frozen at its tilt `varphi`) in state `x`: the lowest rotor hub's
-/// height minus the rim's reach `wheel_radius sin(varphi)` below it.
-/// Allocation-free.
-pub fn wheel_clearance(body: &TiltedBody, ground_z: f64, x: &State, wheel_radius: f64) -> f64 {
-    let (sp, cp) = sin_cos(x[idx::PITCH]);
-    let (sr, cr) = sin_cos(x[idx::ROLL]);
-    let lowest_hub = body
-        .rotor_position
+/// The wheels' clearance above the ground plane `ground` of `body` (frozen
+/// at its tilt) in state `x`: over the four wheels, the smallest distance of
+/// a rim to the plane, each hub's signed height above the plane (along its
+/// normal `n`) minus the rim's reach towards it, `R_w sqrt(1 - (n . a_i)^2)`
+/// (a rim of radius `R_w` about the hub, in the plane normal to the wheel's
+/// axle `a_i`, the rotor axis). The hubs are placed with the full attitude;
+/// the axles with the heading only (the rim's reach at a level attitude, as
+/// the level-ground clearance always took it: the landing is flown level).
+/// On level ground this is, bit for bit, the lowest hub's height minus
+/// `R_w sin(varphi)` (tested). Allocation-free.
+pub fn wheel_clearance(
+    body: &TiltedBody,
+    ground: &GroundPlane,
+    x: &State,
+    wheel_radius: f64,
+) -> f64 {
+    let rot = rotation(x[idx::YAW], x[idx::PITCH], x[idx::ROLL]);
+    let (sy, cy) = sin_cos(x[idx::YAW]);
+    let n = &ground.normal;
+    body.rotor_position
         .iter()
-        .map(|r| ground_z - (x[idx::Z] - sp * r.x + cp * sr * r.y + cp * cr * r.z))
-        .fold(f64::INFINITY, f64::min);
-    lowest_hub - wheel_radius * sin_cos(body.varphi).0
+        .zip(&body.rotor_axis)
+        .map(|(r, a)| {
+            let hub = Vector3::new(
+                x[idx::X] + rot.row(0).transpose().dot(r),
+                x[idx::Y] + rot.row(1).transpose().dot(r),
+                x[idx::Z] + rot[(2, 0)] * r.x + rot[(2, 1)] * r.y + rot[(2, 2)] * r.z,
+            );
+            let along = n.z * a.z + n.x * (cy * a.x - sy * a.y) + n.y * (sy * a.x + cy * a.y);
+            let reach = wheel_radius * (1.0 - along * along).max(0.0).sqrt();
+            ground.height(&hub) - reach
+        })
+        .fold(f64::INFINITY, f64::min)
 }
 
 /// Where the plan's wheels meet the ground: the fractional stage at which
@@ -305,7 +331,7 @@ impl Mpc {
 
     /// The wheels' clearance above the ground plane at a plan stage, m.
     fn clearance(&self, x: &State, varphi: f64, wheel_radius: f64) -> f64 {
-        wheel_clearance(&self.model.at_tilt(varphi), self.ground_z, x, wheel_radius)
+        wheel_clearance(&self.model.at_tilt(varphi), &self.ground, x, wheel_radius)
     }
 
     /// The preparation's linearization for the tilt-planning QP: the
@@ -427,7 +453,76 @@ impl Mpc {
 
 #[cfg(test)]
 mod tests {
-    use super::touchdown_stage;
+    use super::{GroundPlane, State, Vector3, idx, sin_cos, touchdown_stage, wheel_clearance};
+    use atmo_core::{Model, RobotConfig};
+
+    #[test]
+    fn clearance_on_a_slope_is_the_lowest_rim_towards_the_plane() {
+        // Hand-computed: hubs at (+-0.2, +-0.15, 0.05) m (body), the wheels'
+        // axles (+-sin 70, 0, -cos 70) (the sign of the hub's x), base 0.5 m
+        // above the origin, level, yaw 0; the ground a 25 deg slope through
+        // the origin rising to +x, n = (-sin 25, 0, -cos 25). Uphill hubs:
+        // n . p = 0.2 (-sin 25) + 0.45 cos 25 = 0.3233149 m, reach
+        // 0.125 sqrt(1 - cos(95 deg)^2) = 0.1245243 m; downhill:
+        // 0.4923622 m and 0.125 sqrt(1 - cos(45 deg)^2) = 0.0883883 m.
+        let phi = 70f64.to_radians();
+        let mut body = Model::new(&RobotConfig::atmo()).at_tilt(phi);
+        for (i, (x, y)) in [(0.2, 0.15), (0.2, -0.15), (-0.2, 0.15), (-0.2, -0.15)]
+            .into_iter()
+            .enumerate()
+        {
+            body.rotor_position[i] = Vector3::new(x, y, 0.05);
+            body.rotor_axis[i] = Vector3::new(f64::signum(x) * phi.sin(), 0.0, -phi.cos());
+        }
+        let s = 25f64.to_radians();
+        let slope =
+            GroundPlane::new(Vector3::zeros(), Vector3::new(-s.sin(), 0.0, -s.cos())).unwrap();
+        let mut x = State::zeros();
+        x[idx::Z] = -0.5;
+        let c = wheel_clearance(&body, &slope, &x, 0.125);
+        assert!((c - 0.198_790_514_556_884).abs() < 1e-12, "{c}");
+        // The level ground measures hub heights minus R sin(70 deg): 0.45 - 0.1174616.
+        let level = wheel_clearance(&body, &GroundPlane::level(0.0), &x, 0.125);
+        assert!(
+            (level - (0.45 - 0.125 * phi.sin())).abs() < 1e-12,
+            "{level}"
+        );
+        // Facing east (yaw 90 deg) the hubs lie across the slope: the
+        // highest-ground hubs are those at world x = +0.15.
+        x[idx::YAW] = std::f64::consts::FRAC_PI_2;
+        let across = wheel_clearance(&body, &slope, &x, 0.125);
+        let reach = 0.125 * (1.0 - (s.cos() * phi.cos()).powi(2)).sqrt();
+        let expected = -0.15 * s.sin() + 0.45 * s.cos() - reach;
+        assert!((across - expected).abs() < 1e-12, "{across} {expected}");
+    }
+
+    #[test]
+    fn level_clearance_is_the_lowest_hub_minus_the_rim_reach_of_the_tilt() {
+        // The model's own body (any tilt and attitude) on level ground: bit
+        // for bit the clearance before the ground plane, hub heights with the
+        // attitude minus R_w sin(varphi) (the reach at a level attitude).
+        let model = Model::new(&RobotConfig::atmo());
+        let mut x = State::zeros();
+        x[idx::Z] = -0.4;
+        x[idx::YAW] = 0.7;
+        for (pitch, roll) in [(0.0, 0.0), (0.05, -0.03), (-0.1, 0.08)] {
+            x[idx::PITCH] = pitch;
+            x[idx::ROLL] = roll;
+            let (sp, cp) = sin_cos(pitch);
+            let (sr, cr) = sin_cos(roll);
+            for deg in [0.0, 30.0, 50.0, 62.0, 70.0, 90.0] {
+                let body = model.at_tilt(f64::to_radians(deg));
+                let lowest = body
+                    .rotor_position
+                    .iter()
+                    .map(|r| -0.1 - (x[idx::Z] - sp * r.x + cp * sr * r.y + cp * cr * r.z))
+                    .fold(f64::INFINITY, f64::min);
+                let expected = lowest - 0.125 * sin_cos(body.varphi).0;
+                let c = wheel_clearance(&body, &GroundPlane::level(-0.1), &x, 0.125);
+                assert_eq!(c, expected, "{deg} deg, pitch {pitch}, roll {roll}");
+            }
+        }
+    }
 
     #[test]
     fn touchdown_is_interpolated_where_the_clearance_crosses_zero() {
