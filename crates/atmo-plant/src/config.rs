@@ -602,6 +602,14 @@ impl EffectsConfig {
         Self::default()
     }
 
+    /// The thrust axis's rotation vector (body x, y, 0), when it is on.
+    pub fn thrust_axis_rotation(&self) -> Option<[f64; 3]> {
+        self.thrust_axis
+            .as_ref()
+            .filter(|e| e.enabled)
+            .map(|e| [e.tilt[0], e.tilt[1], 0.0])
+    }
+
     /// Every effect on with its default parameters.
     pub fn all() -> Self {
         Self {

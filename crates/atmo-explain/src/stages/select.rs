@@ -181,16 +181,8 @@ pub fn select_effects(res: &Residuals, rec: &Recording, tau: f64) -> Selection {
     // only a candidate if the drag at some wind explains its force, which
     // the linear columns at no wind cannot show (body and axial drag are
     // not linear in it); otherwise other candidates take the wind's force.
-    let pre = crate::stages::wind::profile_wind(
-        prep,
-        rec,
-        tau,
-        &layout,
-        &columns.data,
-        &stats,
-        &weights,
-        &res.seg_of,
-    );
+    let pre =
+        crate::stages::wind::profile_wind(res, rec, tau, &layout, &columns.data, &stats, &weights);
     let wind = pre.is_interior().then(|| {
         knobs.wind = pre.wind;
         columns = build_columns(prep, rec, &knobs, &accel);

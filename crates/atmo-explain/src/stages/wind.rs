@@ -45,6 +45,7 @@ use crate::data::Prepared;
 use crate::effects::{Effect, Layout, drag_columns};
 use crate::recording::Recording;
 use crate::select::{self, FOLDS, Stats, fold_of};
+use crate::stages::Residuals;
 
 /// Most rows the profile uses (a long recording is profiled on evenly
 /// spaced stretches of it: the wind is one steady vector).
@@ -204,15 +205,15 @@ impl Profiler<'_> {
 /// Profiles the wind with the linear drag and [`PROFILE_COMPANIONS`],
 /// given the columns and statistics built at no wind.
 pub fn profile_wind(
-    prep: &Prepared,
+    res: &Residuals,
     rec: &Recording,
     tau: f64,
     layout: &Layout,
     columns: &[Vec<f64>],
     stats: &Stats,
     weights: &[f64],
-    seg_of: &[Option<usize>],
 ) -> WindProfile {
+    let (prep, seg_of) = (&res.prep, res.seg_of.as_slice());
     let rest = PROFILE_COMPANIONS;
     let fixed_idx = select::columns_for(layout, &rest);
     let weights: Vec<f64> = weights
@@ -344,9 +345,8 @@ fn stretches(
     let chosen: Vec<(usize, usize)> = pieces.into_iter().step_by(keep).collect();
     let mut used = vec![None; seg_of.len()];
     for &(a, b) in &chosen {
-        for k in a + prep.half..b - prep.half {
-            used[k] = seg_of[k];
-        }
+        let inner = a + prep.half..b - prep.half;
+        used[inner.clone()].copy_from_slice(&seg_of[inner]);
     }
     (chosen, used)
 }

@@ -287,11 +287,6 @@ impl Plant {
             .as_ref()
             .filter(|e| e.enabled)
             .map(|e| Vector3::from(e.offset));
-        let thrust_axis = fx
-            .thrust_axis
-            .as_ref()
-            .filter(|e| e.enabled)
-            .map(|e| Vector3::new(e.tilt[0], e.tilt[1], 0.0));
         let mass_error = fx
             .mass_error
             .as_ref()
@@ -372,7 +367,7 @@ impl Plant {
             wind,
             battery,
             com_offset,
-            thrust_axis,
+            thrust_axis: fx.thrust_axis_rotation().map(Vector3::from),
             mass_error,
             contact,
             corners,
