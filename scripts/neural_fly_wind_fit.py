@@ -26,25 +26,9 @@ import csv
 import math
 import sys
 
+from neural_fly_conventions import lstsq
+
 M, G, K_T = 2.67, 9.81, 12.53
-
-
-def solve(rows, rhs):
-    """Least squares by the normal equations (a handful of columns)."""
-    n = len(rows[0])
-    a = [[sum(r[i] * r[j] for r in rows) for j in range(n)] for i in range(n)]
-    b = [sum(r[i] * y for r, y in zip(rows, rhs)) for i in range(n)]
-    for i in range(n):
-        p = max(range(i, n), key=lambda k: abs(a[k][i]))
-        a[i], a[p], b[i], b[p] = a[p], a[i], b[p], b[i]
-        for k in range(i + 1, n):
-            f = a[k][i] / a[i][i]
-            a[k] = [x - f * y for x, y in zip(a[k], a[i])]
-            b[k] -= f * b[i]
-    x = [0.0] * n
-    for i in reversed(range(n)):
-        x[i] = (b[i] - sum(a[i][j] * x[j] for j in range(i + 1, n))) / a[i][i]
-    return x
 
 
 def load(path):
@@ -92,7 +76,7 @@ def main():
         best = None
         for wx in [0.5 * i for i in range(-50, 11)]:
             x, y = design(rows, wx, axial)
-            c = solve(x, y)
+            c, _ = lstsq(x, y)
             rss = sum((b - sum(p * q for p, q in zip(r, c))) ** 2 for r, b in zip(x, y))
             if best is None or rss < best[0]:
                 best = (rss, wx, c)

@@ -319,7 +319,21 @@ struct Row<'a> {
     rot: &'a Matrix3<f64>,
 }
 
-impl Row<'_> {
+impl<'a> Row<'a> {
+    /// Row `k` of the recording, with the rotor thrusts `thrust`.
+    fn at(prep: &'a Prepared, rec: &'a Recording, thrust: &'a [Input], k: usize) -> Self {
+        let sample = &rec.samples[k];
+        Row {
+            k,
+            sample,
+            thrust: &thrust[k],
+            command: &prep.u_eff[k],
+            body: prep.table.at(sample.varphi),
+            act: &prep.act[k],
+            rot: &prep.rot[k],
+        }
+    }
+
     fn position(&self) -> Vector3<f64> {
         let x = &self.sample.x;
         Vector3::new(x[idx::X], x[idx::Y], x[idx::Z])
@@ -343,7 +357,6 @@ impl Row<'_> {
 pub fn build_columns(prep: &Prepared, rec: &Recording, knobs: &Knobs, accel: &[f64]) -> Columns {
     let layout = Layout::all();
     let n = prep.n;
-    let samples = &rec.samples;
     let thrust = crate::data::lagged_commands(&prep.t, &prep.u_eff, knobs.tau);
     // Smoothed part (through S) and direct part (already filtered).
     let mut raw: Vec<Vec<f64>> = vec![vec![0.0; 6 * n]; layout.total];
@@ -362,16 +375,7 @@ pub fn build_columns(prep: &Prepared, rec: &Recording, knobs: &Knobs, accel: &[f
                     .map(|v| v.max(0.0).powf(1.5))
                     .sum::<f64>();
         }
-        let sample = &samples[k];
-        let row = Row {
-            k,
-            sample,
-            thrust: &thrust[k],
-            command: &prep.u_eff[k],
-            body: prep.table.at(sample.varphi),
-            act: &prep.act[k],
-            rot: &prep.rot[k],
-        };
+        let row = Row::at(prep, rec, &thrust, k);
         push_thrust_terms(&mut raw, &mut lag_raw, &at, &row, energy);
         push_ground_effect(&mut raw, &at, &row);
         push_drag_and_wind(&mut raw, &at, &row, &wind);
@@ -506,16 +510,7 @@ pub fn drag_columns(
     let mut raw: [Vec<f64>; DRAG_WIDTH] = std::array::from_fn(|_| vec![0.0; 6 * n]);
     for &(s, e) in runs {
         for k in s..e {
-            let sample = &rec.samples[k];
-            let row = Row {
-                k,
-                sample,
-                thrust: &thrust[k],
-                command: &prep.u_eff[k],
-                body: prep.table.at(sample.varphi),
-                act: &prep.act[k],
-                rot: &prep.rot[k],
-            };
+            let row = Row::at(prep, rec, thrust, k);
             for (j, term) in drag_terms(&row, &wind).iter().enumerate() {
                 push6(&mut raw[j], k, term);
             }
