@@ -13,9 +13,12 @@
 //! 2. **Locate** ([`locate`]): channels x bins of hub height, tilt, speed,
 //!    thrust, time, command rate and the (height, tilt) map, each tested
 //!    against the noise floor (batch-means z tests, Bonferroni).
-//! 3. **Name the physics** ([`effects`], [`select`]): nine candidate
-//!    effects with physical parameters, linear in their coefficients
-//!    (motor lag: time constant profiled by held-out error). Forward-backward
+//! 3. **Name the physics** ([`effects`], [`select`]): eleven candidate
+//!    effects with physical parameters, linear in their coefficients, each
+//!    held inside its physical range by an active set (motor lag: time
+//!    constant profiled by held-out error; steady wind: profiled before the
+//!    selection on the force channels with the drag and the thrust
+//!    calibration, `stages::wind`). Forward-backward
 //!    selection on held-out whole segments (5 folds), inclusion frequency
 //!    over random halves of the segments as confidence, delete-a-fold
 //!    jackknife standard deviations, and a swap test for effects the data

@@ -177,10 +177,10 @@ pub fn select_effects(res: &Residuals, rec: &Recording, tau: f64) -> Selection {
     let mut accel = prep.nominal.clone();
     let mut columns = build_columns(prep, rec, &knobs, &accel);
     let mut stats = stats_of(&columns, &weights, &res.seg_of, res.nseg);
-    // The drag candidate on the air-relative velocity: a steady wind is
-    // only a candidate if the drag at some wind explains its force, which
-    // the linear columns at no wind cannot show (body and axial drag are
-    // not linear in it); otherwise other candidates take the wind's force.
+    // The drag candidate on the air-relative velocity, at the profiled
+    // wind (stages::wind): the wind's columns at no wind carry only the
+    // in-plane rotor drag's `k_r w`, and without the rest of the wind's
+    // force other candidates took it.
     let pre =
         crate::stages::wind::profile_wind(res, rec, tau, &layout, &columns.data, &stats, &weights);
     let wind = pre.is_interior().then(|| {

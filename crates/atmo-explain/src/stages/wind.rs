@@ -11,15 +11,14 @@
 //! before the selection:
 //!
 //! ```text
-//! RSS(w) = min_theta |W_F (r - X_cal theta_c - X_lin(w) theta_d)|^2
+//! RSS(w) = min_theta |W_F (r - X_cal theta_c - X_drag(w) theta_d)|^2
 //! ```
 //!
-//! - `X_lin(w)`: the linear drag columns at the trial wind, rotor drag in
-//!   the disc plane and thrust lost to axial inflow, both proportional to
-//!   the rotor's thrust (coefficients held non-negative). The quadratic
-//!   body drag is left out of the profile: its wind dependence is biased by
-//!   the velocity noise (`E[|v + n| (v + n)]` is not `|v| v`) and, quadratic
-//!   in a trial wind, it fits almost anything at a large one.
+//! - `X_drag(w)`: every drag column at the trial wind (rotor drag in the
+//!   disc plane, thrust lost to axial inflow, quadratic body drag), their
+//!   coefficients held inside their physical ranges. With the linear
+//!   columns alone the wind of the plant's concealed drag + wind flight
+//!   came out 6 % low: the body drag carries part of it there.
 //! - `X_cal`: the calibration a flight always needs beside it (thrust scale
 //!   and curve, the thrust axis: [`PROFILE_COMPANIONS`]). A constant
 //!   sideways force is the thrust axis's, not a wind's.
@@ -42,7 +41,7 @@ use nalgebra::{DMatrix, DVector, SMatrix, SVector};
 use atmo_core::model::Input;
 
 use crate::data::Prepared;
-use crate::effects::{Effect, Layout, drag_columns};
+use crate::effects::{DRAG_WIDTH, Effect, Layout, drag_columns};
 use crate::recording::Recording;
 use crate::select::{self, FOLDS, Stats, fold_of};
 use crate::stages::Residuals;
@@ -54,9 +53,6 @@ const PROFILE_MAX_ROWS: usize = 15_000;
 const PROFILE_STRETCH_ROWS: usize = 1_500;
 /// Largest trial wind speed (m/s): past the 15 m/s physical bound.
 pub const SEARCH_LIMIT: f64 = 24.0;
-/// The linear drag columns (rotor drag in the disc plane, axial inflow):
-/// the first two of the drag effect's.
-const LINEAR_DRAG: usize = 5;
 /// The calibration profiled with the drag.
 pub const PROFILE_COMPANIONS: [Effect; 3] =
     [Effect::ThrustScale, Effect::ThrustCurve, Effect::ThrustAxis];
@@ -103,7 +99,7 @@ struct Profiler<'a> {
     seg_of: Vec<Option<usize>>,
     fixed: Vec<&'a [f64]>,
     /// Bounds of the drag coefficients profiled.
-    drag_bounds: [(f64, f64); LINEAR_DRAG],
+    drag_bounds: [(f64, f64); DRAG_WIDTH],
     /// The fixed columns' statistics on the rows used.
     fixed_stats: Stats,
     resid: &'a [f64],
@@ -117,7 +113,7 @@ impl Profiler<'_> {
         self.evaluations += 1;
         let drag = drag_columns(self.prep, self.rec, &self.thrust, wind, &self.stretches);
         let pf = self.fixed.len();
-        let p = pf + LINEAR_DRAG;
+        let p = pf + DRAG_WIDTH;
         let nseg = self.fixed_stats.nseg();
         let mut out = Stats {
             p,
@@ -146,13 +142,13 @@ impl Profiler<'_> {
         let mut xf = vec![0.0; pf];
         for (k, seg) in self.seg_of.iter().enumerate() {
             let Some(s) = *seg else { continue };
-            let mut gdd = SMatrix::<f64, LINEAR_DRAG, LINEAR_DRAG>::zeros();
-            let mut bd = SVector::<f64, LINEAR_DRAG>::zeros();
+            let mut gdd = SMatrix::<f64, DRAG_WIDTH, DRAG_WIDTH>::zeros();
+            let mut bd = SVector::<f64, DRAG_WIDTH>::zeros();
             let (g, b) = (&mut out.g[s], &mut out.b[s]);
             for c in 0..6 {
                 let i = 6 * k + c;
                 let w = self.weights[i];
-                let xd: [f64; LINEAR_DRAG] = std::array::from_fn(|m| drag[m][i] * w);
+                let xd: [f64; DRAG_WIDTH] = std::array::from_fn(|m| drag[m][i] * w);
                 if xd.iter().all(|v| *v == 0.0) {
                     continue;
                 }
@@ -160,9 +156,9 @@ impl Profiler<'_> {
                     xf[j] = col[i] * w;
                 }
                 let y = self.resid[i] * w;
-                for m in 0..LINEAR_DRAG {
+                for m in 0..DRAG_WIDTH {
                     bd[m] += xd[m] * y;
-                    for l in m..LINEAR_DRAG {
+                    for l in m..DRAG_WIDTH {
                         gdd[(m, l)] += xd[m] * xd[l];
                     }
                     for (j, x) in xf.iter().enumerate() {
@@ -170,9 +166,9 @@ impl Profiler<'_> {
                     }
                 }
             }
-            for m in 0..LINEAR_DRAG {
+            for m in 0..DRAG_WIDTH {
                 b[pf + m] += bd[m];
-                for l in m..LINEAR_DRAG {
+                for l in m..DRAG_WIDTH {
                     g[(pf + m, pf + l)] += gdd[(m, l)];
                     g[(pf + l, pf + m)] = g[(pf + m, pf + l)];
                 }
