@@ -216,44 +216,25 @@ impl Stats {
         }
     }
 
-    /// The least-squares coefficients of the columns `idx` with those of
+    /// The least-squares coefficients of the columns `all` with those of
     /// `fixed` held at their values.
     fn solve_unconstrained(
         &self,
-        idx: &[usize],
-        fixed: &[Option<f64>],
-        use_seg: &dyn Fn(usize) -> bool,
-    ) -> DVector<f64> {
-        let free: Vec<usize> = (0..idx.len()).filter(|&a| fixed[a].is_none()).collect();
-        let theta_free = self.solve_free(idx, &free, fixed, use_seg);
-        let mut out = DVector::zeros(idx.len());
-        for (a, v) in fixed.iter().enumerate() {
-            if let Some(v) = v {
-                out[a] = *v;
-            }
-        }
-        for (pos, &a) in free.iter().enumerate() {
-            out[a] = theta_free[pos];
-        }
-        out
-    }
-
-    fn solve_free(
-        &self,
         all: &[usize],
-        free: &[usize],
         fixed: &[Option<f64>],
         use_seg: &dyn Fn(usize) -> bool,
     ) -> DVector<f64> {
+        let free: Vec<usize> = (0..all.len()).filter(|&a| fixed[a].is_none()).collect();
         let idx: Vec<usize> = free.iter().map(|&a| all[a]).collect();
         let held: Vec<(usize, f64)> = fixed
             .iter()
             .enumerate()
             .filter_map(|(a, v)| v.map(|v| (all[a], v)))
             .collect();
+        let mut out = DVector::from_iterator(all.len(), fixed.iter().map(|v| v.unwrap_or(0.0)));
         let q = idx.len();
         if q == 0 {
-            return DVector::zeros(0);
+            return out;
         }
         let mut g = DMatrix::zeros(q, q);
         let mut b = DVector::zeros(q);
@@ -283,7 +264,10 @@ impl Stats {
         for a in 0..q {
             g[(a, a)] += 1e-7 * max_diag + 1e-12;
         }
-        bounded_solve(g, &b)
+        for (pos, v) in bounded_solve(g, &b).iter().enumerate() {
+            out[free[pos]] = *v;
+        }
+        out
     }
 
     /// Weighted squared error of `theta` (columns `idx`) on segment `s`.

@@ -161,7 +161,9 @@ pub struct TickInputs {
     pub ground_normal: [f64; 3],
 }
 
-const TICK_INPUTS_FIELDS: &[&str] = &[
+/// The fields of `TickInputs` in wire order (its .msg definition's, checked
+/// by the message tests).
+pub(super) const TICK_INPUTS_FIELDS: &[&str] = &[
     "tick",
     "clock_ns",
     "has_estimate",

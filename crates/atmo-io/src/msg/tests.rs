@@ -615,25 +615,7 @@ fn tick_inputs_and_sim_truth_layouts() {
             .iter()
             .map(|f| f.name.as_str())
             .collect::<Vec<_>>(),
-        [
-            "tick",
-            "clock_ns",
-            "has_estimate",
-            "estimate_received_ns",
-            "estimate",
-            "has_tilt_counts",
-            "tilt_counts",
-            "pilot",
-            "ground_contact",
-            "ground_z",
-            "driver_lost",
-            "solver_cut_count",
-            "solver_cut_solve",
-            "solver_cut_iteration",
-            "solver_cut_overflow",
-            "has_ground_normal",
-            "ground_normal"
-        ]
+        super::atmo::TICK_INPUTS_FIELDS
     );
     let truth = SimTruth {
         time: 0.5,
