@@ -219,6 +219,38 @@ fn monte_carlo_of_the_wheel_landing() {
     }
     assert_eq!(report.runs, runs);
     assert_eq!(report.crashes, 0);
+    // The per-run records: in run order, agreeing with the counts, and each
+    // run's draws those its seed gives again (so a miss can be replayed).
+    assert_eq!(report.per_run.len(), runs);
+    assert!(
+        report
+            .per_run
+            .iter()
+            .enumerate()
+            .all(|(i, r)| r.run == i && r.seed == 1 + i as u64)
+    );
+    assert_eq!(
+        report.per_run.iter().filter(|r| r.success).count(),
+        report.successes
+    );
+    assert_eq!(
+        report
+            .per_run
+            .iter()
+            .filter(|r| r.landed_past_64_deg)
+            .count(),
+        report.landed_past_64_deg
+    );
+    let base = scenario("wheel_landing");
+    let again = monte_carlo::randomized_with_draws(&base, 7);
+    assert_eq!(again.1, report.per_run[6].draws);
+    let mass = again.0.plant.effects.mass_error.as_ref().unwrap();
+    assert_eq!(mass.mass_scale, again.1.mass_scale);
+    assert_eq!(
+        again.0.robot.rotor.k_thrust,
+        base.robot.rotor.k_thrust * again.1.thrust_scale
+    );
+    assert!((0.7..=1.3).contains(&again.1.ground_effect_scale));
     assert!(
         report.success_rate >= 0.95,
         "success rate {}",

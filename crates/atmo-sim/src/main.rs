@@ -36,7 +36,9 @@ enum Command {
     /// drive distance, mode sequence, MPC failures, times) and figure.png (the
     /// paper's Fig. 5A for this flight). With --runs N: a Monte Carlo of N
     /// randomized copies (mass, inertia, thrust +-5 %, gusts, sensor noise,
-    /// initial spread) in parallel, written to monte_carlo.json.
+    /// initial spread, the plant's ground-effect surface) in parallel,
+    /// written to monte_carlo.json: distributions, and under `per_run` each
+    /// run's seed, draws and outcome (replay one with --runs 1 --seed S).
     /// The exit status is 0 when the flight (or every Monte Carlo run) met
     /// the success criteria: no crash, touchdown tilt >= 60 deg, impact speed
     /// <= 0.5 m/s, >= 1 m driven after touchdown.

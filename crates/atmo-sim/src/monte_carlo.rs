@@ -83,12 +83,52 @@ pub struct MonteCarloReport {
     pub landed_past_64_deg: usize,
     pub crashes: usize,
     pub failures: Vec<Failure>,
+    /// Every run in order: its draws and its outcome.
+    pub per_run: Vec<RunRecord>,
     pub wall_time_s: f64,
     pub threads: usize,
 }
 
+/// What one run drew: the plant's truth against the controller's model.
+#[derive(Debug, Clone, Copy, Serialize, PartialEq, Default)]
+pub struct Draws {
+    /// Mass and inertia against the robot file's (1 = as the file says).
+    pub mass_scale: f64,
+    pub inertia_scale: f64,
+    /// The rotors' thrust coefficient against the robot file's.
+    pub thrust_scale: f64,
+    /// The plant's ground-effect gains against its table's (1 when the
+    /// scenario has no ground effect) and the shift of its tilt axis.
+    pub ground_effect_scale: f64,
+    pub ground_effect_shift_deg: f64,
+    /// The gust: start (s), duration (s), velocity (m/s, NED).
+    pub gust_t: f64,
+    pub gust_duration: f64,
+    pub gust_velocity: [f64; 3],
+}
+
+/// One run of the Monte Carlo: what it drew and how it flew, so that the
+/// runs that missed can be told apart from those that did not.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct RunRecord {
+    pub run: usize,
+    pub seed: u64,
+    pub draws: Draws,
+    pub success: bool,
+    pub landed_past_64_deg: bool,
+    pub crashed: bool,
+    pub touchdown_tilt_deg: Option<f64>,
+    pub impact_speed_mps: Option<f64>,
+    pub max_mean_thrust: f64,
+}
+
 /// The i-th randomized copy of `base`.
 pub fn randomized(base: &Scenario, seed: u64) -> Scenario {
+    randomized_with_draws(base, seed).0
+}
+
+/// The i-th randomized copy of `base` and what was drawn for it.
+pub fn randomized_with_draws(base: &Scenario, seed: u64) -> (Scenario, Draws) {
     let mut s = base.clone();
     let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x4d43_5f41_544d_4f00);
     let mut within = |half: f64| rng.random_range(-half..=half);
@@ -99,19 +139,28 @@ pub fn randomized(base: &Scenario, seed: u64) -> Scenario {
         mass_scale: 1.0,
         inertia_scale: 1.0,
     });
+    let mut draws = Draws {
+        ground_effect_scale: 1.0,
+        ..Draws::default()
+    };
+    draws.mass_scale = mass.mass_scale * (1.0 + within(0.05));
+    draws.inertia_scale = mass.inertia_scale * (1.0 + within(0.05));
     fx.mass_error = Some(MassErrorConfig {
         enabled: true,
-        mass_scale: mass.mass_scale * (1.0 + within(0.05)),
-        inertia_scale: mass.inertia_scale * (1.0 + within(0.05)),
+        mass_scale: draws.mass_scale,
+        inertia_scale: draws.inertia_scale,
     });
-    s.robot.rotor.k_thrust *= 1.0 + within(0.05);
+    draws.thrust_scale = 1.0 + within(0.05);
+    s.robot.rotor.k_thrust *= draws.thrust_scale;
     let mut wind = fx.wind.clone().unwrap_or_default();
     wind.enabled = true;
-    let gust_t = within(0.5 * s.file.duration).abs();
+    draws.gust_t = within(0.5 * s.file.duration).abs();
+    draws.gust_duration = 1.0 + within(0.5);
+    draws.gust_velocity = [within(1.5), within(1.5), within(0.3)];
     wind.gusts.push(GustConfig {
-        t: gust_t,
-        duration: 1.0 + within(0.5),
-        velocity: [within(1.5), within(1.5), within(0.3)],
+        t: draws.gust_t,
+        duration: draws.gust_duration,
+        velocity: draws.gust_velocity,
     });
     fx.wind = Some(wind);
     let init = &mut s.file.initial;
@@ -128,10 +177,11 @@ pub fn randomized(base: &Scenario, seed: u64) -> Scenario {
     }
     // Drawn last, so that the draws above stay those of the runs before.
     if let Some(ge) = s.plant.effects.ground_effect.as_mut() {
-        let scale = 1.0 + within(0.3);
-        *ge = ge.perturbed(scale, within(3.0));
+        draws.ground_effect_scale = 1.0 + within(0.3);
+        draws.ground_effect_shift_deg = within(3.0);
+        *ge = ge.perturbed(draws.ground_effect_scale, draws.ground_effect_shift_deg);
     }
-    s
+    (s, draws)
 }
 
 /// Issue 17's Monte Carlo criterion: no crash, touchdown tilt >= 64 deg,
@@ -156,7 +206,8 @@ pub fn run(
     let criteria = base.file.success;
     let next = AtomicUsize::new(0);
     let done = AtomicUsize::new(0);
-    let results: Mutex<Vec<(usize, u64, Result<Summary>)>> = Mutex::new(Vec::with_capacity(runs));
+    let results: Mutex<Vec<(usize, u64, Draws, Result<Summary>)>> =
+        Mutex::new(Vec::with_capacity(runs));
     let threads = threads.clamp(1, runs.max(1));
     std::thread::scope(|scope| {
         for _ in 0..threads {
@@ -167,12 +218,12 @@ pub fn run(
                         break;
                     }
                     let seed = base_seed.wrapping_add(i as u64);
-                    let scenario = randomized(base, seed);
+                    let (scenario, draws) = randomized_with_draws(base, seed);
                     let summary = fly(&scenario, controller, |_| {});
                     results
                         .lock()
                         .unwrap_or_else(std::sync::PoisonError::into_inner)
-                        .push((i, seed, summary));
+                        .push((i, seed, draws, summary));
                     progress(done.fetch_add(1, Ordering::Relaxed) + 1);
                 }
             });
@@ -183,8 +234,21 @@ pub fn run(
         .unwrap_or_else(std::sync::PoisonError::into_inner);
     results.sort_by_key(|r| r.0);
     let mut summaries = Vec::with_capacity(runs);
-    for (i, seed, r) in results {
-        summaries.push((i, seed, r?));
+    let mut per_run = Vec::with_capacity(runs);
+    for (i, seed, draws, r) in results {
+        let s = r?;
+        per_run.push(RunRecord {
+            run: i,
+            seed,
+            draws,
+            success: criteria.met_by(&s),
+            landed_past_64_deg: landed_past_64_deg(&s),
+            crashed: s.crashed,
+            touchdown_tilt_deg: s.touchdown_tilt_deg,
+            impact_speed_mps: s.impact_speed_mps,
+            max_mean_thrust: s.max_mean_thrust,
+        });
+        summaries.push((i, seed, s));
     }
     let successes = summaries
         .iter()
@@ -240,6 +304,7 @@ pub fn run(
             .count(),
         crashes: summaries.iter().filter(|(_, _, s)| s.crashed).count(),
         failures,
+        per_run,
         wall_time_s: wall.elapsed().as_secs_f64(),
         threads,
     })
