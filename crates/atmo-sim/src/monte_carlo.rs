@@ -192,6 +192,9 @@ pub fn landed_past_64_deg(s: &Summary) -> bool {
         && s.impact_speed_mps.is_some_and(|v| v <= 0.4)
 }
 
+/// A run as a worker thread hands it back: (run, seed, draws, how it flew).
+type Flown = (usize, u64, Draws, Result<Summary>);
+
 /// Flies `runs` randomized copies on `threads` threads; `progress` is
 /// called after each run with the number finished.
 pub fn run(
@@ -206,8 +209,7 @@ pub fn run(
     let criteria = base.file.success;
     let next = AtomicUsize::new(0);
     let done = AtomicUsize::new(0);
-    let results: Mutex<Vec<(usize, u64, Draws, Result<Summary>)>> =
-        Mutex::new(Vec::with_capacity(runs));
+    let results: Mutex<Vec<Flown>> = Mutex::new(Vec::with_capacity(runs));
     let threads = threads.clamp(1, runs.max(1));
     std::thread::scope(|scope| {
         for _ in 0..threads {
