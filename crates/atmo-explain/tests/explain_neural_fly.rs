@@ -140,3 +140,25 @@ fn robot_file_hover_thrust_and_mass_match_the_flight() {
         model.mass()
     );
 }
+
+#[test]
+fn the_fan_wind_is_named_along_the_fan_and_no_sideways_wind_is_claimed() {
+    // 12 s of the 100 % fan flight (12.1 m/s at the fan, blowing along their
+    // x, our NED x). The flight holds one heading, so a sideways wind
+    // cannot be told from a thrust axis turned sideways: its component is
+    // not identified (`stages::wind::MIN_AXIS_GAIN`), the wind is profiled
+    // along x alone.
+    use atmo_explain::{Options, explain};
+    let rec = Recording::load(data(FLIGHTS[1])).unwrap();
+    let ex = explain(&rec, &robot(), &Options::default()).unwrap();
+    let wind = ex
+        .effects
+        .iter()
+        .find(|e| e.name == "wind" && e.selected)
+        .unwrap_or_else(|| panic!("wind not selected: {}", ex.verdict));
+    assert!(wind.confidence >= 0.5, "{}", wind.confidence);
+    let param = |n: &str| wind.parameters.iter().find(|p| p.name == n).unwrap();
+    let (x, y) = (param("steady_x"), param("steady_y"));
+    assert!(x.identified && (-15.0..-8.0).contains(&x.value), "{x:?}");
+    assert!(!y.identified && y.value == 0.0, "{y:?}");
+}

@@ -158,7 +158,17 @@ pub(crate) fn effect_parameters(fit: &Fit, e: Effect, selected: bool) -> Vec<Par
             ),
         ],
         Effect::Wind if selected && fit.wind.is_some() => {
-            let sd = fit.wind.as_ref().map_or([f64::NAN; 2], |p| p.sd);
+            // A component that gains less than the selection's least gain is
+            // not identified, whatever its jackknife (`WindProfile::axis_gain`).
+            let sd = fit.wind.as_ref().map_or([f64::NAN; 2], |p| {
+                std::array::from_fn(|j| {
+                    if p.axis_identified(j) {
+                        p.sd[j]
+                    } else {
+                        f64::INFINITY
+                    }
+                })
+            });
             ["x", "y"]
                 .iter()
                 .enumerate()

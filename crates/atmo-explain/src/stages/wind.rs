@@ -33,8 +33,14 @@
 //! comes from the same profile restricted to the other folds, each
 //! minimized on a local quadratic fit around the optimum (a fold whose
 //! profile is not convex there gives an infinite deviation: not
-//! identified). The selection and the fit then build every drag column at
-//! the profiled wind.
+//! identified). Each component is then tested alone: holding it at 0 (the
+//! other profiled along its line) must cost [`MIN_AXIS_GAIN`] of the
+//! residual, and its value must lie in its physical range; a component
+//! that fails is held at 0 and the wind is the profile along the other
+//! axis (a flight at one heading cannot tell a sideways wind from a
+//! sideways thrust axis, and every fold agrees on that confusion). The
+//! selection and the fit then build every drag column at the profiled
+//! wind.
 
 use nalgebra::{DMatrix, DVector, SMatrix, SVector};
 
@@ -64,6 +70,19 @@ const COARSE_DIRECTIONS: usize = 16;
 const PATTERN_STEPS: (f64, f64) = (1.5, 0.005);
 /// Spacing of the local grid the jackknife's quadratics are fitted on (m/s).
 const LOCAL_SPACING: f64 = 0.1;
+/// Least relative residual reduction for a wind component to count as
+/// identified ([`WindProfile::axis_gain`]). The selection's own least gain
+/// ([`select::MIN_GAIN`], in noise-floor variances) cannot judge this:
+/// on a real flight the residual stays tens of noise floors, the model's
+/// own errors, and a sideways wind trims them by a few percent whatever
+/// the truth. A flight flown at one heading cannot tell a sideways wind
+/// from a thrust axis turned sideways or from a drag law that is not quite
+/// right, and every jackknife fold agrees on the same confusion. On the
+/// Neural-Fly fan flights the along-fan component gains 80 % or more of
+/// the residual and the sideways one 0.6-5.3 % where it lies inside its
+/// range (docs/explain.md); 10 % lies between, and any value from 6 % to
+/// 80 % decides them alike.
+pub const MIN_AXIS_GAIN: f64 = 0.1;
 
 /// The profiled wind.
 #[derive(Debug, Clone)]
@@ -76,6 +95,17 @@ pub struct WindProfile {
     /// Residual sum of squares at the optimum and without wind (weighted).
     pub rss: f64,
     pub rss_no_wind: f64,
+    /// What each component (x, y) of the two-dimensional optimum gains:
+    /// the least residual with it held at 0 (the other profiled), relative
+    /// to the residual at that optimum. Below [`MIN_AXIS_GAIN`] the
+    /// component is not identified, held at 0, and the wind is the profile
+    /// along the other axis.
+    pub axis_gain: [f64; 2],
+    /// Whether each component is identified: its gain at least
+    /// [`MIN_AXIS_GAIN`] and its value at the optimum inside its physical
+    /// range. When exactly one is not, it is held at 0 and
+    /// [`Self::wind`] is the profile along the other axis.
+    pub identified: [bool; 2],
     /// Trial winds evaluated.
     pub evaluations: usize,
 }
@@ -84,6 +114,12 @@ impl WindProfile {
     /// The optimum lies inside the search (not at its edge).
     pub fn is_interior(&self) -> bool {
         self.wind[0].hypot(self.wind[1]) < SEARCH_LIMIT - COARSE_SPEED_STEP / 2.0
+    }
+
+    /// Whether component `axis` (0: x, 1: y) gains at least the selection's
+    /// least gain ([`Self::axis_gain`]).
+    pub fn axis_identified(&self, axis: usize) -> bool {
+        self.identified[axis]
     }
 }
 
@@ -196,6 +232,36 @@ impl Profiler<'_> {
         let folds = std::array::from_fn(|f| score(&|s| fold_of(s) != f));
         (total, folds)
     }
+
+    /// The least residual with component `axis` of the wind held at 0, over
+    /// the other component: a pattern search from `start`.
+    fn line_minimum(&mut self, axis: usize, start: f64) -> (f64, f64) {
+        let at = |v: f64| {
+            let mut w = [0.0; 2];
+            w[1 - axis] = v;
+            w
+        };
+        let mut best = (start, self.rss(at(start)).0);
+        let mut step = PATTERN_STEPS.0;
+        while step >= PATTERN_STEPS.1 {
+            let mut moved = false;
+            for d in [step, -step] {
+                let v = best.0 + d;
+                if v.abs() > SEARCH_LIMIT {
+                    continue;
+                }
+                let r = self.rss(at(v)).0;
+                if r < best.1 {
+                    best = (v, r);
+                    moved = true;
+                }
+            }
+            if !moved {
+                step *= 0.5;
+            }
+        }
+        best
+    }
 }
 
 /// Profiles the wind with the linear drag and [`PROFILE_COMPANIONS`],
@@ -286,28 +352,79 @@ pub fn profile_wind(
             step *= 0.5;
         }
     }
-    // Jackknife: each fold's profile on a local 5 x 5 grid, its quadratic's
-    // minimum.
-    let mut points = Vec::with_capacity(25);
-    for i in -2..=2 {
-        for j in -2..=2 {
-            let d = [LOCAL_SPACING * f64::from(i), LOCAL_SPACING * f64::from(j)];
-            let (_, folds) = prof.rss([best.0[0] + d[0], best.0[1] + d[1]]);
-            points.push((d, folds));
+    // Each component's gain: the profile along the other with it held at 0.
+    // That line passes through no wind, so neither gains more than the wind
+    // as a whole: below the least gain, neither is identified, and the
+    // lines need not be searched.
+    let relative = |rss: f64| (rss - best.1).max(0.0) / best.1.max(f64::MIN_POSITIVE);
+    let held: [(f64, f64); 2] = if relative(rss_no_wind) < MIN_AXIS_GAIN {
+        [(0.0, rss_no_wind); 2]
+    } else {
+        std::array::from_fn(|axis| prof.line_minimum(axis, best.0[1 - axis]))
+    };
+    let axis_gain = held.map(|(_, rss)| relative(rss));
+    // A component beyond its physical range is not identified either (the
+    // finder's rule for every parameter).
+    let identified: [bool; 2] = std::array::from_fn(|axis| {
+        let name = ["steady_x", "steady_y"][axis];
+        let (lo, hi) = crate::stages::range_of("wind", name).unwrap_or((f64::MIN, f64::MAX));
+        axis_gain[axis] >= MIN_AXIS_GAIN && (lo..=hi).contains(&best.0[axis])
+    });
+    // One component not identified: it is held at 0 and the wind is the
+    // profile along the other axis.
+    let free = match identified {
+        [true, false] => {
+            best = ([held[1].0, 0.0], held[1].1);
+            Some(0)
         }
-    }
+        [false, true] => {
+            best = ([0.0, held[0].0], held[0].1);
+            Some(1)
+        }
+        _ => None,
+    };
+    // Jackknife: each fold's profile on a local grid (5 x 5, or 5 points
+    // along the free axis), its quadratic's minimum.
+    let offsets: Vec<[f64; 2]> = match free {
+        None => (-2..=2)
+            .flat_map(|i| (-2..=2).map(move |j| [f64::from(i), f64::from(j)]))
+            .map(|d| d.map(|v| LOCAL_SPACING * v))
+            .collect(),
+        Some(axis) => (-2..=2)
+            .map(|i| {
+                let mut d = [0.0; 2];
+                d[axis] = LOCAL_SPACING * f64::from(i);
+                d
+            })
+            .collect(),
+    };
+    let points: Vec<([f64; 2], [f64; FOLDS])> = offsets
+        .iter()
+        .map(|d| (*d, prof.rss([best.0[0] + d[0], best.0[1] + d[1]]).1))
+        .collect();
     let fold_winds: Vec<Option<[f64; 2]>> = (0..FOLDS)
         .map(|f| {
             let pts: Vec<([f64; 2], f64)> = points.iter().map(|(d, r)| (*d, r[f])).collect();
-            quadratic_minimum(&pts).map(|d| [best.0[0] + d[0], best.0[1] + d[1]])
+            let d = match free {
+                None => quadratic_minimum(&pts),
+                Some(axis) => line_quadratic_minimum(&pts, axis),
+            };
+            d.map(|d| [best.0[0] + d[0], best.0[1] + d[1]])
         })
         .collect();
-    let sd = jackknife_sd(&fold_winds);
+    let mut sd = jackknife_sd(&fold_winds);
+    for axis in 0..2 {
+        if free.is_some_and(|f| f != axis) {
+            sd[axis] = f64::INFINITY;
+        }
+    }
     WindProfile {
         wind: best.0,
         sd,
         rss: best.1,
         rss_no_wind,
+        axis_gain,
+        identified,
         evaluations: prof.evaluations,
     }
 }
@@ -366,6 +483,21 @@ fn quadratic_minimum(points: &[([f64; 2], f64)]) -> Option<[f64; 2]> {
     d.iter().all(|v| v.is_finite()).then(|| [d[0], d[1]])
 }
 
+/// The minimum of the least-squares parabola through `(d, r)` points that
+/// differ along `axis` only, if it is convex.
+fn line_quadratic_minimum(points: &[([f64; 2], f64)], axis: usize) -> Option<[f64; 2]> {
+    let n = points.len();
+    let x = DMatrix::from_fn(n, 3, |i, j| points[i].0[axis].powi(j as i32));
+    let y = DVector::from_iterator(n, points.iter().map(|p| p.1));
+    let c = (x.transpose() * &x).cholesky()?.solve(&(x.transpose() * y));
+    if c[2] <= 0.0 {
+        return None;
+    }
+    let mut d = [0.0; 2];
+    d[axis] = -c[1] / (2.0 * c[2]);
+    d[axis].is_finite().then_some(d)
+}
+
 /// Delete-a-fold jackknife deviation of the fold estimates (infinite if any
 /// fold has none).
 fn jackknife_sd(folds: &[Option<[f64; 2]>]) -> [f64; 2] {
@@ -402,6 +534,18 @@ mod tests {
             .map(|(d, _)| (*d, d[0] * d[0] - d[1] * d[1]))
             .collect();
         assert!(quadratic_minimum(&saddle).is_none());
+    }
+
+    #[test]
+    fn the_parabola_along_an_axis_has_its_vertex_and_a_cap_has_none() {
+        let line: Vec<([f64; 2], f64)> = (-2..=2)
+            .map(|i| [0.0, 0.1 * f64::from(i)])
+            .map(|d| (d, 5.0 + 3.0 * (d[1] - 0.04).powi(2)))
+            .collect();
+        let m = line_quadratic_minimum(&line, 1).expect("a parabola has a vertex");
+        assert!(m[0] == 0.0 && (m[1] - 0.04).abs() < 1e-9, "{m:?}");
+        let cap: Vec<([f64; 2], f64)> = line.iter().map(|(d, r)| (*d, -r)).collect();
+        assert!(line_quadratic_minimum(&cap, 1).is_none());
     }
 
     #[test]
