@@ -158,17 +158,9 @@ pub(crate) fn effect_parameters(fit: &Fit, e: Effect, selected: bool) -> Vec<Par
             ),
         ],
         Effect::Wind if selected && fit.wind.is_some() => {
-            // A component that gains less than the selection's least gain is
-            // not identified, whatever its jackknife (`WindProfile::axis_gain`).
-            let sd = fit.wind.as_ref().map_or([f64::NAN; 2], |p| {
-                std::array::from_fn(|j| {
-                    if p.axis_identified(j) {
-                        p.sd[j]
-                    } else {
-                        f64::INFINITY
-                    }
-                })
-            });
+            // Infinite for a component the profile did not identify
+            // (`WindProfile::identified`).
+            let sd = fit.wind.as_ref().map_or([f64::NAN; 2], |p| p.sd);
             ["x", "y"]
                 .iter()
                 .enumerate()

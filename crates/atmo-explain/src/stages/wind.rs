@@ -116,8 +116,7 @@ impl WindProfile {
         self.wind[0].hypot(self.wind[1]) < SEARCH_LIMIT - COARSE_SPEED_STEP / 2.0
     }
 
-    /// Whether component `axis` (0: x, 1: y) gains at least the selection's
-    /// least gain ([`Self::axis_gain`]).
+    /// Whether component `axis` (0: x, 1: y) is identified ([`Self::identified`]).
     pub fn axis_identified(&self, axis: usize) -> bool {
         self.identified[axis]
     }
@@ -413,8 +412,9 @@ pub fn profile_wind(
         })
         .collect();
     let mut sd = jackknife_sd(&fold_winds);
+    // A component not identified has no deviation to report.
     for axis in 0..2 {
-        if free.is_some_and(|f| f != axis) {
+        if !identified[axis] {
             sd[axis] = f64::INFINITY;
         }
     }
