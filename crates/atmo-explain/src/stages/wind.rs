@@ -115,11 +115,6 @@ impl WindProfile {
     pub fn is_interior(&self) -> bool {
         self.wind[0].hypot(self.wind[1]) < SEARCH_LIMIT - COARSE_SPEED_STEP / 2.0
     }
-
-    /// Whether component `axis` (0: x, 1: y) is identified ([`Self::identified`]).
-    pub fn axis_identified(&self, axis: usize) -> bool {
-        self.identified[axis]
-    }
 }
 
 /// The selected effects' statistics with the drag columns rebuilt per
