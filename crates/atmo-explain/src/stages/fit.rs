@@ -110,6 +110,35 @@ impl Fit {
         }
         after
     }
+
+    /// The residual this model leaves on a recording it was not fitted on
+    /// (`res` of `rec`): the regressors at the fit's knobs, built as the
+    /// selection builds them, once on the nominal accelerations and again
+    /// on the model's (the mass-property columns need the model's
+    /// acceleration), times the coefficients fitted on all data. Battery
+    /// sag's energy counts from `rec`'s start.
+    pub fn residual_on_unseen(&self, res: &Residuals, rec: &Recording) -> Vec<f64> {
+        let prep = &res.prep;
+        let predict = |data: &[Vec<f64>], i: usize| -> f64 {
+            self.idx
+                .iter()
+                .enumerate()
+                .map(|(a, &j)| self.theta[a] * data[j][i])
+                .sum()
+        };
+        let mut accel = prep.nominal.clone();
+        let columns = build_columns(prep, rec, &self.knobs, &accel);
+        for (i, a) in accel.iter_mut().enumerate() {
+            *a += predict(&columns.data, i);
+        }
+        drop(columns);
+        let columns = build_columns(prep, rec, &self.knobs, &accel);
+        let mut after = columns.resid.clone();
+        for (i, r) in after.iter_mut().enumerate() {
+            *r -= predict(&columns.data, i);
+        }
+        after
+    }
 }
 
 /// Fits the selected effects.
