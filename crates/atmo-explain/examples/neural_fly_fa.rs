@@ -106,7 +106,7 @@ fn main() {
                 .samples
                 .iter()
                 .filter(|s| (s.t < t_split) == first)
-                .cloned()
+                .copied()
                 .collect(),
         )
     };
