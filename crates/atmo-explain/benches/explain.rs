@@ -6,6 +6,7 @@
 //!
 //! `cargo bench -p atmo-explain --bench explain` (pin it to one core with
 //! `taskset -c 0` for the budget's reading).
+#![allow(clippy::unwrap_used)] // reason: a benchmark, errors abort it
 
 use std::hint::black_box;
 use std::path::Path;
