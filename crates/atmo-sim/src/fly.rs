@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, Result, bail};
 use atmo_mpc::settings::GroundEffectSource;
 use atmo_sim::closed_loop::{ControllerConfig, TickRecord, fly_logged, trace_of};
-use atmo_sim::figure::{Markers, write_landing_figure};
+use atmo_sim::figure::{Markers, TouchdownCloud, write_landing_figure, write_touchdown_figure};
 use atmo_sim::monte_carlo::{self, MonteCarloReport};
 use atmo_sim::scenario::Scenario;
 use indicatif::{ProgressBar, ProgressStyle};
@@ -105,11 +105,46 @@ pub fn run(
     if reports.len() > 1 {
         print_comparison(&reports);
     }
+    if !reports.is_empty() {
+        let path = staged.path().join("touchdown.png");
+        write_touchdowns(&path, &scenario.file.name, &reports)?;
+        println!("touchdowns        touchdown.png");
+    }
     let dir = staged.commit()?;
     println!("wrote             {}", dir.display());
     if !all_ok {
         std::process::exit(1);
     }
+    Ok(())
+}
+
+/// The Monte Carlo's touchdowns, a cloud per controller (same seeds), with
+/// issue 17's target region.
+fn write_touchdowns(
+    path: &Path,
+    scenario: &str,
+    reports: &[(&str, MonteCarloReport)],
+) -> Result<()> {
+    let clouds: Vec<TouchdownCloud<'_>> = reports
+        .iter()
+        .map(|(name, r)| TouchdownCloud {
+            label: if name.is_empty() { "controller" } else { name },
+            points: r
+                .per_run
+                .iter()
+                .filter_map(|run| run.touchdown_tilt_deg.zip(run.impact_speed_mps))
+                .collect(),
+        })
+        .collect();
+    let runs = reports.first().map_or(0, |(_, r)| r.runs);
+    let seed = reports.first().map_or(0, |(_, r)| r.base_seed);
+    write_touchdown_figure(
+        path,
+        &clouds,
+        monte_carlo::PAST_TILT_DEG,
+        monte_carlo::PAST_IMPACT_MPS,
+        &format!("{scenario}: {runs} randomized runs from seed {seed}"),
+    )?;
     Ok(())
 }
 

@@ -184,12 +184,17 @@ pub fn randomized_with_draws(base: &Scenario, seed: u64) -> (Scenario, Draws) {
     (s, draws)
 }
 
-/// Issue 17's Monte Carlo criterion: no crash, touchdown tilt >= 64 deg,
-/// impact speed <= 0.4 m/s.
+/// Issue 17's Monte Carlo criterion on the touchdown tilt (deg, at least)
+/// and the impact speed (m/s, at most).
+pub const PAST_TILT_DEG: f64 = 64.0;
+pub const PAST_IMPACT_MPS: f64 = 0.4;
+
+/// Issue 17's Monte Carlo criterion: no crash, touchdown tilt >=
+/// [`PAST_TILT_DEG`], impact speed <= [`PAST_IMPACT_MPS`].
 pub fn landed_past_64_deg(s: &Summary) -> bool {
     !s.crashed
-        && s.touchdown_tilt_deg.is_some_and(|t| t >= 64.0)
-        && s.impact_speed_mps.is_some_and(|v| v <= 0.4)
+        && s.touchdown_tilt_deg.is_some_and(|t| t >= PAST_TILT_DEG)
+        && s.impact_speed_mps.is_some_and(|v| v <= PAST_IMPACT_MPS)
 }
 
 /// A run as a worker thread hands it back: (run, seed, draws, how it flew).

@@ -1,8 +1,9 @@
 //! The paper's Fig. 5A for a flight: altitude, tilt angle, alpha and mean
 //! normalized thrust against time, with the morphing, transition and
 //! ground phases shaded, z_varphi and z* marked on the altitude panel and
-//! the touchdown marked on every panel; and the what-if overlay of a
-//! replay (logged vs changed flight stack). PNG via plotters.
+//! the touchdown marked on every panel; the what-if overlay of a replay
+//! (logged vs changed flight stack); and a Monte Carlo's touchdowns (tilt
+//! against impact speed, one cloud per controller). PNG via plotters.
 
 use std::path::Path;
 
@@ -354,4 +355,117 @@ pub fn write_overlay_figure(path: &Path, overlay: &Overlay) -> Result<()> {
     }
     root.present().map_err(plot_err)?;
     Ok(())
+}
+
+/// One controller's touchdowns in a Monte Carlo: (tilt deg, impact m/s)
+/// per run that touched down.
+#[derive(Debug, Clone)]
+pub struct TouchdownCloud<'a> {
+    pub label: &'a str,
+    pub points: Vec<(f64, f64)>,
+}
+
+/// Writes the touchdowns of a Monte Carlo to `path` (PNG): impact speed
+/// against touchdown tilt, a cloud per controller on the same seeds, the
+/// target region (tilt at least `tilt_min` deg, impact at most
+/// `impact_max` m/s) shaded, and how many runs of each cloud fall in it.
+pub fn write_touchdown_figure(
+    path: &Path,
+    clouds: &[TouchdownCloud<'_>],
+    tilt_min: f64,
+    impact_max: f64,
+    title: &str,
+) -> Result<()> {
+    let all = || clouds.iter().flat_map(|c| c.points.iter().copied());
+    if all().next().is_none() {
+        return Err(IoError::Output("figure: no touchdown to plot".into()));
+    }
+    let (t_lo, t_hi) = all().fold((tilt_min - 1.0, tilt_min + 1.0), |(lo, hi), (t, _)| {
+        (lo.min(t - 0.5), hi.max(t + 0.5))
+    });
+    let v_hi = all().fold(impact_max + 0.05, |hi, (_, v)| hi.max(v + 0.02));
+    let root = BitMapBackend::new(path, (900, 640)).into_drawing_area();
+    root.fill(&WHITE).map_err(plot_err)?;
+    let mut chart = ChartBuilder::on(&root)
+        .caption(title, ("sans-serif", 22))
+        .margin(12)
+        .x_label_area_size(48)
+        .y_label_area_size(64)
+        .build_cartesian_2d(t_lo..t_hi, 0.0..v_hi)
+        .map_err(plot_err)?;
+    chart
+        .configure_mesh()
+        .x_desc("touchdown tilt (deg)")
+        .y_desc("impact speed (m/s)")
+        .draw()
+        .map_err(plot_err)?;
+    chart
+        .draw_series(std::iter::once(Rectangle::new(
+            [(tilt_min, 0.0), (t_hi, impact_max)],
+            GREEN.mix(0.12).filled(),
+        )))
+        .map_err(plot_err)?;
+    let colours = [RED, BLUE, BLACK, MAGENTA, CYAN];
+    for (i, cloud) in clouds.iter().enumerate() {
+        let colour = colours[i % colours.len()];
+        let inside = cloud
+            .points
+            .iter()
+            .filter(|(t, v)| *t >= tilt_min && *v <= impact_max)
+            .count();
+        chart
+            .draw_series(
+                cloud
+                    .points
+                    .iter()
+                    .map(|&(t, v)| Circle::new((t, v), 3, colour.mix(0.7).filled())),
+            )
+            .map_err(plot_err)?
+            .label(format!(
+                "{}: {inside}/{} in the target",
+                cloud.label,
+                cloud.points.len()
+            ))
+            .legend(move |(x, y)| Circle::new((x + 8, y), 4, colour.filled()));
+    }
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .position(SeriesLabelPosition::UpperLeft)
+        .draw()
+        .map_err(plot_err)?;
+    root.present().map_err(plot_err)?;
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_touchdown_figure_is_a_png_and_refuses_an_empty_monte_carlo() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("touchdown.png");
+        let clouds = [
+            TouchdownCloud {
+                label: "nominal",
+                points: vec![(62.5, 0.35), (62.9, 0.31)],
+            },
+            TouchdownCloud {
+                label: "planned-tilt",
+                points: vec![(65.4, 0.30), (63.2, 0.22), (66.1, 0.44)],
+            },
+        ];
+        write_touchdown_figure(&path, &clouds, 64.0, 0.4, "test").unwrap();
+        let bytes = std::fs::read(&path).unwrap();
+        assert!(bytes.starts_with(b"\x89PNG"), "not a PNG");
+
+        let empty = [TouchdownCloud {
+            label: "crashed",
+            points: Vec::new(),
+        }];
+        let err = write_touchdown_figure(&dir.path().join("e.png"), &empty, 64.0, 0.4, "e");
+        assert!(err.unwrap_err().to_string().contains("no touchdown"));
+    }
 }
