@@ -68,6 +68,17 @@ const COARSE_SPEED_STEP: f64 = 3.0;
 const COARSE_DIRECTIONS: usize = 16;
 /// First and last step of the pattern search (m/s).
 const PATTERN_STEPS: (f64, f64) = (1.5, 0.005);
+/// Directions of the two-dimensional pattern search (axes and diagonals).
+const PATTERN_DIRECTIONS: [[f64; 2]; 8] = [
+    [1.0, 0.0],
+    [-1.0, 0.0],
+    [0.0, 1.0],
+    [0.0, -1.0],
+    [1.0, 1.0],
+    [1.0, -1.0],
+    [-1.0, 1.0],
+    [-1.0, -1.0],
+];
 /// Spacing of the local grid the jackknife's quadratics are fitted on (m/s).
 const LOCAL_SPACING: f64 = 0.1;
 /// Least relative residual reduction for a wind component to count as
@@ -227,26 +238,26 @@ impl Profiler<'_> {
         (total, folds)
     }
 
-    /// The least residual with component `axis` of the wind held at 0, over
-    /// the other component: a pattern search from `start`.
-    fn line_minimum(&mut self, axis: usize, start: f64) -> (f64, f64) {
-        let at = |v: f64| {
-            let mut w = [0.0; 2];
-            w[1 - axis] = v;
-            w
-        };
-        let mut best = (start, self.rss(at(start)).0);
+    /// Pattern search from `start` (a wind and its residual) along
+    /// `directions` (steps halving from [`PATTERN_STEPS`]`.0` to `.1`,
+    /// within [`SEARCH_LIMIT`]): the least residual found and where.
+    fn pattern_search(
+        &mut self,
+        start: ([f64; 2], f64),
+        directions: &[[f64; 2]],
+    ) -> ([f64; 2], f64) {
+        let mut best = start;
         let mut step = PATTERN_STEPS.0;
         while step >= PATTERN_STEPS.1 {
             let mut moved = false;
-            for d in [step, -step] {
-                let v = best.0 + d;
-                if v.abs() > SEARCH_LIMIT {
+            for d in directions {
+                let w = [best.0[0] + step * d[0], best.0[1] + step * d[1]];
+                if w[0].hypot(w[1]) > SEARCH_LIMIT {
                     continue;
                 }
-                let r = self.rss(at(v)).0;
+                let r = self.rss(w).0;
                 if r < best.1 {
-                    best = (v, r);
+                    best = (w, r);
                     moved = true;
                 }
             }
@@ -255,6 +266,19 @@ impl Profiler<'_> {
             }
         }
         best
+    }
+
+    /// The least residual with component `axis` of the wind held at 0, over
+    /// the other component (from `start` along it): that component and the
+    /// residual.
+    fn line_minimum(&mut self, axis: usize, start: f64) -> (f64, f64) {
+        let mut from = [0.0; 2];
+        from[1 - axis] = start;
+        let mut along = [0.0; 2];
+        along[1 - axis] = 1.0;
+        let start = (from, self.rss(from).0);
+        let (w, rss) = self.pattern_search(start, &[along, along.map(|v| -v)]);
+        (w[1 - axis], rss)
     }
 }
 
@@ -315,37 +339,7 @@ pub fn profile_wind(
         }
         speed += COARSE_SPEED_STEP;
     }
-    // Pattern search.
-    let mut step = PATTERN_STEPS.0;
-    while step >= PATTERN_STEPS.1 {
-        let mut moved = false;
-        for (dx, dy) in [
-            (1, 0),
-            (-1, 0),
-            (0, 1),
-            (0, -1),
-            (1, 1),
-            (1, -1),
-            (-1, 1),
-            (-1, -1),
-        ] {
-            let w = [
-                best.0[0] + step * f64::from(dx),
-                best.0[1] + step * f64::from(dy),
-            ];
-            if w[0].hypot(w[1]) > SEARCH_LIMIT {
-                continue;
-            }
-            let r = prof.rss(w).0;
-            if r < best.1 {
-                best = (w, r);
-                moved = true;
-            }
-        }
-        if !moved {
-            step *= 0.5;
-        }
-    }
+    let mut best = prof.pattern_search(best, &PATTERN_DIRECTIONS);
     // Each component's gain: the profile along the other with it held at 0.
     // That line passes through no wind, so neither gains more than the wind
     // as a whole: below the least gain, neither is identified, and the
