@@ -49,6 +49,20 @@ fn plot_err(e: impl std::fmt::Display) -> IoError {
     IoError::Output(format!("figure: {e}"))
 }
 
+/// The series labels of `chart` in the figures' one legend style.
+fn draw_legend<'a, DB: DrawingBackend + 'a, CT: CoordTranslate>(
+    chart: &mut ChartContext<'a, DB, CT>,
+    position: SeriesLabelPosition,
+) -> Result<()> {
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .position(position)
+        .draw()
+        .map_err(plot_err)
+}
+
 impl FlightTrace {
     /// Adds the sample of one control tick: the height and tilt (the
     /// simulator's truth, or the flight stack's view for a real flight),
@@ -243,13 +257,7 @@ pub fn write_landing_figure(
             }
         }
         if label.starts_with("altitude") {
-            chart
-                .configure_series_labels()
-                .background_style(WHITE.mix(0.85))
-                .border_style(BLACK)
-                .position(SeriesLabelPosition::UpperRight)
-                .draw()
-                .map_err(plot_err)?;
+            draw_legend(&mut chart, SeriesLabelPosition::UpperRight)?;
         }
     }
     root.present().map_err(plot_err)?;
@@ -345,13 +353,7 @@ pub fn write_overlay_figure(path: &Path, overlay: &Overlay) -> Result<()> {
             .map_err(plot_err)?
             .label("what-if")
             .legend(|(x, y)| PathElement::new([(x, y), (x + 16, y)], RED.stroke_width(2)));
-        chart
-            .configure_series_labels()
-            .background_style(WHITE.mix(0.85))
-            .border_style(BLACK)
-            .position(SeriesLabelPosition::UpperRight)
-            .draw()
-            .map_err(plot_err)?;
+        draw_legend(&mut chart, SeriesLabelPosition::UpperRight)?;
     }
     root.present().map_err(plot_err)?;
     Ok(())
@@ -428,13 +430,7 @@ pub fn write_touchdown_figure(
             ))
             .legend(move |(x, y)| Circle::new((x + 8, y), 4, colour.filled()));
     }
-    chart
-        .configure_series_labels()
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK)
-        .position(SeriesLabelPosition::UpperLeft)
-        .draw()
-        .map_err(plot_err)?;
+    draw_legend(&mut chart, SeriesLabelPosition::UpperLeft)?;
     root.present().map_err(plot_err)?;
     Ok(())
 }
