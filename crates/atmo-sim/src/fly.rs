@@ -134,6 +134,7 @@ fn write_touchdowns(
                 .iter()
                 .filter_map(|run| run.touchdown_tilt_deg.zip(run.impact_speed_mps))
                 .collect(),
+            in_target: r.landed_past_64_deg,
         })
         .collect();
     let runs = reports.first().map_or(0, |(_, r)| r.runs);
