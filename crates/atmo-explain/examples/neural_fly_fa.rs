@@ -120,7 +120,6 @@ fn main() {
 
     let starts = atmo_explain::Options::default().max_replay_starts;
     let res = Residuals::new(&rec, &robot).unwrap();
-    let mismatch = locate_mismatch(&res);
     let base = BaseRegressors::new(&res, &rec);
     let lag = profile_motor_lag(&res, &base);
     drop(base);
@@ -136,18 +135,18 @@ fn main() {
     for (e, d) in &decisions {
         println!("  {}: {}", e.name(), d.describe());
     }
-    let validation = validate(&rec, &robot, &res, &mismatch, &fit, starts).unwrap();
     // Scored on the unseen half with the first half's model, or on this
     // recording's held-out folds.
-    let unseen = unseen.map(|rec2| {
+    let scored = if let Some(rec2) = unseen {
         let res2 = Residuals::new(&rec2, &robot).unwrap();
         let after = fit.residual_on_unseen(&res2, &rec2);
         (rec2, res2, after)
-    });
-    let (rec, res, after) = match &unseen {
-        Some((rec2, res2, after)) => (rec2, res2, after),
-        None => (&rec, &res, &validation.after),
+    } else {
+        let mismatch = locate_mismatch(&res);
+        let validation = validate(&rec, &robot, &res, &mismatch, &fit, starts).unwrap();
+        (rec, res, validation.after)
     };
+    let (rec, res, after) = (&scored.0, &scored.1, &scored.2);
     let prep = &res.prep;
     let mass = prep.table.at(0.0).mass;
     let flip = Vector3::new(1.0, -1.0, -1.0);
