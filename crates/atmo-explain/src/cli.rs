@@ -196,10 +196,13 @@ fn summary(ex: &crate::Explanation, out: &Path, elapsed: f64) -> String {
         let params: Vec<String> = e
             .parameters
             .iter()
-            .take(if e.name == "ground_effect" { 0 } else { 4 })
+            .take(if e.name == "ground_effect" { 0 } else { usize::MAX })
             .map(|p| {
                 if p.identified {
-                    format!("{} = {:.4}", p.name, p.value)
+                    match p.std {
+                        Some(sd) => format!("{} = {:.4} +- {:.4}", p.name, p.value, sd),
+                        None => format!("{} = {:.4}", p.name, p.value),
+                    }
                 } else {
                     format!("{} not identified", p.name)
                 }

@@ -436,7 +436,8 @@ fn push_ground_effect(raw: &mut [Vec<f64>], at: &Starts, row: &Row) {
 /// The drag columns of one row (body-frame generalized accelerations per
 /// unit coefficient, before filtering): rotor drag in the disc planes,
 /// thrust lost to axial inflow, and quadratic body drag along body x, y,
-/// z, on the velocity relative to the air (`wind`, NED).
+/// z acting at the centre of mass, on the velocity relative to the air
+/// (`wind`, NED).
 fn drag_terms(row: &Row, wind: &Vector3<f64>) -> [Vector6<f64>; DRAG_WIDTH] {
     let (t, r, body) = (row.thrust, row.rot, &row.body);
     let minv = &body.mass_matrix_inv;
@@ -457,10 +458,14 @@ fn drag_terms(row: &Row, wind: &Vector3<f64>) -> [Vector6<f64>; DRAG_WIDTH] {
     let mut out = [Vector6::zeros(); DRAG_WIDTH];
     out[0] = minv * rotor_w;
     out[1] = minv * axial_w;
+    // The body drag acts at the centre of mass (the usual rigid-body
+    // model: a force without a moment about the CoM), so about B it carries
+    // the moment `com x f`; ATMO's CoM moves with the tilt.
+    let com = body.first_moment / body.mass;
     for axis in 0..3 {
         let mut f = Vector3::zeros();
         f[axis] = -0.5 * AIR_DENSITY * v_air[axis].abs() * v_air[axis];
-        out[2 + axis] = minv * wrench(&f, &Vector3::zeros());
+        out[2 + axis] = minv * wrench(&f, &com.cross(&f));
     }
     out
 }

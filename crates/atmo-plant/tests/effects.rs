@@ -119,8 +119,18 @@ fn steady_wind_drags_the_body_by_the_quadratic_law() {
     let u = Input::repeat(0.5);
     let got = p.body_derivative(&Command::rotors(u)).unwrap();
     let body = truth_model().at_tilt(0.0);
-    let force = 0.5 * drag.air_density * drag.body_cd_area[0] * 16.0;
-    let extra = nalgebra::Vector6::new(force, 0.0, 0.0, 0.0, 0.0, 0.0);
+    let force = nalgebra::Vector3::new(
+        0.5 * drag.air_density * drag.body_cd_area[0] * 16.0,
+        0.0,
+        0.0,
+    );
+    // Applied at the centre of mass: about B it carries the moment com x f.
+    let torque = (body.first_moment / body.mass).cross(&force);
+    assert!(
+        torque.norm() > 1e-4,
+        "ATMO's CoM is off B: the moment is felt"
+    );
+    let extra = nalgebra::Vector6::new(force.x, 0.0, 0.0, torque.x, torque.y, torque.z);
     let expected = TiltedBodyExt::with_extra(&body, &x, &u, &extra);
     assert!((got - expected).norm() < 1e-12, "{got} vs {expected}");
     assert!(got[idx::VX] > 0.0, "the wind pushes downwind");

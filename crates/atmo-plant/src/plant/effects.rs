@@ -50,7 +50,7 @@ impl Wind {
 
 /// Drag wrench on the body (body force, torque about B): body drag
 /// `-1/2 rho CdA_k |v_k| v_k` per body axis on the air velocity
-/// `v_air = R^T (v - wind)`, and rotor drag `-k_r t_i (v_i - (v_i . n_i) n_i)`
+/// `v_air = R^T (v - wind)` acting at the centre of mass, and rotor drag `-k_r t_i (v_i - (v_i . n_i) n_i)`
 /// at each hub with thrust `t_i > 0` (v_i the hub's air velocity).
 #[inline(always)]
 pub(super) fn drag_wrench(
@@ -68,7 +68,9 @@ pub(super) fn drag_wrench(
         q * drag.body_cd_area[1] * v_air.y.abs() * v_air.y,
         q * drag.body_cd_area[2] * v_air.z.abs() * v_air.z,
     );
-    let mut torque = Vector3::zeros();
+    // Body drag acts at the centre of mass (no moment about it), rotor drag
+    // at each hub; torques are about B.
+    let mut torque = (body.first_moment / body.mass).cross(&force);
     for i in 0..4 {
         if t[i] <= 0.0 {
             continue; // rotor drag scales with thrust
