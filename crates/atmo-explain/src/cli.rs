@@ -196,7 +196,11 @@ fn summary(ex: &crate::Explanation, out: &Path, elapsed: f64) -> String {
         let params: Vec<String> = e
             .parameters
             .iter()
-            .take(if e.name == "ground_effect" { 0 } else { usize::MAX })
+            .take(if e.name == "ground_effect" {
+                0
+            } else {
+                usize::MAX
+            })
             .map(|p| {
                 if p.identified {
                     match p.std {
@@ -215,6 +219,9 @@ fn summary(ex: &crate::Explanation, out: &Path, elapsed: f64) -> String {
             e.confidence,
             params.join(", ")
         );
+        for c in &e.combined {
+            let _ = writeln!(s, "  {:<14} only in combination: {}", "", c.describe());
+        }
     }
     let b = &ex.heldout_rms_before;
     let a = &ex.heldout_rms_after;

@@ -13,13 +13,50 @@ use crate::select;
 pub struct Parameter {
     pub name: String,
     pub value: f64,
-    /// One standard deviation (delete-a-fold jackknife; null if unknown).
+    /// One standard deviation (delete-a-segment jackknife; null if unknown).
     pub std: Option<f64>,
     pub unit: String,
     /// Inside its physical range (not at a bound) with an uncertainty below
     /// its value (docs/explain.md, physical ranges); false: the value is
     /// not a finding.
     pub identified: bool,
+}
+
+/// Two parameters this data cannot separate (their jackknife estimates
+/// correlate at least [`crate::stages::COMBINED_CORRELATION`]): neither is a
+/// finding alone; the combination `first + weight * second`, the one with
+/// the smallest variance, is.
+#[derive(Debug, Clone, Serialize)]
+pub struct CombinedFinding {
+    /// `effect.parameter` of the two.
+    pub first: String,
+    pub second: String,
+    /// Correlation of their estimates.
+    pub correlation: f64,
+    /// `-cov / var(second)`, in first's units per second's.
+    pub weight: f64,
+    /// `first + weight * second`, in first's unit.
+    pub value: f64,
+    /// `sd(first) sqrt(1 - correlation^2)`.
+    pub std: f64,
+    pub unit: String,
+}
+
+impl CombinedFinding {
+    /// `a + 0.123 b = 0.0204 +- 0.0011 N/(m/s) (correlation -0.95)`.
+    pub fn describe(&self) -> String {
+        format!(
+            "{} {} {:.4} {} = {:.4} +- {:.4} {} (correlation {:.2})",
+            self.first,
+            if self.weight < 0.0 { "-" } else { "+" },
+            self.weight.abs(),
+            self.second,
+            self.value,
+            self.std,
+            self.unit,
+            self.correlation
+        )
+    }
 }
 
 /// A candidate effect's verdict.
@@ -36,6 +73,9 @@ pub struct EffectReport {
     pub parameters: Vec<Parameter>,
     /// Effects this one cannot be told apart from with this data.
     pub indistinguishable_from: Vec<String>,
+    /// Pairs of parameters (one of them this effect's) the data determine
+    /// only in combination.
+    pub combined: Vec<CombinedFinding>,
     /// Which test decided and its numbers (physical range and
     /// identifiability, held-out residual, 0.5 s prediction).
     pub decided_by: String,

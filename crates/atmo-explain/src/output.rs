@@ -290,11 +290,14 @@ fn report_physics(s: &mut String, ex: &Explanation) {
                 }
             })
             .collect();
-        let params = if e.name == "ground_effect" {
+        let mut params = if e.name == "ground_effect" {
             "gain grid below".to_string()
         } else {
             params.join("; ")
         };
+        for c in &e.combined {
+            let _ = write!(params, "; only in combination: {}", c.describe());
+        }
         let verdict = format!(
             "{}{} ({})",
             if e.selected { "found" } else { "rejected" },

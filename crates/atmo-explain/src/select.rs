@@ -434,13 +434,13 @@ pub fn stability(
         .collect()
 }
 
-/// Coefficients on all data and their delete-a-segment jackknife standard
-/// deviations, for the columns of `set`.
+/// Coefficients on all data and their delete-a-segment jackknife
+/// covariance, for the columns of `set`.
 pub fn fit_with_uncertainty(
     stats: &Stats,
     layout: &Layout,
     set: &[Effect],
-) -> (Vec<usize>, DVector<f64>, DVector<f64>) {
+) -> (Vec<usize>, DVector<f64>, DMatrix<f64>) {
     fit_with_uncertainty_of(stats, columns_of(layout, set))
 }
 
@@ -451,30 +451,36 @@ pub fn fit_with_uncertainty(
 pub fn fit_with_uncertainty_of(
     stats: &Stats,
     idx: Vec<usize>,
-) -> (Vec<usize>, DVector<f64>, DVector<f64>) {
+) -> (Vec<usize>, DVector<f64>, DMatrix<f64>) {
     let theta = stats.solve(&idx, &|_| true);
     let replicates: Vec<DVector<f64>> = (0..stats.nseg())
         .filter(|&d| stats.entries[d] > 0)
         .map(|d| stats.solve(&idx, &|s| s != d))
         .collect();
-    let sd = jackknife_sd(idx.len(), &replicates);
-    (idx, theta, sd)
+    let cov = jackknife_covariance(idx.len(), &replicates);
+    (idx, theta, cov)
 }
 
-/// Delete-one jackknife standard deviation of `p` coefficients from their
-/// replicates (`sqrt((k-1)/k sum (t_i - mean)^2)`; zero with fewer than two).
-fn jackknife_sd(p: usize, replicates: &[DVector<f64>]) -> DVector<f64> {
+/// Delete-one jackknife covariance of `p` coefficients from their
+/// replicates (`(k-1)/k sum (t_i - mean)(t_i - mean)^T`; zero with fewer
+/// than two).
+fn jackknife_covariance(p: usize, replicates: &[DVector<f64>]) -> DMatrix<f64> {
     let k = replicates.len() as f64;
     if k < 2.0 {
-        return DVector::zeros(p);
+        return DMatrix::zeros(p, p);
     }
     let mean = replicates.iter().fold(DVector::zeros(p), |a, t| a + t) / k;
-    let mut sum = DVector::zeros(p);
+    let mut sum = DMatrix::zeros(p, p);
     for t in replicates {
         let d = t - &mean;
-        sum += d.component_mul(&d);
+        sum += &d * d.transpose();
     }
-    (sum * ((k - 1.0) / k)).map(f64::sqrt)
+    sum * ((k - 1.0) / k)
+}
+
+/// Standard deviations: the square roots of a covariance's diagonal.
+pub fn deviations(cov: &DMatrix<f64>) -> DVector<f64> {
+    cov.diagonal().map(|v| v.max(0.0).sqrt())
 }
 
 /// Columns of a set of effects.

@@ -164,6 +164,44 @@ fn the_fan_wind_is_named_along_the_fan_and_no_sideways_wind_is_claimed() {
 }
 
 #[test]
+fn rotor_drag_and_body_drag_at_one_airspeed_are_one_combined_finding() {
+    // Issue 16, item 3. In 12 s of the 100 % fan flight the airspeed stays
+    // near 14 m/s, where the linear rotor drag and the quadratic body drag
+    // along x are nearly the same line: neither is a finding alone, their
+    // best-determined combination is, with a deviation far below the
+    // separate ones.
+    use atmo_explain::{Options, explain};
+    let rec = Recording::load(data(FLIGHTS[1])).unwrap();
+    let ex = explain(&rec, &robot(), &Options::default()).unwrap();
+    let drag = ex
+        .effects
+        .iter()
+        .find(|e| e.name == "drag" && e.selected)
+        .unwrap_or_else(|| panic!("drag not selected: {}", ex.verdict));
+    let param = |n: &str| drag.parameters.iter().find(|p| p.name == n).unwrap();
+    let (rotor, area_x) = (param("rotor_drag"), param("body_cd_area_x"));
+    assert!(
+        !rotor.identified && !area_x.identified,
+        "{rotor:?} {area_x:?}"
+    );
+    let pair = drag
+        .combined
+        .iter()
+        .find(|c| c.first == "drag.rotor_drag" && c.second == "drag.body_cd_area_x")
+        .unwrap_or_else(|| panic!("no combined finding: {:?}", drag.combined));
+    assert!(pair.correlation <= -0.9, "{pair:?}");
+    // The combination is determined where its parts are not.
+    assert!(pair.std < 0.1 * rotor.std.unwrap(), "{pair:?} {rotor:?}");
+    assert!(pair.value > 10.0 * pair.std, "{pair:?}");
+    // Its value is what the fit says: rotor drag plus weight times area.
+    let expect = rotor.value + pair.weight * area_x.value;
+    assert!(
+        (pair.value - expect).abs() < 1e-9 * expect.abs().max(1.0),
+        "{pair:?}"
+    );
+}
+
+#[test]
 fn the_model_fitted_on_the_flight_s_start_predicts_its_end() {
     // Issue 16's held-out data: the whole analysis on the first 12 s of the
     // 100 % fan flight, its model scored on 12 s from 36 s on, which it

@@ -3,7 +3,7 @@
 //! predictions), at the wind profiled before the selection
 //! ([`super::wind`]).
 
-use nalgebra::DVector;
+use nalgebra::{DMatrix, DVector};
 
 use crate::effects::{Columns, Effect, Knobs, Layout, build_columns};
 use crate::physical::Physical;
@@ -31,11 +31,11 @@ pub struct Fit {
     pub wind: Option<WindProfile>,
     pub columns: Columns,
     pub stats: Stats,
-    /// Columns of `chosen`, their coefficients on all data and jackknife
-    /// standard deviations.
+    /// Columns of `chosen`, their coefficients on all data and their
+    /// jackknife covariance.
     pub idx: Vec<usize>,
     pub theta: DVector<f64>,
-    pub sd: DVector<f64>,
+    pub cov: DMatrix<f64>,
     /// Coefficients fitted without each fold (`select::FOLDS` of them).
     pub fold_theta: Vec<DVector<f64>>,
     /// Physical parameters of the fit on all data (wind included).
@@ -60,6 +60,11 @@ impl Fit {
         p
     }
 
+    /// Jackknife standard deviations of `theta`.
+    pub fn sd(&self) -> DVector<f64> {
+        select::deviations(&self.cov)
+    }
+
     /// The fit redone with the effects `kept` only (same regressors and
     /// knobs).
     pub fn restrict(&mut self, kept: &[Effect]) {
@@ -68,7 +73,7 @@ impl Fit {
         if !chosen.contains(&Effect::Wind) {
             self.wind = None;
         }
-        let (idx, theta, sd) =
+        let (idx, theta, cov) =
             select::fit_with_uncertainty_of(&self.stats, self.columns_of(&chosen));
         let mut physical =
             Physical::from_theta(&self.layout, &chosen, &idx, &theta, self.knobs.tau);
@@ -82,7 +87,7 @@ impl Fit {
         self.chosen = chosen;
         self.idx = idx;
         self.theta = theta;
-        self.sd = sd;
+        self.cov = cov;
         self.physical = physical;
     }
 
@@ -169,7 +174,8 @@ pub fn fit_effects(res: &Residuals, rec: &Recording, sel: Selection) -> Fit {
     let wind = if chosen.contains(&Effect::Wind) {
         if wind_profile.is_none() {
             for _ in 0..WIND_REFINEMENTS {
-                let (idx, theta, _) = select::fit_with_uncertainty(&stats, &layout, &chosen);
+                let idx = select::columns_for(&layout, &chosen);
+                let theta = stats.solve(&idx, &|_| true);
                 let phys = Physical::from_theta(&layout, &chosen, &idx, &theta, knobs.tau);
                 let w = phys.wind.unwrap_or([0.0; 2]);
                 let kr = phys.drag.map_or(0.0, |d| d[0]);
@@ -187,7 +193,7 @@ pub fn fit_effects(res: &Residuals, rec: &Recording, sel: Selection) -> Fit {
         None
     };
     let idx = model_columns(&layout, &chosen, wind.is_some());
-    let (idx, theta, sd) = select::fit_with_uncertainty_of(&stats, idx);
+    let (idx, theta, cov) = select::fit_with_uncertainty_of(&stats, idx);
     let mut physical = Physical::from_theta(&layout, &chosen, &idx, &theta, knobs.tau);
     if let Some(w) = physical.wind.as_mut() {
         w[0] += knobs.wind[0];
@@ -205,7 +211,7 @@ pub fn fit_effects(res: &Residuals, rec: &Recording, sel: Selection) -> Fit {
         stats,
         idx,
         theta,
-        sd,
+        cov,
         fold_theta,
         physical,
     }

@@ -28,7 +28,9 @@ pub use accept::{
 };
 pub use fit::{Fit, fit_effects};
 pub use locate::{Mismatch, locate_mismatch, rms_table};
-pub use report::{Findings, effect_reports, gain_grid, notes, plot_series, report, verdict};
+pub use report::{
+    COMBINED_CORRELATION, Findings, effect_reports, gain_grid, notes, plot_series, report, verdict,
+};
 pub use residuals::Residuals;
 pub use select::{BaseRegressors, LagProfile, Selection, profile_motor_lag, select_effects};
 pub use validate::{Validation, validate};

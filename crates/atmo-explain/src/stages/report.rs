@@ -8,12 +8,21 @@ use atmo_plant::ground_effect::GroundEffect;
 
 use crate::data::CHANNELS;
 use crate::effects::Effect;
-use crate::explanation::{EffectReport, Explanation, GridPoint, Parameter, Series};
+use crate::explanation::{
+    CombinedFinding, EffectReport, Explanation, GridPoint, Parameter, Series,
+};
 use crate::physical::{BATTERY_CAPACITY_WH, BATTERY_FULL_POWER_W};
 use crate::recording::Recording;
 use crate::select::{self, Step};
 use crate::stages::{Decision, Fit, LagProfile, Mismatch, Residuals, Validation};
 use crate::{GRID_HEIGHTS, GRID_TILTS_DEG, HIGH_CONFIDENCE};
+
+/// Least |correlation| of two parameters' estimates at which they are
+/// reported as one combined finding: a variance inflation of
+/// `1 / (1 - 0.9^2)` = 5.3, the usual threshold for a pair a regression
+/// cannot separate. The generator's axial drag and vertical area (-0.5 to
+/// -0.6) stay apart; on the fan flights they correlate -0.86 to -0.97.
+pub const COMBINED_CORRELATION: f64 = 0.9;
 
 /// What the report is made of: every stage's output.
 #[derive(Debug, Clone, Copy)]
@@ -107,8 +116,10 @@ pub fn effect_reports(
                 })
                 .collect(),
             indistinguishable_from: indist,
+            combined: Vec::new(),
         });
     }
+    combine_inseparable(fit, &mut reports);
     reports.sort_by(|a, b| {
         b.selected
             .cmp(&a.selected)
@@ -118,16 +129,97 @@ pub fn effect_reports(
     (reports, pairs)
 }
 
+/// The selected effects' parameters that are their linear coefficients
+/// one to one (`effect`, parameter index, column): the wind's, the motor
+/// lag's and the ground effect's are not (a knob, a profiled time constant,
+/// a surface reported as a grid).
+fn linear_parameters(fit: &Fit) -> Vec<(Effect, usize, usize)> {
+    fit.chosen
+        .iter()
+        .filter(|e| {
+            !matches!(
+                e,
+                Effect::Wind | Effect::MotorLag | Effect::GroundEffect | Effect::BatterySag
+            )
+        })
+        .flat_map(|&e| {
+            fit.layout
+                .columns(e)
+                .enumerate()
+                .map(move |(j, c)| (e, j, c))
+        })
+        .collect()
+}
+
+/// Item 3 of issue 16: two parameters whose estimates correlate at least
+/// [`COMBINED_CORRELATION`] (over the jackknife) are not findings alone.
+/// Both are marked not identified, and the combination `a + w b` with the
+/// least variance (`w = -cov_ab / var_b`, deviation `sd_a sqrt(1 - rho^2)`)
+/// is reported on the effects they belong to.
+fn combine_inseparable(fit: &Fit, reports: &mut [EffectReport]) {
+    let params = linear_parameters(fit);
+    let pos = |c: usize| fit.idx.iter().position(|&i| i == c);
+    for (n, &(ea, ja, ca)) in params.iter().enumerate() {
+        for &(eb, jb, cb) in &params[n + 1..] {
+            let (Some(a), Some(b)) = (pos(ca), pos(cb)) else {
+                continue;
+            };
+            let (vaa, vbb, vab) = (fit.cov[(a, a)], fit.cov[(b, b)], fit.cov[(a, b)]);
+            if !(vaa > 0.0 && vbb > 0.0) {
+                continue;
+            }
+            let rho = vab / (vaa * vbb).sqrt();
+            if rho.abs() < COMBINED_CORRELATION {
+                continue;
+            }
+            let name_of = |e: Effect, j: usize| -> Option<(String, String)> {
+                let r = reports.iter().find(|r| r.name == e.name())?;
+                let p = r.parameters.get(j)?;
+                Some((format!("{}.{}", e.name(), p.name), p.unit.clone()))
+            };
+            let (Some((first, unit)), Some((second, _))) = (name_of(ea, ja), name_of(eb, jb))
+            else {
+                continue;
+            };
+            let weight = -vab / vbb;
+            let finding = CombinedFinding {
+                first,
+                second,
+                correlation: rho,
+                weight,
+                value: fit.theta[a] + weight * fit.theta[b],
+                std: vaa.sqrt() * (1.0 - rho * rho).max(0.0).sqrt(),
+                unit,
+            };
+            for (e, j) in [(ea, ja), (eb, jb)] {
+                if let Some(r) = reports.iter_mut().find(|r| r.name == e.name()) {
+                    if let Some(p) = r.parameters.get_mut(j) {
+                        p.identified = false;
+                    }
+                    r.combined.push(finding.clone());
+                }
+            }
+            if ea == eb {
+                // Listed once on its own effect.
+                if let Some(r) = reports.iter_mut().find(|r| r.name == ea.name()) {
+                    r.combined.pop();
+                }
+            }
+        }
+    }
+}
+
 /// Parameters of `e`: for a selected effect from the final fit; for a
 /// rejected one, what a fit with it added would give (for the record).
 pub(crate) fn effect_parameters(fit: &Fit, e: Effect, selected: bool) -> Vec<Parameter> {
     let layout = &fit.layout;
     let (pidx, ptheta, psd) = if selected {
-        (fit.idx.clone(), fit.theta.clone(), fit.sd.clone())
+        (fit.idx.clone(), fit.theta.clone(), fit.sd())
     } else {
         let mut more = fit.chosen.clone();
         more.push(e);
-        select::fit_with_uncertainty(&fit.stats, layout, &more)
+        let (idx, theta, cov) = select::fit_with_uncertainty(&fit.stats, layout, &more);
+        (idx, theta, select::deviations(&cov))
     };
     let coef = |c: usize| -> (f64, f64) {
         pidx.iter()

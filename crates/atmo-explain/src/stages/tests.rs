@@ -253,7 +253,7 @@ fn select_finds_a_mass_property_or_thrust_effect_only_when_there_is_one() {
 fn fit_recovers_the_thrust_per_unit_mass() {
     let fit = &heavy().fit;
     assert_eq!(fit.fold_theta.len(), select::FOLDS);
-    assert!(fit.sd.iter().all(|s| s.is_finite()));
+    assert!(fit.sd().iter().all(|s| s.is_finite()));
     // However it is written, thrust per unit mass is 1 / 1.05 of the model's.
     let p = &fit.physical;
     let per_mass = (1.0 + p.thrust_scale.unwrap_or(0.0)) / (1.0 + p.mass.unwrap_or(0.0));
