@@ -460,7 +460,9 @@ fn drag_terms(row: &Row, wind: &Vector3<f64>) -> [Vector6<f64>; DRAG_WIDTH] {
     out[1] = minv * axial_w;
     // The body drag acts at the centre of mass (the usual rigid-body
     // model: a force without a moment about the CoM), so about B it carries
-    // the moment `com x f`; ATMO's CoM moves with the tilt.
+    // the moment `com x f`; ATMO's CoM moves with the tilt. It is the robot
+    // file's CoM: a fitted CoM offset moves the mass, not the airframe the
+    // air flows around (the plant's `drag_wrench` does the same).
     let com = body.first_moment / body.mass;
     for axis in 0..3 {
         let mut f = Vector3::zeros();

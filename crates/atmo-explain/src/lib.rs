@@ -20,9 +20,10 @@
 //!    selection on the force channels with the drag and the thrust
 //!    calibration, `stages::wind`). Forward-backward
 //!    selection on held-out whole segments (5 folds), inclusion frequency
-//!    over random halves of the segments as confidence, delete-a-fold
-//!    jackknife standard deviations, and a swap test for effects the data
-//!    cannot tell apart.
+//!    over random halves of the segments as confidence, delete-a-segment
+//!    jackknife covariances (two parameters correlated at |rho| >= 0.9 are
+//!    one combined finding), and a swap test for effects the data cannot
+//!    tell apart.
 //! 4. **Fit and validate** ([`stages`]): the fitted effects as a plant file
 //!    (`fitted_effects.toml`, the plant's `[effects.<name>]` sections),
 //!    replayed to compare held-out residual RMS and multi-step error before

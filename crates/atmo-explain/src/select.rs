@@ -1,6 +1,6 @@
 //! Normal equations per segment, cross-validation over whole held-out
 //! segments, forward-backward group selection, stability (inclusion
-//! frequency over random halves of the segments) and delete-a-fold
+//! frequency over random halves of the segments) and delete-a-segment
 //! jackknife uncertainties.
 //!
 //! Residuals and regressors are weighted by the channel noise floor, so one

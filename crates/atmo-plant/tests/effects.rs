@@ -137,6 +137,70 @@ fn steady_wind_drags_the_body_by_the_quadratic_law() {
 }
 
 #[test]
+fn body_drag_acts_at_the_airframe_s_centre_not_at_a_shifted_mass() {
+    // A CoM offset moves the mass, not the shape the air flows around: the
+    // body drag's moment about B stays `c_nominal x f` (the law the
+    // discrepancy finder fits, so a fitted file replays what was fitted).
+    let wind = WindConfig {
+        steady: [4.0, 0.0, 0.0],
+        turbulence_std: [0.0; 3],
+        ..WindConfig::default()
+    };
+    let drag = DragConfig {
+        rotor_drag: 0.0,
+        ..DragConfig::default()
+    };
+    let offset = ComOffsetConfig {
+        enabled: true,
+        offset: [0.0, 0.0, 0.05],
+    };
+    let x = level_at(5.0);
+    let with = plant(
+        EffectsConfig {
+            wind: Some(wind),
+            drag: Some(drag.clone()),
+            com_offset: Some(offset.clone()),
+            ..EffectsConfig::none()
+        },
+        x,
+        0.0,
+    );
+    let without = plant(
+        EffectsConfig {
+            com_offset: Some(offset),
+            ..EffectsConfig::none()
+        },
+        x,
+        0.0,
+    );
+    let u = Command::rotors(Input::repeat(0.5));
+    let got = with.body_derivative(&u).unwrap() - without.body_derivative(&u).unwrap();
+    let got = nalgebra::Vector6::from_iterator(
+        (idx::VX..idx::VX + 3)
+            .chain(idx::WX..idx::WX + 3)
+            .map(|i| got[i]),
+    );
+    let shifted = with.body();
+    let nominal = truth_model().at_tilt(0.0);
+    let force = nalgebra::Vector3::new(
+        0.5 * drag.air_density * drag.body_cd_area[0] * 16.0,
+        0.0,
+        0.0,
+    );
+    let wrench_at = |c: nalgebra::Vector3<f64>| {
+        let t = c.cross(&force);
+        shifted.mass_matrix_inv * nalgebra::Vector6::new(force.x, 0.0, 0.0, t.x, t.y, t.z)
+    };
+    let at_nominal = wrench_at(nominal.first_moment / nominal.mass);
+    let at_shifted = wrench_at(shifted.first_moment / shifted.mass);
+    assert!((got - at_nominal).norm() < 1e-9, "{got} vs {at_nominal}");
+    assert!(
+        (got - at_shifted).norm() > 1e-3,
+        "the two points differ: {at_shifted}"
+    );
+}
+
+#[test]
 fn rotor_drag_opposes_the_in_plane_air_velocity() {
     let drag = DragConfig {
         body_cd_area: [0.0; 3],

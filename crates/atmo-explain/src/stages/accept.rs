@@ -336,8 +336,9 @@ pub fn accept_effects(
     Ok((fit, decisions))
 }
 
-/// `(1 + s) / (1 + m) - 1` of the thrust scale s and mass error m of the
-/// fit, with its delete-a-fold jackknife deviation.
+/// `r = (1 + s) / (1 + m) - 1` of the thrust scale s and mass error m of
+/// the fit, with its deviation from the fit's jackknife covariance (first
+/// order: `g^T C g`, `g = (1 / (1 + m), -(1 + s) / (1 + m)^2)`).
 fn thrust_to_mass(fit: &Fit) -> (f64, f64) {
     let s_col = fit.layout.columns(Effect::ThrustScale).start;
     let m_col = fit.layout.columns(Effect::MassError).start;
@@ -345,12 +346,14 @@ fn thrust_to_mass(fit: &Fit) -> (f64, f64) {
     let (Some(ps), Some(pm)) = (pos(s_col), pos(m_col)) else {
         return (0.0, f64::NAN);
     };
-    let ratio = |th: &nalgebra::DVector<f64>| (1.0 + th[ps]) / (1.0 + th[pm]) - 1.0;
-    let folds: Vec<f64> = fit.fold_theta.iter().map(ratio).collect();
-    let k = folds.len() as f64;
-    let mean = folds.iter().sum::<f64>() / k;
-    let sd = ((k - 1.0) / k * folds.iter().map(|x| (x - mean).powi(2)).sum::<f64>()).sqrt();
-    (ratio(&fit.theta), sd)
+    let (s, m) = (fit.theta[ps], fit.theta[pm]);
+    let g = [1.0 / (1.0 + m), -(1.0 + s) / (1.0 + m).powi(2)];
+    let at = [ps, pm];
+    let var: f64 = (0..2)
+        .flat_map(|a| (0..2).map(move |b| (a, b)))
+        .map(|(a, b)| g[a] * fit.cov[(at[a], at[b])] * g[b])
+        .sum();
+    ((1.0 + s) / (1.0 + m) - 1.0, var.max(0.0).sqrt())
 }
 
 /// Wind without an identified drag: the wind speed is only known through

@@ -1,6 +1,6 @@
 //! Stage 4, fit: the selected effects' coefficients on all data, their
-//! delete-a-fold jackknife deviations and the per-fold fits (for held-out
-//! predictions), at the wind profiled before the selection
+//! delete-a-segment jackknife covariance and the per-fold fits (for
+//! held-out predictions), at the wind profiled before the selection
 //! ([`super::wind`]).
 
 use nalgebra::{DMatrix, DVector};

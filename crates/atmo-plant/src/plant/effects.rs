@@ -50,12 +50,14 @@ impl Wind {
 
 /// Drag wrench on the body (body force, torque about B): body drag
 /// `-1/2 rho CdA_k |v_k| v_k` per body axis on the air velocity
-/// `v_air = R^T (v - wind)` acting at the centre of mass, and rotor drag `-k_r t_i (v_i - (v_i . n_i) n_i)`
-/// at each hub with thrust `t_i > 0` (v_i the hub's air velocity).
+/// `v_air = R^T (v - wind)` acting at `centre` (body frame), and rotor drag
+/// `-k_r t_i (v_i - (v_i . n_i) n_i)` at each hub with thrust `t_i > 0`
+/// (v_i the hub's air velocity).
 #[inline(always)]
 pub(super) fn drag_wrench(
     drag: &DragConfig,
     body: &TiltedBody,
+    centre: &Vector3<f64>,
     r: &Matrix3<f64>,
     air_velocity_world: &Vector3<f64>,
     w: &Vector3<f64>,
@@ -68,9 +70,8 @@ pub(super) fn drag_wrench(
         q * drag.body_cd_area[1] * v_air.y.abs() * v_air.y,
         q * drag.body_cd_area[2] * v_air.z.abs() * v_air.z,
     );
-    // Body drag acts at the centre of mass (no moment about it), rotor drag
-    // at each hub; torques are about B.
-    let mut torque = (body.first_moment / body.mass).cross(&force);
+    // Rotor drag acts at each hub; torques are about B.
+    let mut torque = centre.cross(&force);
     for i in 0..4 {
         if t[i] <= 0.0 {
             continue; // rotor drag scales with thrust

@@ -654,7 +654,11 @@ impl Plant {
             }
 
             if let Some(drag) = &self.drag {
-                extra += drag_wrench(drag, body, &r, &(v - self.wind_now), &w, &t);
+                // The body drag acts at the airframe's centre of mass (the
+                // robot file's geometry at this tilt): a CoM offset moves
+                // the mass, not the shape the air flows around.
+                let centre = body.first_moment / body.mass - self.com_offset.unwrap_or_default();
+                extra += drag_wrench(drag, body, &centre, &r, &(v - self.wind_now), &w, &t);
             }
 
             if self.contact.is_some() {
