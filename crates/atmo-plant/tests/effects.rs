@@ -97,8 +97,10 @@ fn motion_capture_has_its_rate_latency_and_noise() {
     assert!((std - 0.0005).abs() < 0.05 * 0.0005, "position noise {std}");
 }
 
-#[test]
-fn steady_wind_drags_the_body_by_the_quadratic_law() {
+/// A steady 4 m/s wind along x and the default body drag alone (no rotor
+/// drag): on a robot at rest, the body drag force is
+/// `1/2 rho CdA_x 16` along +x.
+fn wind_of_4_mps_and_body_drag() -> (WindConfig, DragConfig) {
     let wind = WindConfig {
         steady: [4.0, 0.0, 0.0],
         turbulence_std: [0.0; 3],
@@ -108,6 +110,12 @@ fn steady_wind_drags_the_body_by_the_quadratic_law() {
         rotor_drag: 0.0,
         ..DragConfig::default()
     };
+    (wind, drag)
+}
+
+#[test]
+fn steady_wind_drags_the_body_by_the_quadratic_law() {
+    let (wind, drag) = wind_of_4_mps_and_body_drag();
     let effects = EffectsConfig {
         wind: Some(wind),
         drag: Some(drag.clone()),
@@ -141,15 +149,7 @@ fn body_drag_acts_at_the_airframe_s_centre_not_at_a_shifted_mass() {
     // A CoM offset moves the mass, not the shape the air flows around: the
     // body drag's moment about B stays `c_nominal x f` (the law the
     // discrepancy finder fits, so a fitted file replays what was fitted).
-    let wind = WindConfig {
-        steady: [4.0, 0.0, 0.0],
-        turbulence_std: [0.0; 3],
-        ..WindConfig::default()
-    };
-    let drag = DragConfig {
-        rotor_drag: 0.0,
-        ..DragConfig::default()
-    };
+    let (wind, drag) = wind_of_4_mps_and_body_drag();
     let offset = ComOffsetConfig {
         enabled: true,
         offset: [0.0, 0.0, 0.05],
