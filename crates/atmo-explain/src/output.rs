@@ -31,6 +31,7 @@ pub fn json(ex: &Explanation) -> serde_json::Value {
                 "heldout_gain": e.heldout_gain,
                 "parameters": e.parameters,
                 "indistinguishable_from": e.indistinguishable_from,
+                "combined": e.combined,
                 "decided_by": e.decided_by,
                 "stage": if e.calibration { "calibration" } else { "physics" },
             })

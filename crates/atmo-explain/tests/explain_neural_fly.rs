@@ -193,6 +193,18 @@ fn rotor_drag_and_body_drag_at_one_airspeed_are_one_combined_finding() {
     // The combination is determined where its parts are not.
     assert!(pair.std < 0.1 * rotor.std.unwrap(), "{pair:?} {rotor:?}");
     assert!(pair.value > 10.0 * pair.std, "{pair:?}");
+    // explain.json carries it.
+    let json = atmo_explain::output::json(&ex);
+    let drag_json = json["effects"]
+        .as_array()
+        .and_then(|a| a.iter().find(|e| e["name"] == "drag"))
+        .unwrap();
+    assert!(
+        drag_json["combined"]
+            .as_array()
+            .is_some_and(|c| c.iter().any(|c| c["second"] == "drag.body_cd_area_x")),
+        "{drag_json}"
+    );
     // Its value is what the fit says: rotor drag plus weight times area.
     let expect = rotor.value + pair.weight * area_x.value;
     assert!(
