@@ -191,19 +191,20 @@ fn combine_inseparable(fit: &Fit, reports: &mut [EffectReport]) {
                 std: vaa.sqrt() * (1.0 - rho * rho).max(0.0).sqrt(),
                 unit,
             };
-            for (e, j) in [(ea, ja), (eb, jb)] {
-                if let Some(r) = reports.iter_mut().find(|r| r.name == e.name()) {
+            for r in reports
+                .iter_mut()
+                .filter(|r| r.name == ea.name() || r.name == eb.name())
+            {
+                for (e, j) in [(ea, ja), (eb, jb)] {
+                    if r.name != e.name() {
+                        continue;
+                    }
                     if let Some(p) = r.parameters.get_mut(j) {
                         p.identified = false;
                     }
-                    r.combined.push(finding.clone());
                 }
-            }
-            if ea == eb {
-                // Listed once on its own effect.
-                if let Some(r) = reports.iter_mut().find(|r| r.name == ea.name()) {
-                    r.combined.pop();
-                }
+                // Once per effect concerned (once when both are its own).
+                r.combined.push(finding.clone());
             }
         }
     }
