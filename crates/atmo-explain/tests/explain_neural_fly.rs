@@ -141,6 +141,17 @@ fn robot_file_hover_thrust_and_mass_match_the_flight() {
     );
 }
 
+/// The analysis of the committed 12 s of the 100 % fan flight, run once for
+/// the tests that read it.
+fn fan_flight_explained() -> &'static atmo_explain::Explanation {
+    static EX: std::sync::OnceLock<atmo_explain::Explanation> = std::sync::OnceLock::new();
+    EX.get_or_init(|| {
+        let rec = Recording::load(data(FLIGHTS[1])).expect("the committed fan flight loads");
+        atmo_explain::explain(&rec, &robot(), &atmo_explain::Options::default())
+            .expect("the fan flight is analysed")
+    })
+}
+
 #[test]
 fn the_fan_wind_is_named_along_the_fan_and_no_sideways_wind_is_claimed() {
     // 12 s of the 100 % fan flight (12.1 m/s at the fan, blowing along their
@@ -148,9 +159,7 @@ fn the_fan_wind_is_named_along_the_fan_and_no_sideways_wind_is_claimed() {
     // cannot be told from a thrust axis turned sideways: its component is
     // not identified (`stages::wind::MIN_AXIS_GAIN`), the wind is profiled
     // along x alone.
-    use atmo_explain::{Options, explain};
-    let rec = Recording::load(data(FLIGHTS[1])).unwrap();
-    let ex = explain(&rec, &robot(), &Options::default()).unwrap();
+    let ex = fan_flight_explained();
     let wind = ex
         .effects
         .iter()
@@ -170,9 +179,7 @@ fn rotor_drag_and_body_drag_at_one_airspeed_are_one_combined_finding() {
     // along x are nearly the same line: neither is a finding alone, their
     // best-determined combination is, with a deviation far below the
     // separate ones.
-    use atmo_explain::{Options, explain};
-    let rec = Recording::load(data(FLIGHTS[1])).unwrap();
-    let ex = explain(&rec, &robot(), &Options::default()).unwrap();
+    let ex = fan_flight_explained();
     let drag = ex
         .effects
         .iter()
@@ -194,7 +201,7 @@ fn rotor_drag_and_body_drag_at_one_airspeed_are_one_combined_finding() {
     assert!(pair.std < 0.1 * rotor.std.unwrap(), "{pair:?} {rotor:?}");
     assert!(pair.value > 10.0 * pair.std, "{pair:?}");
     // explain.json carries it.
-    let json = atmo_explain::output::json(&ex);
+    let json = atmo_explain::output::json(ex);
     let drag_json = json["effects"]
         .as_array()
         .and_then(|a| a.iter().find(|e| e["name"] == "drag"))
