@@ -196,11 +196,7 @@ fn summary(ex: &crate::Explanation, out: &Path, elapsed: f64) -> String {
         let params: Vec<String> = e
             .parameters
             .iter()
-            .take(if e.name == "ground_effect" {
-                0
-            } else {
-                usize::MAX
-            })
+            .filter(|_| e.name != "ground_effect")
             .map(|p| {
                 if p.identified {
                     match p.std {

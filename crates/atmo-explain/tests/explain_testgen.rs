@@ -10,7 +10,7 @@ use std::path::Path;
 
 use atmo_core::{ConfigFile as _, RobotConfig};
 use atmo_explain::recording::Recording;
-use atmo_explain::{Explanation, Options, explain};
+use atmo_explain::{Explanation, Options, Parameter, explain};
 use atmo_testgen::flight::{FlightPlan, fly, to_csv};
 use atmo_testgen::robot::{RigidBody, RobotFile};
 use atmo_testgen::sim::Concealed;
@@ -68,12 +68,15 @@ fn summary(ex: &Explanation) -> String {
     s
 }
 
-fn param(ex: &Explanation, effect: &str, name: &str) -> f64 {
+fn parameter<'a>(ex: &'a Explanation, effect: &str, name: &str) -> Option<&'a Parameter> {
     ex.effects
         .iter()
         .find(|e| e.name == effect)
         .and_then(|e| e.parameters.iter().find(|p| p.name == name))
-        .map_or(f64::NAN, |p| p.value)
+}
+
+fn param(ex: &Explanation, effect: &str, name: &str) -> f64 {
+    parameter(ex, effect, name).map_or(f64::NAN, |p| p.value)
 }
 
 fn within(ex: &Explanation, effect: &str, name: &str, truth: f64) {
@@ -174,12 +177,7 @@ fn drag_and_wind() {
     // nothing here is reported only in combination).
     let drag = ex.effects.iter().find(|e| e.name == "drag").unwrap();
     assert!(drag.combined.is_empty(), "{:?}", drag.combined);
-    let z = ex
-        .effects
-        .iter()
-        .find(|e| e.name == "drag")
-        .and_then(|e| e.parameters.iter().find(|p| p.name == "body_cd_area_z"))
-        .expect("the drag reports its vertical area");
+    let z = parameter(&ex, "drag", "body_cd_area_z").expect("the drag reports its vertical area");
     let sd = z.std.expect("a fitted area has a deviation");
     assert!(
         (z.value - 0.10).abs() <= 2.5 * sd,

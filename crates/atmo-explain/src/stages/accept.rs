@@ -347,12 +347,9 @@ fn thrust_to_mass(fit: &Fit) -> (f64, f64) {
         return (0.0, f64::NAN);
     };
     let (s, m) = (fit.theta[ps], fit.theta[pm]);
-    let g = [1.0 / (1.0 + m), -(1.0 + s) / (1.0 + m).powi(2)];
-    let at = [ps, pm];
-    let var: f64 = (0..2)
-        .flat_map(|a| (0..2).map(move |b| (a, b)))
-        .map(|(a, b)| g[a] * fit.cov[(at[a], at[b])] * g[b])
-        .sum();
+    let (gs, gm) = (1.0 / (1.0 + m), -(1.0 + s) / (1.0 + m).powi(2));
+    let c = &fit.cov;
+    let var = gs * gs * c[(ps, ps)] + 2.0 * gs * gm * c[(ps, pm)] + gm * gm * c[(pm, pm)];
     ((1.0 + s) / (1.0 + m) - 1.0, var.max(0.0).sqrt())
 }
 

@@ -131,8 +131,9 @@ pub fn effect_reports(
 
 /// The selected effects' parameters that are their linear coefficients
 /// one to one (`effect`, parameter index, column): the wind's, the motor
-/// lag's and the ground effect's are not (a knob, a profiled time constant,
-/// a surface reported as a grid).
+/// lag's, the ground effect's and the battery sag's are not (a knob, a
+/// profiled time constant, a surface reported as a grid, a scaled
+/// coefficient).
 fn linear_parameters(fit: &Fit) -> Vec<(Effect, usize, usize)> {
     fit.chosen
         .iter()

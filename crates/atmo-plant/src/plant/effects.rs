@@ -70,7 +70,8 @@ pub(super) fn drag_wrench(
         q * drag.body_cd_area[1] * v_air.y.abs() * v_air.y,
         q * drag.body_cd_area[2] * v_air.z.abs() * v_air.z,
     );
-    // Rotor drag acts at each hub; torques are about B.
+    // Torques about B: the body drag's, acting at `centre`; each rotor's
+    // drag adds its own at its hub below.
     let mut torque = centre.cross(&force);
     for i in 0..4 {
         if t[i] <= 0.0 {
