@@ -152,6 +152,22 @@ fn fan_flight_explained() -> &'static atmo_explain::Explanation {
     })
 }
 
+/// The selected effect `name` of a report (fails the test if not selected).
+fn selected<'a>(ex: &'a atmo_explain::Explanation, name: &str) -> &'a atmo_explain::EffectReport {
+    ex.effects
+        .iter()
+        .find(|e| e.name == name && e.selected)
+        .unwrap_or_else(|| panic!("{name} not selected: {}", ex.verdict))
+}
+
+/// Parameter `name` of an effect's report.
+fn parameter<'a>(e: &'a atmo_explain::EffectReport, name: &str) -> &'a atmo_explain::Parameter {
+    e.parameters
+        .iter()
+        .find(|p| p.name == name)
+        .unwrap_or_else(|| panic!("{} has no {name}", e.name))
+}
+
 #[test]
 fn the_fan_wind_is_named_along_the_fan_and_no_sideways_wind_is_claimed() {
     // 12 s of the 100 % fan flight (12.1 m/s at the fan, blowing along their
@@ -160,13 +176,9 @@ fn the_fan_wind_is_named_along_the_fan_and_no_sideways_wind_is_claimed() {
     // not identified (`stages::wind::MIN_AXIS_GAIN`), the wind is profiled
     // along x alone.
     let ex = fan_flight_explained();
-    let wind = ex
-        .effects
-        .iter()
-        .find(|e| e.name == "wind" && e.selected)
-        .unwrap_or_else(|| panic!("wind not selected: {}", ex.verdict));
+    let wind = selected(ex, "wind");
     assert!(wind.confidence >= 0.5, "{}", wind.confidence);
-    let param = |n: &str| wind.parameters.iter().find(|p| p.name == n).unwrap();
+    let param = |n: &str| parameter(wind, n);
     let (x, y) = (param("steady_x"), param("steady_y"));
     assert!(x.identified && (-15.0..-8.0).contains(&x.value), "{x:?}");
     assert!(!y.identified && y.value == 0.0, "{y:?}");
@@ -180,12 +192,8 @@ fn rotor_drag_and_body_drag_at_one_airspeed_are_one_combined_finding() {
     // best-determined combination is, with a deviation far below the
     // separate ones.
     let ex = fan_flight_explained();
-    let drag = ex
-        .effects
-        .iter()
-        .find(|e| e.name == "drag" && e.selected)
-        .unwrap_or_else(|| panic!("drag not selected: {}", ex.verdict));
-    let param = |n: &str| drag.parameters.iter().find(|p| p.name == n).unwrap();
+    let drag = selected(ex, "drag");
+    let param = |n: &str| parameter(drag, n);
     let (rotor, area_x) = (param("rotor_drag"), param("body_cd_area_x"));
     assert!(
         !rotor.identified && !area_x.identified,
