@@ -22,6 +22,20 @@
 //! stack commands the tilt at the mechanism's full speed to the transition
 //! limit, whatever the MPC's plan says, and the wheels meet the ground a few
 //! centimetres later, at a tilt the robot could not have hovered at.
+//!
+//! The rotors' bound `thrust_max` (0.95) keeps a margin for the attitude
+//! control. A robot that is weaker than its robot file spends it after the
+//! commit: when the observer's vertical force at the commit exceeds
+//! `weak_deficit` of the file's weight,
+//!
+//! ```text
+//! deficit = F_z,observer / (m_file g) > weak_deficit  =>  u_i <= weak_thrust_max
+//! ```
+//!
+//! until the touchdown ([`Flare::thrust_max`]). The deficit is taken once, at
+//! the commit: during the tilt-up the observer also learns the ground
+//! effect's error, and a bound that changed with it would change the
+//! landing it is deciding.
 
 use atmo_core::ground_effect::{ThrustGainSurface, rk4_step_above_ground};
 use atmo_core::model::{Input, State, idx};
@@ -54,6 +68,11 @@ pub struct FlareSettings {
     /// Every rotor's command in that prediction (level, no motor lag: below
     /// the MPC's bound, for the attitude control and the lag it leaves out).
     pub predicted_thrust: f64,
+    /// Thrust deficit (the observer's vertical force over the robot file's
+    /// weight) at the commit above which the robot counts as weak.
+    pub weak_deficit: f64,
+    /// Each rotor's bound from the commit to the touchdown on a weak robot.
+    pub weak_thrust_max: f64,
 }
 
 /// What the robot and the MPC's model know, for [`predict_touchdown`].
@@ -118,6 +137,8 @@ pub struct Flare {
     holding_since: Option<u64>,
     /// The tilt-up has begun (it is never taken back in this transition).
     committed: bool,
+    /// The thrust deficit of the last tick before the commit, then of the commit.
+    deficit_at_commit: f64,
 }
 
 impl Flare {
@@ -131,9 +152,16 @@ impl Flare {
         self.committed
     }
 
+    /// Each rotor's bound after the commit of a weak robot (`None`: the
+    /// MPC's own `thrust_max`; see the module docs).
+    pub fn thrust_max(&self, s: &FlareSettings) -> Option<f64> {
+        (self.committed && self.deficit_at_commit > s.weak_deficit).then_some(s.weak_thrust_max)
+    }
+
     /// One tick of the flare's logic: `clearance` of the wheels (m),
     /// vertical speed `vz` (m/s, down positive), at time `now_ns`;
-    /// `predicted_impact`: [`predict_touchdown`]'s speed for a tilt-up now.
+    /// `predicted_impact`: [`predict_touchdown`]'s speed for a tilt-up now;
+    /// `deficit`: the observer's vertical force over the file's weight.
     pub fn update(
         &mut self,
         s: &FlareSettings,
@@ -141,10 +169,13 @@ impl Flare {
         clearance: f64,
         vz: f64,
         predicted_impact: Option<f64>,
+        deficit: f64,
     ) -> bool {
         if self.committed {
             return true;
         }
+        // Kept from the tick that commits on (`update` returns above).
+        self.deficit_at_commit = deficit;
         if predicted_impact.is_some_and(|v| v <= s.impact_speed) {
             self.committed = true;
             return true;
@@ -199,6 +230,8 @@ mod tests {
         hold_time: 0.3,
         impact_speed: 0.3,
         predicted_thrust: 0.9,
+        weak_deficit: 0.06,
+        weak_thrust_max: 1.0,
     };
 
     #[test]
@@ -220,33 +253,55 @@ mod tests {
     #[test]
     fn the_flare_commits_when_slow_in_the_band_or_after_the_hold_time() {
         let mut f = Flare::default();
-        assert!(!f.update(&S, 0, 0.2, 0.0, None), "high: no commit");
+        assert!(!f.update(&S, 0, 0.2, 0.0, None, 0.0), "high: no commit");
         assert!(
-            !f.update(&S, 1, 0.035, 0.1, None),
+            !f.update(&S, 1, 0.035, 0.1, None, 0.0),
             "in the band, still descending"
         );
-        assert!(f.update(&S, 2, 0.035, 0.01, None), "slow in the band");
-        assert!(f.update(&S, 3, 0.5, 0.2, None), "committed stays committed");
-        let mut f = Flare::default();
-        assert!(!f.update(&S, 0, 0.035, 0.1, None));
-        assert!(!f.update(&S, 200_000_000, 0.035, 0.1, None));
+        assert!(f.update(&S, 2, 0.035, 0.01, None, 0.0), "slow in the band");
         assert!(
-            f.update(&S, 300_000_000, 0.035, 0.1, None),
+            f.update(&S, 3, 0.5, 0.2, None, 0.0),
+            "committed stays committed"
+        );
+        let mut f = Flare::default();
+        assert!(!f.update(&S, 0, 0.035, 0.1, None, 0.0));
+        assert!(!f.update(&S, 200_000_000, 0.035, 0.1, None, 0.0));
+        assert!(
+            f.update(&S, 300_000_000, 0.035, 0.1, None, 0.0),
             "the hold time ran out"
         );
         let mut f = Flare::default();
-        assert!(!f.update(&S, 0, 0.035, 0.1, None));
+        assert!(!f.update(&S, 0, 0.035, 0.1, None, 0.0));
         assert!(
-            f.update(&S, 1, 0.019, 0.1, None),
+            f.update(&S, 1, 0.019, 0.1, None, 0.0),
             "sinking through the hold"
         );
         let mut f = Flare::default();
-        assert!(!f.update(&S, 0, 0.2, 0.2, Some(0.31)));
+        assert!(!f.update(&S, 0, 0.2, 0.2, Some(0.31), 0.0));
         assert!(
-            f.update(&S, 1, 0.2, 0.2, Some(0.29)),
+            f.update(&S, 1, 0.2, 0.2, Some(0.29), 0.0),
             "predicted to land slowly enough"
         );
         f.reset();
         assert!(!f.committed());
+    }
+
+    #[test]
+    fn a_robot_weaker_than_its_file_at_the_commit_spends_the_attitude_margin() {
+        let mut f = Flare::default();
+        assert!(!f.update(&S, 0, 0.2, 0.2, None, 0.1));
+        assert_eq!(f.thrust_max(&S), None, "not before the commit");
+        assert!(f.update(&S, 1, 0.2, 0.2, Some(0.2), 0.1));
+        assert_eq!(f.thrust_max(&S), Some(1.0));
+        // Taken at the commit: what the observer learns later does not move it.
+        f.update(&S, 2, 0.1, 0.3, None, 0.0);
+        assert_eq!(f.thrust_max(&S), Some(1.0));
+        let mut f = Flare::default();
+        assert!(f.update(&S, 0, 0.2, 0.2, Some(0.2), 0.03));
+        assert_eq!(f.thrust_max(&S), None, "as strong as its file");
+        f.update(&S, 1, 0.1, 0.3, None, 0.2);
+        assert_eq!(f.thrust_max(&S), None, "weaker only after the commit");
+        f.reset();
+        assert_eq!(f.thrust_max(&S), None);
     }
 }

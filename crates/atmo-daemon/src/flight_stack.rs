@@ -364,8 +364,9 @@ impl FlightStack {
             if let Some(flare) = self.flare_settings {
                 let clearance = self.flare_clearance(&state);
                 let predicted = self.flare_prediction;
+                let deficit = self.observer.wrench()[2] / self.model.weight();
                 self.flare
-                    .update(&flare, now, clearance, state[idx::VZ], predicted);
+                    .update(&flare, now, clearance, state[idx::VZ], predicted, deficit);
             }
         }
         let limit = self.tilt_limit(mode);
@@ -702,6 +703,8 @@ impl FlightStack {
                 },
                 rate_max: self.tilt_rate_max,
                 wheel_radius: self.wheel_radius,
+                // A weak robot spends the attitude margin after its commit.
+                thrust_max: self.flare_settings.and_then(|f| self.flare.thrust_max(&f)),
             };
             let _ = self.mpc.set_tilt_plan(&plan);
         } else {

@@ -186,5 +186,7 @@ fn validate_flare(c: &Checker, f: &FlareSettings) -> Result<(), CoreError> {
     c.range("flare.hold_time", f.hold_time, 0.0..=10.0, "s")?;
     c.range("flare.impact_speed", f.impact_speed, 0.0..=2.0, "m/s")?;
     c.range("flare.predicted_thrust", f.predicted_thrust, 0.0..=1.0, "")?;
+    c.range("flare.weak_deficit", f.weak_deficit, -1.0..=1.0, "")?;
+    c.range("flare.weak_thrust_max", f.weak_thrust_max, 0.1..=1.0, "")?;
     Ok(())
 }

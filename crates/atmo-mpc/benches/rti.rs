@@ -312,6 +312,7 @@ fn rti_tilt_plan(c: &mut Criterion) {
         rate_min: -robot.limits.tilt_rate_max,
         rate_max: robot.limits.tilt_rate_max,
         wheel_radius: robot.wheels.radius,
+        thrust_max: None,
     };
     let make = || {
         let model = Model::new(&robot);

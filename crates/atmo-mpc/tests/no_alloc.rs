@@ -69,6 +69,7 @@ fn measure(formulation: Formulation, feedback: Feedback) -> Counts {
         rate_min: -rate,
         rate_max: rate,
         wheel_radius: robot.wheels.radius,
+        thrust_max: None,
     };
     let mut planned_tilt = 50f64.to_radians();
     if feedback == Feedback::TiltPlanned {

@@ -70,6 +70,10 @@ pub struct TiltPlan {
     pub rate_max: f64,
     /// Wheel radius, m (the rim's reach below the hub at touchdown).
     pub wheel_radius: f64,
+    /// Each rotor's upper bound this tick (`None`: the settings'
+    /// `thrust_max`; the flight stack raises it after a weak robot's flare
+    /// commits).
+    pub thrust_max: Option<f64>,
 }
 
 /// The tilt-planning QP and its plan (allocated once, when `[tilt_plan]` is configured).
@@ -212,6 +216,7 @@ impl Mpc {
                 plan.rate_min,
                 plan.rate_max,
                 plan.wheel_radius,
+                plan.thrust_max.unwrap_or(0.0),
             ],
         )?;
         for (what, v, max) in [
@@ -219,6 +224,8 @@ impl Mpc {
             ("tilt plan tilt_max", plan.tilt_max, FRAC_PI_2),
             ("tilt plan rate_min", plan.rate_min, 0.0),
             ("tilt plan wheel_radius", plan.wheel_radius, 1.0),
+            // A rotor command is a fraction of its full thrust.
+            ("tilt plan thrust_max", plan.thrust_max.unwrap_or(1.0), 1.0),
         ] {
             let min = if what.ends_with("rate_min") {
                 f64::MIN
@@ -384,7 +391,10 @@ impl Mpc {
                 let lo = plan.rate_min.max((plan.tilt_min - self.varphi[k]) / dt);
                 let hi = plan.rate_max.min((plan.tilt_max - self.varphi[k]) / dt);
                 lin.u_lo[k] = tilt_input(&Input::zeros(), lo.min(hi));
-                lin.u_hi[k] = tilt_input(&Input::from_element(w.thrust_max), hi);
+                lin.u_hi[k] = tilt_input(
+                    &Input::from_element(plan.thrust_max.unwrap_or(w.thrust_max)),
+                    hi,
+                );
             }
             failed
         };
