@@ -88,7 +88,13 @@ fn measure(formulation: Formulation, feedback: Feedback) -> Counts {
             mpc.set_reference_constant(&reference).unwrap();
             mpc.set_alpha(varphi.cos()).unwrap();
             if feedback == Feedback::TiltPlanned {
-                mpc.set_tilt_plan(&plan).unwrap();
+                // The second half with a weak robot's raised rotor bound.
+                let bound = (tick >= TICKS / 2).then_some(1.0);
+                mpc.set_tilt_plan(&TiltPlan {
+                    thrust_max: bound,
+                    ..plan
+                })
+                .unwrap();
                 mpc.set_measured_tilt(varphi).unwrap();
             } else {
                 mpc.set_tilt_ramp(varphi, rate, 0.0, 50f64.to_radians())
