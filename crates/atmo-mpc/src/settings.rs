@@ -42,6 +42,11 @@ pub struct TiltPlanSettings {
     pub descent_speed_weight: f64,
     /// Weight on the tilt rate `omega_k^2`, s^2/rad^2.
     pub rate_weight: f64,
+    /// Weight on `pitch_k^2 + roll_k^2` at every stage before the touchdown,
+    /// 1/rad^2: the wheels touch together (the paper's blended cost weighs
+    /// no attitude angle near the ground, where the ground effect's
+    /// fluctuating thrust rolls the robot).
+    pub level_weight: f64,
     /// Weight on `(varphi - varphi_max)^2` at the predicted touchdown.
     pub touchdown_tilt_weight: f64,
     /// Weight on `(v_z - touchdown_speed)^2` at the predicted touchdown, s^2/m^2.
@@ -300,6 +305,7 @@ impl ConfigFile for MpcFile {
             for (key, value) in [
                 ("tilt_plan.tilt_weight", t.tilt_weight),
                 ("tilt_plan.descent_speed_weight", t.descent_speed_weight),
+                ("tilt_plan.level_weight", t.level_weight),
                 ("tilt_plan.touchdown_tilt_weight", t.touchdown_tilt_weight),
                 ("tilt_plan.touchdown_speed_weight", t.touchdown_speed_weight),
             ] {

@@ -25,7 +25,7 @@
 //! stage when it does not within the horizon). The cost adds
 //!
 //! ```text
-//! sum_k  kappa_k [ |x_k - r_k|^2_Q + w_v (v_z,k - v_z,ref,k)^2 + w_tilt (varphi_k - varphi_max)^2 ] + w_rate omega_k^2
+//! sum_k  kappa_k [ |x_k - r_k|^2_Q + w_v (v_z,k - v_z,ref,k)^2 + w_tilt (varphi_k - varphi_max)^2 + w_level (pitch_k^2 + roll_k^2) ] + w_rate omega_k^2
 //!   + sum_{k in {floor s*, ceil s*}} lambda_k [ W_tilt (varphi_k - varphi_max)^2 + W_v (v_z,k - v_td)^2 ]
 //! kappa_k = clamp(1 - (k - s*), 0, 1)
 //! ```
@@ -35,7 +35,12 @@
 //! touchdown speed aimed at. `w_v` holds the descent slow (the paper's
 //! transition cost, blended towards its L2 part, weighs no velocity), so
 //! that there is time to tilt: the mechanism's speed, not the thrust, is
-//! what limits the tilt of a fast descent. The state cost fades
+//! what limits the tilt of a fast descent. `w_level` keeps the attitude
+//! level, so that the wheels touch together: the paper's cost, blended
+//! towards its L2 part near the ground, weighs only the body rates, and
+//! with every rotor at its bound in the tilt-up the ground effect's
+//! fluctuating thrust rolled the robot by up to 10 deg, one side's wheels
+//! touching early (docs/landing.md). The state cost fades
 //! out past the touchdown (`kappa`): the plan ends on the wheels, and what
 //! the model (which has no ground) predicts beyond is not penalized. Both
 //! are continuous in `s*`, so the objective moves smoothly from tick to tick. The
@@ -406,6 +411,8 @@ impl Mpc {
         lin.q_diag[n] = tilt_state(&(q * self.settings.cost.terminal_scale), w.tilt_weight);
         for q_k in &mut lin.q_diag {
             q_k[idx::VZ] += w.descent_speed_weight;
+            q_k[idx::PITCH] += w.level_weight;
+            q_k[idx::ROLL] += w.level_weight;
         }
         lin.r_diag = tilt_input(&r, w.rate_weight);
         for k in 0..=n {
