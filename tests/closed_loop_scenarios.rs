@@ -258,6 +258,24 @@ fn monte_carlo_of_the_wheel_landing() {
     );
 }
 
+fn tilt(s: &Summary) -> f64 {
+    s.touchdown_tilt_deg.expect("touched down")
+}
+
+fn impact(s: &Summary) -> f64 {
+    s.impact_speed_mps.expect("touched down")
+}
+
+/// Issue 17's Monte Carlo criterion (>= 64 deg, <= 0.4 m/s, no crash).
+fn assert_landed_past_64_deg(s: &Summary) {
+    assert!(
+        monte_carlo::landed_past_64_deg(s),
+        "issue 17's criterion missed: {:.2} deg at {:.3} m/s",
+        tilt(s),
+        impact(s)
+    );
+}
+
 #[test]
 fn a_robot_weaker_than_its_file_spends_its_attitude_margin_after_the_flare_commits() {
     // Run 21 of `fly --runs 200 --seed 1`: thrust over weight 0.935 of the
@@ -284,8 +302,6 @@ fn a_robot_weaker_than_its_file_spends_its_attitude_margin_after_the_flare_commi
         spending.max_mean_thrust
     );
     assert!(keeping.max_mean_thrust <= 0.95 + 1e-9);
-    let tilt = |s: &Summary| s.touchdown_tilt_deg.expect("touched down");
-    let impact = |s: &Summary| s.impact_speed_mps.expect("touched down");
     assert!(
         tilt(&spending) >= tilt(&keeping),
         "touchdown tilt {:.2} deg spending the margin, {:.2} keeping it",
@@ -304,12 +320,7 @@ fn a_robot_weaker_than_its_file_spends_its_attitude_margin_after_the_flare_commi
         tilt(&keeping),
         impact(&keeping)
     );
-    assert!(
-        monte_carlo::landed_past_64_deg(&spending),
-        "issue 17's criterion missed: {:.2} deg at {:.3} m/s",
-        tilt(&spending),
-        impact(&spending)
-    );
+    assert_landed_past_64_deg(&spending);
 }
 
 /// The larger of roll and pitch (deg, the plant's truth) on the last tick of
@@ -356,18 +367,11 @@ fn the_planned_tilt_keeps_the_robot_level_so_that_its_wheels_touch_together() {
         level_angle + 2.0 <= rolled_angle,
         "attitude at the touchdown: {level_angle:.2} deg with the level weight, {rolled_angle:.2} without"
     );
-    let tilt = |s: &Summary| s.touchdown_tilt_deg.expect("touched down");
-    let impact = |s: &Summary| s.impact_speed_mps.expect("touched down");
     assert!(
         tilt(&level) >= tilt(&rolled) + 1.0,
         "touchdown tilt {:.2} deg level, {:.2} deg rolled",
         tilt(&level),
         tilt(&rolled)
     );
-    assert!(
-        monte_carlo::landed_past_64_deg(&level),
-        "issue 17's criterion missed: {:.2} deg at {:.3} m/s",
-        tilt(&level),
-        impact(&level)
-    );
+    assert_landed_past_64_deg(&level);
 }
