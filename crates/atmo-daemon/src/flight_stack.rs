@@ -705,6 +705,10 @@ impl FlightStack {
                 wheel_radius: self.wheel_radius,
                 // A weak robot spends the attitude margin after its commit.
                 thrust_max: self.flare_settings.and_then(|f| self.flare.thrust_max(&f)),
+                // The rotors' mean bounded instead of each rotor after the
+                // commit, if `rotor_thrust_max` is above `thrust_max` (measured
+                // worse: docs/landing.md "The mean thrust bounded").
+                mean_thrust_bound: self.flare.committed(),
             };
             let _ = self.mpc.set_tilt_plan(&plan);
         } else {

@@ -313,6 +313,7 @@ fn rti_tilt_plan(c: &mut Criterion) {
         rate_max: robot.limits.tilt_rate_max,
         wheel_radius: robot.wheels.radius,
         thrust_max: None,
+        mean_thrust_bound: false,
     };
     let make = || {
         let model = Model::new(&robot);

@@ -56,6 +56,12 @@ pub struct TiltPlanSettings {
     /// Upper bound of every rotor command while the tilt is planned (the
     /// thrust margin kept for attitude control).
     pub thrust_max: f64,
+    /// Upper bound of each rotor command while the tilt is planned. Above
+    /// `thrust_max`, `thrust_max` bounds the rotors' mean instead of each
+    /// rotor (the QP in the rotors' modes, `qp::rotor_modes`): a rotor may
+    /// then exceed the mean for attitude control while the mean is at its
+    /// bound. Equal to `thrust_max`: each rotor by `thrust_max`.
+    pub rotor_thrust_max: f64,
 }
 
 /// Which thrust-gain surface the prediction model carries near the ground.
@@ -315,6 +321,12 @@ impl ConfigFile for MpcFile {
             c.range("tilt_plan.rate_weight", t.rate_weight, 1e-9..=1e6, "")?;
             c.range("tilt_plan.thrust_max", t.thrust_max, 0.1..=1.0, "")?;
             c.range(
+                "tilt_plan.rotor_thrust_max",
+                t.rotor_thrust_max,
+                t.thrust_max..=1.0,
+                "",
+            )?;
+            c.range(
                 "tilt_plan.touchdown_speed",
                 t.touchdown_speed,
                 0.0..=2.0,
@@ -409,6 +421,12 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(err.contains("solver.max_step_fraction"), "{err}");
+        // A rotor bound below the mean's bound it would stand above.
+        let low_rotor = SHIPPED.replace("rotor_thrust_max = 0.95", "rotor_thrust_max = 0.9");
+        let err = MpcFile::from_toml_str(&low_rotor, "mpc.toml")
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains("tilt_plan.rotor_thrust_max"), "{err}");
     }
 
     #[test]

@@ -17,6 +17,7 @@
 // Test, bench and example code: an unwrap that fails is the failure report.
 #![allow(clippy::unwrap_used)]
 
+mod common;
 #[allow(dead_code)]
 #[path = "../benches/support/scenarios.rs"]
 mod scenarios;
@@ -24,7 +25,7 @@ mod scenarios;
 use atmo_core::RobotConfig;
 use atmo_core::model::{Model, NU, NX, State};
 use atmo_mpc::qp::QpBackend;
-use atmo_mpc::{Bound, Formulation, LinearizedHorizon, Mpc, SolverSettings};
+use atmo_mpc::{Bound, Formulation, LinearizedHorizon, Mpc};
 use clarabel::solver::SolverStatus;
 use nalgebra::{DMatrix, DVector};
 use rand::{Rng, SeedableRng};
@@ -42,19 +43,6 @@ const PERTURBATIONS_PER_PLAN: usize = 280;
 const SCALE: [f64; NX] = [
     0.05, 0.05, 0.05, 0.05, 0.05, 0.05, 0.2, 0.2, 0.2, 0.4, 0.4, 0.4,
 ];
-
-fn reference_settings(shipped: &SolverSettings) -> SolverSettings {
-    SolverSettings {
-        max_iter: 200,
-        time_limit: 10.0,
-        tol_gap_abs: 1e-11,
-        tol_gap_rel: 1e-11,
-        tol_feas: 1e-11,
-        iterative_refinement: true,
-        max_step_fraction: 0.99,
-        ..*shipped
-    }
-}
 
 /// Linearizations of `PLANS` preparations of a closed loop in the situation.
 fn recorded_plans(name: &str) -> Vec<LinearizedHorizon> {
@@ -182,7 +170,7 @@ fn homotopy_feedback_equals_a_tight_clarabel_solve() {
     // Numbers are under test, not the machine's load: no wall-clock limit.
     shipped.solver.time_limit = 1.0;
     let feedback = shipped.feedback;
-    let tight = reference_settings(&shipped.solver);
+    let tight = common::reference_settings(&shipped.solver);
     let mut rng = ChaCha8Rng::seed_from_u64(18);
     let mut total = Tally::default();
     for name in NAMES {

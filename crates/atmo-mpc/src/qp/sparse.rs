@@ -6,6 +6,7 @@ use clarabel::algebra::CscMatrix;
 use clarabel::solver::SupportedConeT;
 use nalgebra::SVector;
 
+use super::rotor_modes::ROTORS;
 use super::solver::{CscBuilder, TimedSolver, solver_error};
 use super::{LinearizedHorizon, QpSnapshot};
 use crate::error::Result;
@@ -93,7 +94,12 @@ impl<const NX: usize, const NU: usize> SparseQp<NX, NU> {
                 b[NX * (k + 1)..NX * (k + 2)].copy_from_slice(lin.defect[k].as_slice());
                 let bound = NX * (n + 1) + 2 * NU * k;
                 for i in 0..NU {
-                    b[bound + i] = lin.u_hi[k][i] - lin.u_bar[k][i];
+                    let mut hi = lin.u_hi[k][i];
+                    if let (Some(mean), true) = (lin.mean_thrust_max[k], i < ROTORS) {
+                        // No general rows here: every rotor under the mean's bound.
+                        hi = hi.min(mean);
+                    }
+                    b[bound + i] = hi - lin.u_bar[k][i];
                     b[bound + NU + i] = lin.u_bar[k][i] - lin.u_lo[k][i];
                 }
             }

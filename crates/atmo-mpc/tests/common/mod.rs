@@ -6,7 +6,7 @@
 
 use atmo_core::RobotConfig;
 use atmo_core::model::{Input, Model, State, idx};
-use atmo_mpc::{Formulation, Mpc, MpcSettings, Outcome, TickOutput};
+use atmo_mpc::{Formulation, Mpc, MpcSettings, Outcome, SolverSettings, TickOutput};
 
 /// Plant substeps per controller tick: 150 Hz / 7 = 0.95 ms.
 pub const SUBSTEPS: usize = 7;
@@ -86,4 +86,19 @@ pub fn run(
         trace.tilts.push(varphi);
     }
     trace
+}
+
+/// Clarabel as a reference solver: tolerances 1e-11, iterative refinement,
+/// no time limit to speak of (the rest as `shipped`).
+pub fn reference_settings(shipped: &SolverSettings) -> SolverSettings {
+    SolverSettings {
+        max_iter: 200,
+        time_limit: 10.0,
+        tol_gap_abs: 1e-11,
+        tol_gap_rel: 1e-11,
+        tol_feas: 1e-11,
+        iterative_refinement: true,
+        max_step_fraction: 0.99,
+        ..*shipped
+    }
 }
