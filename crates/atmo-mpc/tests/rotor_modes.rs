@@ -157,3 +157,30 @@ fn the_mean_bound_in_the_rotors_modes_solves_the_qp_with_the_general_inequality(
     }
     let _ = NX;
 }
+
+/// The sparse form has no general rows: it bounds every rotor by the
+/// mean's bound, a subset of what the modes allow.
+#[test]
+fn the_sparse_form_bounds_every_rotor_by_the_mean_s_bound() {
+    let settings = common::reference_settings(&scenarios::settings(Formulation::Sparse).solver);
+    let lin = transition_plan(0.7, 0.58);
+    let mut e0 = State::zeros();
+    e0[2] = 0.02;
+    let mut qp = QpBackend::new(&lin, &settings).unwrap();
+    qp.load(&lin).unwrap();
+    qp.set_initial_deviation(&e0).unwrap();
+    assert_eq!(qp.solve().status, SolverStatus::Solved);
+    let du = rotor_deviations(&qp, &lin, &e0);
+    let mut at_bound = 0;
+    for k in 0..lin.steps() {
+        for i in 0..ROTORS {
+            let u = lin.u_bar[k][i] + du[NU * k + i];
+            assert!(u <= 0.58 + 1e-6, "stage {k} rotor {i}: {u}");
+            at_bound += usize::from(u > 0.58 - 1e-4);
+        }
+    }
+    assert!(
+        at_bound > 0,
+        "no rotor at the bound: the test tests nothing"
+    );
+}
