@@ -141,9 +141,7 @@ impl TiltPlanner {
             lin.q_diag[k] = tilt_state(&q, weights.tilt_weight);
             lin.u_bar[k] = tilt_input(&hover, 0.0);
             lin.u_lo[k] = tilt_input(&hover.map(|_| 0.0), -1.0);
-            let (rotor_max, mean_max) = rotor_bounds(&weights, None, false);
-            lin.u_hi[k] = tilt_input(&hover.map(|_| rotor_max), 1.0);
-            lin.mean_thrust_max[k] = mean_max;
+            lin.u_hi[k] = tilt_input(&hover.map(|_| weights.thrust_max), 1.0);
         }
         lin.q_diag[steps] = tilt_state(&(q * settings.cost.terminal_scale), weights.tilt_weight);
         lin.r_diag = tilt_input(&r, weights.rate_weight);

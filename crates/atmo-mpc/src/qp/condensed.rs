@@ -203,7 +203,8 @@ impl<const NX: usize, const NU: usize> CondensedQp<NX, NU> {
                 self.b[NU * k + i] = lin.u_hi[k][i] - lin.u_bar[k][i];
                 self.b[nu_total + NU * k + i] = lin.u_bar[k][i] - lin.u_lo[k][i];
             }
-            if let Some(mean_max) = lin.mean_thrust_max[k] {
+            // The stages `write_rotor_modes` wrote in the modes, and only those.
+            if let (true, Some(mean_max)) = (self.modes[k], lin.mean_thrust_max[k]) {
                 let rotors = 0..ROTORS;
                 let lo = rotors
                     .clone()
