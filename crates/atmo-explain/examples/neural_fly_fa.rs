@@ -97,7 +97,8 @@ fn main() {
     let fit_first_half = args.iter().any(|a| a == "--fit-first-half");
     let second_half = fit_first_half || args.iter().any(|a| a == "--second-half");
     let robot = RobotConfig::load(robot_path).unwrap();
-    let whole = Recording::load(path).unwrap();
+    // As `explain` does: the velocity's slow band from the positions.
+    let (whole, _) = atmo_explain::velocity::from_positions(&Recording::load(path).unwrap());
     let t_split = 0.5 * (whole.samples[0].t + whole.samples[whole.samples.len() - 1].t);
     let half = |first: bool| {
         Recording::from_samples(

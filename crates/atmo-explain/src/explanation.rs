@@ -135,6 +135,8 @@ pub struct Explanation {
     pub outliers: crate::recording::plausible::Outliers,
     pub contact_rows: usize,
     pub noise_floor: [f64; 6],
+    /// The recorded velocity's band below 3 Hz, taken from the positions.
+    pub velocity_from_positions: crate::velocity::VelocityCorrection,
     pub mismatch_found: bool,
     pub verdict: String,
     pub located: Vec<locate::Located>,

@@ -5,7 +5,9 @@
 //! 1. **Residuals** ([`data`]): the nominal model (the robot file, nothing
 //!    else) is evaluated at every recorded state with the recorded commands
 //!    and tilt. Measured accelerations come from a Savitzky-Golay
-//!    differentiator (window about 0.1 s from the data rate); the model
+//!    differentiator (window about 0.1 s from the data rate) of the
+//!    recorded velocity, its band below 3 Hz first taken from the positions
+//!    ([`velocity`]: a velocity estimate's drift is not a force); the model
 //!    side goes through the same filter (integrated, then differentiated),
 //!    so the residual of a right model is noise. Multi-step prediction:
 //!    atmo-plant's plant started from the recorded state and driven by the
@@ -52,6 +54,7 @@ pub mod replay;
 pub mod select;
 pub mod stages;
 pub mod synth;
+pub mod velocity;
 
 use std::path::PathBuf;
 use std::time::Instant;
@@ -200,6 +203,21 @@ fn over_budget(timings: &[(String, f64)], budget_s: f64) -> Option<String> {
     ))
 }
 
+/// Why the recorded velocity was analysed as it is.
+fn velocity_note(c: &velocity::VelocityCorrection) -> String {
+    format!(
+        "velocity analysed as recorded: its band below {} Hz taken from the positions would \
+         change it by {:.3} / {:.3} / {:.3} m/s RMS (x / y / z), more than a velocity sensor's \
+         drift ({} m/s): the positions and the velocity disagree about the motion (another \
+         frame, a jump, a time offset?)",
+        c.below_hz,
+        c.rms[0],
+        c.rms[1],
+        c.rms[2],
+        velocity::MAX_CORRECTION_RMS
+    )
+}
+
 /// Runs the whole analysis.
 pub fn explain(rec: &Recording, robot: &RobotConfig, opts: &Options) -> Result<Explanation> {
     explain_with_progress(rec, robot, opts, &mut |_| {})
@@ -240,6 +258,8 @@ pub fn explain_with_progress(
         screened = copy;
         &screened
     };
+    let (corrected, velocity_correction) = velocity::from_positions(rec);
+    let rec = &corrected;
     let res = t.step("residuals", || Residuals::new(rec, robot))?;
     let mismatch = t.step("locate", || locate_mismatch(&res));
     let base = t.step("regressors", || BaseRegressors::new(&res, rec));
@@ -267,6 +287,10 @@ pub fn explain_with_progress(
         validation: &validation,
     };
     let mut ex = t.step("report", || report(&findings));
+    ex.velocity_from_positions = velocity_correction;
+    if !velocity_correction.applied {
+        ex.notes.push(velocity_note(&velocity_correction));
+    }
     t.lap("total");
     (t.report)(Progress {
         stage: "done",

@@ -58,6 +58,7 @@ pub fn json(ex: &Explanation) -> serde_json::Value {
         "implausible_rows": ex.outliers.rows,
         "implausible_columns": ex.outliers.columns,
         "ground_contact_rows": ex.contact_rows,
+        "velocity_from_positions": ex.velocity_from_positions,
         "noise_floor": CHANNELS.iter().zip(ex.noise_floor).map(|(c, v)| (c.to_string(), json!(v))).collect::<serde_json::Map<String, serde_json::Value>>(),
         "mismatch_found": ex.mismatch_found,
         "verdict": ex.verdict,
@@ -102,6 +103,20 @@ fn report_header(s: &mut String, ex: &Explanation) {
         s,
         "Recording: `{}`, {} rows ({} used) over {:.1} s at {:.0} Hz; Savitzky-Golay window {} samples.\n",
         ex.source, ex.rows, ex.rows_used, ex.duration_s, ex.rate_hz, ex.window_samples
+    );
+    let vc = &ex.velocity_from_positions;
+    let _ = writeln!(
+        s,
+        "Velocity below {} Hz from the positions: {} (correction RMS x / y / z {:.4} / {:.4} / {:.4} m/s).\n",
+        vc.below_hz,
+        if vc.applied {
+            "applied"
+        } else {
+            "not applied, see the notes"
+        },
+        vc.rms[0],
+        vc.rms[1],
+        vc.rms[2]
     );
     if !ex.ignored_columns.is_empty() {
         let _ = writeln!(s, "Ignored columns: {}.\n", ex.ignored_columns.join(", "));

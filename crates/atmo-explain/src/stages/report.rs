@@ -541,6 +541,7 @@ pub fn report(f: &Findings) -> Explanation {
         outliers: rec.outliers.clone(),
         contact_rows: prep.contact_rows,
         noise_floor: prep.floor,
+        velocity_from_positions: crate::velocity::VelocityCorrection::default(),
         mismatch_found,
         verdict,
         located: before.located.clone(),
