@@ -18,7 +18,11 @@
 //! begun now is predicted to touch down at most at `impact_speed`
 //! ([`predict_touchdown`]), or once the wheels are within `hold_band` above
 //! the hold clearance and either slower than `commit_speed` or held there
-//! `hold_time`, or when they sink `hold_band` below it. Then the flight
+//! `hold_time`, or when they sink `hold_band` below it. A hold that would
+//! commit by time or slowness while the prediction says faster than
+//! `lower_above_impact` lowers itself by `lower_step` instead (down to
+//! `lowest_hold`) and the approach goes on: a robot the ground effect holds
+//! at a high tilt would otherwise fall from there too fast. Then the flight
 //! stack commands the tilt at the mechanism's full speed to the transition
 //! limit, whatever the MPC's plan says, and the wheels meet the ground a few
 //! centimetres later, at a tilt the robot could not have hovered at.
@@ -73,6 +77,13 @@ pub struct FlareSettings {
     pub weak_deficit: f64,
     /// Each rotor's bound from the commit to the touchdown on a weak robot.
     pub weak_thrust_max: f64,
+    /// Predicted impact speed (m/s) above which a hold that would commit by
+    /// time or slowness is lowered instead.
+    pub lower_above_impact: f64,
+    /// How far such a hold is lowered each time, m (0: never).
+    pub lower_step: f64,
+    /// The lowest hold clearance it is lowered to, m.
+    pub lowest_hold: f64,
 }
 
 /// What the robot and the MPC's model know, for [`predict_touchdown`].
@@ -139,6 +150,8 @@ pub struct Flare {
     committed: bool,
     /// The thrust deficit of the last tick before the commit, then of the commit.
     deficit_at_commit: f64,
+    /// How far the hold clearance has been lowered, m.
+    lowered: f64,
 }
 
 impl Flare {
@@ -150,6 +163,12 @@ impl Flare {
     /// Whether the tilt-up has begun.
     pub fn committed(&self) -> bool {
         self.committed
+    }
+
+    /// The hold clearance now, m (`hold_clearance`, less what a too fast
+    /// prediction lowered it by).
+    pub fn hold_clearance(&self, s: &FlareSettings) -> f64 {
+        s.hold_clearance - self.lowered
     }
 
     /// Each rotor's bound after the commit of a weak robot (`None`: the
@@ -180,7 +199,8 @@ impl Flare {
             self.committed = true;
             return true;
         }
-        if clearance > s.hold_clearance + s.hold_band {
+        let hold = self.hold_clearance(s);
+        if clearance > hold + s.hold_band {
             self.holding_since = None;
             return false;
         }
@@ -188,8 +208,22 @@ impl Flare {
         let held = now_ns.saturating_sub(since) as f64 * 1e-9;
         // Sinking through the hold: the thrust cannot hold this tilt here,
         // waiting would only land lower.
-        let sinking = clearance < s.hold_clearance - s.hold_band;
-        self.committed = vz.abs() <= s.commit_speed || held >= s.hold_time || sinking;
+        let sinking = clearance < hold - s.hold_band;
+        let holding_done = vz.abs() <= s.commit_speed || held >= s.hold_time;
+        // Held up here (a strong ground effect) but predicted to fall too
+        // fast from here: go lower first.
+        let too_fast = predicted_impact.is_some_and(|v| v > s.lower_above_impact);
+        if holding_done
+            && !sinking
+            && too_fast
+            && s.lower_step > 0.0
+            && hold - s.lower_step >= s.lowest_hold - 1e-12
+        {
+            self.lowered += s.lower_step;
+            self.holding_since = None;
+            return false;
+        }
+        self.committed = holding_done || sinking;
         self.committed
     }
 }
@@ -232,6 +266,9 @@ mod tests {
         predicted_thrust: 0.9,
         weak_deficit: 0.06,
         weak_thrust_max: 1.0,
+        lower_above_impact: 0.4,
+        lower_step: 0.01,
+        lowest_hold: 0.01,
     };
 
     #[test]
@@ -284,6 +321,31 @@ mod tests {
         );
         f.reset();
         assert!(!f.committed());
+    }
+
+    #[test]
+    fn a_hold_predicted_to_land_too_fast_is_lowered_before_it_commits() {
+        let mut f = Flare::default();
+        // Held slowly at the hold (0.03 m), but predicted at 0.45 m/s: lower.
+        assert!(!f.update(&S, 0, 0.035, 0.01, Some(0.45), 0.0));
+        assert!((f.hold_clearance(&S) - 0.02).abs() < 1e-12);
+        // The old hold is now above the band: approach on.
+        assert!(!f.update(&S, 1, 0.035, 0.01, Some(0.45), 0.0));
+        // At the new hold, still too fast: down to the lowest hold, 0.01 m.
+        assert!(!f.update(&S, 2, 0.025, 0.01, Some(0.45), 0.0));
+        assert!((f.hold_clearance(&S) - 0.01).abs() < 1e-12);
+        // Not below the lowest hold: commits there whatever the prediction.
+        assert!(f.update(&S, 3, 0.012, 0.01, Some(0.45), 0.0));
+        // Predicted slow enough for the aim: commits at once as before; not
+        // too fast for the hold: commits by slowness at the first hold.
+        let mut f = Flare::default();
+        assert!(f.update(&S, 0, 0.035, 0.01, Some(0.35), 0.0));
+        assert!((f.hold_clearance(&S) - 0.03).abs() < 1e-12);
+        // Sinking through the hold commits, too fast or not.
+        let mut f = Flare::default();
+        assert!(f.update(&S, 0, 0.015, 0.1, Some(0.45), 0.0));
+        f.reset();
+        assert!((f.hold_clearance(&S) - 0.03).abs() < 1e-12);
     }
 
     #[test]

@@ -652,7 +652,11 @@ impl FlightStack {
             self.hold_yaw = state[idx::YAW];
         }
         let flare = match (self.mode, self.flare_settings) {
-            (Mode::Transition, Some(f)) => Some((f, self.flare_clearance(state))),
+            (Mode::Transition, Some(mut f)) => {
+                // The approach slows onto the hold as the flare has it now.
+                f.hold_clearance = self.flare.hold_clearance(&f);
+                Some((f, self.flare_clearance(state)))
+            }
             _ => None,
         };
         for (k, r) in self.reference.iter_mut().enumerate() {

@@ -188,5 +188,13 @@ fn validate_flare(c: &Checker, f: &FlareSettings) -> Result<(), CoreError> {
     c.range("flare.predicted_thrust", f.predicted_thrust, 0.0..=1.0, "")?;
     c.range("flare.weak_deficit", f.weak_deficit, -1.0..=1.0, "")?;
     c.range("flare.weak_thrust_max", f.weak_thrust_max, 0.1..=1.0, "")?;
+    c.range(
+        "flare.lower_above_impact",
+        f.lower_above_impact,
+        0.0..=2.0,
+        "m/s",
+    )?;
+    c.range("flare.lower_step", f.lower_step, 0.0..=0.1, "m")?;
+    c.range("flare.lowest_hold", f.lowest_hold, -0.1..=0.5, "m")?;
     Ok(())
 }
