@@ -503,31 +503,32 @@ fn push_drag_and_wind(raw: &mut [Vec<f64>], at: &Starts, row: &Row, wind: &Vecto
 }
 
 /// The drag columns alone (filtered like the measurement) for the rotor
-/// thrusts `thrust` and a wind, on the stretches `runs` (0 elsewhere):
-/// what the wind profile rebuilds per trial wind instead of every column.
-pub fn drag_columns(
+/// thrusts `thrust` and a wind, on the stretches `runs`: what the wind
+/// profile rebuilds per trial wind instead of every column. `raw` and `out`
+/// hold `6 n` values each; only the stretches' rows are written (in `out`,
+/// those `half` or more from a stretch's ends), so buffers zeroed once
+/// and reused on the same stretches give 0 elsewhere.
+pub fn drag_columns_into(
     prep: &Prepared,
     rec: &Recording,
     thrust: &[Input],
     wind: [f64; 2],
     runs: &[(usize, usize)],
-) -> [Vec<f64>; DRAG_WIDTH] {
-    let n = prep.n;
+    raw: &mut [Vec<f64>; DRAG_WIDTH],
+    out: &mut [Vec<f64>; DRAG_WIDTH],
+) {
     let wind = Vector3::new(wind[0], wind[1], 0.0);
-    let mut raw: [Vec<f64>; DRAG_WIDTH] = std::array::from_fn(|_| vec![0.0; 6 * n]);
     for &(s, e) in runs {
         for k in s..e {
             let row = Row::at(prep, rec, thrust, k);
             for (j, term) in drag_terms(&row, &wind).iter().enumerate() {
-                push6(&mut raw[j], k, term);
+                raw[j][6 * k..6 * k + 6].copy_from_slice(term.as_slice());
             }
         }
     }
-    raw.map(|r| {
-        let mut out = vec![0.0; 6 * n];
-        prep.smooth_runs(&r, &mut out, runs);
-        out
-    })
+    for (r, o) in raw.iter().zip(out.iter_mut()) {
+        prep.smooth_runs_in_place(r, o, runs);
+    }
 }
 
 /// Mass properties (mass, inertia, centre-of-mass offset): the change of

@@ -47,7 +47,7 @@ use nalgebra::{DMatrix, DVector, SMatrix, SVector};
 use atmo_core::model::Input;
 
 use crate::data::Prepared;
-use crate::effects::{DRAG_WIDTH, Effect, Layout, drag_columns};
+use crate::effects::{DRAG_WIDTH, Effect, Layout, drag_columns_into};
 use crate::recording::Recording;
 use crate::select::{self, FOLDS, Stats, fold_of};
 use crate::stages::Residuals;
@@ -146,13 +146,26 @@ struct Profiler<'a> {
     resid: &'a [f64],
     weights: Vec<f64>,
     evaluations: usize,
+    /// The drag columns before and after the filter, reused per trial
+    /// wind (zeroed once: only the stretches' rows are ever written).
+    drag_raw: [Vec<f64>; DRAG_WIDTH],
+    drag: [Vec<f64>; DRAG_WIDTH],
 }
 
 impl Profiler<'_> {
     /// Statistics of `[fixed, drag(wind)]`.
     fn stats_at(&mut self, wind: [f64; 2]) -> Stats {
         self.evaluations += 1;
-        let drag = drag_columns(self.prep, self.rec, &self.thrust, wind, &self.stretches);
+        drag_columns_into(
+            self.prep,
+            self.rec,
+            &self.thrust,
+            wind,
+            &self.stretches,
+            &mut self.drag_raw,
+            &mut self.drag,
+        );
+        let drag = &self.drag;
         let pf = self.fixed.len();
         let p = pf + DRAG_WIDTH;
         let nseg = self.fixed_stats.nseg();
@@ -323,6 +336,8 @@ pub fn profile_wind(
         resid: &prep.resid,
         weights,
         evaluations: 0,
+        drag_raw: std::array::from_fn(|_| vec![0.0; 6 * prep.n]),
+        drag: std::array::from_fn(|_| vec![0.0; 6 * prep.n]),
     };
     // Coarse polar grid.
     let rss_no_wind = prof.rss([0.0; 2]).0;
