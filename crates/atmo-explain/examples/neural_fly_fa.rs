@@ -98,7 +98,8 @@ fn main() {
     let second_half = fit_first_half || args.iter().any(|a| a == "--second-half");
     let robot = RobotConfig::load(robot_path).unwrap();
     // As `explain` does: the velocity's slow band from the positions.
-    let (whole, _) = atmo_explain::velocity::from_positions(&Recording::load(path).unwrap());
+    let recorded = Recording::load(path).unwrap();
+    let (whole, _) = atmo_explain::velocity::from_positions(&recorded);
     let t_split = 0.5 * (whole.samples[0].t + whole.samples[whole.samples.len() - 1].t);
     let half = |first: bool| {
         Recording::from_samples(
@@ -114,7 +115,7 @@ fn main() {
     let (rec, unseen) = if fit_first_half {
         (half(true), Some(half(false)))
     } else {
-        (whole, None)
+        (whole.into_owned(), None)
     };
     let text = std::fs::read_to_string(path).unwrap();
     let authors = authors_columns(&text);

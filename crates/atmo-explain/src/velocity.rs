@@ -28,6 +28,8 @@
 //! ([`MAX_CORRECTION_RMS`]): a recording whose positions are in another
 //! frame, or jump, keeps its velocity, and the report says why.
 
+use std::borrow::Cow;
+
 use atmo_core::model::idx;
 
 use crate::data::{half_window, sg_derivative_taps};
@@ -55,8 +57,9 @@ pub struct VelocityCorrection {
 }
 
 /// The recording with its velocity's band below [`FROM_POSITIONS_BELOW_HZ`]
-/// taken from its positions (see the module docs), and what that changed.
-pub fn from_positions(rec: &Recording) -> (Recording, VelocityCorrection) {
+/// taken from its positions (see the module docs), and what that changed;
+/// the recording itself (not a copy) when the correction is not applied.
+pub fn from_positions(rec: &Recording) -> (Cow<'_, Recording>, VelocityCorrection) {
     let samples = &rec.samples;
     let dt = rec.median_dt();
     let mut report = VelocityCorrection {
@@ -64,7 +67,7 @@ pub fn from_positions(rec: &Recording) -> (Recording, VelocityCorrection) {
         ..VelocityCorrection::default()
     };
     if !dt.is_finite() || dt <= 0.0 || samples.len() < 3 {
-        return (rec.clone(), report);
+        return (Cow::Borrowed(rec), report);
     }
     let half = half_window(dt);
     let taps = sg_derivative_taps(half, dt);
@@ -119,7 +122,7 @@ pub fn from_positions(rec: &Recording) -> (Recording, VelocityCorrection) {
         rows += len;
     }
     if rows == 0 {
-        return (rec.clone(), report);
+        return (Cow::Borrowed(rec), report);
     }
     report.rms = sum_sq.map(|s| (s / rows as f64).sqrt());
     // NaN (a non-finite cell in a position) counts as disagreement.
@@ -128,7 +131,7 @@ pub fn from_positions(rec: &Recording) -> (Recording, VelocityCorrection) {
         .iter()
         .all(|r| r.is_finite() && *r <= MAX_CORRECTION_RMS)
     {
-        return (rec.clone(), report);
+        return (Cow::Borrowed(rec), report);
     }
     report.applied = true;
     let mut out = rec.clone();
@@ -137,7 +140,7 @@ pub fn from_positions(rec: &Recording) -> (Recording, VelocityCorrection) {
             sample.x[idx::VX + c] += dv[c];
         }
     }
-    (out, report)
+    (Cow::Owned(out), report)
 }
 
 /// Rows `[start, end)` without a time step above `gap`.
@@ -235,7 +238,8 @@ mod tests {
                 row
             })
             .collect();
-        let (out, c) = from_positions(&recording(&rows));
+        let rec = recording(&rows);
+        let (out, c) = from_positions(&rec);
         assert!(c.applied);
         assert!(c.rms[0] < 1e-4, "{c:?}");
         for (a, b) in out.samples.iter().zip(&recording(&rows).samples) {
@@ -258,7 +262,8 @@ mod tests {
                     (t, x, v + drift(t, f))
                 })
                 .collect();
-            let (out, c) = from_positions(&recording(&rows));
+            let rec = recording(&rows);
+            let (out, c) = from_positions(&rec);
             assert!(c.applied);
             let mut worst: f64 = 0.0;
             for s in out.samples.iter().skip(300).take(5400) {
@@ -286,6 +291,7 @@ mod tests {
         let (out, c) = from_positions(&rec);
         assert!(!c.applied, "{c:?}");
         assert!(c.rms[0] > MAX_CORRECTION_RMS);
-        assert_eq!(out, rec);
+        assert!(matches!(out, Cow::Borrowed(_)), "not copied");
+        assert_eq!(*out, rec);
     }
 }

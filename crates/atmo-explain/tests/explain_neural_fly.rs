@@ -243,7 +243,9 @@ fn the_model_fitted_on_the_flight_s_start_predicts_its_end() {
     // As `explain` reads a recording: the velocity's slow band from the
     // positions.
     let load = |name: &str| {
-        atmo_explain::velocity::from_positions(&Recording::load(data(name)).unwrap()).0
+        atmo_explain::velocity::from_positions(&Recording::load(data(name)).unwrap())
+            .0
+            .into_owned()
     };
     let start = load(FLIGHTS[1]);
     let res = Residuals::new(&start, &robot).unwrap();
