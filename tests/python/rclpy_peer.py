@@ -80,7 +80,7 @@ class Checks:
 
 def daemon_config(tmp: Path, tag: str) -> Path:
     """The shipped config with loopback-only DDS, absolute paths and an
-    iceoryx2 prefix of its own (as crates/atmo-sim/tests/sitl.rs does)."""
+    iceoryx2 prefix of its own (as crates/atmo-sim/tests/sim/sitl.rs does)."""
     config_dir = REPO / "config"
     text = (config_dir / "daemon.toml").read_text()
     shipped = text

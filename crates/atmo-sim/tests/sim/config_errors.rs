@@ -4,9 +4,9 @@ use atmo_core::{ConfigFile, CoreError};
 use atmo_plant::config::PlantConfig;
 use atmo_sim::{Scenario, SimError};
 
-const PLANT: &str = include_str!("../../../config/plant.toml");
+const PLANT: &str = include_str!("../../../../config/plant.toml");
 const PLANT_FILE: &str = "plants/bad.toml";
-const SCENARIO: &str = include_str!("../../../config/scenarios/wheel_landing.toml");
+const SCENARIO: &str = include_str!("../../../../config/scenarios/wheel_landing.toml");
 
 fn scenario_path() -> String {
     // Next to the real file, so that its relative plant path resolves.

@@ -11,7 +11,7 @@
 //!
 //! Seconds (5.7 s measured in release on main of 2026-12-02 at load 8; the
 //! workspace's test profile is optimized too, so it runs with `cargo test`):
-//! `cargo test -p atmo-sim --test closed_loop_identification -- --nocapture`.
+//! `cargo test -p atmo-sim --test sim -- closed_loop_identification --nocapture`.
 //! Measured in release: ground_effect selected (confidence 1.00); over seeds 1-8
 //! the median touchdown went from 62.61 deg at 0.40 m/s (nominal MPC) to
 //! 63.54 deg at 0.37 m/s (fitted surface, planned tilt).
