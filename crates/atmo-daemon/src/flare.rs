@@ -226,29 +226,31 @@ impl Flare {
         self.committed = holding_done || sinking;
         self.committed
     }
-}
 
-/// The reference's clearance and descent speed (down positive) `t` seconds
-/// ahead of a clearance `c0`, descending at most at `v_desc` (see the module
-/// docs). Below the hold clearance the reference is the hold clearance.
-pub fn approach(s: &FlareSettings, v_desc: f64, c0: f64, t: f64) -> (f64, f64) {
-    let d0 = c0 - s.hold_clearance;
-    if d0 <= 0.0 {
-        return (s.hold_clearance, 0.0);
-    }
-    let tau = s.time_constant;
-    let knee = v_desc * tau;
-    let (d_knee, t_exp) = if d0 > knee {
-        let t_knee = (d0 - knee) / v_desc;
-        if t < t_knee {
-            return (c0 - v_desc * t, v_desc);
+    /// The reference's clearance and descent speed (down positive) `t`
+    /// seconds ahead of a clearance `c0`, descending at most at `v_desc`
+    /// onto the hold clearance as it is now ([`Flare::hold_clearance`]; see
+    /// the module docs). Below the hold the reference is the hold.
+    pub fn approach(&self, s: &FlareSettings, v_desc: f64, c0: f64, t: f64) -> (f64, f64) {
+        let hold = self.hold_clearance(s);
+        let d0 = c0 - hold;
+        if d0 <= 0.0 {
+            return (hold, 0.0);
         }
-        (knee, t - t_knee)
-    } else {
-        (d0, t)
-    };
-    let d = d_knee * (-t_exp / tau).exp();
-    (s.hold_clearance + d, d / tau)
+        let tau = s.time_constant;
+        let knee = v_desc * tau;
+        let (d_knee, t_exp) = if d0 > knee {
+            let t_knee = (d0 - knee) / v_desc;
+            if t < t_knee {
+                return (c0 - v_desc * t, v_desc);
+            }
+            (knee, t - t_knee)
+        } else {
+            (d0, t)
+        };
+        let d = d_knee * (-t_exp / tau).exp();
+        (hold + d, d / tau)
+    }
 }
 
 #[cfg(test)]
@@ -274,17 +276,17 @@ mod tests {
     #[test]
     fn the_approach_descends_at_the_speed_then_slows_onto_the_hold_clearance() {
         // 0.5 m above the hold at 0.2 m/s: constant until 4 cm above it.
-        let (c, v) = approach(&S, 0.2, 0.53, 1.0);
+        let (c, v) = Flare::default().approach(&S, 0.2, 0.53, 1.0);
         assert!((c - 0.33).abs() < 1e-12 && (v - 0.2).abs() < 1e-12);
         // Continuous at the knee, and the speed is the distance over tau after it.
         let t_knee = (0.5 - 0.04) / 0.2;
-        let (c1, v1) = approach(&S, 0.2, 0.53, t_knee + 1e-9);
+        let (c1, v1) = Flare::default().approach(&S, 0.2, 0.53, t_knee + 1e-9);
         assert!((c1 - 0.07).abs() < 1e-6 && (v1 - 0.2).abs() < 1e-6);
-        let (c2, v2) = approach(&S, 0.2, 0.53, t_knee + 0.4);
+        let (c2, v2) = Flare::default().approach(&S, 0.2, 0.53, t_knee + 0.4);
         assert!(((c2 - 0.03) / 0.2 - v2).abs() < 1e-12);
         assert!(c2 > 0.03 && c2 < 0.04);
         // Below the hold: back to it.
-        assert_eq!(approach(&S, 0.2, 0.01, 0.5), (0.03, 0.0));
+        assert_eq!(Flare::default().approach(&S, 0.2, 0.01, 0.5), (0.03, 0.0));
     }
 
     #[test]

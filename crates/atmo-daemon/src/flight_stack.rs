@@ -18,7 +18,7 @@ use atmo_mpc::{AlphaSchedule, Mpc, MpcSettings, Outcome, SolverCuts, TiltPlan, w
 use nalgebra::Vector3;
 
 use crate::error::{DaemonError, Result};
-use crate::flare::{Flare, FlareSettings, TouchdownModel, approach, predict_touchdown};
+use crate::flare::{Flare, FlareSettings, TouchdownModel, predict_touchdown};
 use crate::ground_model::{Surface, ground_surface};
 use crate::modes::{Conditions, Mode, Thresholds, next_mode};
 use crate::observer::{DisturbanceObserver, ObserverSettings};
@@ -652,11 +652,7 @@ impl FlightStack {
             self.hold_yaw = state[idx::YAW];
         }
         let flare = match (self.mode, self.flare_settings) {
-            (Mode::Transition, Some(mut f)) => {
-                // The approach slows onto the hold as the flare has it now.
-                f.hold_clearance = self.flare.hold_clearance(&f);
-                Some((f, self.flare_clearance(state)))
-            }
+            (Mode::Transition, Some(f)) => Some((f, self.flare_clearance(state))),
             _ => None,
         };
         for (k, r) in self.reference.iter_mut().enumerate() {
@@ -665,7 +661,8 @@ impl FlightStack {
             let mut vz = v.z;
             if let Some((f, c0)) = flare {
                 // Down is +z: the reference sinks by the clearance it loses.
-                let (c, speed) = approach(&f, v.z, c0, t);
+                // Onto the hold as the flare has it now (lowered or not).
+                let (c, speed) = self.flare.approach(&f, v.z, c0, t);
                 pos.z = state[idx::Z] + (c0 - c);
                 vz = speed;
             }

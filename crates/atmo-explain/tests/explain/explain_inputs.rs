@@ -143,9 +143,9 @@ fn too_short_recording_is_an_error() {
     assert!(message(&err).contains("too short"), "{}", message(&err));
 }
 
-#[test]
-fn csv_round_trip_and_outputs_are_written_and_loadable() {
-    let robot = RobotConfig::atmo();
+/// The ideal plant with the motor lag and the sensors: the recordings the
+/// output and MCAP tests write.
+fn lagged_plant_with_sensors(robot: &RobotConfig) -> PlantConfig {
     let mut plant = PlantConfig::ideal();
     plant.arm_inertia_convention = robot.arm.inertia_convention;
     plant.effects = EffectsConfig {
@@ -153,6 +153,13 @@ fn csv_round_trip_and_outputs_are_written_and_loadable() {
         sensors: Some(SensorsConfig::default()),
         ..EffectsConfig::none()
     };
+    plant
+}
+
+#[test]
+fn csv_round_trip_and_outputs_are_written_and_loadable() {
+    let robot = RobotConfig::atmo();
+    let plant = lagged_plant_with_sensors(&robot);
     let rec = record(&robot, &plant, &Flight::new(Profile::Cruise, 24.0, 3)).unwrap();
     let dir = temp_dir("outputs");
     let csv = dir.join("recording.csv");
@@ -263,13 +270,7 @@ fn write_mcap(rec: &Recording, path: &std::path::Path) {
 #[test]
 fn mcap_logs_are_read_and_truncated_ones_are_clear_errors() {
     let robot = RobotConfig::atmo();
-    let mut plant = PlantConfig::ideal();
-    plant.arm_inertia_convention = robot.arm.inertia_convention;
-    plant.effects = EffectsConfig {
-        motor_lag: Some(MotorLagConfig::default()),
-        sensors: Some(SensorsConfig::default()),
-        ..EffectsConfig::none()
-    };
+    let plant = lagged_plant_with_sensors(&robot);
     let rec = record(&robot, &plant, &Flight::new(Profile::Cruise, 24.0, 4)).unwrap();
     let dir = temp_dir("mcap");
     let path = dir.join("flight.mcap");
