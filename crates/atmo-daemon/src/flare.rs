@@ -331,6 +331,10 @@ mod tests {
         // Held slowly at the hold (0.03 m), but predicted at 0.45 m/s: lower.
         assert!(!f.update(&S, 0, 0.035, 0.01, Some(0.45), 0.0));
         assert!((f.hold_clearance(&S) - 0.02).abs() < 1e-12);
+        // The approach's reference now slows onto the lowered hold.
+        assert_eq!(f.approach(&S, 0.2, 0.019, 0.5), (0.02, 0.0));
+        let (c, _) = f.approach(&S, 0.2, 0.1, 10.0);
+        assert!((c - 0.02).abs() < 1e-6, "{c}");
         // The old hold is now above the band: approach on.
         assert!(!f.update(&S, 1, 0.035, 0.01, Some(0.45), 0.0));
         // At the new hold, still too fast: down to the lowest hold, 0.01 m.
