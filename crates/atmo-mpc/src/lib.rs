@@ -139,7 +139,7 @@ pub use controller::{
 };
 pub use error::{MpcError, Result};
 pub use homotopy::{Bound, BoxHomotopy, HomotopyStop};
-pub use qp::cuts::SolverCuts;
+pub use qp::cuts::{CutWindow, SolverCuts};
 pub use qp::{LinearizedHorizon, QpSnapshot, SolveReport};
 pub use settings::{
     CostPreset, FeedbackMethod, FeedbackSettings, Formulation, MpcFile, MpcSettings, Predictor,

@@ -25,7 +25,7 @@ mod scenarios;
 use atmo_core::RobotConfig;
 use atmo_core::model::{Model, NU, NX, State};
 use atmo_mpc::qp::QpBackend;
-use atmo_mpc::{Bound, Formulation, LinearizedHorizon, Mpc};
+use atmo_mpc::{Bound, CutWindow, Formulation, LinearizedHorizon, Mpc};
 use clarabel::solver::SolverStatus;
 use nalgebra::{DMatrix, DVector};
 use rand::{Rng, SeedableRng};
@@ -188,14 +188,18 @@ fn homotopy_feedback_equals_a_tight_clarabel_solve() {
                 let actual = perturbation(&mut rng, size);
                 let qp = under_test.condensed_mut().unwrap();
                 let prepared = qp
-                    .prepare_solution(&predicted, feedback.max_preparation_changes)
+                    .prepare_solution(
+                        &predicted,
+                        feedback.max_preparation_changes,
+                        &mut CutWindow::default(),
+                    )
                     .unwrap();
                 let walked = match prepared.correction {
                     Ok(_) => qp.feedback_solution(&actual, feedback.max_active_set_changes),
                     Err(stop) => Err(stop),
                 };
                 reference.set_initial_deviation(&actual).unwrap();
-                let report = reference.solve();
+                let report = reference.solve(&mut CutWindow::default());
                 assert_eq!(report.status, SolverStatus::Solved, "{name}: reference");
                 tally.cases += 1;
                 let deviation = |a: &[f64], b: &[f64]| {
@@ -249,7 +253,7 @@ fn homotopy_feedback_equals_a_tight_clarabel_solve() {
                     // shipped tolerances: that is what it would fly.
                     tally.fallbacks += 1;
                     under_test.set_initial_deviation(&actual).unwrap();
-                    under_test.solve();
+                    under_test.solve(&mut CutWindow::default());
                     let d = deviation(under_test.raw_solution(), reference.raw_solution());
                     tally.worst_fallback_vs_reference = tally.worst_fallback_vs_reference.max(d);
                 }

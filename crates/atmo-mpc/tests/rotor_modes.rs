@@ -14,7 +14,7 @@ mod scenarios;
 use atmo_core::model::{NU, NX, State};
 use atmo_mpc::qp::QpBackend;
 use atmo_mpc::qp::rotor_modes::{ROTORS, mode_box, to_modes};
-use atmo_mpc::{Formulation, LinearizedHorizon, SolverSettings};
+use atmo_mpc::{CutWindow, Formulation, LinearizedHorizon, SolverSettings};
 use clarabel::algebra::CscMatrix;
 use clarabel::solver::{DefaultSettings, DefaultSolver, IPSolver, SolverStatus, SupportedConeT};
 
@@ -120,12 +120,14 @@ fn the_mean_bound_in_the_rotors_modes_solves_the_qp_with_the_general_inequality(
     let mut qp = QpBackend::new(&lin, &settings).unwrap();
     qp.load(&lin).unwrap();
     qp.set_initial_deviation(&e0).unwrap();
-    let report = qp.solve();
+    let report = qp.solve(&mut CutWindow::default());
     assert_eq!(report.status, SolverStatus::Solved);
     let by_clarabel = rotor_deviations(&qp, &lin, &e0);
     // The homotopy: prepared at another deviation, fed back to e0.
     let condensed = qp.condensed_mut().unwrap();
-    let prepared = condensed.prepare_solution(&(e0 * 0.5), 200).unwrap();
+    let prepared = condensed
+        .prepare_solution(&(e0 * 0.5), 200, &mut CutWindow::default())
+        .unwrap();
     assert!(prepared.correction.is_ok(), "{prepared:?}");
     condensed.feedback_solution(&e0, 200).unwrap();
     let by_homotopy = rotor_deviations(&qp, &lin, &e0);
@@ -169,7 +171,10 @@ fn the_sparse_form_bounds_every_rotor_by_the_mean_s_bound() {
     let mut qp = QpBackend::new(&lin, &settings).unwrap();
     qp.load(&lin).unwrap();
     qp.set_initial_deviation(&e0).unwrap();
-    assert_eq!(qp.solve().status, SolverStatus::Solved);
+    assert_eq!(
+        qp.solve(&mut CutWindow::default()).status,
+        SolverStatus::Solved
+    );
     let du = rotor_deviations(&qp, &lin, &e0);
     let mut at_bound = 0;
     for k in 0..lin.steps() {

@@ -19,7 +19,7 @@ use clarabel::solver::SolverStatus;
 
 use crate::error::{MpcError, Result};
 use crate::homotopy::HomotopyStop;
-use crate::qp::cuts::SolverCuts;
+use crate::qp::cuts::{CutWindow, SolverCuts};
 use crate::qp::{LinearizedHorizon, QpBackend, SolveReport};
 use crate::settings::{FeedbackMethod, Formulation, MpcSettings};
 
@@ -57,6 +57,9 @@ pub struct Mpc {
     alpha: f64,
     lin: LinearizedHorizon,
     qp: QpBackend,
+    /// Numbers every Clarabel solve of both QPs (nominal and tilt) between
+    /// two `open_cut_window`s and records the time-limit cuts among them.
+    cut_window: CutWindow,
     dx: Vec<State>,
     du: Vec<Input>,
     prepared: bool,
@@ -118,6 +121,7 @@ impl Mpc {
             alpha: 1.0,
             lin,
             qp,
+            cut_window: CutWindow::default(),
             dx: vec![State::zeros(); steps + 1],
             du: vec![Input::zeros(); steps],
             prepared: false,
@@ -244,12 +248,12 @@ impl Mpc {
     /// of a recorded window, the time limit lifted) those solves end where
     /// the recorded ones did. See [`crate::qp::cuts`].
     pub fn open_cut_window(&mut self, script: Option<SolverCuts>) {
-        self.qp.open_cut_window(script);
+        self.cut_window.open(script);
     }
 
     /// The time-limit cuts of the current window so far.
     pub fn solver_cuts(&self) -> SolverCuts {
-        self.qp.window_cuts()
+        self.cut_window.cuts()
     }
 
     /// True when the feedback uses the homotopy (configured, condensed QP).

@@ -15,6 +15,7 @@ use super::outcome::{
 use super::{Mpc, hover_reference, wrap_angle};
 use crate::error::{MpcError, Result};
 use crate::homotopy::HomotopyStop;
+use crate::qp::cuts::CutWindow;
 use crate::qp::{QpBackend, QpSnapshot, SolveReport};
 use crate::settings::Predictor;
 use crate::tilt_model::{TILT, TILT_RATE, tilt_state};
@@ -58,12 +59,16 @@ impl Mpc {
             let prepared = if planning {
                 let e0_tilt = tilt_state(&e0, self.predicted_tilt_deviation(shift));
                 match self.tilt.as_deref_mut().and_then(|t| t.qp.condensed_mut()) {
-                    Some(qp) => Some(qp.prepare_solution(&e0_tilt, max_changes)?),
+                    Some(qp) => {
+                        Some(qp.prepare_solution(&e0_tilt, max_changes, &mut self.cut_window)?)
+                    }
                     None => None,
                 }
             } else {
                 match self.qp.condensed_mut() {
-                    Some(qp) => Some(qp.prepare_solution(&e0, max_changes)?),
+                    Some(qp) => {
+                        Some(qp.prepare_solution(&e0, max_changes, &mut self.cut_window)?)
+                    }
                     None => None,
                 }
             };
@@ -222,14 +227,28 @@ impl Mpc {
                 return Err(MpcError::NotPrepared);
             };
             let e0_tilt = tilt_state(&e0, tilt.measured - self.varphi[0]);
-            let solved = solve_at(&mut tilt.qp, prepared, &e0_tilt, max_changes, &mut timings);
+            let solved = solve_at(
+                &mut tilt.qp,
+                prepared,
+                &e0_tilt,
+                max_changes,
+                &mut self.cut_window,
+                &mut timings,
+            );
             if solved.is_ok() {
                 tilt.qp
                     .extract(&tilt.lin, &e0_tilt, &mut tilt.dx, &mut tilt.du);
             }
             solved
         } else {
-            let solved = solve_at(&mut self.qp, prepared, &e0, max_changes, &mut timings);
+            let solved = solve_at(
+                &mut self.qp,
+                prepared,
+                &e0,
+                max_changes,
+                &mut self.cut_window,
+                &mut timings,
+            );
             if solved.is_ok() {
                 self.qp.extract(&self.lin, &e0, &mut self.dx, &mut self.du);
             }
@@ -424,11 +443,13 @@ impl Mpc {
     }
 
     /// Re-solves the QP currently loaded (after a `prepare` and a `feedback`),
-    /// touching nothing else. For measuring the bare solver call.
+    /// touching nothing else. For measuring the bare solver call: outside
+    /// the flight's window of solves, so a cut in it is not recorded.
     pub fn resolve_loaded_qp(&mut self) -> SolveReport {
+        let mut window = CutWindow::default();
         match self.tilt.as_deref_mut().filter(|t| t.active) {
-            Some(tilt) => tilt.qp.solve(),
-            None => self.qp.solve(),
+            Some(tilt) => tilt.qp.solve(&mut window),
+            None => self.qp.solve(&mut window),
         }
     }
 
@@ -451,6 +472,7 @@ fn solve_at<const NX_: usize, const NU_: usize>(
     prepared: Option<std::result::Result<(), HomotopyStop>>,
     e0: &SVector<f64, NX_>,
     max_changes: u32,
+    window: &mut CutWindow,
     timings: &mut TickTimings,
 ) -> std::result::Result<(Outcome, FeedbackPath), (FeedbackPath, FailureCause)> {
     let mut fallback = None;
@@ -479,7 +501,7 @@ fn solve_at<const NX_: usize, const NU_: usize>(
     if qp.set_initial_deviation(e0).is_err() {
         return Err((path, FailureCause::PreparationFailed));
     }
-    let report: SolveReport = qp.solve();
+    let report: SolveReport = qp.solve(window);
     timings.solve = Duration::from_secs_f64(report.solve_time.max(0.0));
     timings.feedback_solver_iterations = report.iterations;
     timings.solver_iterations = timings.preparation_solver_iterations + report.iterations;

@@ -9,6 +9,7 @@ use clarabel::algebra::CscMatrix;
 use clarabel::solver::{SolverStatus, SupportedConeT};
 use nalgebra::{SMatrix, SVector};
 
+use super::cuts::CutWindow;
 use super::rotor_modes::{ROTORS, from_modes, mode_box, to_modes};
 use super::solver::{CscBuilder, TimedSolver, solver_error};
 use super::{LinearizedHorizon, QpSnapshot, SolveReport};
@@ -301,13 +302,17 @@ impl<const NX: usize, const NU: usize> CondensedQp<NX, NU> {
     /// Preparation: Clarabel solves at the predicted `e0`; the working set
     /// read off its solution (a bound is active where its slack is below its
     /// multiplier) is corrected by the homotopy into the exact solution there.
+    /// The Clarabel solve is the next of `window` ([`super::cuts`]): a cut
+    /// there changes the homotopy's starting guess, and so the rounding of
+    /// its exact solution, which a replay must repeat.
     pub fn prepare_solution(
         &mut self,
         e0_predicted: &SVector<f64, NX>,
         max_changes: u32,
+        window: &mut CutWindow,
     ) -> Result<PreparedSolution> {
         self.set_initial_deviation(e0_predicted)?;
-        let clarabel = self.solver.solve();
+        let clarabel = self.solver.solve(window);
         let n = NU * self.steps;
         let sol = &self.solver.solver.solution;
         if matches!(

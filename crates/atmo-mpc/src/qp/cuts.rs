@@ -7,7 +7,9 @@
 //! deterministic, so a cut solve is reproduced exactly by ending it at the
 //! same iteration. The solves of a *window* (the flight stack opens one
 //! before each preparation phase: the preparation and the next tick's
-//! feedback, re-plans included) are numbered from 0; every cut is recorded
+//! feedback, re-plans included) are numbered from 0, whichever of the
+//! controller's QPs (nominal or tilt-planning) makes them: the window is the
+//! controller's, passed to each solve. Every cut is recorded
 //! as (ordinal, iteration). A replay opens each window with the recorded
 //! cuts as a script and the wall clock lifted, so each scripted solve ends
 //! where it ended in flight and no other one is cut.

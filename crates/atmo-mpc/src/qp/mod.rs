@@ -147,31 +147,15 @@ impl<const NX: usize, const NU: usize> QpBackend<NX, NU> {
         }
     }
 
-    /// Clarabel on the QP as loaded in it.
-    pub fn solve(&mut self) -> SolveReport {
+    /// Clarabel on the QP as loaded in it, as the next solve of `window`
+    /// (which records a time-limit cut, or repeats a replay's; see [`cuts`]).
+    pub fn solve(&mut self, window: &mut cuts::CutWindow) -> SolveReport {
         match self {
-            Self::Sparse(qp) => qp.solver.solve(),
+            Self::Sparse(qp) => qp.solver.solve(window),
             Self::Condensed(qp) => {
                 qp.solved_by = SolvedBy::Clarabel;
-                qp.solver.solve()
+                qp.solver.solve(window)
             }
-        }
-    }
-
-    /// Opens a window of solves whose time-limit cuts are recorded (or, with
-    /// a `script`, repeated: a replay); see [`cuts`].
-    pub fn open_cut_window(&mut self, script: Option<cuts::SolverCuts>) {
-        match self {
-            Self::Sparse(qp) => qp.solver.open_cut_window(script),
-            Self::Condensed(qp) => qp.solver.open_cut_window(script),
-        }
-    }
-
-    /// The time-limit cuts of the current window so far.
-    pub fn window_cuts(&self) -> cuts::SolverCuts {
-        match self {
-            Self::Sparse(qp) => qp.solver.window_cuts(),
-            Self::Condensed(qp) => qp.solver.window_cuts(),
         }
     }
 

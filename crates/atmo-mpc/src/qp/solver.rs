@@ -8,7 +8,7 @@ use clarabel::algebra::CscMatrix;
 use clarabel::solver::{DefaultInfo, DefaultSettings, DefaultSolver, IPSolver, SupportedConeT};
 
 use super::SolveReport;
-use super::cuts::{CutWindow, SolverCuts};
+use super::cuts::CutWindow;
 use crate::error::{MpcError, Result};
 use crate::settings::SolverSettings;
 
@@ -34,7 +34,9 @@ pub fn build_solver(
 /// callback (checked once per interior-point iteration) compares a monotonic
 /// clock with the deadline set just before the solve. In a replay the
 /// callback instead ends a scripted solve at its recorded iteration
-/// ([`super::cuts`]).
+/// ([`super::cuts`]). The window that numbers the solves and records the cuts
+/// is passed to each solve: it belongs to the controller, which owns several
+/// QPs (nominal and tilt-planning) whose solves one window must number.
 pub struct TimedSolver {
     pub solver: DefaultSolver<f64>,
     epoch: Instant,
@@ -44,7 +46,6 @@ pub struct TimedSolver {
     /// with the callback.
     scripted_cut: Arc<AtomicU32>,
     limit: Duration,
-    window: CutWindow,
 }
 
 const NOT_SCRIPTED: u32 = u32::MAX;
@@ -75,15 +76,15 @@ impl TimedSolver {
             deadline,
             scripted_cut,
             limit: Duration::from_secs_f64(settings.time_limit),
-            window: CutWindow::default(),
         })
     }
 
-    /// Solves; `CallbackTerminated` means the time limit was hit (or, in a
-    /// replay, the recorded cut was reached).
-    pub fn solve(&mut self) -> SolveReport {
+    /// Solves as the next solve of `window`; `CallbackTerminated` means the
+    /// time limit was hit (recorded in `window`) or, in a replay, the
+    /// window's scripted cut was reached.
+    pub fn solve(&mut self, window: &mut CutWindow) -> SolveReport {
         let start = Instant::now();
-        let (ordinal, script) = self.window.next_solve();
+        let (ordinal, script) = window.next_solve();
         let limit = u64::try_from(self.limit.as_nanos()).unwrap_or(u64::MAX);
         let deadline = match script {
             // A replay: only the recorded cuts end a solve early.
@@ -100,20 +101,9 @@ impl TimedSolver {
             solve_time: start.elapsed().as_secs_f64(),
         };
         if report.status == clarabel::solver::SolverStatus::CallbackTerminated {
-            self.window.record(ordinal, report.iterations);
+            window.record(ordinal, report.iterations);
         }
         report
-    }
-
-    /// Opens a window of solves ([`super::cuts`]): `script` repeats a
-    /// recorded window's cuts (a replay), `None` flies on the wall clock.
-    pub fn open_cut_window(&mut self, script: Option<SolverCuts>) {
-        self.window.open(script);
-    }
-
-    /// The cuts of the current window so far.
-    pub fn window_cuts(&self) -> SolverCuts {
-        self.window.cuts()
     }
 }
 
@@ -192,6 +182,7 @@ pub(super) fn solver_error(e: impl std::fmt::Display) -> MpcError {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::qp::cuts::SolverCuts;
     use crate::settings::MpcSettings;
     use clarabel::solver::SolverStatus;
 
@@ -217,14 +208,15 @@ mod tests {
         let mut settings = MpcSettings::atmo("default").unwrap().solver;
         settings.time_limit = 0.02;
         let mut solver = tiny(&settings);
+        let mut window = CutWindow::default();
         let clarabel_clock = |s: &TimedSolver| s.solver.timers.as_ref().unwrap().total_time();
-        solver.solve();
+        solver.solve(&mut window);
         let first = clarabel_clock(&solver);
         let limit = Duration::from_secs_f64(settings.time_limit);
         let mut stalled = 0;
         for k in 0..20_000 {
             let start = std::time::Instant::now();
-            let report = solver.solve();
+            let report = solver.solve(&mut window);
             let took = start.elapsed();
             // A loaded machine can stall one solve past the limit (seen in
             // CI); that solve may be stopped. Any other stop would mean the
@@ -247,24 +239,25 @@ mod tests {
     fn a_scripted_window_cuts_where_the_recorded_one_did() {
         let settings = MpcSettings::atmo("default").unwrap().solver;
         let mut solver = tiny(&settings);
-        let full = solver.solve();
+        let mut window = CutWindow::default();
+        let full = solver.solve(&mut window);
         assert_eq!(full.status, SolverStatus::Solved);
         assert!(full.iterations >= 3, "{full:?}");
         let mut script = SolverCuts::default();
         script.record(1, 2);
-        solver.open_cut_window(Some(script));
-        assert_eq!(solver.solve().status, SolverStatus::Solved);
-        let cut = solver.solve();
+        window.open(Some(script));
+        assert_eq!(solver.solve(&mut window).status, SolverStatus::Solved);
+        let cut = solver.solve(&mut window);
         assert_eq!(
             (cut.status, cut.iterations),
             (SolverStatus::CallbackTerminated, 2)
         );
-        assert_eq!(solver.solve().status, SolverStatus::Solved);
-        assert_eq!(solver.window_cuts(), script);
+        assert_eq!(solver.solve(&mut window).status, SolverStatus::Solved);
+        assert_eq!(window.cuts(), script);
         // Back in flight: the wall clock, nothing scripted.
-        solver.open_cut_window(None);
-        assert_eq!(solver.solve().status, SolverStatus::Solved);
-        assert!(solver.window_cuts().is_empty());
+        window.open(None);
+        assert_eq!(solver.solve(&mut window).status, SolverStatus::Solved);
+        assert!(window.cuts().is_empty());
     }
 
     #[test]
@@ -272,9 +265,10 @@ mod tests {
         let mut settings = MpcSettings::atmo("default").unwrap().solver;
         settings.time_limit = 0.0;
         let mut solver = tiny(&settings);
-        let cut = solver.solve();
+        let mut window = CutWindow::default();
+        let cut = solver.solve(&mut window);
         assert_eq!(cut.status, SolverStatus::CallbackTerminated);
         // Recorded, as solve 0 of the window, for a replay.
-        assert_eq!(solver.window_cuts().cut_of(0), Some(cut.iterations));
+        assert_eq!(window.cuts().cut_of(0), Some(cut.iterations));
     }
 }

@@ -531,3 +531,56 @@ fn injected_solver_cuts_are_logged_and_a_replay_repeats_them() {
     let uncut = replay(&flight, &config, CutReplay::None, |_| {}).unwrap();
     assert!(uncut.first_difference.is_some(), "the cuts changed nothing");
 }
+
+/// The window of solves covers both of the MPC's QPs. In transition the tilt
+/// is planned by a second QP whose Clarabel solves (the homotopy's starting
+/// guess in each preparation) were once outside the window: a busy machine
+/// cut them unrecorded and the replay of a real SITL flight differed from
+/// the transition on, by one ulp (CI, 2026-12-03). Here every solve of the
+/// transition's first half second is cut at iteration 1: each of those
+/// ticks logs its cut, the log replays bit for bit, and without the cuts it
+/// does not.
+#[test]
+fn the_tilt_planning_solves_are_in_the_window_and_their_cuts_replay() {
+    use atmo_daemon::replay::{CutReplay, RecordedFlight, replay};
+    use atmo_sim::closed_loop::{STATUS_TOPIC, fly_logged};
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("issue21-faults");
+    std::fs::create_dir_all(&dir).unwrap();
+    let controller = ControllerConfig::atmo().unwrap().deterministic();
+    let start = clean().first_in(Mode::Transition, 0.0).unwrap().time;
+    let overrun = format!(
+        "[[faults.solver_overrun]]\nt = {:.3}\nduration = 0.5\niteration = 1",
+        start + 0.05
+    );
+    let log = dir.join("tilt_planning_overrun.mcap");
+    fly_logged(&scenario(&overrun), &controller, &log, |_| {}).unwrap();
+
+    let flight = RecordedFlight::read(&log, STATUS_TOPIC).unwrap();
+    let in_overrun = |t: f64| t > start + 0.06 && t < start + 0.54;
+    let planning: Vec<_> = flight
+        .inputs
+        .iter()
+        .zip(&flight.status)
+        .filter(|(i, s)| in_overrun(i.clock_ns as f64 * 1e-9) && s.mode.name() == "transition")
+        .collect();
+    assert!(planning.len() >= 60, "{} transition ticks", planning.len());
+    let uncut = planning
+        .iter()
+        .filter(|(i, _)| i.solver_cut_count == 0)
+        .count();
+    assert_eq!(uncut, 0, "transition ticks without a logged cut");
+
+    let config = RecordedFlight::config(&flight.files).unwrap();
+    let report = replay(&flight, &config, CutReplay::AsLogged, |_| {}).unwrap();
+    println!("replayed with the cuts: {report:?}");
+    assert_eq!(report.first_difference, None, "{report:?}");
+    let without = replay(&flight, &config, CutReplay::None, |_| {}).unwrap();
+    println!(
+        "without them, first difference: {:?}",
+        without.first_difference
+    );
+    assert!(
+        without.first_difference.is_some(),
+        "the cuts changed nothing"
+    );
+}
