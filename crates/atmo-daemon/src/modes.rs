@@ -187,7 +187,11 @@ pub const TRANSITIONS: &[Transition] = &[
     Transition {
         from: &[Mode::Disarmed],
         to: Mode::Drive,
-        guard: |c, t| c.armed && (c.grounded || c.height <= t.takeoff_height),
+        // The height says "ground" only from a fresh estimate: armed before
+        // the first one arrives, a missing estimate's zero height would put
+        // a flying robot in Drive, its thrusters off (seen in SITL on a
+        // loaded machine). Without contact or an estimate it stays disarmed.
+        guard: |c, t| c.armed && (c.grounded || (c.estimate_fresh && c.height <= t.takeoff_height)),
         reason: "armed on the ground",
     },
     Transition {

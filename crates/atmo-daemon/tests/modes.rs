@@ -81,6 +81,20 @@ fn disarmed_to_drive_when_armed_on_the_ground() {
         ),
         Mode::Disarmed
     );
+    // Armed before any estimate, no contact: the height (0, no estimate's)
+    // proves nothing, so it waits disarmed; contact alone is the ground.
+    let unknown = Conditions {
+        grounded: false,
+        height: 0.0,
+        estimate_fresh: false,
+        ..on_ground()
+    };
+    assert_eq!(step(Mode::Disarmed, unknown), Mode::Disarmed);
+    let touching = Conditions {
+        grounded: true,
+        ..unknown
+    };
+    assert_eq!(step(Mode::Disarmed, touching), Mode::Drive);
 }
 
 #[test]
