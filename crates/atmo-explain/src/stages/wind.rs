@@ -150,6 +150,10 @@ struct Profiler<'a> {
     /// wind (zeroed once: only the stretches' rows are ever written).
     drag_raw: [Vec<f64>; DRAG_WIDTH],
     drag: [Vec<f64>; DRAG_WIDTH],
+    /// Per segment, the fixed-by-drag cross products (`pf x DRAG_WIDTH`,
+    /// row-major), summed here rather than in the segment's dense matrix:
+    /// the same sums in the same order, without indexing it per entry.
+    cross: Vec<f64>,
 }
 
 impl Profiler<'_> {
@@ -194,11 +198,15 @@ impl Profiler<'_> {
             out.b[s].rows_mut(0, pf).copy_from(&self.fixed_stats.b[s]);
         }
         let mut xf = vec![0.0; pf];
+        let block = pf * DRAG_WIDTH;
+        self.cross.clear();
+        self.cross.resize(nseg * block, 0.0);
         for (k, seg) in self.seg_of.iter().enumerate() {
             let Some(s) = *seg else { continue };
             let mut gdd = SMatrix::<f64, DRAG_WIDTH, DRAG_WIDTH>::zeros();
             let mut bd = SVector::<f64, DRAG_WIDTH>::zeros();
             let (g, b) = (&mut out.g[s], &mut out.b[s]);
+            let cross = &mut self.cross[s * block..(s + 1) * block];
             for c in 0..6 {
                 let i = 6 * k + c;
                 let w = self.weights[i];
@@ -215,8 +223,10 @@ impl Profiler<'_> {
                     for l in m..DRAG_WIDTH {
                         gdd[(m, l)] += xd[m] * xd[l];
                     }
-                    for (j, x) in xf.iter().enumerate() {
-                        g[(j, pf + m)] += x * xd[m];
+                }
+                for (x, sums) in xf.iter().zip(cross.chunks_exact_mut(DRAG_WIDTH)) {
+                    for (sum, d) in sums.iter_mut().zip(&xd) {
+                        *sum += x * d;
                     }
                 }
             }
@@ -226,8 +236,13 @@ impl Profiler<'_> {
                     g[(pf + m, pf + l)] += gdd[(m, l)];
                     g[(pf + l, pf + m)] = g[(pf + m, pf + l)];
                 }
-                for j in 0..pf {
-                    g[(pf + m, j)] = g[(j, pf + m)];
+            }
+        }
+        for (g, cross) in out.g.iter_mut().zip(self.cross.chunks_exact(block.max(1))) {
+            for (j, sums) in cross.chunks_exact(DRAG_WIDTH).enumerate() {
+                for (m, sum) in sums.iter().enumerate() {
+                    g[(j, pf + m)] = *sum;
+                    g[(pf + m, j)] = *sum;
                 }
             }
         }
@@ -338,6 +353,7 @@ pub fn profile_wind(
         evaluations: 0,
         drag_raw: std::array::from_fn(|_| vec![0.0; 6 * prep.n]),
         drag: std::array::from_fn(|_| vec![0.0; 6 * prep.n]),
+        cross: Vec::new(),
     };
     // Coarse polar grid.
     let rss_no_wind = prof.rss([0.0; 2]).0;
