@@ -207,16 +207,14 @@ impl Prepared {
     /// starting at `s` into `out` (linear part rotated to the body frame).
     fn differentiate_into(&self, series: &[[f64; 6]], s: usize, out: &mut [f64]) {
         let h = self.half;
-        let len = series.len();
-        for j in h..len - h {
+        for (j, window) in series.windows(self.taps.len()).enumerate() {
             let mut d = [0.0; 6];
-            for (q, tap) in self.taps.iter().enumerate() {
-                let v = &series[j + q - h];
-                for c in 0..6 {
-                    d[c] += tap * v[c];
+            for (tap, v) in self.taps.iter().zip(window) {
+                for (dc, vc) in d.iter_mut().zip(v) {
+                    *dc += tap * vc;
                 }
             }
-            let k = s + j;
+            let k = s + j + h;
             let lin = self.rot[k].transpose() * Vector3::new(d[0], d[1], d[2]);
             out[6 * k..6 * k + 6].copy_from_slice(&[lin.x, lin.y, lin.z, d[3], d[4], d[5]]);
         }

@@ -34,6 +34,10 @@ pub const GE_TILTS_DEG: [f64; 4] = [40.0, 50.0, 60.0, 70.0];
 pub const GE_CLASSICAL_BELOW_DEG: f64 = 30.0;
 /// Drag coefficients: rotor drag, axial drag, body Cd A along x, y, z.
 pub const DRAG_WIDTH: usize = 5;
+/// The first drag columns, rotor and axial drag, are affine in the wind:
+/// they act on `v_air + w x r_i`, linear in `v - wind` (the body drag's
+/// `|v| v` is not).
+pub const WIND_AFFINE_DRAG: usize = 2;
 /// Air density used for body drag (kg/m^3).
 pub const AIR_DENSITY: f64 = 1.225;
 
@@ -502,21 +506,40 @@ fn push_drag_and_wind(raw: &mut [Vec<f64>], at: &Starts, row: &Row, wind: &Vecto
     }
 }
 
+/// The drag columns of `n` rows before (`raw`) and after (`out`) the
+/// measurement's filter: `6 n` values each, zeroed once and reused.
+pub struct DragColumns {
+    pub raw: [Vec<f64>; DRAG_WIDTH],
+    pub out: [Vec<f64>; DRAG_WIDTH],
+}
+
+impl DragColumns {
+    pub fn zeroed(n: usize) -> Self {
+        Self {
+            raw: std::array::from_fn(|_| vec![0.0; 6 * n]),
+            out: std::array::from_fn(|_| vec![0.0; 6 * n]),
+        }
+    }
+}
+
 /// The drag columns alone (filtered like the measurement) for the rotor
 /// thrusts `thrust` and a wind, on the stretches `runs`: what the wind
-/// profile rebuilds per trial wind instead of every column. `raw` and `out`
-/// hold `6 n` values each; only the stretches' rows are written (in `out`,
-/// those `half` or more from a stretch's ends), so buffers zeroed once
-/// and reused on the same stretches give 0 elsewhere.
+/// profile rebuilds per trial wind instead of every column. Only the
+/// stretches' rows are written (in `out`, those `half` or more from a
+/// stretch's ends), so buffers zeroed once and reused on the same
+/// stretches give 0 elsewhere. Only the columns from `first_filtered` on
+/// are filtered into `out` (the wind profile combines the
+/// [`WIND_AFFINE_DRAG`] ones from filtered bases).
 pub fn drag_columns_into(
     prep: &Prepared,
     rec: &Recording,
     thrust: &[Input],
     wind: [f64; 2],
     runs: &[(usize, usize)],
-    raw: &mut [Vec<f64>; DRAG_WIDTH],
-    out: &mut [Vec<f64>; DRAG_WIDTH],
+    columns: &mut DragColumns,
+    first_filtered: usize,
 ) {
+    let DragColumns { raw, out } = columns;
     let wind = Vector3::new(wind[0], wind[1], 0.0);
     for &(s, e) in runs {
         for k in s..e {
@@ -526,7 +549,7 @@ pub fn drag_columns_into(
             }
         }
     }
-    for (r, o) in raw.iter().zip(out.iter_mut()) {
+    for (r, o) in raw.iter().zip(out.iter_mut()).skip(first_filtered) {
         prep.smooth_runs_in_place(r, o, runs);
     }
 }

@@ -76,11 +76,14 @@ pub fn profile_motor_lag(res: &Residuals, base: &BaseRegressors) -> LagProfile {
     let mut points = vec![(0.0, base.stats.cv(&all_idx, &active))];
     for &tau in &taus {
         let col = lag_column(prep, tau);
-        let mut cross = vec![DVector::zeros(base.others.len()); nseg];
+        // Cross products per segment in one flat buffer (segment-major).
+        let p = cols.len();
+        let mut flat = vec![0.0; nseg * p];
         let mut own = vec![0.0; nseg];
         let mut own_y = vec![0.0; nseg];
         for &k in &res.fit_rows {
             let Some(s) = seg_of[k] else { continue };
+            let sums = &mut flat[s * p..(s + 1) * p];
             for c in 0..6 {
                 let i = 6 * k + c;
                 let w2 = base.weights[i] * base.weights[i];
@@ -90,11 +93,15 @@ pub fn profile_motor_lag(res: &Residuals, base: &BaseRegressors) -> LagProfile {
                 }
                 own[s] += l * l * w2;
                 own_y[s] += l * base.columns.resid[i] * w2;
-                for (j, cj) in cols.iter().enumerate() {
-                    cross[s][j] += l * cj[i] * w2;
+                for (sum, cj) in sums.iter_mut().zip(&cols) {
+                    *sum += l * cj[i] * w2;
                 }
             }
         }
+        let cross: Vec<DVector<f64>> = flat
+            .chunks_exact(p.max(1))
+            .map(DVector::from_column_slice)
+            .collect();
         let st = base.stats.with_fixed_term(&cross, &own, &own_y);
         points.push((tau, st.cv(&all_idx, &active)));
     }
