@@ -544,8 +544,10 @@ pub fn drag_columns_into(
     for &(s, e) in runs {
         for k in s..e {
             let row = Row::at(prep, rec, thrust, k);
-            for (j, term) in drag_terms(&row, &wind).iter().enumerate() {
-                raw[j][6 * k..6 * k + 6].copy_from_slice(term.as_slice());
+            // Only the columns filtered here are needed raw.
+            let terms = drag_terms(&row, &wind);
+            for (r, term) in raw.iter_mut().zip(&terms).skip(first_filtered) {
+                r[6 * k..6 * k + 6].copy_from_slice(term.as_slice());
             }
         }
     }

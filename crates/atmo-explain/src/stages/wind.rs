@@ -167,18 +167,9 @@ impl Profiler<'_> {
     /// Statistics of `[fixed, drag(wind)]`.
     fn stats_at(&mut self, wind: [f64; 2]) -> Stats {
         self.evaluations += 1;
-        drag_columns_into(
-            self.prep,
-            self.rec,
-            &self.thrust,
-            wind,
-            &self.stretches,
-            &mut self.drag,
-            WIND_AFFINE_DRAG,
-        );
+        self.drag_columns_at(wind, WIND_AFFINE_DRAG);
         for (column, [at_rest, per_x, per_y]) in self.drag.out.iter_mut().zip(&self.affine) {
-            let rows = self.stretches.iter().flat_map(|&(s, e)| 6 * s..6 * e);
-            for (o, i) in rows.enumerate() {
+            for (o, i) in stretch_entries(&self.stretches).enumerate() {
                 column[i] = at_rest[o] + wind[0] * per_x[o] + wind[1] * per_y[o];
             }
         }
@@ -262,36 +253,41 @@ impl Profiler<'_> {
         out
     }
 
+    /// The drag columns at `wind` into [`Profiler::drag`], filtered from
+    /// column `first_filtered` on.
+    fn drag_columns_at(&mut self, wind: [f64; 2], first_filtered: usize) {
+        drag_columns_into(
+            self.prep,
+            self.rec,
+            &self.thrust,
+            wind,
+            &self.stretches,
+            &mut self.drag,
+            first_filtered,
+        );
+    }
+
     /// [`Profiler::affine`]: the affine columns at no wind and at 1 m/s
     /// along x and along y, differenced.
     fn affine_drag_bases(&mut self) -> [[Vec<f64>; 3]; WIND_AFFINE_DRAG] {
         let mut at = |wind: [f64; 2]| -> [Vec<f64>; WIND_AFFINE_DRAG] {
-            drag_columns_into(
-                self.prep,
-                self.rec,
-                &self.thrust,
-                wind,
-                &self.stretches,
-                &mut self.drag,
-                0,
-            );
+            self.drag_columns_at(wind, 0);
             std::array::from_fn(|j| {
-                self.stretches
-                    .iter()
-                    .flat_map(|&(s, e)| self.drag.out[j][6 * s..6 * e].iter().copied())
+                let column = &self.drag.out[j];
+                stretch_entries(&self.stretches)
+                    .map(|i| column[i])
                     .collect()
             })
         };
         let (rest, x, y) = (at([0.0, 0.0]), at([1.0, 0.0]), at([0.0, 1.0]));
         let minus =
             |a: &[f64], b: &[f64]| -> Vec<f64> { a.iter().zip(b).map(|(a, b)| a - b).collect() };
-        std::array::from_fn(|j| {
-            [
-                rest[j].clone(),
-                minus(&x[j], &rest[j]),
-                minus(&y[j], &rest[j]),
-            ]
-        })
+        let mut bases = rest.map(|at_rest| [at_rest, Vec::new(), Vec::new()]);
+        for (j, [at_rest, per_x, per_y]) in bases.iter_mut().enumerate() {
+            *per_x = minus(&x[j], at_rest);
+            *per_y = minus(&y[j], at_rest);
+        }
+        bases
     }
 
     /// Residual sums of squares at `wind`: on all segments, and per fold
@@ -353,6 +349,12 @@ impl Profiler<'_> {
         let (w, rss) = self.pattern_search(start, &[along, along.map(|v| -v)]);
         (w[1 - axis], rss)
     }
+}
+
+/// The residual entries (6 per row) of the stretches' rows, in order: the
+/// layout of [`Profiler::affine`].
+fn stretch_entries(stretches: &[(usize, usize)]) -> impl Iterator<Item = usize> + '_ {
+    stretches.iter().flat_map(|&(s, e)| 6 * s..6 * e)
 }
 
 /// Profiles the wind with the linear drag and [`PROFILE_COMPANIONS`],
