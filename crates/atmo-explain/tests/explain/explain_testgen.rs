@@ -76,8 +76,15 @@ fn summary(ex: &Explanation) -> String {
         let p: Vec<String> = e
             .parameters
             .iter()
-            .take(4)
-            .map(|p| format!("{}={:.4}", p.name, p.value))
+            .take(5)
+            .map(|p| {
+                let mark = if p.identified {
+                    ""
+                } else {
+                    " (not identified)"
+                };
+                format!("{}={:.4}{mark}", p.name, p.value)
+            })
             .collect();
         let _ = writeln!(
             s,
@@ -332,8 +339,16 @@ fn ground_effect_and_motor_lag() {
 
 /// Recordings built to push a parameter beyond its physical range
 /// (docs/explain.md): a thrust 80 % above the file's, a thrust curve with
-/// f = 0.9, a centre of mass 9 cm off. None of these is printed as a
-/// finding: no selected effect carries a parameter outside its range.
+/// f = 0.9, a centre of mass 9 cm off, a 0.4 s motor lag, a rotor drag of
+/// 0.3 N per (m/s) per N of thrust (8.4 per unit command, range 5), body
+/// drag areas of 2 m^2 (range 1) in a 2 m/s wind, a 20 m/s wind (range 15),
+/// a classical ground effect of a 0.9 m rotor (gains past 3 at the low
+/// pass). None of these is printed as a finding: no selected effect
+/// carries a parameter beyond its range by more than its deviation, nor
+/// one outside it that is marked identified. A value held at a bound is
+/// not identified; what is fitted beside it is not judged here (the 2 m^2
+/// areas, held at 1, leave a 2.9 m/s wind where the truth has 2:
+/// docs/explain.md, "Physical bounds").
 /// The generator has no drag and its controller cannot hold every such
 /// robot: a flight that runs away past 100 m/s (the 9 cm offset) is refused
 /// by the reader's plausible ranges (docs/recording_format.md), naming the
@@ -352,6 +367,28 @@ fn no_parameter_outside_its_physical_range_is_a_finding() {
         },
         Concealed {
             com_offset: Some([0.09, 0.0, 0.0]),
+            ..Concealed::default()
+        },
+        Concealed {
+            motor_lag: Some(0.4),
+            ..Concealed::default()
+        },
+        Concealed {
+            drag: Some((0.3, [0.0; 3])),
+            ..Concealed::default()
+        },
+        Concealed {
+            drag: Some((0.0, [2.0, 2.0, 2.0])),
+            wind: [2.0, 0.0, 0.0],
+            ..Concealed::default()
+        },
+        Concealed {
+            drag: Some((0.005, [0.06, 0.06, 0.10])),
+            wind: [20.0, 0.0, 0.0],
+            ..Concealed::default()
+        },
+        Concealed {
+            ground_effect_radius: Some(0.9),
             ..Concealed::default()
         },
     ];
@@ -379,6 +416,7 @@ fn no_parameter_outside_its_physical_range_is_a_finding() {
             }
         };
         analysed += 1;
+        eprintln!("{fx:?}: {}", summary(&ex));
         for e in ex.effects.iter().filter(|e| e.selected) {
             for p in &e.parameters {
                 if let Some((lo, hi)) = atmo_explain::stages::range_of(&e.name, &p.name) {
@@ -391,7 +429,8 @@ fn no_parameter_outside_its_physical_range_is_a_finding() {
                         summary(&ex)
                     );
                     assert!(
-                        p.value > lo - p.std.unwrap_or(0.0) && p.value < hi + p.std.unwrap_or(0.0),
+                        p.value >= lo - p.std.unwrap_or(0.0)
+                            && p.value <= hi + p.std.unwrap_or(0.0),
                         "{fx:?}: {}.{} = {} beyond [{lo}, {hi}] in a found effect: {}",
                         e.name,
                         p.name,
@@ -403,7 +442,7 @@ fn no_parameter_outside_its_physical_range_is_a_finding() {
         }
     }
     assert!(
-        analysed >= 2,
+        analysed >= 6,
         "only {analysed} of the flights were analysed"
     );
 }
