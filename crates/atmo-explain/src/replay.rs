@@ -2,14 +2,14 @@
 //! effects) started from the recorded state and driven by the recorded
 //! commands and tilt for a short horizon, against what was recorded.
 
-use atmo_core::RobotConfig;
 use atmo_core::control::WheelRates;
 use atmo_core::model::{State, idx};
 
 use crate::data::{Prepared, lagged_commands, sg_smoothing_taps};
 use crate::recording::Recording;
-use atmo_plant::config::{PlantConfig, TerrainConfig};
-use atmo_plant::plant::{Command, InitialState, Plant};
+use atmo_plant::PlantTemplate;
+use atmo_plant::config::TerrainConfig;
+use atmo_plant::plant::{Command, InitialState};
 
 /// Prediction errors at the end of the horizon, RMS over the starts.
 #[derive(Debug, Clone, Copy, Default, serde::Serialize)]
@@ -92,15 +92,15 @@ pub fn start_rows(prep: &Prepared, horizon: f64, spacing: f64) -> Vec<(usize, us
     out
 }
 
-/// Runs the plant of `config` from each start for the horizon and returns
-/// the RMS error at the end; `config_for(k)` picks the plant file for the
-/// start row k (held-out fits).
-pub fn replay(
+/// Runs the plant from each start for the horizon and returns the RMS
+/// error at the end; `plant_for(k)` picks the plant (robot and plant file,
+/// checked once) for the start row k (held-out fits), `None` where the
+/// plant refused its file (the start is skipped).
+pub fn replay<'t>(
     rec: &Recording,
     prep: &Prepared,
-    robot: &RobotConfig,
     starts: &[(usize, usize)],
-    config_for: &dyn Fn(usize) -> PlantConfig,
+    plant_for: &dyn Fn(usize) -> Option<&'t PlantTemplate>,
     lag_tau: &dyn Fn(usize) -> f64,
 ) -> ReplayError {
     let mut sq = [[0.0; 3]; 4];
@@ -108,7 +108,9 @@ pub fn replay(
     let u = &prep.u_eff;
     let mut horizon_sum = 0.0;
     for &(k, j) in starts {
-        let cfg = config_for(k);
+        let Some(template) = plant_for(k) else {
+            continue;
+        };
         let tau = lag_tau(k);
         let s = &rec.samples[k];
         let thrust = if tau > 0.0 {
@@ -123,7 +125,7 @@ pub fn replay(
             thrust: thrust.map(|v| v.clamp(0.0, 1.0)),
         };
         let terrain = TerrainConfig::flat(-s.ground_z);
-        let Ok(mut plant) = Plant::new(robot, &cfg, &terrain, &initial, 1) else {
+        let Ok(mut plant) = template.start(&terrain, &initial, 1) else {
             continue;
         };
         let t_end = prep.t[j];

@@ -610,6 +610,22 @@ impl EffectsConfig {
             .map(|e| [e.tilt[0], e.tilt[1], 0.0])
     }
 
+    /// The centre of mass's offset (body frame, m), when it is on.
+    pub fn com_offset_vector(&self) -> Option<nalgebra::Vector3<f64>> {
+        self.com_offset
+            .as_ref()
+            .filter(|e| e.enabled)
+            .map(|e| nalgebra::Vector3::from(e.offset))
+    }
+
+    /// The mass and inertia scales, when the mass error is on.
+    pub fn mass_error_scales(&self) -> Option<(f64, f64)> {
+        self.mass_error
+            .as_ref()
+            .filter(|e| e.enabled)
+            .map(|e| (e.mass_scale, e.inertia_scale))
+    }
+
     /// Every effect on with its default parameters.
     pub fn all() -> Self {
         Self {

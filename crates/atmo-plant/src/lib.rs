@@ -71,4 +71,4 @@ pub mod sensors;
 pub use body::lerp_body;
 pub use config::{EffectsConfig, PlantConfig, TerrainConfig};
 pub use error::{PlantError, Result};
-pub use plant::{Command, CrashKind, Event, EventKind, InitialState, Plant};
+pub use plant::{Command, CrashKind, Event, EventKind, InitialState, Plant, PlantTemplate};

@@ -17,6 +17,7 @@
 //! the tests are not repeated on the reduced model).
 
 use atmo_core::RobotConfig;
+use atmo_plant::PlantTemplate;
 use atmo_plant::config::PlantConfig;
 
 use crate::effects::Effect;
@@ -188,8 +189,10 @@ fn heldout_multistep(
     set: &[Effect],
     starts: &[(usize, usize)],
 ) -> ReplayError {
-    let cfgs = fold_configs(fit, set, robot);
-    let fallback = cfgs[0].clone();
+    let plants: Vec<Option<PlantTemplate>> = fold_configs(fit, set, robot)
+        .iter()
+        .map(|c| PlantTemplate::new(robot, c).ok())
+        .collect();
     let tau = if set.contains(&Effect::MotorLag) {
         fit.knobs.tau
     } else {
@@ -198,9 +201,8 @@ fn heldout_multistep(
     replay::replay(
         rec,
         &res.prep,
-        robot,
         starts,
-        &|k| res.seg_of[k].map_or_else(|| fallback.clone(), |s| cfgs[fold_of(s)].clone()),
+        &|k| plants[res.seg_of[k].map_or(0, fold_of)].as_ref(),
         &|_| tau,
     )
 }

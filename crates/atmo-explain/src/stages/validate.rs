@@ -6,6 +6,7 @@
 
 use atmo_core::ConfigFile as _;
 use atmo_core::RobotConfig;
+use atmo_plant::PlantTemplate;
 use atmo_plant::config::PlantConfig;
 
 use crate::effects::Effect;
@@ -59,18 +60,20 @@ pub fn validate(
     let starts = replay::start_rows(prep, HORIZON, spacing);
     let mut nominal_cfg = PlantConfig::ideal();
     nominal_cfg.arm_inertia_convention = robot.arm.inertia_convention;
-    let multistep_before =
-        replay::replay(rec, prep, robot, &starts, &|_| nominal_cfg.clone(), &|_| {
-            0.0
-        });
+    let nominal = PlantTemplate::new(robot, &nominal_cfg).ok();
+    let multistep_before = replay::replay(rec, prep, &starts, &|_| nominal.as_ref(), &|_| 0.0);
     let lag_on = fit.chosen.contains(&Effect::MotorLag);
     let tau = fit.knobs.tau;
+    let fitted = PlantTemplate::new(robot, &fitted_cfg).ok();
+    let folds: Vec<Option<PlantTemplate>> = fold_cfgs
+        .iter()
+        .map(|c| PlantTemplate::new(robot, c).ok())
+        .collect();
     let multistep_after = replay::replay(
         rec,
         prep,
-        robot,
         &starts,
-        &|k| res.seg_of[k].map_or_else(|| fitted_cfg.clone(), |s| fold_cfgs[fold_of(s)].clone()),
+        &|k| res.seg_of[k].map_or(fitted.as_ref(), |s| folds[fold_of(s)].as_ref()),
         &|_| if lag_on { tau } else { 0.0 },
     );
     Ok(Validation {

@@ -10,6 +10,7 @@ use atmo_explain::output::write_all;
 use atmo_explain::replay::{replay, start_rows};
 use atmo_explain::synth::{Flight, Profile, record};
 use atmo_explain::{Options, explain};
+use atmo_plant::PlantTemplate;
 use atmo_plant::config::{EffectsConfig, PlantConfig, SensorsConfig};
 use atmo_plant::ground_effect::GroundEffectConfig;
 
@@ -39,22 +40,10 @@ fn fitted_ground_effect_makes_a_replayed_landing_match_better() {
     assert!(starts.len() > 20);
     let mut nominal = PlantConfig::ideal();
     nominal.arm_inertia_convention = robot.arm.inertia_convention;
-    let before = replay(
-        &landing,
-        &prep,
-        &robot,
-        &starts,
-        &|_| nominal.clone(),
-        &|_| 0.0,
-    );
-    let after = replay(
-        &landing,
-        &prep,
-        &robot,
-        &starts,
-        &|_| fitted.clone(),
-        &|_| 0.0,
-    );
+    let nominal = PlantTemplate::new(&robot, &nominal).unwrap();
+    let fitted = PlantTemplate::new(&robot, &fitted).unwrap();
+    let before = replay(&landing, &prep, &starts, &|_| Some(&nominal), &|_| 0.0);
+    let after = replay(&landing, &prep, &starts, &|_| Some(&fitted), &|_| 0.0);
     println!(
         "replayed landing, {} starts, 1 s each: height error {:.4} -> {:.4} m, vertical speed error {:.4} -> {:.4} m/s",
         before.starts, before.position[2], after.position[2], before.velocity[2], after.velocity[2]

@@ -239,25 +239,81 @@ fn cpu_has_avx2() -> bool {
     }
 }
 
-impl Plant {
-    /// Builds the plant for a robot, a validated plant config, the terrain
-    /// and the initial condition; `seed` drives every random process.
-    pub fn new(
-        robot: &RobotConfig,
-        config: &PlantConfig,
-        terrain: &TerrainConfig,
-        initial: &InitialState,
-        seed: u64,
-    ) -> Result<Self> {
+/// A robot and a plant config checked once, with what a plant takes from
+/// them alone: the model, the linkage, the exact bodies of the tilt grid
+/// and the contact points' reaches. [`PlantTemplate::start`] builds a
+/// [`Plant`] from it for a terrain, an initial condition and a seed, the
+/// same plant [`Plant::new`] builds, without redoing that work (the
+/// discrepancy finder starts one plant per 0.5 s stretch it replays).
+#[derive(Debug, Clone)]
+pub struct PlantTemplate {
+    robot: RobotConfig,
+    config: PlantConfig,
+    model: Model,
+    linkage: Linkage,
+    tilt_max: f64,
+    tilt_grid: Arc<[TiltedBody]>,
+    corners: [Vector3<f64>; 8],
+    reach: f64,
+    corner_reach: f64,
+}
+
+impl PlantTemplate {
+    /// Checks the plant config against the robot and builds what every
+    /// plant of the pair shares.
+    pub fn new(robot: &RobotConfig, config: &PlantConfig) -> Result<Self> {
         config.validate(&config.source)?;
         let checker = Checker::new(&config.source);
-        terrain.validate(&checker, "terrain")?;
         let fx = &config.effects;
         let mut truth = robot.clone();
         truth.arm.inertia_convention = config.arm_inertia_convention;
         let model = Model::new(&truth);
         let tilt_max = robot.limits.tilt_max();
         let linkage = Linkage::from_config(&robot.linkage, tilt_max)?;
+        let com_offset = fx.com_offset_vector();
+        let mass_error = fx.mass_error_scales();
+        let tilt_grid = tilt_grid(&model, tilt_max, mass_error, com_offset, &checker)?;
+        let (lo, hi) = fx
+            .ground_contact
+            .as_ref()
+            .filter(|e| e.enabled)
+            .map_or_else(
+                || {
+                    let d = GroundContactConfig::default();
+                    (d.base_box_min, d.base_box_max)
+                },
+                |c| (c.base_box_min, c.base_box_max),
+            );
+        let corners = box_corners(lo, hi);
+        let (reach, corner_reach) = reaches(&model, robot, tilt_max, &corners);
+        Ok(Self {
+            robot: robot.clone(),
+            config: config.clone(),
+            model,
+            linkage,
+            tilt_max,
+            tilt_grid: tilt_grid.into(),
+            corners,
+            reach,
+            corner_reach,
+        })
+    }
+
+    /// The plant of this robot and config on `terrain` from `initial`;
+    /// `seed` drives every random process.
+    pub fn start(
+        &self,
+        terrain: &TerrainConfig,
+        initial: &InitialState,
+        seed: u64,
+    ) -> Result<Plant> {
+        let (robot, config) = (&self.robot, &self.config);
+        let checker = Checker::new(&config.source);
+        terrain.validate(&checker, "terrain")?;
+        let fx = &config.effects;
+        let model = self.model.clone();
+        let tilt_max = self.tilt_max;
+        let linkage = self.linkage;
         let dt = config.dt;
 
         let tilt_mech = fx.tilt_mechanism.as_ref().filter(|e| e.enabled);
@@ -282,20 +338,11 @@ impl Plant {
         let thrust_curve = curve.filter(|_| motor_lag.is_none());
         let drag = fx.drag.clone().filter(|e| e.enabled);
         let battery = fx.battery_sag.clone().filter(|e| e.enabled);
-        let com_offset = fx
-            .com_offset
-            .as_ref()
-            .filter(|e| e.enabled)
-            .map(|e| Vector3::from(e.offset));
-        let mass_error = fx
-            .mass_error
-            .as_ref()
-            .filter(|e| e.enabled)
-            .map(|e| (e.mass_scale, e.inertia_scale));
+        let com_offset = fx.com_offset_vector();
+        let mass_error = fx.mass_error_scales();
         let sensors: Option<SensorsConfig> = fx.sensors.clone().filter(|e| e.enabled);
         let contact_cfg = fx.ground_contact.clone().filter(|e| e.enabled);
 
-        let tilt_grid = tilt_grid(&model, tilt_max, mass_error, com_offset, &checker)?;
         let c = &initial.state;
         checker.finite("initial.state", c.as_slice())?;
         checker.within("initial.tilt", initial.tilt, 0.0, tilt_max)?;
@@ -328,15 +375,7 @@ impl Plant {
                 c,
             )
         });
-        let (lo, hi) = contact.as_ref().map_or(
-            (
-                GroundContactConfig::default().base_box_min,
-                GroundContactConfig::default().base_box_max,
-            ),
-            |(_, _, c)| (c.base_box_min, c.base_box_max),
-        );
-        let corners = box_corners(lo, hi);
-        let (reach, corner_reach) = reaches(&model, robot, tilt_max, &corners);
+        let (corners, reach, corner_reach) = (self.corners, self.reach, self.corner_reach);
         let tip_over_cos = contact
             .as_ref()
             .map_or(-1.0, |(_, _, c)| c.tip_over_deg.to_radians().cos());
@@ -351,7 +390,7 @@ impl Plant {
             || GroundEffect::default_surface().slice(tilt),
             |g| g.slice(tilt),
         );
-        let mut plant = Self {
+        let mut plant = Plant {
             linkage,
             dt,
             tilt_max,
@@ -385,7 +424,7 @@ impl Plant {
             body,
             wheel_lanes: None,
             body_interpolated: false,
-            tilt_grid: tilt_grid.into(),
+            tilt_grid: Arc::clone(&self.tilt_grid),
             command: Command::rotors(initial.thrust),
             mocap: Mocap::new(sensors, dt, seed),
             contacts: [ContactInfo::default(); N_CONTACTS],
@@ -403,6 +442,20 @@ impl Plant {
         plant.observe();
         plant.grounded = plant.contact_signal();
         Ok(plant)
+    }
+}
+
+impl Plant {
+    /// Builds the plant for a robot, a validated plant config, the terrain
+    /// and the initial condition; `seed` drives every random process.
+    pub fn new(
+        robot: &RobotConfig,
+        config: &PlantConfig,
+        terrain: &TerrainConfig,
+        initial: &InitialState,
+        seed: u64,
+    ) -> Result<Self> {
+        PlantTemplate::new(robot, config)?.start(terrain, initial, seed)
     }
 
     /// Whether steps run the copy of the step code compiled for AVX2 and FMA
