@@ -125,6 +125,7 @@ impl FlightStack {
             torque_gain: settings.observer.torque_gain,
             max_force: settings.observer.max_force,
             max_torque: settings.observer.max_torque,
+            min_interval: settings.observer.min_interval,
         });
         // The observer learns what the MPC's model leaves out: with its surface.
         observer.set_ground_effect(surface.clone());

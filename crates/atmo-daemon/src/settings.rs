@@ -64,6 +64,7 @@ pub struct ObserverConfig {
     pub torque_gain: f64,
     pub max_force: f64,
     pub max_torque: f64,
+    pub min_interval: f64,
 }
 
 #[derive(Debug, Clone, Deserialize, PartialEq)]
@@ -168,6 +169,7 @@ impl ConfigFile for FlightSettings {
         c.range("observer.torque_gain", o.torque_gain, 0.0..=1.0, "")?;
         c.range("observer.max_force", o.max_force, 0.0..=200.0, "N")?;
         c.range("observer.max_torque", o.max_torque, 0.0..=20.0, "N m")?;
+        c.range("observer.min_interval", o.min_interval, 0.0..=0.05, "s")?;
         c.range(
             "loop.rate_hz",
             self.control_loop.rate_hz,

@@ -1,0 +1,129 @@
+//! The SITL flight that fell (CI, 2026-12-04; reproduced the same day under
+//! three busy loops on 2 cores): two motion-capture estimates accepted
+//! 39 us apart, the disturbance observer differenced them over that `dt`,
+//! its force estimate jumped to its limits, the MPC cut the thrust to zero
+//! at 0.78 m and ATMO hit the ground at 2.6 m/s. The fixture
+//! (`tests/data/sitl_estimate_burst.mcap`) is that flight's log, written by
+//! the daemon of fc7d04b (`atmo-sim` test
+//! `sitl::the_daemon_binary_lands_on_the_wheels_against_the_plant_server`).
+//!
+//! Replayed open loop with its own configuration plus the observer's
+//! `min_interval` (the only change), the thrust after the burst stays near
+//! hover (0.52 a rotor against the logged 0.02); with `min_interval = 0` (the old rule) the replay is the logged
+//! flight bit for bit, collapse included.
+// Test code: an unwrap that fails is the failure report.
+#![allow(clippy::unwrap_used)]
+
+use std::path::{Path, PathBuf};
+
+use atmo_daemon::flight_log::{CONFIG_METADATA, ConfigText, FlightConfigFiles, INPUTS_TOPIC};
+use atmo_daemon::replay::{CutReplay, RecordedFlight, replay};
+use atmo_io::mcap_log::{read_extras, read_topic};
+use atmo_io::msg::{MpcStatus, TickInputs};
+
+/// The burst: tick 356 took the estimate accepted 39 us after tick 355's.
+const BURST_TICK: u64 = 356;
+
+/// The fixture, read as `RecordedFlight::read` would but without parsing
+/// its configuration: its flight.toml predates `min_interval`, which the
+/// current parser requires (the tests add it).
+fn flight() -> RecordedFlight {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/sitl_estimate_burst.mcap");
+    let extras = read_extras(&path).unwrap();
+    let meta = extras.metadata(CONFIG_METADATA).unwrap().clone();
+    let text = |role: &str| ConfigText {
+        source: PathBuf::from(&meta[&format!("{role}.source")]),
+        text: String::from_utf8(
+            extras
+                .attachment(&format!("config/{role}"))
+                .unwrap()
+                .data
+                .clone(),
+        )
+        .unwrap(),
+    };
+    let files = FlightConfigFiles {
+        robot: text("robot"),
+        flight: text("flight"),
+        mpc: text("mpc"),
+        ground_effect: meta
+            .contains_key("ground_effect.sha256")
+            .then(|| text("ground_effect")),
+    };
+    let inputs: Vec<TickInputs> = read_topic(&path, INPUTS_TOPIC)
+        .unwrap()
+        .into_iter()
+        .map(|(_, m)| m)
+        .collect();
+    let status: Vec<MpcStatus> = read_topic(&path, "/atmo/status")
+        .unwrap()
+        .into_iter()
+        .map(|(_, m)| m)
+        .collect();
+    let n = inputs.len().min(status.len());
+    RecordedFlight {
+        path,
+        files,
+        extras,
+        inputs: inputs[..n].to_vec(),
+        status: status[..n].to_vec(),
+        incomplete_tail: (inputs.len() - n, status.len() - n),
+    }
+}
+
+/// Mean rotor command of the five ticks after the burst (their estimates
+/// still show the robot descending at 0.3 m/s as commanded: the fall it
+/// caused starts later), as logged and as replayed with the observer's
+/// `min_interval` set to `min_interval`.
+fn thrust_after_the_burst(min_interval: &str) -> (f64, f64, bool) {
+    let flight = flight();
+    let mut files = flight.files.clone();
+    let anchor = "max_torque = 1.0";
+    assert!(
+        files.flight.text.contains(anchor),
+        "the logged flight.toml changed"
+    );
+    files.flight.text = files.flight.text.replacen(
+        anchor,
+        &format!("{anchor}\nmin_interval = {min_interval}"),
+        1,
+    );
+    let config = RecordedFlight::config(&files).unwrap();
+    let (mut logged, mut replayed, mut n) = (0.0, 0.0, 0.0);
+    let report = replay(&flight, &config, CutReplay::AsLogged, |pair| {
+        if (BURST_TICK + 1..=BURST_TICK + 5).contains(&pair.tick) {
+            logged += pair.logged.thrust.iter().sum::<f64>() / 4.0;
+            replayed += pair.replayed.thrust.iter().sum::<f64>() / 4.0;
+            n += 1.0;
+        }
+    })
+    .unwrap();
+    assert_eq!(n, 5.0);
+    (logged / n, replayed / n, report.identical())
+}
+
+#[test]
+fn the_old_rule_replays_the_fall_bit_for_bit() {
+    let (logged, replayed, identical) = thrust_after_the_burst("0.0");
+    assert!(identical, "the fixture no longer replays as logged");
+    assert_eq!(logged.to_bits(), replayed.to_bits());
+    // What fell: the rotors near zero after the burst.
+    assert!(
+        logged < 0.1,
+        "logged mean thrust after the burst {logged:.3}"
+    );
+}
+
+#[test]
+fn with_min_interval_the_burst_leaves_the_thrust_at_hover() {
+    let (logged, replayed, identical) = thrust_after_the_burst("0.004");
+    assert!(!identical);
+    println!(
+        "mean rotor command after the burst: logged {logged:.3}, with min_interval {replayed:.3}"
+    );
+    // Hover at 31 deg of tilt is about 0.57 a rotor (the ticks before).
+    assert!(
+        (0.45..0.75).contains(&replayed),
+        "replayed mean thrust after the burst {replayed:.3}"
+    );
+}
