@@ -335,6 +335,9 @@ impl FlightConfigFiles {
 
     /// The configuration stored in a log by [`Self::log_to`]; `file` names
     /// the log in errors. Each attachment's text must match its recorded hash.
+    /// The texts are not parsed here ([`Self::parse`] does that): a log
+    /// flown before a key the current parser requires is still read, and
+    /// parsing its configuration names the key.
     ///
     /// # Errors
     /// No [`CONFIG_METADATA`] record, a missing attachment, text that is not
@@ -385,8 +388,6 @@ impl FlightConfigFiles {
                 .then(|| role(GROUND_EFFECT))
                 .transpose()?,
         };
-        // The MPC text must not name a surface the log does not hold.
-        files.parse().map_err(|e| fail(e.to_string()))?;
         Ok(files)
     }
 

@@ -126,7 +126,8 @@ fn replay_command(
             println!("what-if: {}", replaced.display());
         }
     }
-    let config = RecordedFlight::config(&files)?;
+    let config = RecordedFlight::config(&files)
+        .with_context(|| format!("the configuration to replay {} with", log.display()))?;
     let started = Instant::now();
     let mut table = atmo_daemon::whatif::WhatIfTable::default();
     // A what-if's solves are other solves: none is cut (see `CutReplay`).

@@ -9,66 +9,24 @@
 //!
 //! Replayed open loop with its own configuration plus the observer's
 //! `min_interval` (the only change), the thrust after the burst stays near
-//! hover (0.52 a rotor against the logged 0.02); with `min_interval = 0` (the old rule) the replay is the logged
-//! flight bit for bit, collapse included.
+//! hover (0.52 a rotor against the logged 0.02); with `min_interval = 0`
+//! (the old rule) the replay is the logged flight bit for bit, collapse
+//! included.
 // Test code: an unwrap that fails is the failure report.
 #![allow(clippy::unwrap_used)]
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
-use atmo_daemon::flight_log::{CONFIG_METADATA, ConfigText, FlightConfigFiles, INPUTS_TOPIC};
 use atmo_daemon::replay::{CutReplay, RecordedFlight, replay};
-use atmo_io::mcap_log::{read_extras, read_topic};
-use atmo_io::msg::{MpcStatus, TickInputs};
 
 /// The burst: tick 356 took the estimate accepted 39 us after tick 355's.
 const BURST_TICK: u64 = 356;
 
-/// The fixture, read as `RecordedFlight::read` would but without parsing
-/// its configuration: its flight.toml predates `min_interval`, which the
-/// current parser requires (the tests add it).
+/// The fixture. Its logged flight.toml predates `min_interval`, which the
+/// current parser requires: the tests add it.
 fn flight() -> RecordedFlight {
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/sitl_estimate_burst.mcap");
-    let extras = read_extras(&path).unwrap();
-    let meta = extras.metadata(CONFIG_METADATA).unwrap().clone();
-    let text = |role: &str| ConfigText {
-        source: PathBuf::from(&meta[&format!("{role}.source")]),
-        text: String::from_utf8(
-            extras
-                .attachment(&format!("config/{role}"))
-                .unwrap()
-                .data
-                .clone(),
-        )
-        .unwrap(),
-    };
-    let files = FlightConfigFiles {
-        robot: text("robot"),
-        flight: text("flight"),
-        mpc: text("mpc"),
-        ground_effect: meta
-            .contains_key("ground_effect.sha256")
-            .then(|| text("ground_effect")),
-    };
-    let inputs: Vec<TickInputs> = read_topic(&path, INPUTS_TOPIC)
-        .unwrap()
-        .into_iter()
-        .map(|(_, m)| m)
-        .collect();
-    let status: Vec<MpcStatus> = read_topic(&path, "/atmo/status")
-        .unwrap()
-        .into_iter()
-        .map(|(_, m)| m)
-        .collect();
-    let n = inputs.len().min(status.len());
-    RecordedFlight {
-        path,
-        files,
-        extras,
-        inputs: inputs[..n].to_vec(),
-        status: status[..n].to_vec(),
-        incomplete_tail: (inputs.len() - n, status.len() - n),
-    }
+    RecordedFlight::read(path, "/atmo/status").unwrap()
 }
 
 /// Mean rotor command of the five ticks after the burst (their estimates
@@ -100,6 +58,16 @@ fn thrust_after_the_burst(min_interval: &str) -> (f64, f64, bool) {
     .unwrap();
     assert_eq!(n, 5.0);
     (logged / n, replayed / n, report.identical())
+}
+
+/// A log flown before a required key is read; only parsing its
+/// configuration refuses it, naming the key.
+#[test]
+fn the_fixture_is_read_and_its_config_refused_for_the_missing_key() {
+    let e = RecordedFlight::config(&flight().files)
+        .expect_err("the logged flight.toml lacks min_interval")
+        .to_string();
+    assert!(e.contains("min_interval"), "{e}");
 }
 
 #[test]
