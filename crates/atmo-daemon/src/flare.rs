@@ -40,11 +40,37 @@
 //! the commit: during the tilt-up the observer also learns the ground
 //! effect's error, and a bound that changed with it would change the
 //! landing it is deciding.
+//!
+//! Two rules for the robots whose ground effect is stronger than the
+//! model's (docs/landing.md "A ground-effect surplus not credited to the
+//! tilt-up"):
+//!
+//! - **The force learned aloft as a floor.** Near the ground the observer
+//!   learns the ground effect's error as a constant force, but the tilt-up
+//!   carries the rotors through the surface's tilt range, where the gain
+//!   falls from about +7 % at 60 deg to -7 % at 70 deg, and a surplus of
+//!   lift at the hold turns into a deficit. The prediction therefore takes
+//!   the observer's vertical force as at least the one learned aloft
+//!   (before the transition, where the model's ground effect is below 1 %):
+//!
+//!   ```text
+//!   F_z,predicted = max(F_z,observer, F_z,aloft)
+//!   ```
+//!
+//!   A deficit learned near the ground is kept (a weak ground effect is not
+//!   made stronger).
+//! - **The margin spent late.** After the commit, while the wheels are
+//!   within `late_window` of the ground (at the current tilt and attitude),
+//!   the touchdown is predicted again from the current state, holding the
+//!   measured roll and pitch with the axles turned by them (accurate to about
+//!   0.01 m/s there, where the level prediction is not), every rotor at
+//!   `late_predicted_thrust`. A predicted impact above `late_impact_speed`
+//!   spends the attitude margin as a weak robot does, from then on.
 
 use atmo_core::ground_effect::{ThrustGainSurface, rk4_step_above_ground};
 use atmo_core::model::{Input, State, idx};
 use atmo_core::{GroundPlane, Model};
-use atmo_mpc::wheel_clearance;
+use atmo_mpc::{wheel_clearance, wheel_clearance_at_attitude};
 use nalgebra::Vector6;
 use serde::Deserialize;
 
@@ -84,6 +110,17 @@ pub struct FlareSettings {
     pub lower_step: f64,
     /// The lowest hold clearance it is lowered to, m.
     pub lowest_hold: f64,
+    /// Whether the prediction takes the observer's vertical force as at
+    /// least the one learned aloft (see the module docs).
+    pub aloft_force_floor: bool,
+    /// After the commit, within this clearance of the wheels (m, at the
+    /// current tilt and attitude) the touchdown is predicted again (0: never).
+    pub late_window: f64,
+    /// Each rotor's command in that prediction.
+    pub late_predicted_thrust: f64,
+    /// Predicted impact speed above which the robot then spends its
+    /// attitude margin (each rotor up to `weak_thrust_max`), m/s.
+    pub late_impact_speed: f64,
 }
 
 /// What the robot and the MPC's model know, for [`predict_touchdown`].
@@ -103,11 +140,15 @@ pub struct TouchdownModel<'a> {
     pub tilt_max: f64,
     /// Every rotor's command during the fall (`predicted_thrust`).
     pub thrust: f64,
+    /// Hold the state's roll and pitch (and turn the axles by them,
+    /// [`wheel_clearance_at_attitude`]) instead of levelling the robot.
+    pub hold_attitude: bool,
 }
 
 /// Touchdown tilt (rad) and vertical speed (m/s, down positive) if the
 /// tilt-up began now from `state` at `tilt`: level (at the state's heading
-/// and position, falling straight down), every rotor at
+/// and position, falling straight down; or at its roll and pitch with
+/// `hold_attitude`), every rotor at
 /// `thrust`, the tilt rising at full rate, integrated with RK4 in `dt` steps
 /// until the wheels touch (at most `horizon` s; `None` if they do not).
 /// Allocation-free; about 1 us per step.
@@ -122,11 +163,18 @@ pub fn predict_touchdown(
     for i in [idx::X, idx::Y, idx::Z, idx::YAW, idx::VZ] {
         x[i] = state[i];
     }
+    let clearance = if m.hold_attitude {
+        x[idx::ROLL] = state[idx::ROLL];
+        x[idx::PITCH] = state[idx::PITCH];
+        wheel_clearance_at_attitude
+    } else {
+        wheel_clearance
+    };
     let u = Input::from_element(m.thrust);
     let mut varphi = tilt;
     let mut t = 0.0;
     while t < horizon {
-        if wheel_clearance(&m.model.at_tilt(varphi), &m.ground, &x, m.wheel_radius) <= 0.0 {
+        if clearance(&m.model.at_tilt(varphi), &m.ground, &x, m.wheel_radius) <= 0.0 {
             return Some((varphi, x[idx::VZ]));
         }
         let next_tilt = (varphi + m.tilt_rate * dt).min(m.tilt_max);
@@ -141,6 +189,16 @@ pub fn predict_touchdown(
     None
 }
 
+/// The observer's vertical body force (N, down positive) the prediction
+/// takes: at least `aloft`, the one learned before the transition, with
+/// `aloft_force_floor` (see the module docs).
+pub fn predicted_vertical_force(s: &FlareSettings, observer: f64, aloft: Option<f64>) -> f64 {
+    match aloft {
+        Some(a) if s.aloft_force_floor => observer.max(a),
+        _ => observer,
+    }
+}
+
 /// Where the flare is.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct Flare {
@@ -152,6 +210,8 @@ pub struct Flare {
     deficit_at_commit: f64,
     /// How far the hold clearance has been lowered, m.
     lowered: f64,
+    /// A late prediction after the commit said too fast (module docs).
+    spends_late: bool,
 }
 
 impl Flare {
@@ -174,7 +234,21 @@ impl Flare {
     /// Each rotor's bound after the commit of a weak robot (`None`: the
     /// MPC's own `thrust_max`; see the module docs).
     pub fn thrust_max(&self, s: &FlareSettings) -> Option<f64> {
-        (self.committed && self.deficit_at_commit > s.weak_deficit).then_some(s.weak_thrust_max)
+        let weak = self.deficit_at_commit > s.weak_deficit;
+        (self.committed && (weak || self.spends_late)).then_some(s.weak_thrust_max)
+    }
+
+    /// Whether a late prediction after the commit is due: committed, not yet
+    /// spending the margin, the wheels within `late_window` (m) of the ground
+    /// at the current tilt and attitude.
+    pub fn late_prediction_due(&self, s: &FlareSettings, clearance: f64) -> bool {
+        self.committed && !self.spends_late && s.late_window > 0.0 && clearance < s.late_window
+    }
+
+    /// Takes a late prediction's impact speed (m/s): too fast spends the
+    /// attitude margin until the touchdown.
+    pub fn late_prediction(&mut self, s: &FlareSettings, predicted_impact: Option<f64>) {
+        self.spends_late |= predicted_impact.is_some_and(|v| v > s.late_impact_speed);
     }
 
     /// One tick of the flare's logic: `clearance` of the wheels (m),
@@ -271,6 +345,10 @@ mod tests {
         lower_above_impact: 0.4,
         lower_step: 0.01,
         lowest_hold: 0.01,
+        aloft_force_floor: true,
+        late_window: 0.03,
+        late_predicted_thrust: 0.95,
+        late_impact_speed: 0.4,
     };
 
     #[test]
@@ -372,5 +450,81 @@ mod tests {
         assert_eq!(f.thrust_max(&S), None, "weaker only after the commit");
         f.reset();
         assert_eq!(f.thrust_max(&S), None);
+    }
+
+    #[test]
+    fn a_late_prediction_too_fast_spends_the_margin_until_the_touchdown() {
+        let mut f = Flare::default();
+        assert!(!f.late_prediction_due(&S, 0.01), "not before the commit");
+        assert!(f.update(&S, 0, 0.2, 0.2, Some(0.2), 0.0));
+        assert_eq!(f.thrust_max(&S), None, "as strong as its file");
+        assert!(!f.late_prediction_due(&S, 0.05), "outside the window");
+        assert!(f.late_prediction_due(&S, 0.02));
+        f.late_prediction(&S, Some(0.39));
+        assert_eq!(f.thrust_max(&S), None, "predicted slow enough");
+        f.late_prediction(&S, None);
+        assert_eq!(f.thrust_max(&S), None, "no touchdown predicted");
+        f.late_prediction(&S, Some(0.41));
+        assert_eq!(f.thrust_max(&S), Some(1.0));
+        assert!(!f.late_prediction_due(&S, 0.02), "decided once");
+        f.reset();
+        assert_eq!(f.thrust_max(&S), None);
+        let off = FlareSettings {
+            late_window: 0.0,
+            ..S
+        };
+        assert!(f.update(&off, 0, 0.2, 0.2, Some(0.2), 0.0));
+        assert!(!f.late_prediction_due(&off, 0.0));
+    }
+
+    #[test]
+    fn the_prediction_does_not_credit_a_surplus_learned_near_the_ground() {
+        // Learned aloft: 2 N of missing lift; at the hold the observer reads
+        // 1 N of extra lift (a ground effect stronger than the model's).
+        assert_eq!(predicted_vertical_force(&S, -1.0, Some(2.0)), 2.0);
+        // A deficit grown near the ground is kept.
+        assert_eq!(predicted_vertical_force(&S, 3.0, Some(2.0)), 3.0);
+        assert_eq!(predicted_vertical_force(&S, -1.0, None), -1.0);
+        let off = FlareSettings {
+            aloft_force_floor: false,
+            ..S
+        };
+        assert_eq!(predicted_vertical_force(&off, -1.0, Some(2.0)), -1.0);
+    }
+
+    #[test]
+    fn the_prediction_holding_the_attitude_touches_down_earlier_when_rolled() {
+        use atmo_core::RobotConfig;
+        let model = Model::new(&RobotConfig::atmo());
+        let tilt = 60f64.to_radians();
+        let ground = GroundPlane::level(0.0);
+        // Level, the wheels 4 cm above the ground (the clearance grows
+        // one-for-one with the height), falling at 0.1 m/s; then rolled.
+        let mut state = State::zeros();
+        state[idx::Z] = wheel_clearance(&model.at_tilt(tilt), &ground, &state, 0.125) - 0.04;
+        state[idx::VZ] = 0.1;
+        state[idx::ROLL] = 4f64.to_radians();
+        let mut m = TouchdownModel {
+            model: &model,
+            surface: None,
+            ground,
+            disturbance: Vector6::zeros(),
+            wheel_radius: 0.125,
+            tilt_rate: 22.5f64.to_radians(),
+            tilt_max: 70f64.to_radians(),
+            thrust: 0.9,
+            hold_attitude: false,
+        };
+        let (level_tilt, level_v) = predict_touchdown(&m, &state, tilt, 0.005, 1.0).unwrap();
+        m.hold_attitude = true;
+        let (rolled_tilt, rolled_v) = predict_touchdown(&m, &state, tilt, 0.005, 1.0).unwrap();
+        // The rolled robot's low side (hub and rim) is nearer the ground.
+        assert!(rolled_tilt < level_tilt, "{rolled_tilt} {level_tilt}");
+        assert!(rolled_v > 0.0 && level_v > 0.0);
+        // At a level state the two are the same prediction.
+        state[idx::ROLL] = 0.0;
+        let held = predict_touchdown(&m, &state, tilt, 0.005, 1.0);
+        m.hold_attitude = false;
+        assert_eq!(held, predict_touchdown(&m, &state, tilt, 0.005, 1.0));
     }
 }

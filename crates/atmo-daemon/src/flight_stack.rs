@@ -11,14 +11,20 @@
 //! after the outputs have been sent.
 
 use atmo_core::control::{DiffDrive, WheelRates, blending_alpha};
+use atmo_core::ground_effect::GroundedBody;
 use atmo_core::ground_plane::{LEVEL_NORMAL, unit_ground_normal};
 use atmo_core::model::{Input, State, TiltedBody, idx};
 use atmo_core::{GroundPlane, Linkage, Model, RobotConfig};
-use atmo_mpc::{AlphaSchedule, Mpc, MpcSettings, Outcome, SolverCuts, TiltPlan, wheel_clearance};
+use atmo_mpc::{
+    AlphaSchedule, Mpc, MpcSettings, Outcome, SolverCuts, TiltPlan, wheel_clearance,
+    wheel_clearance_at_attitude,
+};
 use nalgebra::Vector3;
 
 use crate::error::{DaemonError, Result};
-use crate::flare::{Flare, FlareSettings, TouchdownModel, predict_touchdown};
+use crate::flare::{
+    Flare, FlareSettings, TouchdownModel, predict_touchdown, predicted_vertical_force,
+};
 use crate::ground_model::{Surface, ground_surface};
 use crate::modes::{Conditions, Mode, Thresholds, next_mode};
 use crate::observer::{DisturbanceObserver, ObserverSettings};
@@ -39,6 +45,10 @@ const REPLAN_ITERATIONS: usize = 4;
 
 /// The flare predicts its touchdown within this of its hold clearance, m.
 const PREDICTION_RANGE: f64 = 0.15;
+
+/// Below this model ground-effect gain the observer's force counts as
+/// learned aloft (the flare's force floor).
+const ALOFT_GAIN: f64 = 0.01;
 
 /// The flight stack.
 pub struct FlightStack {
@@ -94,6 +104,10 @@ pub struct FlightStack {
     /// The body at the transition's tilt limit (the flare's clearance),
     /// frozen once at start-up.
     limit_body: TiltedBody,
+    /// The observer's vertical body force learned aloft: its last value
+    /// before the transition where the model's ground effect was below 1 %
+    /// (the flare's prediction takes it as a floor, `flare` module docs).
+    aloft_force: Option<f64>,
 }
 
 impl FlightStack {
@@ -196,6 +210,7 @@ impl FlightStack {
             transition_limit: 0.0,
             ground_effect: surface,
             limit_body: model.at_tilt(lim.tilt_transition_max()),
+            aloft_force: None,
             model,
             settings,
         })
@@ -405,6 +420,12 @@ impl FlightStack {
         };
         self.observe(mode, tilt);
         status.disturbance = self.observer.wrench().into();
+        if mode.is_airborne_mode()
+            && mode != Mode::Transition
+            && self.model_ground_gain(&state, tilt).abs() < ALOFT_GAIN
+        {
+            self.aloft_force = Some(self.observer.wrench()[2]);
+        }
 
         let thrust = self.thrust(mode, &state, estimate_fresh, pilot, tilt, &mut status);
         let tilt_velocity = match self.mpc_tilt_rate.take() {
@@ -456,6 +477,32 @@ impl FlightStack {
             self.observer.pause();
         } else {
             self.observer.reset();
+            self.aloft_force = None;
+        }
+    }
+
+    /// The model's ground-effect gain `g` at `state` and `tilt`, the
+    /// rotors weighted by the last command (0 without a surface).
+    fn model_ground_gain(&self, state: &State, tilt: f64) -> f64 {
+        let Some(surface) = self.ground_effect.as_deref() else {
+            return 0.0;
+        };
+        let gains = GroundedBody {
+            body: self.model.at_tilt(tilt),
+            surface,
+            ground_z: self.last_ground_z,
+        }
+        .gains(state);
+        let total: f64 = self.last_thrust.iter().sum();
+        if total > 0.1 {
+            gains
+                .iter()
+                .zip(self.last_thrust.iter())
+                .map(|(g, u)| g * u)
+                .sum::<f64>()
+                / total
+        } else {
+            gains.iter().sum::<f64>() / 4.0
         }
     }
 
@@ -739,21 +786,39 @@ impl FlightStack {
         let Some(flare) = self.flare_settings else {
             return;
         };
-        // Near the hold only: the prediction costs up to 50 RK4 steps.
-        let near = self.flare_clearance(state) < flare.hold_clearance + PREDICTION_RANGE;
-        if self.mode != Mode::Transition || self.flare.committed() || !near {
+        if self.mode != Mode::Transition {
             return;
         }
-        let model = TouchdownModel {
+        let ground = self.ground_plane(state);
+        let mut model = TouchdownModel {
             model: &self.model,
             surface: self.ground_effect.as_deref(),
-            ground: self.ground_plane(state),
+            ground,
             disturbance: self.observer.wrench(),
             wheel_radius: self.wheel_radius,
             tilt_rate: self.tilt_rate_max,
             tilt_max: self.transition_tilt_max,
             thrust: flare.predicted_thrust,
+            hold_attitude: false,
         };
+        if self.flare.committed() {
+            // The late prediction: at the current tilt and attitude, 5 ms steps.
+            let body = self.model.at_tilt(self.last_tilt);
+            let clearance = wheel_clearance_at_attitude(&body, &ground, state, self.wheel_radius);
+            if self.flare.late_prediction_due(&flare, clearance) {
+                model.hold_attitude = true;
+                model.thrust = flare.late_predicted_thrust;
+                let late = predict_touchdown(&model, state, self.last_tilt, 0.005, 0.5);
+                self.flare.late_prediction(&flare, late.map(|(_, v)| v));
+            }
+            return;
+        }
+        // Near the hold only: the prediction costs up to 50 RK4 steps.
+        if self.flare_clearance(state) >= flare.hold_clearance + PREDICTION_RANGE {
+            return;
+        }
+        model.disturbance[2] =
+            predicted_vertical_force(&flare, model.disturbance[2], self.aloft_force);
         self.flare_prediction =
             predict_touchdown(&model, state, self.last_tilt, 0.01, 0.5).map(|(_, v)| v);
     }

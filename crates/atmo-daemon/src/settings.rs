@@ -198,5 +198,18 @@ fn validate_flare(c: &Checker, f: &FlareSettings) -> Result<(), CoreError> {
     )?;
     c.range("flare.lower_step", f.lower_step, 0.0..=0.1, "m")?;
     c.range("flare.lowest_hold", f.lowest_hold, -0.1..=0.5, "m")?;
+    c.range("flare.late_window", f.late_window, 0.0..=0.2, "m")?;
+    c.range(
+        "flare.late_predicted_thrust",
+        f.late_predicted_thrust,
+        0.0..=1.0,
+        "",
+    )?;
+    c.range(
+        "flare.late_impact_speed",
+        f.late_impact_speed,
+        0.0..=2.0,
+        "m/s",
+    )?;
     Ok(())
 }

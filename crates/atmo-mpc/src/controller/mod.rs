@@ -24,7 +24,7 @@ use crate::qp::{LinearizedHorizon, QpBackend, SolveReport};
 use crate::settings::{FeedbackMethod, Formulation, MpcSettings};
 
 use tilt_plan::TiltPlanner;
-pub use tilt_plan::{TiltPlan, wheel_clearance};
+pub use tilt_plan::{TiltPlan, wheel_clearance, wheel_clearance_at_attitude};
 
 pub use outcome::{
     AlphaSchedule, DegradedCause, FailureCause, FeedbackPath, HomotopyFallback, Outcome, SqpReport,

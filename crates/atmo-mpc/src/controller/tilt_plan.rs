@@ -178,6 +178,35 @@ pub fn wheel_clearance(
     x: &State,
     wheel_radius: f64,
 ) -> f64 {
+    clearance(body, ground, x, wheel_radius, Axles::Heading)
+}
+
+/// [`wheel_clearance`] with the axles turned by the full attitude too (the
+/// plant's geometry: a rolled robot's lower rims reach further down). At a
+/// level attitude the two are equal.
+pub fn wheel_clearance_at_attitude(
+    body: &TiltedBody,
+    ground: &GroundPlane,
+    x: &State,
+    wheel_radius: f64,
+) -> f64 {
+    clearance(body, ground, x, wheel_radius, Axles::Attitude)
+}
+
+/// What turns the axles of [`clearance`].
+#[derive(Clone, Copy, PartialEq)]
+enum Axles {
+    Heading,
+    Attitude,
+}
+
+fn clearance(
+    body: &TiltedBody,
+    ground: &GroundPlane,
+    x: &State,
+    wheel_radius: f64,
+    axles: Axles,
+) -> f64 {
     let rot = rotation(x[idx::YAW], x[idx::PITCH], x[idx::ROLL]);
     let (sy, cy) = sin_cos(x[idx::YAW]);
     let n = &ground.normal;
@@ -190,7 +219,12 @@ pub fn wheel_clearance(
                 x[idx::Y] + rot.row(1).transpose().dot(r),
                 x[idx::Z] + rot[(2, 0)] * r.x + rot[(2, 1)] * r.y + rot[(2, 2)] * r.z,
             );
-            let along = n.z * a.z + n.x * (cy * a.x - sy * a.y) + n.y * (sy * a.x + cy * a.y);
+            let along = match axles {
+                Axles::Heading => {
+                    n.z * a.z + n.x * (cy * a.x - sy * a.y) + n.y * (sy * a.x + cy * a.y)
+                }
+                Axles::Attitude => n.dot(&(rot * a)),
+            };
             let reach = wheel_radius * (1.0 - along * along).max(0.0).sqrt();
             ground.height(&hub) - reach
         })
@@ -493,7 +527,10 @@ impl Mpc {
 
 #[cfg(test)]
 mod tests {
-    use super::{GroundPlane, State, Vector3, idx, sin_cos, touchdown_stage, wheel_clearance};
+    use super::{
+        GroundPlane, State, Vector3, idx, rotation, sin_cos, touchdown_stage, wheel_clearance,
+        wheel_clearance_at_attitude,
+    };
     use atmo_core::{Model, RobotConfig};
 
     #[test]
@@ -562,6 +599,40 @@ mod tests {
                 assert_eq!(c, expected, "{deg} deg, pitch {pitch}, roll {roll}");
             }
         }
+    }
+
+    #[test]
+    fn clearance_at_attitude_turns_the_axles_with_the_body() {
+        // Level: the same as the heading-only clearance, bit for bit.
+        let model = Model::new(&RobotConfig::atmo());
+        let body = model.at_tilt(66f64.to_radians());
+        let ground = GroundPlane::level(0.0);
+        let mut x = State::zeros();
+        x[idx::Z] = -0.2;
+        x[idx::YAW] = 0.4;
+        assert_eq!(
+            wheel_clearance_at_attitude(&body, &ground, &x, 0.125),
+            wheel_clearance(&body, &ground, &x, 0.125)
+        );
+        // Rolled by 3 deg: each rim reaches down by R_w sqrt(1 - (z . R a_i)^2)
+        // (the axle turned by the whole rotation), computed here per wheel.
+        x[idx::ROLL] = 3f64.to_radians();
+        let rot = rotation(x[idx::YAW], x[idx::PITCH], x[idx::ROLL]);
+        let expected = body
+            .rotor_position
+            .iter()
+            .zip(&body.rotor_axis)
+            .map(|(r, a)| {
+                let hub_z = x[idx::Z] + (rot * r).z;
+                let along = (rot * a).z;
+                -hub_z - 0.125 * (1.0 - along * along).sqrt()
+            })
+            .fold(f64::INFINITY, f64::min);
+        let c = wheel_clearance_at_attitude(&body, &ground, &x, 0.125);
+        assert!((c - expected).abs() < 1e-12, "{c} {expected}");
+        // The heading-only clearance differs there by millimetres.
+        let level_axles = wheel_clearance(&body, &ground, &x, 0.125);
+        assert!((level_axles - c).abs() > 1e-3, "{level_axles} {c}");
     }
 
     #[test]
