@@ -61,6 +61,7 @@ fn flare_prediction(c: &mut Criterion) {
         tilt_rate: robot.limits.tilt_rate_max,
         tilt_max: robot.limits.tilt_transition_max(),
         thrust: 0.9,
+        hold_attitude: false,
     };
     let mut state = State::zeros();
     state[idx::Z] = -0.25;
@@ -69,6 +70,30 @@ fn flare_prediction(c: &mut Criterion) {
     assert!(landed.is_some(), "the benchmark's tilt-up touches down");
     c.bench_function("flare/predict_touchdown", |b| {
         b.iter(|| predict_touchdown(&touchdown, &state, tilt, 0.01, 0.5));
+    });
+    // The late prediction after the commit: from 65 deg with the wheels
+    // 3 cm up (the window's edge), rolled 3 deg, falling at 0.3 m/s, the
+    // attitude held, 5 ms steps.
+    let late = TouchdownModel {
+        hold_attitude: true,
+        thrust: 0.95,
+        ..touchdown
+    };
+    let tilt = 65f64.to_radians();
+    let mut state = State::zeros();
+    state[idx::ROLL] = 3f64.to_radians();
+    state[idx::VZ] = 0.3;
+    let body = model.at_tilt(tilt);
+    state[idx::Z] = atmo_mpc::wheel_clearance_at_attitude(
+        &body,
+        &touchdown.ground,
+        &state,
+        touchdown.wheel_radius,
+    ) - 0.03;
+    let landed = predict_touchdown(&late, &state, tilt, 0.005, 0.5);
+    assert!(landed.is_some(), "the late prediction touches down");
+    c.bench_function("flare/predict_touchdown_late", |b| {
+        b.iter(|| predict_touchdown(&late, &state, tilt, 0.005, 0.5));
     });
 }
 
