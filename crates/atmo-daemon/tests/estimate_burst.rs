@@ -22,8 +22,9 @@ use atmo_daemon::replay::{CutReplay, RecordedFlight, replay};
 /// The burst: tick 356 took the estimate accepted 39 us after tick 355's.
 const BURST_TICK: u64 = 356;
 
-/// The fixture. Its logged flight.toml predates `min_interval`, which the
-/// current parser requires: the tests add it.
+/// The fixture. Its logged flight.toml predates `min_interval` and the
+/// flare's `aloft_force_floor` and `late_*` keys, which the current parser
+/// requires: the tests add them (the flare's as off, as it was flown).
 fn flight() -> RecordedFlight {
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/sitl_estimate_burst.mcap");
     RecordedFlight::read(path, "/atmo/status").unwrap()
@@ -44,6 +45,17 @@ fn thrust_after_the_burst(min_interval: &str) -> (f64, f64, bool) {
     files.flight.text = files.flight.text.replacen(
         anchor,
         &format!("{anchor}\nmin_interval = {min_interval}"),
+        1,
+    );
+    let flare_anchor = "\nlowest_hold = ";
+    assert!(
+        files.flight.text.contains(flare_anchor),
+        "the logged flight.toml changed"
+    );
+    files.flight.text = files.flight.text.replacen(
+        flare_anchor,
+        "\naloft_force_floor = false\nlate_window = 0.0\nlate_predicted_thrust = 0.95\n\
+         late_impact_speed = 0.4\nlowest_hold = ",
         1,
     );
     let config = RecordedFlight::config(&files).unwrap();
