@@ -241,9 +241,9 @@ impl Flare {
 
     /// Whether a late prediction after the commit is due: committed, not yet
     /// spending the margin, the wheels within `late_window` (m) of the ground
-    /// at the current tilt and attitude.
-    pub fn late_prediction_due(&self, s: &FlareSettings, clearance: f64) -> bool {
-        self.committed && !self.spends_late && s.late_window > 0.0 && clearance < s.late_window
+    /// at the current tilt and attitude (`clearance`, evaluated only then).
+    pub fn late_prediction_due(&self, s: &FlareSettings, clearance: impl FnOnce() -> f64) -> bool {
+        self.committed && !self.spends_late && s.late_window > 0.0 && clearance() < s.late_window
     }
 
     /// Takes a late prediction's impact speed (m/s): too fast spends the
@@ -456,18 +456,18 @@ mod tests {
     #[test]
     fn a_late_prediction_too_fast_spends_the_margin_until_the_touchdown() {
         let mut f = Flare::default();
-        assert!(!f.late_prediction_due(&S, 0.01), "not before the commit");
+        assert!(!f.late_prediction_due(&S, || 0.01), "not before the commit");
         assert!(f.update(&S, 0, 0.2, 0.2, Some(0.2), 0.0));
         assert_eq!(f.thrust_max(&S), None, "as strong as its file");
-        assert!(!f.late_prediction_due(&S, 0.05), "outside the window");
-        assert!(f.late_prediction_due(&S, 0.02));
+        assert!(!f.late_prediction_due(&S, || 0.05), "outside the window");
+        assert!(f.late_prediction_due(&S, || 0.02));
         f.late_prediction(&S, Some(0.39));
         assert_eq!(f.thrust_max(&S), None, "predicted slow enough");
         f.late_prediction(&S, None);
         assert_eq!(f.thrust_max(&S), None, "no touchdown predicted");
         f.late_prediction(&S, Some(0.41));
         assert_eq!(f.thrust_max(&S), Some(1.0));
-        assert!(!f.late_prediction_due(&S, 0.02), "decided once");
+        assert!(!f.late_prediction_due(&S, || 0.02), "decided once");
         f.reset();
         assert_eq!(f.thrust_max(&S), None);
         let off = FlareSettings {
@@ -475,7 +475,7 @@ mod tests {
             ..S
         };
         assert!(f.update(&off, 0, 0.2, 0.2, Some(0.2), 0.0));
-        assert!(!f.late_prediction_due(&off, 0.0));
+        assert!(!f.late_prediction_due(&off, || 0.0));
     }
 
     #[test]

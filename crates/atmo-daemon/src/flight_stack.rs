@@ -420,12 +420,6 @@ impl FlightStack {
         };
         self.observe(mode, tilt);
         status.disturbance = self.observer.wrench().into();
-        if mode.is_airborne_mode()
-            && mode != Mode::Transition
-            && self.model_ground_gain(&state, tilt).abs() < ALOFT_GAIN
-        {
-            self.aloft_force = Some(self.observer.wrench()[2]);
-        }
 
         let thrust = self.thrust(mode, &state, estimate_fresh, pilot, tilt, &mut status);
         let tilt_velocity = match self.mpc_tilt_rate.take() {
@@ -478,6 +472,17 @@ impl FlightStack {
         } else {
             self.observer.reset();
             self.aloft_force = None;
+        }
+    }
+
+    /// Keeps the observer's vertical force while it counts as learned
+    /// aloft: airborne before the transition, the model's ground-effect gain
+    /// below `ALOFT_GAIN` (in the preparation: off the feedback's path).
+    fn learn_aloft_force(&mut self, state: &State) {
+        if self.mode != Mode::Transition
+            && self.model_ground_gain(state, self.last_tilt).abs() < ALOFT_GAIN
+        {
+            self.aloft_force = Some(self.observer.wrench()[2]);
         }
     }
 
@@ -803,8 +808,10 @@ impl FlightStack {
         };
         if self.flare.committed() {
             // The late prediction: at the current tilt and attitude, 5 ms steps.
-            let body = self.model.at_tilt(self.last_tilt);
-            let clearance = wheel_clearance_at_attitude(&body, &ground, state, self.wheel_radius);
+            let clearance = || {
+                let body = self.model.at_tilt(self.last_tilt);
+                wheel_clearance_at_attitude(&body, &ground, state, self.wheel_radius)
+            };
             if self.flare.late_prediction_due(&flare, clearance) {
                 model.hold_attitude = true;
                 model.thrust = flare.late_predicted_thrust;
@@ -858,6 +865,7 @@ impl FlightStack {
         };
         self.fill_reference(&est.state);
         self.configure_mpc(&est.state);
+        self.learn_aloft_force(&est.state);
         self.predict_flare(&est.state);
         if let Ok(prep) = self.mpc.prepare() {
             self.last_preparation_time = prep.as_secs_f64();
