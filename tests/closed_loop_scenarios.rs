@@ -276,6 +276,30 @@ fn assert_landed_past_64_deg(s: &Summary) {
     );
 }
 
+/// Run `seed` of the wheel landing's Monte Carlo flown with a rule of the
+/// flare (`with`) and without it (`without`): neither crashes, and only the
+/// flight with the rule meets issue 17's criterion. Returns both summaries.
+fn with_and_without(
+    seed: u64,
+    with: &ControllerConfig,
+    without: &ControllerConfig,
+    rule: &str,
+) -> (Summary, Summary) {
+    let run = monte_carlo::randomized(&scenario("wheel_landing"), seed);
+    let a = fly(&run, with, |_| {}).unwrap();
+    let b = fly(&run, without, |_| {}).unwrap();
+    eprintln!("run {seed} with {rule}: {a:?}\nwithout: {b:?}");
+    assert!(!a.crashed && !b.crashed);
+    assert!(
+        !monte_carlo::landed_past_64_deg(&b),
+        "without {rule} issue 17's criterion was met too: {:.2} deg at {:.3} m/s",
+        tilt(&b),
+        impact(&b)
+    );
+    assert_landed_past_64_deg(&a);
+    (a, b)
+}
+
 #[test]
 fn a_robot_weaker_than_its_file_spends_its_attitude_margin_after_the_flare_commits() {
     // Run 21 of `fly --runs 200 --seed 1`: thrust over weight 0.935 of the
@@ -284,8 +308,6 @@ fn a_robot_weaker_than_its_file_spends_its_attitude_margin_after_the_flare_commi
     // commit as well: the margin spent buys impact speed at the same tilt
     // or more (measured 64.8 deg at 0.32 m/s against 64.4 deg at 0.41 m/s;
     // before the level weight, 65.1 deg at 0.33 against 63.8 at 0.38).
-    let weak = monte_carlo::randomized(&scenario("wheel_landing"), 21);
-    let spending = fly(&weak, &controller(), |_| {}).unwrap();
     let mut keeping_margin = controller();
     keeping_margin.flight.flare.weak_thrust_max = keeping_margin
         .mpc
@@ -293,9 +315,8 @@ fn a_robot_weaker_than_its_file_spends_its_attitude_margin_after_the_flare_commi
         .as_ref()
         .expect("the shipped MPC plans the tilt")
         .thrust_max;
-    let keeping = fly(&weak, &keeping_margin, |_| {}).unwrap();
-    eprintln!("spending the margin: {spending:?}\nkeeping it: {keeping:?}");
-    assert!(!spending.crashed && !keeping.crashed);
+    let (spending, keeping) =
+        with_and_without(21, &controller(), &keeping_margin, "spending the margin");
     assert!(
         spending.max_mean_thrust > 0.96,
         "the margin was not spent: max mean thrust {:.3}",
@@ -314,13 +335,6 @@ fn a_robot_weaker_than_its_file_spends_its_attitude_margin_after_the_flare_commi
         impact(&spending),
         impact(&keeping)
     );
-    assert!(
-        !monte_carlo::landed_past_64_deg(&keeping),
-        "keeping the margin met issue 17's criterion too: {:.2} deg at {:.3} m/s",
-        tilt(&keeping),
-        impact(&keeping)
-    );
-    assert_landed_past_64_deg(&spending);
 }
 
 #[test]
@@ -332,29 +346,18 @@ fn a_ground_effect_surplus_learned_at_the_hold_is_not_credited_to_the_tilt_up() 
     // to the prediction commits too early (docs/landing.md "A ground-effect
     // surplus not credited to the tilt-up"). Measured: 66.28 deg at
     // 0.315 m/s not crediting it, 67.09 deg at 0.409 m/s crediting it.
-    let strong_ground = monte_carlo::randomized(&scenario("wheel_landing"), 197);
     let mut crediting = controller();
     crediting.flight.flare.aloft_force_floor = false;
     crediting.flight.flare.late_window = 0.0;
     let mut floored = controller();
     floored.flight.flare.late_window = 0.0;
-    let credited = fly(&strong_ground, &crediting, |_| {}).unwrap();
-    let not_credited = fly(&strong_ground, &floored, |_| {}).unwrap();
-    eprintln!("the surplus credited: {credited:?}\nnot credited: {not_credited:?}");
-    assert!(!credited.crashed && !not_credited.crashed);
+    let (not_credited, credited) = with_and_without(197, &floored, &crediting, "the force floor");
     assert!(
         impact(&not_credited) <= impact(&credited) - 0.05,
         "impact {:.3} m/s not crediting the surplus, {:.3} crediting it",
         impact(&not_credited),
         impact(&credited)
     );
-    assert!(
-        !monte_carlo::landed_past_64_deg(&credited),
-        "crediting the surplus met issue 17's criterion too: {:.2} deg at {:.3} m/s",
-        tilt(&credited),
-        impact(&credited)
-    );
-    assert_landed_past_64_deg(&not_credited);
 }
 
 #[test]
@@ -364,13 +367,9 @@ fn a_tilt_up_predicted_fast_near_the_ground_spends_the_attitude_margin() {
     // with its attitude held, is faster than 0.4 m/s. Measured: 66.90 deg
     // at 0.386 m/s spending the margin from there (max mean thrust 0.998),
     // 66.88 deg at 0.403 m/s without the late prediction.
-    let fast = monte_carlo::randomized(&scenario("wheel_landing"), 1118);
     let mut never = controller();
     never.flight.flare.late_window = 0.0;
-    let late = fly(&fast, &controller(), |_| {}).unwrap();
-    let kept = fly(&fast, &never, |_| {}).unwrap();
-    eprintln!("the late prediction: {late:?}\nwithout it: {kept:?}");
-    assert!(!late.crashed && !kept.crashed);
+    let (late, kept) = with_and_without(1118, &controller(), &never, "the late prediction");
     assert!(
         late.max_mean_thrust > 0.96,
         "the margin was not spent: max mean thrust {:.3}",
@@ -383,8 +382,6 @@ fn a_tilt_up_predicted_fast_near_the_ground_spends_the_attitude_margin() {
         impact(&late),
         impact(&kept)
     );
-    assert!(!monte_carlo::landed_past_64_deg(&kept));
-    assert_landed_past_64_deg(&late);
 }
 
 /// The larger of roll and pitch (deg, the plant's truth) on the last tick of

@@ -30,6 +30,12 @@ fn flight() -> RecordedFlight {
     RecordedFlight::read(path, "/atmo/status").unwrap()
 }
 
+/// Adds `keys` (TOML lines) to the logged `text` after its first `anchor`.
+fn add_keys_after(text: &mut String, anchor: &str, keys: &str) {
+    assert!(text.contains(anchor), "the logged flight.toml changed");
+    *text = text.replacen(anchor, &format!("{anchor}\n{keys}"), 1);
+}
+
 /// Mean rotor command of the five ticks after the burst (their estimates
 /// still show the robot descending at 0.3 m/s as commanded: the fall it
 /// caused starts later), as logged and as replayed with the observer's
@@ -37,26 +43,17 @@ fn flight() -> RecordedFlight {
 fn thrust_after_the_burst(min_interval: &str) -> (f64, f64, bool) {
     let flight = flight();
     let mut files = flight.files.clone();
-    let anchor = "max_torque = 1.0";
-    assert!(
-        files.flight.text.contains(anchor),
-        "the logged flight.toml changed"
+    let text = &mut files.flight.text;
+    add_keys_after(
+        text,
+        "max_torque = 1.0",
+        &format!("min_interval = {min_interval}"),
     );
-    files.flight.text = files.flight.text.replacen(
-        anchor,
-        &format!("{anchor}\nmin_interval = {min_interval}"),
-        1,
-    );
-    let flare_anchor = "\nlowest_hold = ";
-    assert!(
-        files.flight.text.contains(flare_anchor),
-        "the logged flight.toml changed"
-    );
-    files.flight.text = files.flight.text.replacen(
-        flare_anchor,
-        "\naloft_force_floor = false\nlate_window = 0.0\nlate_predicted_thrust = 0.95\n\
-         late_impact_speed = 0.4\nlowest_hold = ",
-        1,
+    add_keys_after(
+        text,
+        "lowest_hold = 0.0",
+        "aloft_force_floor = false\nlate_window = 0.0\nlate_predicted_thrust = 0.95\n\
+         late_impact_speed = 0.4",
     );
     let config = RecordedFlight::config(&files).unwrap();
     let (mut logged, mut replayed, mut n) = (0.0, 0.0, 0.0);
