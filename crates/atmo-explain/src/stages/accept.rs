@@ -13,8 +13,13 @@
 //!    with the same model refitted without it.
 //!
 //! The rest is listed as rejected, with both numbers and the test that
-//! decided. The fit is then redone with the accepted effects only (once:
-//! the tests are not repeated on the reduced model).
+//! decided. The fit is then redone with the accepted effects only, and
+//! both tests are repeated on that reduced model: an effect that helped
+//! only beside a rejected one (the prediction it is judged against is then
+//! a model nobody will fly) is rejected in its turn, the worst first, until
+//! every effect left improves the prediction of the effects left. So the
+//! model reported is one whose every effect earns its place against the
+//! others in it.
 
 use atmo_core::RobotConfig;
 use atmo_plant::PlantTemplate;
@@ -25,6 +30,7 @@ use crate::physical::Physical;
 use crate::recording::Recording;
 use crate::replay::{self, ReplayError};
 use crate::select::{FOLDS, fold_of};
+use crate::stages::fit::SWAP_RECOVERY;
 use crate::stages::report::effect_parameters;
 use crate::stages::{Fit, Residuals};
 use crate::{HORIZON, Result};
@@ -137,8 +143,13 @@ pub enum Decision {
     },
     /// A parameter outside its physical range, or none identified.
     NotIdentified { reason: String },
-    /// Lowers the one-step residual but not the 0.5 s prediction.
-    RejectedByPrediction { with: f64, without: f64 },
+    /// Lowers the one-step residual but not the 0.5 s prediction;
+    /// `reduced` when judged on the model left after other rejections.
+    RejectedByPrediction {
+        with: f64,
+        without: f64,
+        reduced: bool,
+    },
 }
 
 impl Decision {
@@ -155,9 +166,18 @@ impl Decision {
                 "found by the held-out residual alone (no 0.5 s stretch to predict)".into()
             }
             Decision::NotIdentified { reason } => format!("not identified: {reason}"),
-            Decision::RejectedByPrediction { with, without } => format!(
-                "rejected by the 0.5 s prediction: lowers the held-out residual, but the velocity \
-                 error is {with:.4} m/s with it against {without:.4} m/s without"
+            Decision::RejectedByPrediction {
+                with,
+                without,
+                reduced,
+            } => format!(
+                "rejected by the 0.5 s prediction{}: lowers the held-out residual, but the \
+                 velocity error is {with:.4} m/s with it against {without:.4} m/s without",
+                if *reduced {
+                    " of the model left after the other rejections"
+                } else {
+                    ""
+                }
             ),
         }
     }
@@ -242,100 +262,207 @@ pub fn accept_effects(
         ));
     }
     let chosen = fit.chosen.clone();
-    let with = (!starts.is_empty() && !chosen.is_empty())
-        .then(|| heldout_multistep(rec, robot, res, &fit, &chosen, &starts));
+    // First round, on the whole selection's fit: every range, then the
+    // prediction with each effect against the selection without it.
+    let mut tested = Vec::new();
     for &e in &chosen {
         // Drag is part of a wind finding: judged with it.
         if e == Effect::Drag && chosen.contains(&Effect::Wind) {
             continue;
         }
-        if let Some(reason) = identification_failure(&fit, e).or_else(|| wind_failure(&fit, e)) {
-            decisions.push((e, Decision::NotIdentified { reason }));
-            continue;
+        match failure(&fit, e, &chosen, &chosen) {
+            // (No calibration to swap in yet: the selection's are all in.)
+            Some((reason, _)) => decisions.push((e, Decision::NotIdentified { reason })),
+            None => tested.push(e),
         }
-        let decision = match &with {
-            Some(w) if w.starts > 0 => {
-                let rest: Vec<Effect> = chosen
-                    .iter()
-                    .copied()
-                    .filter(|x| *x != e && !(e == Effect::Wind && *x == Effect::Drag))
-                    .collect();
-                let wo = heldout_multistep(rec, robot, res, &fit, &rest, &starts);
-                let (a, b) = (w.velocity_norm(), wo.velocity_norm());
-                if wo.starts > 0 && a < (1.0 - PREDICTION_MARGIN) * b {
-                    Decision::Found {
-                        with: Some(a),
-                        without: Some(b),
-                    }
-                } else {
-                    Decision::RejectedByPrediction {
-                        with: a,
-                        without: b,
-                    }
-                }
-            }
-            Some(w) => Decision::NotIdentified {
-                reason: format!(
-                    "the fitted plant file could not be replayed from any of the {} starts",
-                    starts.len().max(w.starts)
-                ),
-            },
-            None => Decision::Found {
-                with: None,
-                without: None,
-            },
-        };
-        decisions.push((e, decision));
     }
-    let rejected: Vec<Effect> = decisions
+    decisions.extend(prediction_verdicts(
+        rec, robot, res, &fit, &chosen, &tested, &starts, false,
+    ));
+    let mut kept: Vec<Effect> = chosen
         .iter()
-        .filter(|(e, d)| chosen.contains(e) && !matches!(d, Decision::Found { .. }))
-        .flat_map(|(e, _)| {
-            if *e == Effect::Wind {
-                vec![Effect::Wind, Effect::Drag]
-            } else {
-                vec![*e]
+        .copied()
+        .filter(|e| {
+            let group_found = |g: Effect| {
+                decisions
+                    .iter()
+                    .any(|(x, d)| *x == g && matches!(d, Decision::Found { .. }))
+            };
+            match e {
+                Effect::Drag if chosen.contains(&Effect::Wind) => group_found(Effect::Wind),
+                _ => group_found(*e),
             }
         })
         .collect();
+    // Later rounds, on the model left: the refit moves the kept effects'
+    // values, so their ranges are checked again, and each must still
+    // improve the prediction of the effects left (the worst one goes
+    // first, then the rest are judged again without it). A physics
+    // effect is only ever removed, a calibration only comes back in place
+    // of one, so this ends.
+    let mut settled = kept == chosen;
+    while !settled {
+        fit.restrict(&kept);
+        if let Some((e, (reason, swap))) = kept
+            .iter()
+            .find_map(|&e| failure(&fit, e, &kept, &chosen).map(|f| (e, f)))
+        {
+            let reason = format!("after the refit without the rejected effects, {reason}");
+            reject(
+                &mut decisions,
+                &mut kept,
+                e,
+                &Decision::NotIdentified { reason },
+            );
+            if let Some(c) = swap.filter(|c| !kept.contains(c)) {
+                kept.push(c);
+            }
+            continue;
+        }
+        let tested: Vec<Effect> = kept
+            .iter()
+            .copied()
+            .filter(|e| !(*e == Effect::Drag && kept.contains(&Effect::Wind)))
+            .collect();
+        let verdicts = prediction_verdicts(rec, robot, res, &fit, &kept, &tested, &starts, true);
+        let worst = verdicts
+            .iter()
+            .filter(|(_, d)| !matches!(d, Decision::Found { .. }))
+            .max_by(|a, b| prediction_ratio(&a.1).total_cmp(&prediction_ratio(&b.1)))
+            .cloned();
+        if let Some((e, d)) = worst {
+            reject(&mut decisions, &mut kept, e, &d);
+        } else {
+            // Every effect left earns its place: its numbers are the
+            // final model's.
+            for (e, d) in verdicts {
+                set_decision(&mut decisions, e, d);
+            }
+            settled = true;
+        }
+    }
     // Drag shares the wind's verdict.
     if let Some((_, d)) = decisions.iter().find(|(e, _)| *e == Effect::Wind) {
         let d = d.clone();
-        decisions.push((Effect::Drag, d));
-    }
-    if !rejected.is_empty() {
-        let mut kept: Vec<Effect> = chosen
-            .iter()
-            .copied()
-            .filter(|e| !rejected.contains(e))
-            .collect();
-        fit.restrict(&kept);
-        // The refit moves the kept effects' values: their ranges are
-        // checked again until none fails (the prediction test is not
-        // repeated).
-        while let Some((e, reason)) = kept.iter().find_map(|&e| {
-            identification_failure(&fit, e)
-                .or_else(|| wind_failure(&fit, e))
-                .map(|r| (e, r))
-        }) {
-            let gone: Vec<Effect> =
-                if e == Effect::Wind || (e == Effect::Drag && kept.contains(&Effect::Wind)) {
-                    vec![Effect::Wind, Effect::Drag]
-                } else {
-                    vec![e]
-                };
-            for g in &gone {
-                let reason = format!("after the refit without the rejected effects, {reason}");
-                match decisions.iter_mut().find(|d| d.0 == *g) {
-                    Some(d) => d.1 = Decision::NotIdentified { reason },
-                    None => decisions.push((*g, Decision::NotIdentified { reason })),
-                }
-            }
-            kept.retain(|k| !gone.contains(k));
-            fit.restrict(&kept);
-        }
+        set_decision(&mut decisions, Effect::Drag, d);
     }
     Ok((fit, decisions))
+}
+
+/// Why effect `e` of the fit of `model` is not a finding, if it is not:
+/// out of range or not identified, a wind without a drag, or a physics
+/// effect a calibration explains as well (then with the best such
+/// calibration the selection `proposed`, to take its place: one rejected
+/// only because the physics did its work beside it).
+fn failure(
+    fit: &Fit,
+    e: Effect,
+    model: &[Effect],
+    proposed: &[Effect],
+) -> Option<(String, Option<Effect>)> {
+    identification_failure(fit, e)
+        .or_else(|| wind_failure(fit, e))
+        .map(|r| (r, None))
+        .or_else(|| {
+            calibration_confusion(fit, e, model).map(|(r, alike)| {
+                let swap = alike.into_iter().find(|c| proposed.contains(c));
+                (r, swap)
+            })
+        })
+}
+
+/// Record `d` as the decision on `e`, replacing an earlier one.
+fn set_decision(decisions: &mut Vec<(Effect, Decision)>, e: Effect, d: Decision) {
+    match decisions.iter_mut().find(|x| x.0 == e) {
+        Some(x) => x.1 = d,
+        None => decisions.push((e, d)),
+    }
+}
+
+/// Reject `e` (with the drag, when `e` is the wind or the drag of a wind
+/// finding) from the model `kept`, with the decision `d`.
+fn reject(
+    decisions: &mut Vec<(Effect, Decision)>,
+    kept: &mut Vec<Effect>,
+    e: Effect,
+    d: &Decision,
+) {
+    let gone = if e == Effect::Wind || (e == Effect::Drag && kept.contains(&Effect::Wind)) {
+        vec![Effect::Wind, Effect::Drag]
+    } else {
+        vec![e]
+    };
+    for g in &gone {
+        set_decision(decisions, *g, d.clone());
+    }
+    kept.retain(|k| !gone.contains(k));
+}
+
+/// How much an effect's rejection worsens the prediction (with / without;
+/// a model that could not be replayed is the worst).
+fn prediction_ratio(d: &Decision) -> f64 {
+    match d {
+        Decision::RejectedByPrediction { with, without, .. } => with / without,
+        _ => f64::INFINITY,
+    }
+}
+
+/// The 0.5 s prediction test of each effect of `tested` in the model
+/// `set`: the held-out velocity error with `set` against `set` without the
+/// effect (without the drag too, for the wind), refitted on the same
+/// regressors. `reduced` marks a model left after other rejections.
+#[allow(clippy::too_many_arguments)] // reason: the stage's inputs, passed through
+fn prediction_verdicts(
+    rec: &Recording,
+    robot: &RobotConfig,
+    res: &Residuals,
+    fit: &Fit,
+    set: &[Effect],
+    tested: &[Effect],
+    starts: &[(usize, usize)],
+    reduced: bool,
+) -> Vec<(Effect, Decision)> {
+    let with = (!starts.is_empty() && !set.is_empty())
+        .then(|| heldout_multistep(rec, robot, res, fit, set, starts));
+    tested
+        .iter()
+        .map(|&e| {
+            let decision = match &with {
+                Some(w) if w.starts > 0 => {
+                    let rest: Vec<Effect> = set
+                        .iter()
+                        .copied()
+                        .filter(|x| *x != e && !(e == Effect::Wind && *x == Effect::Drag))
+                        .collect();
+                    let wo = heldout_multistep(rec, robot, res, fit, &rest, starts);
+                    let (a, b) = (w.velocity_norm(), wo.velocity_norm());
+                    if wo.starts > 0 && a < (1.0 - PREDICTION_MARGIN) * b {
+                        Decision::Found {
+                            with: Some(a),
+                            without: Some(b),
+                        }
+                    } else {
+                        Decision::RejectedByPrediction {
+                            with: a,
+                            without: b,
+                            reduced,
+                        }
+                    }
+                }
+                Some(w) => Decision::NotIdentified {
+                    reason: format!(
+                        "the fitted plant file could not be replayed from any of the {} starts",
+                        starts.len().max(w.starts)
+                    ),
+                },
+                None => Decision::Found {
+                    with: None,
+                    without: None,
+                },
+            };
+            (e, decision)
+        })
+        .collect()
 }
 
 /// `r = (1 + s) / (1 + m) - 1` of the thrust scale s and mass error m of
@@ -384,6 +511,38 @@ fn wind_failure(fit: &Fit, e: Effect) -> Option<String> {
         "drag and wind not separable (no drag coefficient identified: {}): the steady \
          force is identified, not the wind speed behind it",
         listed.join(", ")
+    ))
+}
+
+/// A physics effect the data cannot tell apart from a calibration of the
+/// robot file (issue 16, items 3 and 4): a calibration that every flight
+/// pins down, swapped in for it, explains nearly as much, so it is the
+/// simpler account and no physics is claimed. On a flight at one heading,
+/// a steady wind and a centre of mass or thrust axis off the file push
+/// alike. The wind stands for its drag. With those calibrations, the best
+/// first.
+fn calibration_confusion(fit: &Fit, e: Effect, model: &[Effect]) -> Option<(String, Vec<Effect>)> {
+    if e.is_calibration() || (e == Effect::Drag && model.contains(&Effect::Wind)) {
+        return None;
+    }
+    let calibrations: Vec<Effect> = fit
+        .swaps_for(e)
+        .into_iter()
+        .filter(|f| f.is_calibration())
+        .collect();
+    if calibrations.is_empty() {
+        return None;
+    }
+    let names: Vec<&str> = calibrations.iter().map(|c| c.name()).collect();
+    Some((
+        format!(
+            "this data cannot tell it apart from {}, a calibration of the robot file (swapped \
+             in for it, it explains at least {:.0} % as much): the calibration is the simpler \
+             account, no physics is claimed",
+            names.join(", "),
+            100.0 * SWAP_RECOVERY
+        ),
+        calibrations,
     ))
 }
 

@@ -17,6 +17,10 @@ use crate::stages::{Residuals, Selection};
 /// was profiled.
 const WIND_REFINEMENTS: usize = 3;
 
+/// Share of what an effect explains that another must recover, swapped
+/// in for it, for the data to be unable to tell them apart.
+pub const SWAP_RECOVERY: f64 = 0.9;
+
 /// The fitted model.
 #[derive(Debug, Clone)]
 pub struct Fit {
@@ -89,6 +93,34 @@ impl Fit {
         self.theta = theta;
         self.cov = cov;
         self.physical = physical;
+    }
+
+    /// The effects outside the model that the data cannot tell apart from
+    /// its effect `e`: swapping `e` for one of them recovers at least
+    /// [`SWAP_RECOVERY`] of what `e` explains of the cross-validated
+    /// residual. The best swap first.
+    pub fn swaps_for(&self, e: Effect) -> Vec<Effect> {
+        let active = vec![true; self.stats.nseg()];
+        let cv = |set: &[Effect]| self.stats.cv(&self.columns_of(set), &active);
+        let with = self.stats.cv(&self.idx, &active);
+        let rest: Vec<Effect> = self.chosen.iter().copied().filter(|x| *x != e).collect();
+        let without = cv(&rest);
+        if !self.chosen.contains(&e) || without - with <= 0.0 {
+            return Vec::new();
+        }
+        let mut swaps: Vec<(Effect, f64)> = Effect::ALL
+            .iter()
+            .copied()
+            .filter(|f| !self.chosen.contains(f))
+            .map(|f| {
+                let mut swapped = rest.clone();
+                swapped.push(f);
+                (f, cv(&swapped))
+            })
+            .filter(|(_, cv_swap)| without - cv_swap >= SWAP_RECOVERY * (without - with))
+            .collect();
+        swaps.sort_by(|a, b| a.1.total_cmp(&b.1));
+        swaps.into_iter().map(|(f, _)| f).collect()
     }
 
     /// The fit's columns of the effects `set`: the wind, when profiled, is

@@ -71,24 +71,12 @@ pub fn effect_reports(
             more.push(e);
             (cv_sel - cv(&more)) / entries
         };
-        let mut indist = Vec::new();
-        if selected {
-            let rest: Vec<Effect> = chosen.iter().copied().filter(|x| *x != e).collect();
-            let without = cv(&rest);
-            for &f in &Effect::ALL {
-                if chosen.contains(&f) {
-                    continue;
-                }
-                let mut swapped = rest.clone();
-                swapped.push(f);
-                let cv_swap = cv(&swapped);
-                // The swap recovers at least 90 % of what e explains.
-                if without - cv_swap >= 0.9 * (without - cv_sel) && without - cv_sel > 0.0 {
-                    indist.push(f.name().to_string());
-                    pairs.push((e.name().to_string(), f.name().to_string()));
-                }
-            }
-        }
+        let indist: Vec<String> = fit
+            .swaps_for(e)
+            .iter()
+            .map(|f| f.name().to_string())
+            .collect();
+        pairs.extend(indist.iter().map(|f| (e.name().to_string(), f.clone())));
         let decided_by = decisions.iter().find(|d| d.0 == e).map_or_else(
             || {
                 "not selected: adding it lowers the held-out residual by less than the threshold"
