@@ -10,11 +10,14 @@
 //! 2. it improves the held-out 0.5 s multi-step prediction: the velocity
 //!    error at the horizon with the effects fitted without the start's fold
 //!    must be at least [`PREDICTION_MARGIN`] lower with the effect than
-//!    with the same model refitted without it.
+//!    with the same model refitted without it;
+//! 3. it is calibration, or physics no calibration explains as well
+//!    ([`Fit::swaps_for`]): the calibration every flight pins down is the
+//!    simpler account of what both explain.
 //!
 //! The rest is listed as rejected, with both numbers and the test that
 //! decided. The fit is then redone with the accepted effects only, and
-//! both tests are repeated on that reduced model: an effect that helped
+//! the tests are repeated on that reduced model: an effect that helped
 //! only beside a rejected one (the prediction it is judged against is then
 //! a model nobody will fly) is rejected in its turn, the worst first, until
 //! every effect left improves the prediction of the effects left. So the
@@ -519,8 +522,14 @@ fn wind_failure(fit: &Fit, e: Effect) -> Option<String> {
 /// pins down, swapped in for it, explains nearly as much, so it is the
 /// simpler account and no physics is claimed. On a flight at one heading,
 /// a steady wind and a centre of mass or thrust axis off the file push
-/// alike. The wind stands for its drag. With those calibrations, the best
-/// first.
+/// alike. With those calibrations, the best first.
+///
+/// A wind is judged by its own columns' swaps. A wind whose force the
+/// drag's columns carry (built at the profiled or refined wind) has
+/// nothing of its own to swap and is not judged here: the drag's swaps
+/// are not used, because on the fan flights an inertia or mass error swaps
+/// for the drag of a 4-9 m/s fan (docs/explain.md, "The acceptance
+/// repeated").
 fn calibration_confusion(fit: &Fit, e: Effect, model: &[Effect]) -> Option<(String, Vec<Effect>)> {
     if e.is_calibration() || (e == Effect::Drag && model.contains(&Effect::Wind)) {
         return None;
