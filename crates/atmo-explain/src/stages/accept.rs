@@ -270,7 +270,7 @@ pub fn accept_effects(
     let mut tested = Vec::new();
     for &e in &chosen {
         // Drag is part of a wind finding: judged with it.
-        if e == Effect::Drag && chosen.contains(&Effect::Wind) {
+        if rides_with_wind(e, &chosen) {
             continue;
         }
         match failure(&fit, e, &chosen, &chosen) {
@@ -285,16 +285,15 @@ pub fn accept_effects(
     let mut kept: Vec<Effect> = chosen
         .iter()
         .copied()
-        .filter(|e| {
-            let group_found = |g: Effect| {
-                decisions
-                    .iter()
-                    .any(|(x, d)| *x == g && matches!(d, Decision::Found { .. }))
+        .filter(|&e| {
+            let judged = if rides_with_wind(e, &chosen) {
+                Effect::Wind
+            } else {
+                e
             };
-            match e {
-                Effect::Drag if chosen.contains(&Effect::Wind) => group_found(Effect::Wind),
-                _ => group_found(*e),
-            }
+            decisions
+                .iter()
+                .any(|(x, d)| *x == judged && matches!(d, Decision::Found { .. }))
         })
         .collect();
     // Later rounds, on the model left: the refit moves the kept effects'
@@ -325,7 +324,7 @@ pub fn accept_effects(
         let tested: Vec<Effect> = kept
             .iter()
             .copied()
-            .filter(|e| !(*e == Effect::Drag && kept.contains(&Effect::Wind)))
+            .filter(|e| !rides_with_wind(*e, &kept))
             .collect();
         let verdicts = prediction_verdicts(rec, robot, res, &fit, &kept, &tested, &starts, true);
         let worst = verdicts
@@ -374,6 +373,22 @@ fn failure(
         })
 }
 
+/// Whether `e` is the drag of a wind finding in `model`: it is judged,
+/// kept and rejected with the wind.
+fn rides_with_wind(e: Effect, model: &[Effect]) -> bool {
+    e == Effect::Drag && model.contains(&Effect::Wind)
+}
+
+/// The effects that stand or fall with `e` in `model`: the wind and its
+/// drag together, any other effect alone.
+fn finding_of(e: Effect, model: &[Effect]) -> Vec<Effect> {
+    if e == Effect::Wind || rides_with_wind(e, model) {
+        vec![Effect::Wind, Effect::Drag]
+    } else {
+        vec![e]
+    }
+}
+
 /// Record `d` as the decision on `e`, replacing an earlier one.
 fn set_decision(decisions: &mut Vec<(Effect, Decision)>, e: Effect, d: Decision) {
     match decisions.iter_mut().find(|x| x.0 == e) {
@@ -390,11 +405,7 @@ fn reject(
     e: Effect,
     d: &Decision,
 ) {
-    let gone = if e == Effect::Wind || (e == Effect::Drag && kept.contains(&Effect::Wind)) {
-        vec![Effect::Wind, Effect::Drag]
-    } else {
-        vec![e]
-    };
+    let gone = finding_of(e, kept);
     for g in &gone {
         set_decision(decisions, *g, d.clone());
     }
@@ -432,11 +443,9 @@ fn prediction_verdicts(
         .map(|&e| {
             let decision = match &with {
                 Some(w) if w.starts > 0 => {
-                    let rest: Vec<Effect> = set
-                        .iter()
-                        .copied()
-                        .filter(|x| *x != e && !(e == Effect::Wind && *x == Effect::Drag))
-                        .collect();
+                    let gone = finding_of(e, set);
+                    let rest: Vec<Effect> =
+                        set.iter().copied().filter(|x| !gone.contains(x)).collect();
                     let wo = heldout_multistep(rec, robot, res, fit, &rest, starts);
                     let (a, b) = (w.velocity_norm(), wo.velocity_norm());
                     if wo.starts > 0 && a < (1.0 - PREDICTION_MARGIN) * b {
@@ -531,7 +540,7 @@ fn wind_failure(fit: &Fit, e: Effect) -> Option<String> {
 /// for the drag of a 4-9 m/s fan (docs/explain.md, "The acceptance
 /// repeated").
 fn calibration_confusion(fit: &Fit, e: Effect, model: &[Effect]) -> Option<(String, Vec<Effect>)> {
-    if e.is_calibration() || (e == Effect::Drag && model.contains(&Effect::Wind)) {
+    if e.is_calibration() || rides_with_wind(e, model) {
         return None;
     }
     let calibrations: Vec<Effect> = fit

@@ -100,12 +100,15 @@ impl Fit {
     /// [`SWAP_RECOVERY`] of what `e` explains of the cross-validated
     /// residual. The best swap first.
     pub fn swaps_for(&self, e: Effect) -> Vec<Effect> {
+        if !self.chosen.contains(&e) {
+            return Vec::new();
+        }
         let active = vec![true; self.stats.nseg()];
         let cv = |set: &[Effect]| self.stats.cv(&self.columns_of(set), &active);
         let with = self.stats.cv(&self.idx, &active);
         let rest: Vec<Effect> = self.chosen.iter().copied().filter(|x| *x != e).collect();
         let without = cv(&rest);
-        if !self.chosen.contains(&e) || without - with <= 0.0 {
+        if without - with <= 0.0 {
             return Vec::new();
         }
         let mut swaps: Vec<(Effect, f64)> = Effect::ALL
