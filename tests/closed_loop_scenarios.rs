@@ -112,23 +112,23 @@ fn wheel_landing_of_fig5_lands_past_66_deg_softly_and_drives_on() {
     };
     assert_wheel_landing(&s, 60.0);
     assert_saturated_transition(&s);
-    // Issue 17's targets for this landing (the flare, docs/landing.md):
-    // past the paper's 65 deg, soft, the thrust not saturated.
+    // The README landing's targets (the flare, docs/landing.md): past the
+    // paper's 65 deg, soft. The rotors may use their full range after the
+    // flare's commit, so the mean thrust is not bounded by the MPC's 0.95.
     let tilt = s.touchdown_tilt_deg.unwrap_or(0.0);
     let impact = s.impact_speed_mps.unwrap_or(f64::INFINITY);
     assert!(
         tilt >= 66.0,
-        "touchdown tilt {tilt:.2} deg, issue 17 wants >= 66"
+        "touchdown tilt {tilt:.2} deg, the target is >= 66"
     );
     assert!(
         impact <= 0.35,
-        "impact {impact:.3} m/s, issue 17 wants <= 0.35"
+        "impact {impact:.3} m/s, the target is <= 0.35"
     );
-    assert!(
-        s.max_mean_thrust <= 0.95 + 1e-9,
-        "max mean thrust {:.3}",
-        s.max_mean_thrust
-    );
+    let predicted = s
+        .predicted_touchdown
+        .expect("the flare decided its tilt-up");
+    assert!(predicted.decided_at_s < s.touchdown_time_s.unwrap_or(0.0));
     assert!(
         s.drive_distance_m >= 1.0,
         "drove {:.2} m",
@@ -196,16 +196,18 @@ fn a_flight_is_deterministic() {
 
 #[test]
 fn monte_carlo_of_the_wheel_landing() {
-    // The 200-run figure is in README.md (`atmo-sim fly --runs 200`); the test
-    // flies 40 randomized copies (mass, inertia and thrust +-5 %, gusts,
-    // sensor noise, initial spread) on the cores there are.
+    // The 200-run figures are in docs/landing.md; the test flies 40
+    // randomized copies (mass, inertia and thrust +-5 %, gusts, sensor
+    // noise, initial spread, the ground effect's scale and shift) from a
+    // base seed none of the landing's settings were chosen on.
     let runs = 40;
+    let base_seed = 900_001;
     let threads = std::thread::available_parallelism().map_or(1, std::num::NonZero::get);
     let report = monte_carlo::run(
         &scenario("wheel_landing"),
         &controller(),
         runs,
-        1,
+        base_seed,
         threads,
         &|_| {},
     )
@@ -227,7 +229,7 @@ fn monte_carlo_of_the_wheel_landing() {
             .per_run
             .iter()
             .enumerate()
-            .all(|(i, r)| r.run == i && r.seed == 1 + i as u64)
+            .all(|(i, r)| r.run == i && r.seed == base_seed + i as u64)
     );
     assert_eq!(
         report.per_run.iter().filter(|r| r.success).count(),
@@ -242,7 +244,7 @@ fn monte_carlo_of_the_wheel_landing() {
         report.landed_past_64_deg
     );
     let base = scenario("wheel_landing");
-    let again = monte_carlo::randomized_with_draws(&base, 7);
+    let again = monte_carlo::randomized_with_draws(&base, base_seed + 6);
     assert_eq!(again.1, report.per_run[6].draws);
     let mass = again.0.plant.effects.mass_error.as_ref().unwrap();
     assert_eq!(mass.mass_scale, again.1.mass_scale);
@@ -256,6 +258,32 @@ fn monte_carlo_of_the_wheel_landing() {
         "success rate {}",
         report.success_rate
     );
+    // The touchdown expected at the flare's decision is right on average
+    // on runs it was not calibrated on: its bias within three standard
+    // errors of the configured spread, its spread not above 1.5 times it.
+    let check = report.prediction.expect("the runs decided their tilt-up");
+    let flare = controller().flight.flare;
+    let n = check.runs as f64;
+    eprintln!("prediction: {check:?}");
+    assert!(check.runs >= runs * 9 / 10, "{check:?}");
+    let (v, t) = (flare.impact_speed_error, flare.touchdown_tilt_error_deg);
+    assert!(
+        check.impact_speed_bias_mps.abs() <= 3.0 * v.spread / n.sqrt(),
+        "{check:?}"
+    );
+    assert!(
+        check.touchdown_tilt_bias_deg.abs() <= 3.0 * t.spread / n.sqrt(),
+        "{check:?}"
+    );
+    assert!(check.impact_speed_spread_mps <= 1.5 * v.spread, "{check:?}");
+    assert!(
+        check.touchdown_tilt_spread_deg <= 1.5 * t.spread,
+        "{check:?}"
+    );
+    // Each criterion's count with its Wilson interval, which holds its rate.
+    let target = report.criteria_met.wheel_landing_target;
+    assert_eq!(target.count, report.landed_past_64_deg);
+    assert!(target.wilson_95[0] <= target.rate && target.rate <= target.wilson_95[1]);
 }
 
 fn tilt(s: &Summary) -> f64 {
@@ -266,122 +294,33 @@ fn impact(s: &Summary) -> f64 {
     s.impact_speed_mps.expect("touched down")
 }
 
-/// Issue 17's Monte Carlo criterion (>= 64 deg, <= 0.4 m/s, no crash).
+/// The wheel-landing target (>= 64 deg, <= 0.4 m/s, no crash).
 fn assert_landed_past_64_deg(s: &Summary) {
     assert!(
         monte_carlo::landed_past_64_deg(s),
-        "issue 17's criterion missed: {:.2} deg at {:.3} m/s",
+        "the wheel-landing target missed: {:.2} deg at {:.3} m/s",
         tilt(s),
         impact(s)
     );
 }
 
-/// Run `seed` of the wheel landing's Monte Carlo flown with a rule of the
-/// flare (`with`) and without it (`without`): neither crashes, and only the
-/// flight with the rule meets issue 17's criterion. Returns both summaries.
-fn with_and_without(
-    seed: u64,
-    with: &ControllerConfig,
-    without: &ControllerConfig,
-    rule: &str,
-) -> (Summary, Summary) {
-    let run = monte_carlo::randomized(&scenario("wheel_landing"), seed);
-    let a = fly(&run, with, |_| {}).unwrap();
-    let b = fly(&run, without, |_| {}).unwrap();
-    eprintln!("run {seed} with {rule}: {a:?}\nwithout: {b:?}");
-    assert!(!a.crashed && !b.crashed);
-    assert!(
-        !monte_carlo::landed_past_64_deg(&b),
-        "without {rule} issue 17's criterion was met too: {:.2} deg at {:.3} m/s",
-        tilt(&b),
-        impact(&b)
-    );
-    assert_landed_past_64_deg(&a);
-    (a, b)
-}
-
 #[test]
-fn a_robot_weaker_than_its_file_spends_its_attitude_margin_after_the_flare_commits() {
-    // Run 21 of `fly --runs 200 --seed 1`: thrust over weight 0.935 of the
-    // file's (docs/landing.md "A weak robot spends its margin"). The same
-    // robot and seed flown with the rotors held to the MPC's 0.95 after the
-    // commit as well: the margin spent buys impact speed at the same tilt
-    // or more (measured 64.8 deg at 0.32 m/s against 64.4 deg at 0.41 m/s;
-    // before the level weight, 65.1 deg at 0.33 against 63.8 at 0.38).
-    let mut keeping_margin = controller();
-    keeping_margin.flight.flare.weak_thrust_max = keeping_margin
-        .mpc
-        .tilt_plan
-        .as_ref()
-        .expect("the shipped MPC plans the tilt")
-        .thrust_max;
-    let (spending, keeping) =
-        with_and_without(21, &controller(), &keeping_margin, "spending the margin");
+fn a_robot_much_weaker_than_its_file_still_touches_down_softly() {
+    // Thrust 10 % below the file's on top of the plant's 3 % extra mass:
+    // the hover-limit tilt drops by about 5 deg and the target tilt is out
+    // of reach. The decision weighs both risks, so the robot trades tilt
+    // for speed: it commits low and touches down no faster than the limit.
+    let mut weak = scenario("wheel_landing");
+    weak.robot.rotor.k_thrust *= 0.9;
+    let s = fly(&weak, &controller(), |_| {}).unwrap();
+    eprintln!("{s:?}");
+    assert!(!s.crashed);
+    let decided = s.predicted_touchdown.expect("the flare decided");
     assert!(
-        spending.max_mean_thrust > 0.96,
-        "the margin was not spent: max mean thrust {:.3}",
-        spending.max_mean_thrust
+        decided.impact_speed_mps <= controller().flight.flare.impact_speed_max,
+        "{decided:?}"
     );
-    assert!(keeping.max_mean_thrust <= 0.95 + 1e-9);
-    assert!(
-        tilt(&spending) >= tilt(&keeping),
-        "touchdown tilt {:.2} deg spending the margin, {:.2} keeping it",
-        tilt(&spending),
-        tilt(&keeping)
-    );
-    assert!(
-        impact(&spending) <= impact(&keeping) - 0.05,
-        "impact {:.3} m/s spending the margin, {:.3} keeping it",
-        impact(&spending),
-        impact(&keeping)
-    );
-}
-
-#[test]
-fn a_ground_effect_surplus_learned_at_the_hold_is_not_credited_to_the_tilt_up() {
-    // Run 197 of `fly --runs 200 --seed 1`: a ground effect 23 % stronger
-    // than the MPC's surface holds the robot at the hold at about 60 deg, and
-    // the observer learns the surplus as lift; the tilt-up to 67 deg carries
-    // the rotors to where the surface's gain is negative. Crediting that lift
-    // to the prediction commits too early (docs/landing.md "A ground-effect
-    // surplus not credited to the tilt-up"). Measured: 66.28 deg at
-    // 0.315 m/s not crediting it, 67.09 deg at 0.409 m/s crediting it.
-    let mut crediting = controller();
-    crediting.flight.flare.aloft_force_floor = false;
-    crediting.flight.flare.late_window = 0.0;
-    let mut floored = controller();
-    floored.flight.flare.late_window = 0.0;
-    let (not_credited, credited) = with_and_without(197, &floored, &crediting, "the force floor");
-    assert!(
-        impact(&not_credited) <= impact(&credited) - 0.05,
-        "impact {:.3} m/s not crediting the surplus, {:.3} crediting it",
-        impact(&not_credited),
-        impact(&credited)
-    );
-}
-
-#[test]
-fn a_tilt_up_predicted_fast_near_the_ground_spends_the_attitude_margin() {
-    // Run 1118 of `fly --runs 200 --seed 1001`: a strong robot (not weak at
-    // its commit) whose tilt-up, predicted again within 3 cm of the ground
-    // with its attitude held, is faster than 0.4 m/s. Measured: 66.90 deg
-    // at 0.386 m/s spending the margin from there (max mean thrust 0.998),
-    // 66.88 deg at 0.403 m/s without the late prediction.
-    let mut never = controller();
-    never.flight.flare.late_window = 0.0;
-    let (late, kept) = with_and_without(1118, &controller(), &never, "the late prediction");
-    assert!(
-        late.max_mean_thrust > 0.96,
-        "the margin was not spent: max mean thrust {:.3}",
-        late.max_mean_thrust
-    );
-    assert!(kept.max_mean_thrust <= 0.95 + 1e-9);
-    assert!(
-        impact(&late) < impact(&kept),
-        "impact {:.3} m/s with the late prediction, {:.3} without",
-        impact(&late),
-        impact(&kept)
-    );
+    assert!(impact(&s) <= 0.4, "impact {:.3} m/s", impact(&s));
 }
 
 /// The larger of roll and pitch (deg, the plant's truth) on the last tick of
@@ -403,20 +342,12 @@ fn attitude_at_the_touchdown(scenario: &Scenario, controller: &ControllerConfig)
 
 #[test]
 fn the_planned_tilt_keeps_the_robot_level_so_that_its_wheels_touch_together() {
-    // Seed 126 of `fly --runs 200 --seed 1` (docs/landing.md "Level
-    // wheels"): a strong ground effect whose fluctuating thrust rolled the
-    // robot by about 10 deg while every rotor stood at its bound, and one
-    // side's wheels touched early, at 63.6 deg and 0.17 m/s. With the
-    // level weight the MPC spends differential thrust on the roll
-    // (measured: 3.8 deg at the touchdown against 7.6, 65.5 deg at
-    // 0.29 m/s). Both arms keep the flare's hold where it is (no "hold
-    // lowered", docs/landing.md), as when this was measured: with it, the
-    // robot without the level weight lowers its hold and touches down
-    // rolled 4.8 deg, and the comparison is no longer the weight's alone
-    // (the level robot: 4.2 deg).
+    // Seed 126 of the Monte Carlo: a strong ground effect whose fluctuating
+    // thrust rolls the robot while its rotors stand at their bound, and
+    // without the level weight one side's wheels touch early. With it the
+    // MPC spends differential thrust on the roll.
     let robot = monte_carlo::randomized(&scenario("wheel_landing"), 126);
-    let mut levelled = controller();
-    levelled.flight.flare.lower_step = 0.0;
+    let levelled = controller();
     let (level, level_angle) = attitude_at_the_touchdown(&robot, &levelled);
     let mut unlevelled = levelled.clone();
     unlevelled

@@ -108,6 +108,10 @@ pub struct Rotor {
     pub k_moment: f64,
     /// Reaction-moment sign per rotor, each +1 or -1.
     pub yaw_sign: [f64; 4],
+    /// s, time constant of the thrust's first-order response to a command
+    /// (0: immediate, the MPC's model; a robot file without it reads 0).
+    #[serde(default)]
+    pub time_constant: f64,
 }
 
 #[derive(Debug, Clone, Deserialize, PartialEq)]

@@ -57,6 +57,12 @@ impl ConfigFile for RobotConfig {
         )?;
         c.range("rotor.k_thrust", self.rotor.k_thrust, 1e-3..=1e5, "N")?;
         c.range("rotor.k_moment", self.rotor.k_moment, 0.0..=1.0, "m")?;
+        c.range(
+            "rotor.time_constant",
+            self.rotor.time_constant,
+            0.0..=1.0,
+            "s",
+        )?;
         for (i, s) in self.rotor.yaw_sign.iter().enumerate() {
             if *s != 1.0 && *s != -1.0 {
                 return Err(c.fail(&format!("rotor.yaw_sign[{i}]"), "+1 or -1", s));

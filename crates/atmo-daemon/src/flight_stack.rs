@@ -15,15 +15,13 @@ use atmo_core::ground_effect::GroundedBody;
 use atmo_core::ground_plane::{LEVEL_NORMAL, unit_ground_normal};
 use atmo_core::model::{Input, State, TiltedBody, idx};
 use atmo_core::{GroundPlane, Linkage, Model, RobotConfig};
-use atmo_mpc::{
-    AlphaSchedule, Mpc, MpcSettings, Outcome, SolverCuts, TiltPlan, wheel_clearance,
-    wheel_clearance_at_attitude,
-};
+use atmo_mpc::{AlphaSchedule, Mpc, MpcSettings, Outcome, SolverCuts, TiltPlan, wheel_clearance};
 use nalgebra::Vector3;
 
 use crate::error::{DaemonError, Result};
 use crate::flare::{
-    Flare, FlareSettings, TouchdownModel, predict_touchdown, predicted_vertical_force,
+    COMMITTED_THRUST_MAX, Decision, Flare, FlareSettings, Touchdown, TouchdownModel,
+    predict_touchdown, predicted_vertical_force,
 };
 use crate::ground_model::{Surface, ground_surface};
 use crate::modes::{Conditions, Mode, Thresholds, next_mode};
@@ -43,8 +41,9 @@ const TRANSITION_TILT_MARGIN_DEG: f64 = 5.0;
 /// few feedback times).
 const REPLAN_ITERATIONS: usize = 4;
 
-/// The flare predicts its touchdown within this of its hold clearance, m.
-const PREDICTION_RANGE: f64 = 0.15;
+/// The flare predicts its touchdown while the wheels are within this of
+/// the ground at the transition's tilt limit, m.
+const PREDICTION_RANGE: f64 = 0.17;
 
 /// Below this model ground-effect gain the observer's force counts as
 /// learned aloft (the flare's force floor).
@@ -97,8 +96,8 @@ pub struct FlightStack {
     /// The flare ending a planned-tilt transition (`None`: no flare).
     flare_settings: Option<FlareSettings>,
     flare: Flare,
-    /// The impact speed of a tilt-up begun at the last preparation's state.
-    flare_prediction: Option<f64>,
+    /// The touchdown of a tilt-up begun at the last preparation's state.
+    flare_prediction: Option<Touchdown>,
     /// The MPC's thrust-gain surface (shared with it), for the prediction.
     ground_effect: Option<Surface>,
     /// The body at the transition's tilt limit (the flare's clearance),
@@ -108,6 +107,8 @@ pub struct FlightStack {
     /// before the transition where the model's ground effect was below 1 %
     /// (the flare's prediction takes it as a floor, `flare` module docs).
     aloft_force: Option<f64>,
+    /// The robot file's motor time constant, s.
+    motor_time_constant: f64,
 }
 
 impl FlightStack {
@@ -204,13 +205,14 @@ impl FlightStack {
             plans_tilt,
             wheel_radius: robot.wheels.radius,
             mpc_tilt_rate: None,
-            flare_settings: (plans_tilt && settings.flare.enabled).then_some(settings.flare),
+            flare_settings: plans_tilt.then_some(settings.flare),
             flare: Flare::default(),
             flare_prediction: None,
             transition_limit: 0.0,
             ground_effect: surface,
             limit_body: model.at_tilt(lim.tilt_transition_max()),
             aloft_force: None,
+            motor_time_constant: robot.rotor.time_constant,
             model,
             settings,
         })
@@ -379,10 +381,8 @@ impl FlightStack {
             self.transition_limit = self.transition_limit.max(self.transition_schedule(height));
             if let Some(flare) = self.flare_settings {
                 let clearance = self.flare_clearance(&state);
-                let predicted = self.flare_prediction;
-                let deficit = self.observer.wrench()[2] / self.model.weight();
                 self.flare
-                    .update(&flare, now, clearance, state[idx::VZ], predicted, deficit);
+                    .update(&flare, now, tilt, clearance, self.flare_prediction);
             }
         }
         let limit = self.tilt_limit(mode);
@@ -715,7 +715,7 @@ impl FlightStack {
             if let Some((f, c0)) = flare {
                 // Down is +z: the reference sinks by the clearance it loses.
                 // Onto the hold as the flare has it now (lowered or not).
-                let (c, speed) = self.flare.approach(&f, v.z, c0, t);
+                let (c, speed) = Flare::approach(&f, v.z, c0, t);
                 pos.z = state[idx::Z] + (c0 - c);
                 vz = speed;
             }
@@ -748,8 +748,7 @@ impl FlightStack {
                 // With the flare the planned tilt only grows. After its
                 // commit `step` commands the full rate whatever the plan says;
                 // the plan keeps the tilt as its decision, re-measured every
-                // tick (pinning the plan to the full rate was measured worse:
-                // docs/landing.md).
+                // tick.
                 rate_min: if self.flare_settings.is_some() {
                     0.0
                 } else {
@@ -757,12 +756,9 @@ impl FlightStack {
                 },
                 rate_max: self.tilt_rate_max,
                 wheel_radius: self.wheel_radius,
-                // A weak robot spends the attitude margin after its commit.
-                thrust_max: self.flare_settings.and_then(|f| self.flare.thrust_max(&f)),
-                // The rotors' mean bounded instead of each rotor after the
-                // commit, if `rotor_thrust_max` is above `thrust_max` (measured
-                // worse: docs/landing.md "The mean thrust bounded").
-                mean_thrust_bound: self.flare.committed(),
+                // Full range after the commit (`flare::COMMITTED_THRUST_MAX`).
+                thrust_max: self.flare.thrust_max(),
+                mean_thrust_bound: false,
             };
             let _ = self.mpc.set_tilt_plan(&plan);
         } else {
@@ -784,50 +780,43 @@ impl FlightStack {
         }
     }
 
-    /// In a flare's approach: the impact speed if the tilt-up began now
-    /// (`flare::predict_touchdown`, 10 ms steps, within 0.5 s).
+    /// In a flare's approach: the touchdown if the tilt-up began now
+    /// (`flare::predict_touchdown`, 5 ms steps, within 0.6 s), every rotor
+    /// reaching full thrust less the attitude control's share of it now
+    /// (the largest command above their mean).
     fn predict_flare(&mut self, state: &State) {
         self.flare_prediction = None;
-        let Some(flare) = self.flare_settings else {
-            return;
-        };
-        if self.mode != Mode::Transition {
+        if self.flare_settings.is_none() || self.mode != Mode::Transition || self.flare.committed()
+        {
             return;
         }
-        let ground = self.ground_plane(state);
-        let mut model = TouchdownModel {
+        // Near the hold only: the prediction costs up to 120 RK4 steps.
+        if self.flare_clearance(state) >= PREDICTION_RANGE {
+            return;
+        }
+        let u = self.last_thrust;
+        let attitude_share = u.max() - u.sum() / 4.0;
+        let mut disturbance = self.observer.wrench();
+        disturbance[2] = predicted_vertical_force(disturbance[2], self.aloft_force);
+        let model = TouchdownModel {
             model: &self.model,
             surface: self.ground_effect.as_deref(),
-            ground,
-            disturbance: self.observer.wrench(),
+            ground: self.ground_plane(state),
+            disturbance,
             wheel_radius: self.wheel_radius,
             tilt_rate: self.tilt_rate_max,
             tilt_max: self.transition_tilt_max,
-            thrust: flare.predicted_thrust,
-            hold_attitude: false,
+            thrust: (COMMITTED_THRUST_MAX - attitude_share).max(0.0),
+            thrust_now: u,
+            motor_time_constant: self.motor_time_constant,
         };
-        if self.flare.committed() {
-            // The late prediction: at the current tilt and attitude, 5 ms steps.
-            let clearance = || {
-                let body = self.model.at_tilt(self.last_tilt);
-                wheel_clearance_at_attitude(&body, &ground, state, self.wheel_radius)
-            };
-            if self.flare.late_prediction_due(&flare, clearance) {
-                model.hold_attitude = true;
-                model.thrust = flare.late_predicted_thrust;
-                let late = predict_touchdown(&model, state, self.last_tilt, 0.005, 0.5);
-                self.flare.late_prediction(&flare, late.map(|(_, v)| v));
-            }
-            return;
-        }
-        // Near the hold only: the prediction costs up to 50 RK4 steps.
-        if self.flare_clearance(state) >= flare.hold_clearance + PREDICTION_RANGE {
-            return;
-        }
-        model.disturbance[2] =
-            predicted_vertical_force(&flare, model.disturbance[2], self.aloft_force);
-        self.flare_prediction =
-            predict_touchdown(&model, state, self.last_tilt, 0.01, 0.5).map(|(_, v)| v);
+        self.flare_prediction = predict_touchdown(&model, state, self.last_tilt, 0.005, 0.6);
+    }
+
+    /// The flare's decision in this transition (its prediction and when it
+    /// was taken), once committed.
+    pub fn flare_decision(&self) -> Option<Decision> {
+        self.flare.decision()
     }
 
     /// Whether the flare of this transition has committed its tilt-up.

@@ -183,33 +183,35 @@ impl ConfigFile for FlightSettings {
 fn validate_flare(c: &Checker, f: &FlareSettings) -> Result<(), CoreError> {
     c.range("flare.hold_clearance", f.hold_clearance, -0.1..=0.5, "m")?;
     c.range("flare.time_constant", f.time_constant, 0.01..=5.0, "s")?;
-    c.range("flare.hold_band", f.hold_band, 0.0..=0.5, "m")?;
-    c.range("flare.commit_speed", f.commit_speed, 0.0..=2.0, "m/s")?;
-    c.range("flare.hold_time", f.hold_time, 0.0..=10.0, "s")?;
-    c.range("flare.impact_speed", f.impact_speed, 0.0..=2.0, "m/s")?;
-    c.range("flare.predicted_thrust", f.predicted_thrust, 0.0..=1.0, "")?;
-    c.range("flare.weak_deficit", f.weak_deficit, -1.0..=1.0, "")?;
-    c.range("flare.weak_thrust_max", f.weak_thrust_max, 0.1..=1.0, "")?;
     c.range(
-        "flare.lower_above_impact",
-        f.lower_above_impact,
-        0.0..=2.0,
+        "flare.impact_speed_max",
+        f.impact_speed_max,
+        0.01..=2.0,
         "m/s",
     )?;
-    c.range("flare.lower_step", f.lower_step, 0.0..=0.1, "m")?;
-    c.range("flare.lowest_hold", f.lowest_hold, -0.1..=0.5, "m")?;
-    c.range("flare.late_window", f.late_window, 0.0..=0.2, "m")?;
     c.range(
-        "flare.late_predicted_thrust",
-        f.late_predicted_thrust,
-        0.0..=1.0,
-        "",
+        "flare.touchdown_tilt_min_deg",
+        f.touchdown_tilt_min_deg,
+        0.0..=90.0,
+        "deg",
     )?;
-    c.range(
-        "flare.late_impact_speed",
-        f.late_impact_speed,
-        0.0..=2.0,
-        "m/s",
-    )?;
+    let errors = [
+        ("flare.impact_speed_error", f.impact_speed_error, 1.0, "m/s"),
+        (
+            "flare.touchdown_tilt_error_deg",
+            f.touchdown_tilt_error_deg,
+            20.0,
+            "deg",
+        ),
+    ];
+    for (key, e, limit, unit) in errors {
+        c.range(&format!("{key}.mean"), e.mean, -limit..=limit, unit)?;
+        c.range(
+            &format!("{key}.spread"),
+            e.spread,
+            limit * 1e-3..=limit,
+            unit,
+        )?;
+    }
     Ok(())
 }

@@ -23,8 +23,9 @@ use atmo_daemon::replay::{CutReplay, RecordedFlight, replay};
 const BURST_TICK: u64 = 356;
 
 /// The fixture. Its logged flight.toml predates `min_interval` and the
-/// flare's `aloft_force_floor` and `late_*` keys, which the current parser
-/// requires: the tests add them (the flare's as off, as it was flown).
+/// flare's present keys, which the current parser requires: the tests add
+/// `min_interval` and take the shipped `[flare]` (the flight fell at
+/// 0.78 m, before any flare could act).
 fn flight() -> RecordedFlight {
     let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/sitl_estimate_burst.mcap");
     RecordedFlight::read(path, "/atmo/status").unwrap()
@@ -34,6 +35,21 @@ fn flight() -> RecordedFlight {
 fn add_keys_after(text: &mut String, anchor: &str, keys: &str) {
     assert!(text.contains(anchor), "the logged flight.toml changed");
     *text = text.replacen(anchor, &format!("{anchor}\n{keys}"), 1);
+}
+
+/// The shipped config/flight.toml's text from `start` up to `end`.
+fn shipped_section(start: &str, end: &str) -> String {
+    let shipped = include_str!("../../../config/flight.toml");
+    let a = shipped.find(start).expect("shipped section");
+    let b = shipped[a..].find(end).expect("shipped section end") + a;
+    shipped[a..b].to_string()
+}
+
+/// Replaces the logged `text` from `start` up to `end` with `section`.
+fn replace_section(text: &mut String, start: &str, end: &str, section: &str) {
+    let a = text.find(start).expect("the logged flight.toml changed");
+    let b = text[a..].find(end).expect("the logged flight.toml changed") + a;
+    text.replace_range(a..b, section);
 }
 
 /// Mean rotor command of the five ticks after the burst (their estimates
@@ -49,11 +65,11 @@ fn thrust_after_the_burst(min_interval: &str) -> (f64, f64, bool) {
         "max_torque = 1.0",
         &format!("min_interval = {min_interval}"),
     );
-    add_keys_after(
+    replace_section(
         text,
-        "lowest_hold = 0.0",
-        "aloft_force_floor = false\nlate_window = 0.0\nlate_predicted_thrust = 0.95\n\
-         late_impact_speed = 0.4",
+        "[flare]",
+        "[loop]",
+        &shipped_section("[flare]", "[loop]"),
     );
     let config = RecordedFlight::config(&files).unwrap();
     let (mut logged, mut replayed, mut n) = (0.0, 0.0, 0.0);

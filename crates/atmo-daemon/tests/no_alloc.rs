@@ -72,7 +72,7 @@ fn flight_stack_allocations(ground_effect: GroundEffectSource, ground_normal: Op
     let settings = FlightSettings::atmo();
     let mut mpc = deterministic(MpcSettings::atmo(&settings.mpc_preset).unwrap());
     mpc.model.ground_effect = ground_effect;
-    let planned_tilt = mpc.tilt_plan.is_some_and(|t| t.enabled) && settings.flare.enabled;
+    let planned_tilt = mpc.tilt_plan.is_some_and(|t| t.enabled);
     let mut stack = FlightStack::new(&robot, mpc, settings).unwrap();
     let model = Model::new(&robot);
     let linkage = Linkage::from_config(&robot.linkage, robot.limits.tilt_max()).unwrap();

@@ -47,7 +47,7 @@ pub struct TickRecord {
     pub io: SimIoCounts,
 }
 
-pub use atmo_io::review::landing::{LandingTracker, RunEnd, Summary};
+pub use atmo_io::review::landing::{LandingTracker, PredictedTouchdown, RunEnd, Summary};
 
 impl SuccessConfig {
     /// Whether `summary` meets these `[success]` criteria: a wheel landing
@@ -275,6 +275,17 @@ pub fn fly_observed(
                     s.rejected.ground,
                 ],
             );
+            if let Some((d, p)) = stack
+                .flare_decision()
+                .and_then(|d| d.predicted.map(|p| (d, p)))
+            {
+                tracker.on_decision(PredictedTouchdown {
+                    decided_at_s: d.now_ns as f64 * 1e-9,
+                    tilt_deg: p.tilt.to_degrees(),
+                    impact_speed_mps: p.impact_speed,
+                    time_to_touchdown_s: p.time,
+                });
+            }
             on_tick(&record(&tick, &plant, control.io.counts()));
         }
         let (force, torque) = scenario.disturbance_at(plant.time());

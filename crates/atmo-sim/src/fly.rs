@@ -290,6 +290,25 @@ fn many(
             t.median, t.p05, t.p95, v.median, v.p95, v.max
         );
     }
+    let c = &report.criteria_met;
+    println!("success           {}", c.success);
+    println!(
+        "target            {} (>= {} deg, <= {} m/s)",
+        c.wheel_landing_target,
+        monte_carlo::PAST_TILT_DEG,
+        monte_carlo::PAST_IMPACT_MPS
+    );
+    println!("no crash          {}", c.no_crash);
+    if let Some(p) = &report.prediction {
+        println!(
+            "prediction        flown - predicted at the decision over {} runs: impact {:+.3} m/s (spread {:.3}), tilt {:+.2} deg (spread {:.2})",
+            p.runs,
+            p.impact_speed_bias_mps,
+            p.impact_speed_spread_mps,
+            p.touchdown_tilt_bias_deg,
+            p.touchdown_tilt_spread_deg
+        );
+    }
     for f in report.failures.iter().take(10) {
         println!(
             "  failed run {} (seed {}): tilt {:?}, impact {:?}, crash {:?}",

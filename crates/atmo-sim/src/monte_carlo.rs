@@ -19,7 +19,7 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use serde::Serialize;
 
-use crate::closed_loop::{ControllerConfig, Summary, fly};
+use crate::closed_loop::{ControllerConfig, PredictedTouchdown, Summary, fly};
 use crate::error::Result;
 use crate::scenario::{Scenario, SuccessConfig};
 use atmo_plant::config::{GustConfig, MassErrorConfig};
@@ -57,6 +57,68 @@ impl Distribution {
     }
 }
 
+/// The Wilson score interval at 95 % of `count` successes in `runs`
+/// trials, as `[low, high]` (`[0, 1]` for no trial).
+pub fn wilson_95(count: usize, runs: usize) -> [f64; 2] {
+    if runs == 0 {
+        return [0.0, 1.0];
+    }
+    let z = 1.959_963_984_540_054_f64;
+    let n = runs as f64;
+    let p = count as f64 / n;
+    let z2n = z * z / n;
+    let centre = (p + 0.5 * z2n) / (1.0 + z2n);
+    let half = z / (1.0 + z2n) * (p * (1.0 - p) / n + 0.25 * z2n / n).sqrt();
+    [(centre - half).max(0.0), (centre + half).min(1.0)]
+}
+
+/// A count of runs meeting a criterion, with its rate's Wilson 95 % interval.
+#[derive(Debug, Clone, Copy, Serialize, PartialEq)]
+pub struct Count {
+    pub count: usize,
+    pub runs: usize,
+    pub rate: f64,
+    pub wilson_95: [f64; 2],
+}
+
+impl Count {
+    pub fn of(count: usize, runs: usize) -> Self {
+        Self {
+            count,
+            runs,
+            rate: if runs == 0 {
+                0.0
+            } else {
+                count as f64 / runs as f64
+            },
+            wilson_95: wilson_95(count, runs),
+        }
+    }
+}
+
+impl std::fmt::Display for Count {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "{}/{} ({:.1} %, 95 % {:.1}-{:.1} %)",
+            self.count,
+            self.runs,
+            100.0 * self.rate,
+            100.0 * self.wilson_95[0],
+            100.0 * self.wilson_95[1]
+        )
+    }
+}
+
+/// [`MonteCarloReport::criteria_met`].
+#[derive(Debug, Clone, Copy, Serialize, PartialEq)]
+pub struct CriteriaMet {
+    pub success: Count,
+    /// Touchdown tilt >= [`PAST_TILT_DEG`], impact <= [`PAST_IMPACT_MPS`], no crash.
+    pub wheel_landing_target: Count,
+    pub no_crash: Count,
+}
+
 /// A run that did not succeed, for replay.
 #[derive(Debug, Clone, Serialize, PartialEq)]
 pub struct Failure {
@@ -82,7 +144,12 @@ pub struct MonteCarloReport {
     /// impact speed <= 0.4 m/s (issue 17's Monte Carlo criterion).
     pub landed_past_64_deg: usize,
     pub crashes: usize,
+    /// Each criterion's count with its Wilson 95 % interval: the
+    /// scenario's success criteria, the wheel-landing target, no crash.
+    pub criteria_met: CriteriaMet,
     pub failures: Vec<Failure>,
+    /// The touchdown prediction at the decision against the flown one.
+    pub prediction: Option<PredictionCheck>,
     /// Every run in order: its draws and its outcome.
     pub per_run: Vec<RunRecord>,
     pub wall_time_s: f64,
@@ -120,6 +187,52 @@ pub struct RunRecord {
     pub touchdown_tilt_deg: Option<f64>,
     pub impact_speed_mps: Option<f64>,
     pub max_mean_thrust: f64,
+    /// The touchdown the flight stack predicted at its decision.
+    pub predicted_touchdown: Option<PredictedTouchdown>,
+}
+
+/// The flown touchdown against the one predicted at the decision, over
+/// the runs that decided and touched down: mean (bias) and standard
+/// deviation (spread) of flown minus predicted.
+#[derive(Debug, Clone, Copy, Serialize, PartialEq)]
+pub struct PredictionCheck {
+    pub runs: usize,
+    pub impact_speed_bias_mps: f64,
+    pub impact_speed_spread_mps: f64,
+    pub touchdown_tilt_bias_deg: f64,
+    pub touchdown_tilt_spread_deg: f64,
+}
+
+impl PredictionCheck {
+    /// Over `records`; `None` if no run decided and touched down.
+    pub fn of(records: &[RunRecord]) -> Option<Self> {
+        let pairs: Vec<(f64, f64)> = records
+            .iter()
+            .filter_map(|r| {
+                let p = r.predicted_touchdown?;
+                Some((
+                    r.impact_speed_mps? - p.impact_speed_mps,
+                    r.touchdown_tilt_deg? - p.tilt_deg,
+                ))
+            })
+            .collect();
+        if pairs.is_empty() {
+            return None;
+        }
+        let n = pairs.len() as f64;
+        let mean = |f: fn(&(f64, f64)) -> f64| pairs.iter().map(f).sum::<f64>() / n;
+        let (v, t) = (mean(|p| p.0), mean(|p| p.1));
+        let spread = |f: fn(&(f64, f64)) -> f64, m: f64| {
+            (pairs.iter().map(|p| (f(p) - m).powi(2)).sum::<f64>() / n).sqrt()
+        };
+        Some(Self {
+            runs: pairs.len(),
+            impact_speed_bias_mps: v,
+            impact_speed_spread_mps: spread(|p| p.0, v),
+            touchdown_tilt_bias_deg: t,
+            touchdown_tilt_spread_deg: spread(|p| p.1, t),
+        })
+    }
 }
 
 /// The i-th randomized copy of `base`.
@@ -254,6 +367,7 @@ pub fn run(
             touchdown_tilt_deg: s.touchdown_tilt_deg,
             impact_speed_mps: s.impact_speed_mps,
             max_mean_thrust: s.max_mean_thrust,
+            predicted_touchdown: s.predicted_touchdown,
         });
         summaries.push((i, seed, s));
     }
@@ -270,6 +384,11 @@ pub fn run(
             summary: s.clone(),
         })
         .collect();
+    let landed = summaries
+        .iter()
+        .filter(|(_, _, s)| landed_past_64_deg(s))
+        .count();
+    let crashes = summaries.iter().filter(|(_, _, s)| s.crashed).count();
     Ok(MonteCarloReport {
         scenario: base.file.name.clone(),
         base_seed,
@@ -305,12 +424,15 @@ pub fn run(
                 .map(|(_, _, s)| s.max_mean_thrust)
                 .collect(),
         ),
-        landed_past_64_deg: summaries
-            .iter()
-            .filter(|(_, _, s)| landed_past_64_deg(s))
-            .count(),
-        crashes: summaries.iter().filter(|(_, _, s)| s.crashed).count(),
+        landed_past_64_deg: landed,
+        crashes,
+        criteria_met: CriteriaMet {
+            success: Count::of(successes, runs),
+            wheel_landing_target: Count::of(landed, runs),
+            no_crash: Count::of(runs - crashes, runs),
+        },
         failures,
+        prediction: PredictionCheck::of(&per_run),
         per_run,
         wall_time_s: wall.elapsed().as_secs_f64(),
         threads,

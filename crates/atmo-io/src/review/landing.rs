@@ -25,6 +25,9 @@ pub struct Summary {
     /// Vertical speed at first wheel contact, m/s (positive = downwards).
     pub impact_speed_mps: Option<f64>,
     pub touchdown_time_s: Option<f64>,
+    /// The touchdown the flight stack predicted when it decided its
+    /// tilt-up (null without that decision, and when summarized from a log).
+    pub predicted_touchdown: Option<PredictedTouchdown>,
     /// Max over the transition of the mean normalized thrust command.
     pub max_mean_thrust: f64,
     pub crashed: bool,
@@ -45,6 +48,17 @@ pub struct Summary {
     pub feedback_time_max_s: f64,
 }
 
+/// A touchdown as predicted at a decision.
+#[derive(Debug, Clone, Copy, Serialize, PartialEq)]
+pub struct PredictedTouchdown {
+    /// When the decision was taken, s.
+    pub decided_at_s: f64,
+    pub tilt_deg: f64,
+    pub impact_speed_mps: f64,
+    /// Predicted time from the decision to the touchdown, s.
+    pub time_to_touchdown_s: f64,
+}
+
 /// Indices of the 12-state (`MpcStatus.msg`).
 const X: usize = 0;
 const Y: usize = 1;
@@ -62,6 +76,7 @@ pub struct LandingTracker {
     feedback_times: Vec<f64>,
     /// Time, tilt and vertical speed at the first wheel contact after flying.
     touchdown: Option<(f64, f64, f64)>,
+    predicted: Option<PredictedTouchdown>,
     last_ground_xy: Option<Vector3<f64>>,
     drive_distance: f64,
     last_time: f64,
@@ -110,6 +125,12 @@ impl LandingTracker {
         self.rejected = rejected;
     }
 
+    /// The flight stack's touchdown prediction at its decision (the first
+    /// one given is kept).
+    pub fn on_decision(&mut self, predicted: PredictedTouchdown) {
+        self.predicted.get_or_insert(predicted);
+    }
+
     /// After one plant step; `was_grounded` is the contact signal before it.
     pub fn after_plant_step(&mut self, truth: &SimTruth, was_grounded: bool) {
         let state = &truth.state;
@@ -139,6 +160,7 @@ impl LandingTracker {
             touchdown_tilt_deg: touchdown.map(|(_, tilt, _)| tilt.to_degrees()),
             impact_speed_mps: touchdown.map(|(_, _, vz)| vz),
             touchdown_time_s: touchdown.map(|(t, _, _)| t),
+            predicted_touchdown: self.predicted,
             max_mean_thrust: self.max_mean_thrust,
             crashed: end.crash_reason.is_some(),
             crash_reason: end.crash_reason.clone(),

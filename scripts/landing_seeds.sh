@@ -1,0 +1,61 @@
+#!/usr/bin/env bash
+# Flies the wheel landing's Monte Carlo on several base seeds and prints one
+# table: each seed set's count at the wheel-landing target (>= 64 deg,
+# <= 0.4 m/s, no crash) with its Wilson 95 % interval, and the pooled row.
+#
+#   scripts/landing_seeds.sh [--controller nominal] [--runs 200] [SEED...]
+#
+# Without seeds: the judging set of docs/landing.md (100001 ... 500001).
+# Uses target/release/atmo-sim (built if missing); outputs under
+# out/landing_seeds/<seed>/.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+runs=200
+controller=()
+seeds=()
+while [ $# -gt 0 ]; do
+  case "$1" in
+    --runs) runs=$2; shift 2 ;;
+    --controller) controller=(--controller "$2"); shift 2 ;;
+    *) seeds+=("$1"); shift ;;
+  esac
+done
+[ ${#seeds[@]} -gt 0 ] || seeds=(100001 200001 300001 400001 500001)
+bin=${CARGO_TARGET_DIR:-target}/release/atmo-sim
+[ -x "$bin" ] || cargo build --release -p atmo-sim
+files=()
+for s in "${seeds[@]}"; do
+  out=out/landing_seeds/$s
+  "$bin" fly --runs "$runs" --seed "$s" "${controller[@]}" --out "$out" > /dev/null
+  files+=("$(find "$out" -name monte_carlo.json | head -n1)")
+done
+python3 - "${files[@]}" <<'PY'
+import json, math, sys
+def wilson(k, n, z=1.959963984540054):
+    p = k / n; d = 1 + z * z / n
+    c = (p + z * z / (2 * n)) / d
+    h = z / d * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n))
+    return max(0.0, c - h), min(1.0, c + h)
+rows = []
+print("| base seed | runs | target (>= 64 deg, <= 0.4 m/s) | Wilson 95 % | low | fast | success | crashes | prediction bias (m/s, deg) | spread (m/s, deg) |")
+print("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |")
+tot = dict(n=0, k=0, low=0, fast=0, ok=0, crash=0)
+for f in sys.argv[1:]:
+    r = json.load(open(f)); pr = r["per_run"]
+    n, k = r["runs"], r["landed_past_64_deg"]
+    low = sum(1 for x in pr if x["touchdown_tilt_deg"] is not None and x["touchdown_tilt_deg"] < 64)
+    fast = sum(1 for x in pr if x["impact_speed_mps"] is not None and x["impact_speed_mps"] > 0.4)
+    p = r.get("prediction") or {}
+    lo, hi = wilson(k, n)
+    print(f"| {r['base_seed']} | {n} | {k} ({100*k/n:.1f} %) | {100*lo:.1f}-{100*hi:.1f} % | {low} | {fast} | {r['successes']} | {r['crashes']} | {p.get('impact_speed_bias_mps', float('nan')):+.3f}, {p.get('touchdown_tilt_bias_deg', float('nan')):+.2f} | {p.get('impact_speed_spread_mps', float('nan')):.3f}, {p.get('touchdown_tilt_spread_deg', float('nan')):.2f} |")
+    for key, v in (("n", n), ("k", k), ("low", low), ("fast", fast), ("ok", r["successes"]), ("crash", r["crashes"])):
+        tot[key] += v
+    rows.append((pr, p))
+lo, hi = wilson(tot["k"], tot["n"])
+pairs = [(x["impact_speed_mps"] - x["predicted_touchdown"]["impact_speed_mps"], x["touchdown_tilt_deg"] - x["predicted_touchdown"]["tilt_deg"])
+         for pr, _ in rows for x in pr if x["predicted_touchdown"] and x["impact_speed_mps"] is not None]
+m = len(pairs)
+bv = sum(a for a, _ in pairs) / m; bt = sum(b for _, b in pairs) / m
+sv = math.sqrt(sum((a - bv) ** 2 for a, _ in pairs) / m); st = math.sqrt(sum((b - bt) ** 2 for _, b in pairs) / m)
+print(f"| all | {tot['n']} | {tot['k']} ({100*tot['k']/tot['n']:.1f} %) | {100*lo:.1f}-{100*hi:.1f} % | {tot['low']} | {tot['fast']} | {tot['ok']} | {tot['crash']} | {bv:+.3f}, {bt:+.2f} ({m} decided) | {sv:.3f}, {st:.2f} |")
+PY
