@@ -338,8 +338,8 @@ impl Driver {
         self.phase = Phase::Starting;
     }
 
-    /// True if `count` of `motor` at `now_ns` is the counter's power-up
-    /// value reached faster than the motor can move.
+    /// True if `count` of `motor` at `now_ns` is back near the counter's
+    /// power-up value, reached faster than the motor can move.
     fn encoder_jumped_to_zero(
         &self,
         motor: Motor,
@@ -352,9 +352,11 @@ impl Driver {
         };
         let dt = now_ns.saturating_sub(t) as f64 * 1e-9;
         // Twice the speed limit and a margin of 50 counts: only a jump the
-        // motor cannot make.
+        // motor cannot make, and one that lands where a counter starts
+        // (0, plus what the coasting rotor turned since).
         let reach = 2.0 * max_speed * dt + 50.0;
-        count == 0 && f64::from(previous).abs() > reach
+        let jump = (f64::from(count) - f64::from(previous)).abs();
+        jump > reach && f64::from(count).abs() <= reach
     }
 
     fn run<T: Transport>(

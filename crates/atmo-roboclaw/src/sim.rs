@@ -117,7 +117,7 @@ impl SimConfig {
             address: protocol::DEFAULT_ADDRESS,
             firmware: "USB Roboclaw 2x15a v4.2.8 (simulated)".into(),
             time_constant_s: 0.05,
-            max_speed: [6000.0, 6000.0],
+            max_speed: [10000.0, 10000.0],
             home_switch: Some((-start_counts, SwitchInput::S5)),
             start_position: [0.0, 0.0],
             eeprom_serial_timeout: 0,
