@@ -228,7 +228,7 @@ fn a_board_reset_is_detected_counted_and_homed_again() {
         })
     );
     let true_position = rig.sim(|b| b.position(Motor::M2));
-    rig.sim(|b| b.reset());
+    rig.sim(atmo_roboclaw::sim::SimBoard::reset);
     assert_eq!(rig.sim(|b| b.encoder(Motor::M2)), 0);
     // Detected at the next encoder read (a jump back to the power-up 0).
     rig.tick(Some(DriverCommand::TiltVelocity(-0.3)));
@@ -257,7 +257,7 @@ fn a_reset_at_standstill_is_found_by_the_serial_timeout_read_back() {
     for _ in 0..10 {
         rig.tick(None);
     }
-    rig.sim(|b| b.reset());
+    rig.sim(atmo_roboclaw::sim::SimBoard::reset);
     assert!(rig.run_until(1.0, None, |r| r.board.health().resets == 1));
     assert!(rig.run_until(5.0, None, |r| r.driver.phase() == Phase::Running));
     assert_eq!(rig.sim(|b| b.serial_timeout()), 5);
