@@ -11,7 +11,7 @@ use atmo_roboclaw::RoboclawError;
 use atmo_roboclaw::config::{Mode, RoboclawConfig};
 use atmo_roboclaw::table::{AUTHORS_TABLE_COUNTS, AUTHORS_TABLE_TILT_DEG, TiltTable};
 
-fn err_text(e: RoboclawError) -> String {
+fn err_text(e: &RoboclawError) -> String {
     e.to_string()
 }
 
@@ -22,7 +22,7 @@ fn the_authors_table_interpolates_like_numpy_interp() {
     assert!((deg(0.0) - 90.0).abs() < 1e-12);
     assert!((deg(26325.0) - 0.8).abs() < 1e-12);
     // Halfway between 3696 (86.6 deg) and 5551 (84.0 deg).
-    assert!((deg((3696.0 + 5551.0) / 2.0) - 85.3).abs() < 1e-9);
+    assert!((deg(f64::midpoint(3696.0, 5551.0)) - 85.3).abs() < 1e-9);
     // Every point exactly.
     for (c, a) in AUTHORS_TABLE_COUNTS.iter().zip(AUTHORS_TABLE_TILT_DEG) {
         assert!((deg(*c) - a).abs() < 1e-9, "{c}");
@@ -54,7 +54,7 @@ fn the_table_inverts_and_its_slope_is_the_segments() {
 }
 
 fn table_error(counts: &[f64], tilt: &[f64]) -> String {
-    err_text(TiltTable::new(counts, tilt, Path::new("tilt.toml"), "tilt.").unwrap_err())
+    err_text(&TiltTable::new(counts, tilt, Path::new("tilt.toml"), "tilt.").unwrap_err())
 }
 
 #[test]
@@ -110,7 +110,7 @@ fn the_example_files_load() {
 fn load_error(edit: impl Fn(String) -> String) -> String {
     let path = common::repo_config("drivers/tilt.toml");
     let text = edit(std::fs::read_to_string(&path).unwrap());
-    err_text(RoboclawConfig::from_toml_str(&text, "tilt.toml").unwrap_err())
+    err_text(&RoboclawConfig::from_toml_str(&text, "tilt.toml").unwrap_err())
 }
 
 #[test]
