@@ -368,12 +368,18 @@ impl Driver {
         if now_ns.saturating_sub(self.last_health_check_ns) >= self.settings.health_check_period_ns
         {
             self.last_health_check_ns = now_ns;
-            // After a reset the board has its stored timeout, not ours.
-            if board.read_serial_timeout()? != self.settings.board_serial_timeout {
+            // After a reset the board has its stored timeout, not ours. A
+            // failed read is counted in the board's health and must not
+            // keep this tick from commanding the motors.
+            if let Ok(timeout) = board.read_serial_timeout()
+                && timeout != self.settings.board_serial_timeout
+            {
                 self.board_reset(board);
                 return Ok(());
             }
-            self.last_status = board.read_status()?;
+            if let Ok(status) = board.read_status() {
+                self.last_status = status;
+            }
         }
         let command = self.fresh_command(now_ns);
         out.watchdog_stop = command.is_none();

@@ -2,7 +2,7 @@
 
 use atmo_core::CoreError;
 
-use crate::link::LinkError;
+use crate::link::{LinkError, SerialOpenError};
 
 /// Everything atmo-roboclaw can refuse. Faults of a running board are not
 /// errors: they are counted in [`crate::link::BoardHealth`].
@@ -15,8 +15,8 @@ pub enum RoboclawError {
     /// The iceoryx2 driver ports.
     #[error(transparent)]
     Ports(#[from] atmo_io::IoError),
-    #[error("serial port {path}: {reason}")]
-    SerialOpen { path: String, reason: String },
+    #[error(transparent)]
+    SerialOpen(#[from] SerialOpenError),
     /// A transaction with the board failed (after its retries).
     #[error("board: {0}")]
     Link(#[from] LinkError),

@@ -24,6 +24,14 @@ pub trait Transport {
     fn clear_input(&mut self) -> io::Result<()>;
 }
 
+/// A serial port that could not be opened.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("serial port {path}: {reason}")]
+pub struct SerialOpenError {
+    pub path: String,
+    pub reason: String,
+}
+
 /// A real serial port (or a pseudo-terminal's slave side) through the
 /// `serialport` crate: 8N1, no flow control, raw.
 pub struct SerialTransport {
@@ -32,11 +40,11 @@ pub struct SerialTransport {
 
 impl SerialTransport {
     /// Opens `path` at `baud`.
-    pub fn open(path: &str, baud: u32) -> Result<Self, crate::RoboclawError> {
+    pub fn open(path: &str, baud: u32) -> Result<Self, SerialOpenError> {
         let port = serialport::new(path, baud)
             .timeout(Duration::from_millis(100))
             .open_native()
-            .map_err(|e| crate::RoboclawError::SerialOpen {
+            .map_err(|e| SerialOpenError {
                 path: path.to_string(),
                 reason: e.to_string(),
             })?;

@@ -537,3 +537,143 @@ impl<C: Clock> crate::link::Transport for Loopback<'_, C> {
         Ok(())
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::link::{Board, LinkSettings};
+
+    const MS: u64 = 1_000_000;
+
+    fn board(config: SimConfig) -> std::sync::Mutex<SimBoard> {
+        std::sync::Mutex::new(SimBoard::new(config))
+    }
+
+    fn link<'a>(
+        board: &'a std::sync::Mutex<SimBoard>,
+        clock: &'a ManualClock,
+    ) -> Board<Loopback<'a, ManualClock>> {
+        Board::new(
+            Loopback::new(board, clock),
+            LinkSettings {
+                address: 0x80,
+                answer_timeout: std::time::Duration::from_millis(1),
+                retries: 1,
+            },
+        )
+    }
+
+    #[test]
+    fn speed_follows_a_first_order_lag_and_the_counter_integrates_it() {
+        let b = board(SimConfig::wheels());
+        let clock = ManualClock::new(0);
+        let mut link = link(&b, &clock);
+        link.set_speed(Motor::M1, 1000).unwrap();
+        // One time constant: 1 - e^-1 of the step.
+        clock.set(50 * MS);
+        let v = link.read_speed(Motor::M1).unwrap();
+        assert_eq!(v, (1000.0 * (1.0 - (-1.0f64).exp())).round() as i32);
+        // Position: 1000 (t - tau (1 - e^(-t/tau))) at t = 1 s.
+        clock.set(1000 * MS);
+        let (count, status) = link.read_encoder(Motor::M1).unwrap();
+        let expected = 1000.0 * (1.0 - 0.05 * (1.0 - (-20.0f64).exp()));
+        assert!(
+            (f64::from(count) - expected).abs() <= 1.0,
+            "{count} vs {expected}"
+        );
+        assert_eq!(status & protocol::encoder_status::BACKWARD, 0);
+        // Duty: a fraction of the top speed, backwards.
+        link.set_duty(Motor::M2, -16384).unwrap();
+        clock.set(2000 * MS);
+        assert!((link.read_speed(Motor::M2).unwrap() + 4000).abs() <= 1);
+    }
+
+    #[test]
+    fn runs_depend_only_on_the_times_passed_in() {
+        let run = || {
+            let b = board(SimConfig::tilt(1234.5));
+            let clock = ManualClock::new(0);
+            let mut link = link(&b, &clock);
+            let mut trace = Vec::new();
+            for i in 1..=300u64 {
+                clock.set(i * 7 * MS + i % 3);
+                link.set_speed(Motor::M2, if i < 150 { -3000 } else { 2500 })
+                    .unwrap();
+                trace.push(link.read_encoder(Motor::M2).unwrap());
+            }
+            trace
+        };
+        assert_eq!(run(), run());
+    }
+
+    #[test]
+    fn the_home_switch_stops_m2_zeroes_its_counter_and_shows_in_the_status() {
+        let b = board(SimConfig::tilt(500.0));
+        let clock = ManualClock::new(0);
+        let mut link = link(&b, &clock);
+        assert_eq!(link.read_status().unwrap(), 0);
+        link.set_speed(Motor::M2, -2000).unwrap();
+        clock.set(1000 * MS);
+        assert_eq!(link.read_status().unwrap(), status::S5_TRIGGERED);
+        assert_eq!(link.read_encoder(Motor::M2).unwrap().0, 0);
+        assert_eq!(link.read_speed(Motor::M2).unwrap(), 0);
+        // Away from home again: the switch lets go.
+        link.set_speed(Motor::M2, 1000).unwrap();
+        clock.set(1500 * MS);
+        assert_eq!(link.read_status().unwrap(), 0);
+        assert!(link.read_encoder(Motor::M2).unwrap().0 > 300);
+        assert_eq!(b.lock().unwrap().stats.home_triggers, 1);
+    }
+
+    #[test]
+    fn the_serial_timeout_stops_both_motors_at_its_deadline() {
+        let b = board(SimConfig::wheels());
+        let clock = ManualClock::new(0);
+        let mut link = link(&b, &clock);
+        link.set_serial_timeout(3).unwrap();
+        assert_eq!(link.read_serial_timeout().unwrap(), 3);
+        link.set_speed(Motor::M1, 1000).unwrap();
+        link.set_speed(Motor::M2, -1000).unwrap();
+        // Silence from the driver: stopped 300 ms after the last packet.
+        b.lock().unwrap().advance(299 * MS);
+        assert_eq!(b.lock().unwrap().target(Motor::M1), 1000.0);
+        b.lock().unwrap().advance(2000 * MS);
+        let board = b.lock().unwrap();
+        assert_eq!(board.stats.serial_timeouts, 1);
+        assert_eq!(
+            (board.target(Motor::M1), board.target(Motor::M2)),
+            (0.0, 0.0)
+        );
+        assert!(board.speed(Motor::M1).abs() < 1e-6);
+    }
+
+    #[test]
+    fn faults_corrupt_silence_and_reset() {
+        let b = board(SimConfig::wheels());
+        let clock = ManualClock::new(0);
+        let mut link = link(&b, &clock);
+        link.set_serial_timeout(5).unwrap();
+        link.set_speed(Motor::M1, 500).unwrap();
+        clock.set(1000 * MS);
+        b.lock().unwrap().faults.corrupt_next = 2;
+        // Both attempts corrupted: the transaction fails, named.
+        let e = link.read_encoder(Motor::M1).unwrap_err();
+        assert!(
+            e.to_string().contains("read encoder M1 (16): CRC mismatch"),
+            "{e}"
+        );
+        assert_eq!(link.health().crc_errors, 2);
+        b.lock().unwrap().faults.silent_next = 1;
+        assert!(
+            link.read_encoder(Motor::M1).is_ok(),
+            "the retry is answered"
+        );
+        assert_eq!(link.health().no_answer, 1);
+        b.lock().unwrap().reset();
+        assert_eq!(link.read_serial_timeout().unwrap(), 0);
+        assert_eq!(link.read_encoder(Motor::M1).unwrap().0, 0);
+        assert_eq!(b.lock().unwrap().target(Motor::M1), 0.0);
+        let version = link.read_firmware_version().unwrap();
+        assert!(version.as_str().starts_with("USB Roboclaw"));
+    }
+}
