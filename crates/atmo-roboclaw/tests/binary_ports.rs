@@ -73,12 +73,15 @@ fn sim_and_run_processes_on_the_driver_ports() {
         .replace(
             "[ports]",
             &format!("[ports]\niceoryx_prefix = \"{prefix}\""),
-        );
+        )
+        // Wall-clock timeouts, generous for a busy machine.
+        .replace("answer_timeout_ms = 10 ", "answer_timeout_ms = 100 ");
     let file = dir.path().join("tilt.toml");
     std::fs::write(&file, text).unwrap();
 
     let ports = DriverPortsConfig {
         iceoryx_prefix: prefix.clone(),
+        liveness_timeout_ms: 1000,
         required: vec!["tilt".into()],
         ..DriverPortsConfig::default()
     };
@@ -116,11 +119,12 @@ fn sim_and_run_processes_on_the_driver_ports() {
         daemon.notify_drivers();
         std::thread::sleep(Duration::from_millis(7));
         let inputs = daemon.poll(monotonic_ns());
-        assert!(inputs.health.is_alive(DriverId::Tilt));
         if let Some(e) = inputs.tilt_encoder {
             last = e.counts;
         }
     }
+    assert!(daemon.poll(monotonic_ns()).health.is_alive(DriverId::Tilt));
+    assert_eq!(daemon.counters().deaths[DriverId::Tilt as usize], 0);
     assert!(
         last < home - 300,
         "the encoder did not follow: {home} -> {last}"

@@ -39,6 +39,9 @@ pub fn example_config(name: &str, port: &str) -> RoboclawConfig {
 
 pub const TICK_NS: u64 = 10_000_000;
 
+/// Answer timeout of the tests' links, ms.
+pub const ANSWER_TIMEOUT_MS: u64 = 100;
+
 pub struct Rig {
     pub clock: Arc<ManualClock>,
     pub server: PtyServer,
@@ -54,7 +57,11 @@ impl Rig {
         let clock = Arc::new(ManualClock::new(1_000_000_000));
         let server = PtyServer::spawn(SimBoard::new(sim), clock.clone() as Arc<dyn Clock>).unwrap();
         let port = server.path().to_str().unwrap().to_string();
-        let config = example_config(file, &port);
+        let mut config = example_config(file, &port);
+        // The answer timeout is wall-clock time: generous, so that a busy
+        // machine (the whole workspace's tests on 2 cores) does not turn a
+        // late answer into a counted fault the test did not inject.
+        config.serial.answer_timeout_ms = ANSWER_TIMEOUT_MS;
         let board = Board::new(
             SerialTransport::open(&port, config.serial.baud).unwrap(),
             config.link(),
