@@ -264,7 +264,21 @@ impl ConfigFile for RoboclawConfig {
             10..=60_000,
             "ms",
         )?;
-        self.ports.validate(file)?;
+        // atmo-io names its keys from the table's root: say `ports.`.
+        self.ports.validate(file).map_err(|e| match e {
+            atmo_io::IoError::Config(atmo_core::CoreError::ConfigValue {
+                file,
+                key,
+                expected,
+                got,
+            }) => RoboclawError::Core(atmo_core::CoreError::ConfigValue {
+                file,
+                key: format!("ports.{key}"),
+                expected,
+                got,
+            }),
+            other => other.into(),
+        })?;
         match self.mode {
             Mode::Tilt => {
                 let Some(tilt) = &self.tilt else {

@@ -127,6 +127,8 @@ fn the_driver_file_is_strict() {
         e.contains("`timing.board_serial_timeout_ms`") && e.contains("multiple of 100"),
         "{e}"
     );
+    let e = load_error(|t| t.replace("required = [\"tilt\"]", "required = [\"tilts\"]"));
+    assert!(e.contains("tilt.toml: key `ports.required`"), "{e}");
     let e = load_error(|t| t.replace("address = 128", "address = 7"));
     assert!(e.contains("`serial.address`"), "{e}");
     let e = load_error(|t| t.replace("mode = \"tilt\"", "mode = \"wheels\""));
