@@ -152,20 +152,33 @@ fn run(path: &PathBuf, port: Option<String>) -> Result<()> {
     };
     let mut endpoint = DriverEndpoint::open(&config.ports, node)?;
     let mut driver = Driver::new(settings);
-    let period = Duration::from_secs_f64(1.0 / config.timing.rate_hz);
-    let mut last_report = monotonic_ns();
+    let period_ns = (1e9 / config.timing.rate_hz) as u64;
+    let mut next_ns = monotonic_ns();
+    let mut last_report = next_ns;
+    let mut ticks_at_report = 0;
     let mut port_errors = 0u64;
     eprintln!(
         "atmo-roboclaw: {} board on {} ({} Hz)",
         node, config.serial.port, config.timing.rate_hz
     );
     while !stop.load(Ordering::SeqCst) {
-        // Wakes on the daemon's tick (commands_sent) or after one period:
-        // the watchdog and the heartbeat go on without a daemon.
-        let commands = endpoint.wait_for_commands(period).unwrap_or_else(|_| {
-            port_errors += 1;
+        // Wakes on the daemon's tick (commands_sent) or at the next
+        // deadline of the own rate: the watchdog and the heartbeat go on
+        // without a daemon.
+        let wait = Duration::from_nanos(next_ns.saturating_sub(monotonic_ns()));
+        // A zero timeout would block for good (iceoryx2's socket wait takes
+        // 0 as "no timeout"): at or past the deadline, only take what is there.
+        let commands = if wait < Duration::from_micros(100) {
             endpoint.receive()
-        });
+        } else {
+            endpoint.wait_for_commands(wait).unwrap_or_else(|_| {
+                // SIGINT/SIGTERM interrupt the wait: not a port error.
+                if !stop.load(Ordering::SeqCst) {
+                    port_errors += 1;
+                }
+                endpoint.receive()
+            })
+        };
         let now = monotonic_ns();
         match config.mode {
             Mode::Tilt => {
@@ -180,6 +193,10 @@ fn run(path: &PathBuf, port: Option<String>) -> Result<()> {
             }
         }
         let out = driver.tick(&mut board, now);
+        if now >= next_ns {
+            // Deadlines on a fixed grid; after an overrun, from now.
+            next_ns = (next_ns + period_ns).max(now);
+        }
         if let Some(counts) = out.tilt_counts
             && !endpoint.publish_tilt_encoder(counts)
         {
@@ -189,13 +206,16 @@ fn run(path: &PathBuf, port: Option<String>) -> Result<()> {
             port_errors += 1;
         }
         if now.saturating_sub(last_report) >= 1_000_000_000 {
+            let ticks = driver.counters().ticks;
+            let rate = (ticks - ticks_at_report) as f64 * 1e9 / (now - last_report) as f64;
             last_report = now;
-            report(&driver, &board, port_errors);
+            ticks_at_report = ticks;
+            report(&driver, &board, port_errors, rate);
         }
     }
     // Leave the motors stopped (the board's serial timeout would too).
     let stopped = board.stop();
-    report(&driver, &board, port_errors);
+    report(&driver, &board, port_errors, 0.0);
     eprintln!(
         "atmo-roboclaw: stopped ({})",
         if stopped.is_ok() {
@@ -208,7 +228,7 @@ fn run(path: &PathBuf, port: Option<String>) -> Result<()> {
 }
 
 /// One status line on stderr (once a second, off the tick).
-fn report(driver: &Driver, board: &Board<SerialTransport>, port_errors: u64) {
+fn report(driver: &Driver, board: &Board<SerialTransport>, port_errors: u64, rate_hz: f64) {
     let c = driver.counters();
     let phase = match driver.phase() {
         Phase::Starting => "starting",
@@ -219,7 +239,7 @@ fn report(driver: &Driver, board: &Board<SerialTransport>, port_errors: u64) {
     let mut err = std::io::stderr().lock();
     let _ = write!(
         err,
-        "atmo-roboclaw: {phase}, status {:#010x}, watchdog stops {}, homings {}, port errors {port_errors}, board: {}",
+        "atmo-roboclaw: {phase}, {rate_hz:.0} ticks/s, status {:#010x}, watchdog stops {}, homings {}, port errors {port_errors}, board: {}",
         driver.last_status(),
         c.watchdog_stops,
         c.homings,
