@@ -295,7 +295,7 @@ impl<T: Transport> Board<T> {
         }
     }
 
-    fn expect<V>(
+    fn expect_reply<V>(
         &mut self,
         request: Request,
         pick: impl Fn(Reply) -> Option<V>,
@@ -312,7 +312,7 @@ impl<T: Transport> Board<T> {
     }
 
     pub fn read_firmware_version(&mut self) -> Result<Version, LinkError> {
-        self.expect(Request::ReadFirmwareVersion, |r| match r {
+        self.expect_reply(Request::ReadFirmwareVersion, |r| match r {
             Reply::Version(v) => Some(v),
             _ => None,
         })
@@ -320,7 +320,7 @@ impl<T: Transport> Board<T> {
 
     /// Encoder count and status byte of `motor`.
     pub fn read_encoder(&mut self, motor: Motor) -> Result<(i32, u8), LinkError> {
-        self.expect(Request::ReadEncoder(motor), |r| match r {
+        self.expect_reply(Request::ReadEncoder(motor), |r| match r {
             Reply::Encoder { count, status } => Some((count, status)),
             _ => None,
         })
@@ -328,7 +328,7 @@ impl<T: Transport> Board<T> {
 
     /// Speed of `motor`, counts/s.
     pub fn read_speed(&mut self, motor: Motor) -> Result<i32, LinkError> {
-        self.expect(Request::ReadSpeed(motor), |r| match r {
+        self.expect_reply(Request::ReadSpeed(motor), |r| match r {
             Reply::Speed(s) => Some(s),
             _ => None,
         })
@@ -336,7 +336,7 @@ impl<T: Transport> Board<T> {
 
     /// Status bits ([`crate::protocol::status`]); an error bit is counted.
     pub fn read_status(&mut self) -> Result<u32, LinkError> {
-        let bits = self.expect(Request::ReadStatus, |r| match r {
+        let bits = self.expect_reply(Request::ReadStatus, |r| match r {
             Reply::Status(s) => Some(s),
             _ => None,
         })?;
@@ -348,14 +348,14 @@ impl<T: Transport> Board<T> {
 
     /// Serial timeout, 100 ms units.
     pub fn read_serial_timeout(&mut self) -> Result<u8, LinkError> {
-        self.expect(Request::ReadSerialTimeout, |r| match r {
+        self.expect_reply(Request::ReadSerialTimeout, |r| match r {
             Reply::SerialTimeout(v) => Some(v),
             _ => None,
         })
     }
 
     fn write(&mut self, request: Request) -> Result<(), LinkError> {
-        self.expect(request, |r| (r == Reply::Ack).then_some(()))
+        self.expect_reply(request, |r| (r == Reply::Ack).then_some(()))
     }
 
     /// Serial timeout in 100 ms units (0: off).

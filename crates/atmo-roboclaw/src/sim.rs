@@ -239,6 +239,16 @@ impl SimBoard {
         self.motors[motor.index()].position
     }
 
+    /// Imposes the true position of `motor` (a plant that owns the
+    /// mechanism: SITL moves the linkage and the board counts it); the
+    /// counter moves with it, the home switch is re-evaluated.
+    pub fn set_position(&mut self, motor: Motor, position: f64) {
+        if position.is_finite() {
+            self.motors[motor.index()].position = position;
+            self.update_switch();
+        }
+    }
+
     pub fn speed(&self, motor: Motor) -> f64 {
         self.motors[motor.index()].speed
     }
@@ -623,6 +633,13 @@ mod tests {
         assert_eq!(link.read_status().unwrap(), 0);
         assert!(link.read_encoder(Motor::M2).unwrap().0 > 300);
         assert_eq!(b.lock().unwrap().stats.home_triggers, 1);
+        // A plant imposing the position: the counter follows it, and back
+        // at home the switch triggers again.
+        b.lock().unwrap().set_position(Motor::M2, 0.0);
+        assert_eq!(link.read_encoder(Motor::M2).unwrap().0, 500);
+        b.lock().unwrap().set_position(Motor::M2, -600.0);
+        assert_eq!(link.read_status().unwrap(), status::S5_TRIGGERED);
+        assert_eq!(b.lock().unwrap().stats.home_triggers, 2);
     }
 
     #[test]
