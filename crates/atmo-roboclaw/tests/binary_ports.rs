@@ -1,8 +1,8 @@
 //! The two processes as deployed: `atmo-roboclaw sim` (the board on a pty,
 //! real time) and `atmo-roboclaw run` (the driver) on the iceoryx2 driver
 //! ports, with the daemon's side of the ports in this test: heartbeats,
-//! the tilt encoder at home, a velocity command moving it, and a clean
-//! stop on SIGTERM.
+//! the tilt encoder at home, a velocity command moving it, the watchdog
+//! stopping it when the commands stop, and a clean stop on SIGTERM.
 #![allow(clippy::unwrap_used)]
 
 mod common;
@@ -129,6 +129,25 @@ fn sim_and_run_processes_on_the_driver_ports() {
         last < home - 300,
         "the encoder did not follow: {home} -> {last}"
     );
+
+    // The daemon goes quiet: the driver's watchdog (200 ms) stops the
+    // motor, the encoder stands still while the heartbeat goes on.
+    let poll_for = |daemon: &mut FlightPorts, d: Duration| {
+        let t = Instant::now();
+        let mut counts = None;
+        while t.elapsed() < d {
+            std::thread::sleep(Duration::from_millis(10));
+            if let Some(e) = daemon.poll(monotonic_ns()).tilt_encoder {
+                counts = Some(e.counts);
+            }
+        }
+        counts
+    };
+    let settled = poll_for(&mut daemon, Duration::from_millis(700)).unwrap();
+    let later = poll_for(&mut daemon, Duration::from_millis(300)).unwrap();
+    assert_eq!(settled, later, "the motor still moves without commands");
+    assert!(settled < last, "moved on after the last command");
+    assert!(daemon.poll(monotonic_ns()).health.is_alive(DriverId::Tilt));
 
     // SIGTERM: the driver stops the motors and exits cleanly.
     let status = Command::new("kill")
