@@ -375,6 +375,28 @@ impl RoboclawConfig {
         }
     }
 
+    /// Tilt mode with a table: the table against the robot file's linkage
+    /// model (with `tilt.encoder_sign` and `tilt.home_tilt_deg`).
+    pub fn table_vs_linkage(&self) -> Result<Option<crate::table::LinkageComparison>> {
+        let Some(tilt) = &self.tilt else {
+            return Ok(None);
+        };
+        if tilt.calibration != CalibrationKind::Table {
+            return Ok(None);
+        }
+        let robot = RobotConfig::load(&tilt.robot_file)?;
+        let linkage = Linkage::from_config(&robot.linkage, robot.limits.tilt_max())?;
+        let table = TiltTable::new(
+            &tilt.table_counts,
+            &tilt.table_tilt_deg,
+            &self.file,
+            "tilt.",
+        )?;
+        table
+            .compare_with_linkage(&linkage, tilt.encoder_sign, tilt.home_tilt_deg.to_radians())
+            .map(Some)
+    }
+
     /// Loads the robot file and builds the tilt calibration (tilt mode).
     pub fn tilt_calibration(&self) -> Result<Option<TiltCalibration>> {
         let Some(tilt) = &self.tilt else {

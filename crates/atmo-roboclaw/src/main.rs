@@ -126,6 +126,32 @@ fn check(path: &PathBuf) -> Result<()> {
                     if r.outside { " (outside)" } else { "" }
                 );
             }
+            if let Some(cmp) = config.table_vs_linkage()? {
+                println!("the table against the linkage model (board counts as model counts):");
+                for p in &cmp.points {
+                    match p.model_tilt {
+                        Some(m) => println!(
+                            "  {:>6.0}: table {:>5.1} deg, model {:>5.1} deg, difference {:>+6.1} deg",
+                            p.counts,
+                            p.table_tilt.to_degrees(),
+                            m.to_degrees(),
+                            (p.table_tilt - m).to_degrees()
+                        ),
+                        None => println!(
+                            "  {:>6.0}: table {:>5.1} deg, beyond the model's counts",
+                            p.counts,
+                            p.table_tilt.to_degrees()
+                        ),
+                    }
+                }
+                if let Some((worst, at)) = cmp.max_abs() {
+                    println!(
+                        "largest disagreement {:.1} deg at {at:.0} counts; {} points beyond the model",
+                        worst.to_degrees(),
+                        cmp.beyond_model()
+                    );
+                }
+            }
         }
         Role::Wheels(w) => println!(
             "wheels: left on {}, right on {}, {:?} counts/rad, limit {} counts/s",

@@ -172,6 +172,79 @@ impl TiltTable {
         let (a, b) = (self.tilt[0], self.tilt[self.tilt.len() - 1]);
         (a.min(b), a.max(b))
     }
+
+    /// The measured points: (board counts, tilt rad).
+    pub fn points(&self) -> impl Iterator<Item = (f64, f64)> + '_ {
+        self.counts.iter().copied().zip(self.tilt.iter().copied())
+    }
+
+    /// How far the table and the linkage model disagree, point by point,
+    /// if the board's counter were the model's encoder: board counts =
+    /// `sign` x (model counts - model counts at `home_tilt`).
+    pub fn compare_with_linkage(
+        &self,
+        linkage: &Linkage,
+        sign: f64,
+        home_tilt: f64,
+    ) -> std::result::Result<LinkageComparison, RoboclawError> {
+        let (_, tilt_max) = linkage.tilt_range();
+        let (lo, hi) = linkage.counts_range();
+        let home = linkage.counts_from_tilt(home_tilt.clamp(0.0, tilt_max))?;
+        let mut points = Vec::with_capacity(self.counts.len());
+        for (counts, table_tilt) in self.points() {
+            let model = home + counts / sign;
+            let model_tilt = if (lo..=hi).contains(&model) {
+                Some(linkage.tilt_from_counts(model)?)
+            } else {
+                None
+            };
+            points.push(ComparedPoint {
+                counts,
+                table_tilt,
+                model_tilt,
+            });
+        }
+        Ok(LinkageComparison { points })
+    }
+}
+
+/// One table point against the linkage model.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ComparedPoint {
+    /// Board counts of the point.
+    pub counts: f64,
+    /// The table's tilt there, rad.
+    pub table_tilt: f64,
+    /// The model's tilt at those counts, rad (`None`: beyond its range).
+    pub model_tilt: Option<f64>,
+}
+
+/// The table against the linkage model ([`TiltTable::compare_with_linkage`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct LinkageComparison {
+    pub points: Vec<ComparedPoint>,
+}
+
+impl LinkageComparison {
+    /// Largest |table - model| over the points the model reaches (rad), and
+    /// the board counts where it is.
+    pub fn max_abs(&self) -> Option<(f64, f64)> {
+        self.points
+            .iter()
+            .filter_map(|p| p.model_tilt.map(|m| ((p.table_tilt - m).abs(), p.counts)))
+            .fold(None, |best: Option<(f64, f64)>, x| match best {
+                Some(b) if b.0 >= x.0 => Some(b),
+                _ => Some(x),
+            })
+    }
+
+    /// Points beyond the model's counts range.
+    pub fn beyond_model(&self) -> usize {
+        self.points
+            .iter()
+            .filter(|p| p.model_tilt.is_none())
+            .count()
+    }
 }
 
 /// How board counts become a tilt.

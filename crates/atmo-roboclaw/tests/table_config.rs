@@ -169,3 +169,37 @@ fn the_linkage_calibration_follows_the_model() {
     assert!(far.outside && far.tilt.abs() < 1e-9);
     assert!(cal.counts_per_rad(0.5) < 0.0);
 }
+
+#[test]
+fn the_table_against_the_linkage_model() {
+    let robot = atmo_core::RobotConfig::load(common::repo_config("atmo.toml")).unwrap();
+    let linkage = atmo_core::Linkage::from_config(&robot.linkage, robot.limits.tilt_max()).unwrap();
+    let home = 90f64.to_radians();
+    // A table made from the model itself agrees with it.
+    let model_home = linkage.counts_from_tilt(home).unwrap();
+    let tilt_deg: Vec<f64> = (0..=18).rev().map(|i| f64::from(i) * 5.0).collect();
+    let counts: Vec<f64> = tilt_deg
+        .iter()
+        .map(|d| model_home - linkage.counts_from_tilt(d.to_radians()).unwrap())
+        .collect();
+    let own = TiltTable::new(&counts, &tilt_deg, Path::new("t"), "").unwrap();
+    let cmp = own.compare_with_linkage(&linkage, -1.0, home).unwrap();
+    assert_eq!(cmp.beyond_model(), 0);
+    assert!(cmp.max_abs().unwrap().0 < 1e-9);
+    // The authors' table does not: their counter is not the model's
+    // encoder (26325 counts over the travel, against the model's 19929).
+    let cmp = TiltTable::authors()
+        .compare_with_linkage(&linkage, -1.0, home)
+        .unwrap();
+    let (worst, at) = cmp.max_abs().unwrap();
+    assert!(
+        (worst.to_degrees() - 28.3).abs() < 0.1,
+        "{}",
+        worst.to_degrees()
+    );
+    assert_eq!(at, 19645.0);
+    assert_eq!(cmp.beyond_model(), 10);
+    // The example file gives the same through its keys.
+    let config = RoboclawConfig::load(common::repo_config("drivers/tilt.toml")).unwrap();
+    assert_eq!(config.table_vs_linkage().unwrap().unwrap(), cmp);
+}
