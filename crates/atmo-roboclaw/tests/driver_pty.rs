@@ -286,3 +286,56 @@ fn wheel_rates_reach_both_motors() {
     assert_eq!(out.speeds, [Some(0), Some(0)]);
     assert_eq!(rig.board.health().failed, 0);
 }
+
+#[test]
+fn the_linkage_calibration_drives_and_reports_the_same_way() {
+    let mut rig = Rig::new(SimConfig::tilt(0.0), "tilt.toml+linkage");
+    assert!(rig.run_until(1.0, None, |r| r.driver.phase() == Phase::Running));
+    let home = rig.tick(None);
+    assert!((home.tilt.unwrap().to_degrees() - 90.0).abs() < 1e-6);
+    assert_eq!(home.tilt_counts, Some(19929));
+    // Near 90 deg the model's counts per rad grow without bound (the
+    // linkage's singular end): the 8000 counts/s limit holds the tilt
+    // speed there. Away from it, 0.1 rad/s for 1 s is 0.1 rad.
+    assert!(
+        rig.run_until(3.0, Some(DriverCommand::TiltVelocity(-0.2)), |r| {
+            r.last.tilt.is_some_and(|t| t.to_degrees() < 75.0)
+        })
+    );
+    let start = rig.last.tilt.unwrap();
+    for _ in 0..100 {
+        rig.tick(Some(DriverCommand::TiltVelocity(-0.1)));
+    }
+    let out = rig.last;
+    let moved = out.tilt.unwrap() - start;
+    assert!((moved + 0.1).abs() < 0.01, "moved {moved} rad");
+    // The board's counter grew; the model's counts fell with the tilt.
+    assert!(out.encoders[1].unwrap() > 0);
+    assert!(out.tilt_counts.unwrap() < 19929);
+    assert_eq!(
+        out.tilt_counts.unwrap(),
+        19929 - i64::from(out.encoders[1].unwrap()),
+        "board counts are model counts, signed"
+    );
+}
+
+#[test]
+fn a_wheel_board_reset_is_detected_and_the_wheels_run_on() {
+    let mut rig = Rig::new(SimConfig::wheels(), "wheels.toml");
+    let rates = Some(DriverCommand::WheelRates([5.0, 5.0]));
+    assert!(rig.run_until(0.5, rates, |r| r.driver.phase() == Phase::Running));
+    for _ in 0..100 {
+        rig.tick(rates);
+    }
+    rig.sim(atmo_roboclaw::sim::SimBoard::reset);
+    rig.tick(rates);
+    assert_eq!(rig.board.health().resets, 1);
+    assert!(rig.run_until(0.5, rates, |r| r.driver.phase() == Phase::Running));
+    assert_eq!(rig.driver.counters().starts, 2);
+    for _ in 0..50 {
+        rig.tick(rates);
+    }
+    assert_eq!(rig.last.speeds, [Some(-1500), Some(1500)]);
+    assert!(rig.sim(|b| b.speed(Motor::M2)) > 1400.0);
+    assert_eq!(rig.sim(|b| b.serial_timeout()), 5);
+}

@@ -19,10 +19,23 @@ pub fn repo_config(name: &str) -> PathBuf {
         .join(name)
 }
 
-/// The example file `config/drivers/<name>` with its port replaced.
+/// The example file `config/drivers/<name>` with its port replaced;
+/// `name` may end in `+linkage`: the tilt file with the linkage calibration.
 pub fn example_config(name: &str, port: &str) -> RoboclawConfig {
-    let path = repo_config(&format!("drivers/{name}"));
-    let text = std::fs::read_to_string(&path).unwrap();
+    let (file, linkage) = match name.strip_suffix("+linkage") {
+        Some(file) => (file, true),
+        None => (name, false),
+    };
+    let path = repo_config(&format!("drivers/{file}"));
+    let mut text = std::fs::read_to_string(&path).unwrap();
+    if linkage {
+        text = text
+            .replace("calibration = \"table\"", "calibration = \"linkage\"")
+            .lines()
+            .filter(|l| !l.starts_with("table_"))
+            .collect::<Vec<_>>()
+            .join("\n");
+    }
     let text = text
         .lines()
         .map(|l| {
