@@ -46,6 +46,7 @@ for f in sys.argv[1:]:
     low = sum(1 for x in pr if x["touchdown_tilt_deg"] is not None and x["touchdown_tilt_deg"] < 64)
     fast = sum(1 for x in pr if x["impact_speed_mps"] is not None and x["impact_speed_mps"] > 0.4)
     p = r.get("prediction") or {}
+    nan = float("nan")
     lo, hi = wilson(k, n)
     print(f"| {r['base_seed']} | {n} | {k} ({100*k/n:.1f} %) | {100*lo:.1f}-{100*hi:.1f} % | {low} | {fast} | {r['successes']} | {r['crashes']} | {p.get('impact_speed_bias_mps', float('nan')):+.3f}, {p.get('touchdown_tilt_bias_deg', float('nan')):+.2f} | {p.get('impact_speed_spread_mps', float('nan')):.3f}, {p.get('touchdown_tilt_spread_deg', float('nan')):.2f} |")
     for key, v in (("n", n), ("k", k), ("low", low), ("fast", fast), ("ok", r["successes"]), ("crash", r["crashes"])):
@@ -55,7 +56,11 @@ lo, hi = wilson(tot["k"], tot["n"])
 pairs = [(x["impact_speed_mps"] - x["predicted_touchdown"]["impact_speed_mps"], x["touchdown_tilt_deg"] - x["predicted_touchdown"]["tilt_deg"])
          for pr, _ in rows for x in pr if x["predicted_touchdown"] and x["impact_speed_mps"] is not None]
 m = len(pairs)
-bv = sum(a for a, _ in pairs) / m; bt = sum(b for _, b in pairs) / m
-sv = math.sqrt(sum((a - bv) ** 2 for a, _ in pairs) / m); st = math.sqrt(sum((b - bt) ** 2 for _, b in pairs) / m)
-print(f"| all | {tot['n']} | {tot['k']} ({100*tot['k']/tot['n']:.1f} %) | {100*lo:.1f}-{100*hi:.1f} % | {tot['low']} | {tot['fast']} | {tot['ok']} | {tot['crash']} | {bv:+.3f}, {bt:+.2f} ({m} decided) | {sv:.3f}, {st:.2f} |")
+if m:
+    bv = sum(a for a, _ in pairs) / m; bt = sum(b for _, b in pairs) / m
+    sv = math.sqrt(sum((a - bv) ** 2 for a, _ in pairs) / m); st = math.sqrt(sum((b - bt) ** 2 for _, b in pairs) / m)
+    bias, spread = f"{bv:+.3f}, {bt:+.2f} ({m} decided)", f"{sv:.3f}, {st:.2f}"
+else:
+    bias, spread = "- (no decision)", "-"
+print(f"| all | {tot['n']} | {tot['k']} ({100*tot['k']/tot['n']:.1f} %) | {100*lo:.1f}-{100*hi:.1f} % | {tot['low']} | {tot['fast']} | {tot['ok']} | {tot['crash']} | {bias} | {spread} |")
 PY
