@@ -31,6 +31,7 @@ for s in "${seeds[@]}"; do
 done
 python3 - "${files[@]}" <<'PY'
 import json, math, sys
+# The pooled row's interval (each seed set's comes from its monte_carlo.json).
 def wilson(k, n, z=1.959963984540054):
     p = k / n; d = 1 + z * z / n
     c = (p + z * z / (2 * n)) / d
@@ -46,8 +47,7 @@ for f in sys.argv[1:]:
     low = sum(1 for x in pr if x["touchdown_tilt_deg"] is not None and x["touchdown_tilt_deg"] < 64)
     fast = sum(1 for x in pr if x["impact_speed_mps"] is not None and x["impact_speed_mps"] > 0.4)
     p = r.get("prediction") or {}
-    nan = float("nan")
-    lo, hi = wilson(k, n)
+    lo, hi = r["criteria_met"]["wheel_landing_target"]["wilson_95"]
     print(f"| {r['base_seed']} | {n} | {k} ({100*k/n:.1f} %) | {100*lo:.1f}-{100*hi:.1f} % | {low} | {fast} | {r['successes']} | {r['crashes']} | {p.get('impact_speed_bias_mps', float('nan')):+.3f}, {p.get('touchdown_tilt_bias_deg', float('nan')):+.2f} | {p.get('impact_speed_spread_mps', float('nan')):.3f}, {p.get('touchdown_tilt_spread_deg', float('nan')):.2f} |")
     for key, v in (("n", n), ("k", k), ("low", low), ("fast", fast), ("ok", r["successes"]), ("crash", r["crashes"])):
         tot[key] += v

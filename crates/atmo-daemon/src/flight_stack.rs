@@ -714,7 +714,6 @@ impl FlightStack {
             let mut vz = v.z;
             if let Some((f, c0)) = flare {
                 // Down is +z: the reference sinks by the clearance it loses.
-                // Onto the hold as the flare has it now (lowered or not).
                 let (c, speed) = Flare::approach(&f, v.z, c0, t);
                 pos.z = state[idx::Z] + (c0 - c);
                 vz = speed;
