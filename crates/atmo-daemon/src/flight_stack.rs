@@ -757,7 +757,6 @@ impl FlightStack {
                 wheel_radius: self.wheel_radius,
                 // Full range after the commit (`flare::COMMITTED_THRUST_MAX`).
                 thrust_max: self.flare.thrust_max(),
-                mean_thrust_bound: false,
             };
             let _ = self.mpc.set_tilt_plan(&plan);
         } else {

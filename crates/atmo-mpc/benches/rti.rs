@@ -313,7 +313,6 @@ fn rti_tilt_plan(c: &mut Criterion) {
         rate_max: robot.limits.tilt_rate_max,
         wheel_radius: robot.wheels.radius,
         thrust_max: None,
-        mean_thrust_bound: false,
     };
     let make = || {
         let model = Model::new(&robot);

@@ -56,12 +56,13 @@ pub struct TiltPlanSettings {
     /// Upper bound of every rotor command while the tilt is planned (the
     /// thrust margin kept for attitude control).
     pub thrust_max: f64,
-    /// Upper bound of each rotor command while the tilt is planned. Above
-    /// `thrust_max`, `thrust_max` bounds the rotors' mean instead of each
-    /// rotor (the QP in the rotors' modes, `qp::rotor_modes`): a rotor may
-    /// then exceed the mean for attitude control while the mean is at its
-    /// bound. Equal to `thrust_max`: each rotor by `thrust_max`.
-    pub rotor_thrust_max: f64,
+    /// Retired key `rotor_thrust_max` (a bound of each rotor above a bound
+    /// of their mean, removed: docs/decisions/2026-12-05-landing-decision.md).
+    /// Logs written before its removal carry it at `thrust_max`, which is
+    /// what every rotor is bounded by now, so it is accepted at that value
+    /// only and refused otherwise; never read.
+    #[serde(default, rename = "rotor_thrust_max")]
+    pub retired_rotor_thrust_max: Option<f64>,
 }
 
 /// Which thrust-gain surface the prediction model carries near the ground.
@@ -320,12 +321,15 @@ impl ConfigFile for MpcFile {
             // Strictly convex in the tilt rate too.
             c.range("tilt_plan.rate_weight", t.rate_weight, 1e-9..=1e6, "")?;
             c.range("tilt_plan.thrust_max", t.thrust_max, 0.1..=1.0, "")?;
-            c.range(
-                "tilt_plan.rotor_thrust_max",
-                t.rotor_thrust_max,
-                t.thrust_max..=1.0,
-                "",
-            )?;
+            if let Some(v) = t.retired_rotor_thrust_max {
+                // Retired: only the value that reproduces today's bound.
+                c.range(
+                    "tilt_plan.rotor_thrust_max (retired key: remove it)",
+                    v,
+                    t.thrust_max..=t.thrust_max,
+                    "",
+                )?;
+            }
             c.range(
                 "tilt_plan.touchdown_speed",
                 t.touchdown_speed,
@@ -421,9 +425,16 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(err.contains("solver.max_step_fraction"), "{err}");
-        // A rotor bound below the mean's bound it would stand above.
-        let low_rotor = SHIPPED.replace("rotor_thrust_max = 0.95", "rotor_thrust_max = 0.9");
-        let err = MpcFile::from_toml_str(&low_rotor, "mpc.toml")
+        // The retired rotor bound: accepted at `thrust_max` (older logs
+        // carry it there), refused at any other value.
+        let with_retired = SHIPPED.replace(
+            "thrust_max = 0.95 ",
+            "rotor_thrust_max = 0.95\nthrust_max = 0.95 ",
+        );
+        assert!(with_retired.contains("rotor_thrust_max = 0.95"));
+        MpcFile::from_toml_str(&with_retired, "mpc.toml").unwrap();
+        let raised = with_retired.replace("rotor_thrust_max = 0.95", "rotor_thrust_max = 1.0");
+        let err = MpcFile::from_toml_str(&raised, "mpc.toml")
             .unwrap_err()
             .to_string();
         assert!(err.contains("tilt_plan.rotor_thrust_max"), "{err}");

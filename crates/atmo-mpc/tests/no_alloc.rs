@@ -50,10 +50,6 @@ fn measure(formulation: Formulation, feedback: Feedback) -> Counts {
     if feedback == Feedback::ForcedFallback {
         settings.feedback.max_active_set_changes = 0;
     }
-    if let Some(t) = settings.tilt_plan.as_mut() {
-        // Each rotor above the mean's bound when `mean_thrust_bound` asks.
-        t.rotor_thrust_max = 1.0;
-    }
     let mut mpc = Mpc::new(Model::new(&RobotConfig::atmo()), settings).unwrap();
     let tick_period = mpc.settings().horizon.tick_period;
     let h = tick_period / SUBSTEPS as f64;
@@ -74,7 +70,6 @@ fn measure(formulation: Formulation, feedback: Feedback) -> Counts {
         rate_max: rate,
         wheel_radius: robot.wheels.radius,
         thrust_max: None,
-        mean_thrust_bound: false,
     };
     let mut planned_tilt = 50f64.to_radians();
     if feedback == Feedback::TiltPlanned {
@@ -93,12 +88,11 @@ fn measure(formulation: Formulation, feedback: Feedback) -> Counts {
             mpc.set_reference_constant(&reference).unwrap();
             mpc.set_alpha(varphi.cos()).unwrap();
             if feedback == Feedback::TiltPlanned {
-                // The second half with a weak robot's raised rotor bound on
-                // even ticks and the mean bounded (the rotors' modes) on odd ones.
+                // The second half with the committed tilt-up's raised rotor
+                // bound on even ticks.
                 let bound = (tick >= TICKS / 2 && tick % 2 == 0).then_some(1.0);
                 mpc.set_tilt_plan(&TiltPlan {
                     thrust_max: bound,
-                    mean_thrust_bound: tick >= TICKS / 2,
                     ..plan
                 })
                 .unwrap();

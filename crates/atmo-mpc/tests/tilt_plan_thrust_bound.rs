@@ -19,7 +19,6 @@ fn plan(thrust_max: Option<f64>) -> TiltPlan {
         rate_max: robot.limits.tilt_rate_max,
         wheel_radius: robot.wheels.radius,
         thrust_max,
-        mean_thrust_bound: false,
     }
 }
 

@@ -11,10 +11,7 @@
 //! max(rate_min, (tilt_min - varphibar_k) / dt) <= omega_k <= min(rate_max, (tilt_max - varphibar_k) / dt)
 //! ```
 //!
-//! (`TiltPlan::mean_thrust_bound` with `rotor_thrust_max > thrust_max`:
-//! `mean(u_k) <= thrust_max`, each rotor up to `rotor_thrust_max`, as a box
-//! in the rotors' modes, [`crate::qp::rotor_modes`])
-//! (the tilt limits enforced at the plan's tilt `varphibar_k`; the step of
+//! (`thrust_max`: the plan's, or the settings' without one; the tilt limits enforced at the plan's tilt `varphibar_k`; the step of
 //! the earlier stages' tilt in the same QP is not in them, RTI converges it
 //! over the next ticks, and the flight stack clamps what it commands).
 //!
@@ -79,13 +76,9 @@ pub struct TiltPlan {
     /// Wheel radius, m (the rim's reach below the hub at touchdown).
     pub wheel_radius: f64,
     /// Each rotor's upper bound this tick (`None`: the settings'
-    /// `thrust_max`; the flight stack raises it after a weak robot's flare
-    /// commits).
+    /// `thrust_max`; the flight stack raises it once the landing's tilt-up
+    /// has committed).
     pub thrust_max: Option<f64>,
-    /// Whether the settings' `thrust_max` bounds the rotors' mean this tick,
-    /// each rotor going up to `rotor_thrust_max` ([`crate::qp::rotor_modes`]),
-    /// instead of bounding each rotor. Ignored with `thrust_max` given.
-    pub mean_thrust_bound: bool,
 }
 
 /// The tilt-planning QP and its plan (allocated once, when `[tilt_plan]` is configured).
@@ -229,22 +222,6 @@ fn clearance(
             ground.height(&hub) - reach
         })
         .fold(f64::INFINITY, f64::min)
-}
-
-/// Each rotor's bound and the bound of the rotors' mean (`None`: none)
-/// for the settings `w` and the flight stack's per-rotor bound of this
-/// tick (`Some`: a weak robot's, which bounds each rotor and not the mean).
-fn rotor_bounds(
-    w: &TiltPlanSettings,
-    plan_thrust_max: Option<f64>,
-    mean_bound: bool,
-) -> (f64, Option<f64>) {
-    let rotor_max = w.rotor_thrust_max;
-    match plan_thrust_max {
-        Some(bound) => (bound, None),
-        None if mean_bound && rotor_max > w.thrust_max => (rotor_max, Some(w.thrust_max)),
-        None => (w.thrust_max, None),
-    }
 }
 
 /// Where the plan's wheels meet the ground: the fractional stage at which
@@ -453,10 +430,8 @@ impl Mpc {
                 let lo = plan.rate_min.max((plan.tilt_min - self.varphi[k]) / dt);
                 let hi = plan.rate_max.min((plan.tilt_max - self.varphi[k]) / dt);
                 lin.u_lo[k] = tilt_input(&Input::zeros(), lo.min(hi));
-                let (rotor_max, mean_max) =
-                    rotor_bounds(&w, plan.thrust_max, plan.mean_thrust_bound);
+                let rotor_max = plan.thrust_max.unwrap_or(w.thrust_max);
                 lin.u_hi[k] = tilt_input(&Input::from_element(rotor_max), hi);
-                lin.mean_thrust_max[k] = mean_max;
             }
             failed
         };

@@ -1,8 +1,5 @@
 //! The condensed QP: states eliminated, 4N inputs, a dense Hessian and box
-//! constraints only, so that the feedback can walk the exact homotopy. A
-//! stage whose rotors' mean thrust is bounded is written in the rotors'
-//! modes, where that bound is a box ([`super::rotor_modes`]); its variables,
-//! the raw solution and the snapshot are then in those modes.
+//! constraints only, so that the feedback can walk the exact homotopy.
 
 use atmo_core::model::{NU as ATMO_NU, NX as ATMO_NX};
 use clarabel::algebra::CscMatrix;
@@ -10,7 +7,6 @@ use clarabel::solver::{SolverStatus, SupportedConeT};
 use nalgebra::{SMatrix, SVector};
 
 use super::cuts::CutWindow;
-use super::rotor_modes::{ROTORS, from_modes, mode_box, to_modes};
 use super::solver::{CscBuilder, TimedSolver, solver_error};
 use super::{LinearizedHorizon, QpSnapshot, SolveReport};
 use crate::error::Result;
@@ -45,8 +41,6 @@ pub struct CondensedQp<const NX: usize = ATMO_NX, const NU: usize = ATMO_NU> {
     homotopy: BoxHomotopy,
     /// Working set read off Clarabel's solution.
     guess: Vec<Bound>,
-    /// Stages whose rotors are in their modes (a bounded mean, [`rotor_modes`]).
-    modes: Vec<bool>,
     /// Where the current solution comes from.
     pub(super) solved_by: SolvedBy,
 }
@@ -116,7 +110,6 @@ impl<const NX: usize, const NU: usize> CondensedQp<NX, NU> {
             a_pattern,
             homotopy: BoxHomotopy::new(n),
             guess: vec![Bound::Free; n],
-            modes: vec![false; steps],
             solved_by: SolvedBy::Clarabel,
         };
         // Build the real solver from the real start-up values, so that its
@@ -191,7 +184,6 @@ impl<const NX: usize, const NU: usize> CondensedQp<NX, NU> {
                 }
             }
         }
-        self.write_rotor_modes(lin);
         let mut pos = 0;
         for c in 0..nu_total {
             for r in 0..=c {
@@ -203,60 +195,6 @@ impl<const NX: usize, const NU: usize> CondensedQp<NX, NU> {
             for i in 0..NU {
                 self.b[NU * k + i] = lin.u_hi[k][i] - lin.u_bar[k][i];
                 self.b[nu_total + NU * k + i] = lin.u_bar[k][i] - lin.u_lo[k][i];
-            }
-            // The stages `write_rotor_modes` wrote in the modes, and only those.
-            if let (true, Some(mean_max)) = (self.modes[k], lin.mean_thrust_max[k]) {
-                let rotors = 0..ROTORS;
-                let lo = rotors
-                    .clone()
-                    .map(|i| lin.u_lo[k][i])
-                    .fold(f64::MIN, f64::max);
-                let hi = rotors.map(|i| lin.u_hi[k][i]).fold(f64::MAX, f64::min);
-                let (v_lo, v_hi) = mode_box(lo, hi, mean_max);
-                let mut v_bar = [0.0; ROTORS];
-                v_bar.copy_from_slice(&lin.u_bar[k].as_slice()[..ROTORS]);
-                to_modes(&mut v_bar);
-                for d in 0..ROTORS {
-                    self.b[NU * k + d] = v_hi[d] - v_bar[d];
-                    self.b[nu_total + NU * k + d] = v_bar[d] - v_lo[d];
-                }
-            }
-        }
-    }
-
-    /// Writes the stages whose mean thrust is bounded in their rotors'
-    /// modes: `H_ij <- T_i H_ij T_j`, `g0_i <- T_i g0_i`, `M_i <- T_i M_i`
-    /// (`T` symmetric, see [`rotor_modes`]).
-    fn write_rotor_modes(&mut self, lin: &LinearizedHorizon<NX, NU>) {
-        let nu_total = NU * self.steps;
-        for (k, moded) in self.modes.iter_mut().enumerate() {
-            *moded = lin.mean_thrust_max[k].is_some();
-        }
-        if NU < ROTORS {
-            // No rotor block to transform (a model without four rotors).
-            self.modes.fill(false);
-            return;
-        }
-        for (k, _) in self.modes.iter().enumerate().filter(|(_, m)| **m) {
-            let rows = NU * k;
-            // Rows of stage k: contiguous in each column (column-major).
-            for c in 0..nu_total {
-                to_modes(&mut self.hessian[c * nu_total + rows..c * nu_total + rows + ROTORS]);
-            }
-            // Columns of stage k: four columns, one row at a time.
-            for r in 0..nu_total {
-                let mut x = [0.0; ROTORS];
-                for (d, x) in x.iter_mut().enumerate() {
-                    *x = self.hessian[(rows + d) * nu_total + r];
-                }
-                to_modes(&mut x);
-                for (d, x) in x.iter().enumerate() {
-                    self.hessian[(rows + d) * nu_total + r] = *x;
-                }
-            }
-            to_modes(&mut self.g0[rows..rows + ROTORS]);
-            for c in 0..NX {
-                to_modes(&mut self.m[k].as_mut_slice()[c * NU..c * NU + ROTORS]);
             }
         }
     }
@@ -397,9 +335,6 @@ impl<const NX: usize, const NU: usize> CondensedQp<NX, NU> {
         dx[0] = *e0;
         for k in 0..self.steps {
             du[k] = SVector::<f64, NU>::from_column_slice(&z[NU * k..NU * (k + 1)]);
-            if self.modes[k] {
-                from_modes(&mut du[k].as_mut_slice()[..ROTORS]);
-            }
             dx[k + 1] = lin.a[k] * dx[k] + lin.b[k] * du[k] + lin.defect[k];
         }
     }

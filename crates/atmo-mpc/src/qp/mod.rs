@@ -8,7 +8,6 @@
 
 mod condensed;
 pub mod cuts;
-pub mod rotor_modes;
 mod solver;
 mod sparse;
 
@@ -47,11 +46,6 @@ pub struct LinearizedHorizon<const NX: usize = ATMO_NX, const NU: usize = ATMO_N
     /// Input bounds per stage (0 and 1 for the rotor commands).
     pub u_lo: Vec<SVector<f64, NU>>,
     pub u_hi: Vec<SVector<f64, NU>>,
-    /// Per stage, `Some(m)`: the four rotors' mean is bounded by `m`, each
-    /// rotor staying within its `u_lo..u_hi` through the inner box of
-    /// [`rotor_modes`] (condensed form); the sparse form bounds each rotor
-    /// by `min(u_hi, m)` instead. `None`: each rotor by its own box.
-    pub mean_thrust_max: Vec<Option<f64>>,
 }
 
 impl<const NX: usize, const NU: usize> LinearizedHorizon<NX, NU> {
@@ -67,7 +61,6 @@ impl<const NX: usize, const NU: usize> LinearizedHorizon<NX, NU> {
             u_bar: vec![SVector::<f64, NU>::from_element(0.5); steps],
             u_lo: vec![SVector::<f64, NU>::zeros(); steps],
             u_hi: vec![SVector::<f64, NU>::from_element(1.0); steps],
-            mean_thrust_max: vec![None; steps],
         }
     }
 

@@ -6,7 +6,6 @@ use clarabel::algebra::CscMatrix;
 use clarabel::solver::SupportedConeT;
 use nalgebra::SVector;
 
-use super::rotor_modes::ROTORS;
 use super::solver::{CscBuilder, TimedSolver, solver_error};
 use super::{LinearizedHorizon, QpSnapshot};
 use crate::error::Result;
@@ -94,12 +93,7 @@ impl<const NX: usize, const NU: usize> SparseQp<NX, NU> {
                 b[NX * (k + 1)..NX * (k + 2)].copy_from_slice(lin.defect[k].as_slice());
                 let bound = NX * (n + 1) + 2 * NU * k;
                 for i in 0..NU {
-                    let mut hi = lin.u_hi[k][i];
-                    if let (Some(mean), true) = (lin.mean_thrust_max[k], i < ROTORS) {
-                        // No general rows here: every rotor under the mean's bound.
-                        hi = hi.min(mean);
-                    }
-                    b[bound + i] = hi - lin.u_bar[k][i];
+                    b[bound + i] = lin.u_hi[k][i] - lin.u_bar[k][i];
                     b[bound + NU + i] = lin.u_bar[k][i] - lin.u_lo[k][i];
                 }
             }
