@@ -5,7 +5,7 @@
 #
 #   scripts/landing_seeds.sh [--controller nominal] [--runs 200] [SEED...]
 #
-# Without seeds: the judging set of docs/landing.md (100001 ... 500001).
+# Without seeds: the judging set of docs/landing.md (600001 ... 1100001).
 # Uses target/release/atmo-sim (built if missing); outputs under
 # out/landing_seeds/<seed>/.
 set -euo pipefail
@@ -20,7 +20,7 @@ while [ $# -gt 0 ]; do
     *) seeds+=("$1"); shift ;;
   esac
 done
-[ ${#seeds[@]} -gt 0 ] || seeds=(100001 200001 300001 400001 500001)
+[ ${#seeds[@]} -gt 0 ] || seeds=(600001 700001 800001 1000001 1100001)
 bin=${CARGO_TARGET_DIR:-target}/release/atmo-sim
 [ -x "$bin" ] || cargo build --release -p atmo-sim
 files=()
