@@ -210,17 +210,14 @@ fn monte_carlo_of_the_wheel_landing() {
         base_seed,
         threads,
         &|_| {},
-    )
-    .unwrap();
-    eprintln!(
-        "monte carlo: {}/{} in {:.1} s",
-        report.successes, report.runs, report.wall_time_s
     );
+    eprintln!("monte carlo: {}/{}", report.successes, report.runs);
     for f in &report.failures {
-        eprintln!("  failed run {} seed {}: {:?}", f.run, f.seed, f.summary);
+        eprintln!("  failed run {} seed {}: {}", f.run, f.seed, f.reason);
     }
     assert_eq!(report.runs, runs);
     assert_eq!(report.crashes, 0);
+    assert_eq!(report.errors, 0);
     // The per-run records: in run order, agreeing with the counts, and each
     // run's draws those its seed gives again (so a miss can be replayed).
     assert_eq!(report.per_run.len(), runs);
@@ -292,16 +289,6 @@ fn tilt(s: &Summary) -> f64 {
 
 fn impact(s: &Summary) -> f64 {
     s.impact_speed_mps.expect("touched down")
-}
-
-/// The wheel-landing target (>= 64 deg, <= 0.4 m/s, no crash).
-fn assert_landed_past_64_deg(s: &Summary) {
-    assert!(
-        monte_carlo::landed_past_64_deg(s),
-        "the wheel-landing target missed: {:.2} deg at {:.3} m/s",
-        tilt(s),
-        impact(s)
-    );
 }
 
 #[test]

@@ -195,6 +195,57 @@ impl ControllerConfig {
     }
 }
 
+/// The controllers a simulated flight can be flown with, by name.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum ControllerPreset {
+    /// The MPC settings as given (config/mpc.toml, or `--mpc-config`).
+    Config,
+    /// No ground effect in the model, the tilt on the paper's law.
+    Nominal,
+    /// The ground-effect surface in the model, the tilt on the paper's law.
+    GroundEffect,
+    /// The ground-effect surface in the model and the tilt planned by the
+    /// MPC in the transition (`[tilt_plan]`, enabled).
+    PlannedTilt,
+}
+
+impl ControllerPreset {
+    /// Its name, as on the command line and in output folders.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Config => "config",
+            Self::Nominal => "nominal",
+            Self::GroundEffect => "ground-effect",
+            Self::PlannedTilt => "planned-tilt",
+        }
+    }
+
+    /// `base` made into this controller; `surface` is the ground-effect
+    /// surface of the presets that model it.
+    ///
+    /// # Errors
+    /// A surface file that cannot be read, or MPC settings without the
+    /// `[tilt_plan]` a preset needs.
+    pub fn config(
+        self,
+        base: &ControllerConfig,
+        surface: &GroundEffectSource,
+    ) -> Result<ControllerConfig> {
+        let with = |source: &GroundEffectSource, plans_tilt: bool| {
+            base.clone()
+                .with_ground_effect(source)?
+                .with_tilt_plan(plans_tilt)
+        };
+        match self {
+            Self::Config => Ok(base.clone()),
+            Self::Nominal => with(&GroundEffectSource::None, false),
+            Self::GroundEffect => with(surface, false),
+            Self::PlannedTilt => with(surface, true),
+        }
+    }
+}
+
 fn setup(e: impl std::fmt::Display) -> SimError {
     SimError::Setup(e.to_string())
 }
@@ -224,6 +275,16 @@ pub fn fly(
     fly_observed(scenario, controller, on_tick, |_| {})
 }
 
+/// [`fly`] without observers, stopped with [`SimError::TimeLimit`] once the
+/// wall clock passes `deadline` (checked every control tick).
+pub fn fly_within(
+    scenario: &Scenario,
+    controller: &ControllerConfig,
+    deadline: Option<Instant>,
+) -> Result<Summary> {
+    fly_until(scenario, controller, deadline, |_| {}, |_| {})
+}
+
 /// The plant's truth now, as logged.
 pub fn truth_of(plant: &Plant) -> SimTruth {
     let state = plant.state();
@@ -241,6 +302,16 @@ pub fn truth_of(plant: &Plant) -> SimTruth {
 pub fn fly_observed(
     scenario: &Scenario,
     controller: &ControllerConfig,
+    on_tick: impl FnMut(&TickRecord),
+    on_plant: impl FnMut(&SimTruth),
+) -> Result<Summary> {
+    fly_until(scenario, controller, None, on_tick, on_plant)
+}
+
+fn fly_until(
+    scenario: &Scenario,
+    controller: &ControllerConfig,
+    deadline: Option<Instant>,
     mut on_tick: impl FnMut(&TickRecord),
     mut on_plant: impl FnMut(&SimTruth),
 ) -> Result<Summary> {
@@ -287,6 +358,12 @@ pub fn fly_observed(
                 });
             }
             on_tick(&record(&tick, &plant, control.io.counts()));
+            if deadline.is_some_and(|d| Instant::now() > d) {
+                return Err(SimError::TimeLimit {
+                    limit_s: deadline.map_or(0.0, |d| (d - wall).as_secs_f64()),
+                    sim_time_s: plant.time(),
+                });
+            }
         }
         let (force, torque) = scenario.disturbance_at(plant.time());
         plant.set_external_wrench(force, torque)?;

@@ -20,6 +20,10 @@ pub enum SimError {
     /// The flight stack or its MPC could not be built.
     #[error("closed loop: {0}")]
     Setup(String),
+    /// A run went on past its wall-clock time limit (a Monte Carlo's
+    /// per-run budget) and was stopped.
+    #[error("stopped after its time limit of {limit_s:.0} s (at {sim_time_s:.2} s simulated)")]
+    TimeLimit { limit_s: f64, sim_time_s: f64 },
     /// Writing an output (figure, summary, log) failed.
     #[error("output: {0}")]
     Output(String),

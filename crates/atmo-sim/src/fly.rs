@@ -4,7 +4,9 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
 use atmo_mpc::settings::GroundEffectSource;
-use atmo_sim::closed_loop::{ControllerConfig, TickRecord, fly_logged, trace_of};
+use atmo_sim::campaign::Plan;
+use atmo_sim::campaign::shard::ShardSpec;
+use atmo_sim::closed_loop::{ControllerConfig, ControllerPreset, TickRecord, fly_logged, trace_of};
 use atmo_sim::figure::{Markers, TouchdownCloud, write_landing_figure, write_touchdown_figure};
 use atmo_sim::monte_carlo::{self, MonteCarloReport};
 use atmo_sim::scenario::Scenario;
@@ -36,53 +38,76 @@ pub struct ControllerArgs {
     pub mpc_config: Option<PathBuf>,
 }
 
-/// `--runs`, `--seed`, `--jobs`.
+/// `--runs`, `--seed`, `--jobs`, `--shard`.
 #[derive(Debug, Clone, Copy)]
 pub struct MonteCarloArgs {
     pub count: Option<usize>,
     pub seed: u64,
     pub jobs: Option<usize>,
+    pub shard: Option<ShardSpec>,
+}
+
+impl ControllerChoice {
+    /// The controllers flown, in order.
+    fn presets(self) -> &'static [ControllerPreset] {
+        use ControllerPreset as P;
+        match self {
+            Self::Config => &[P::Config],
+            Self::Nominal => &[P::Nominal],
+            Self::GroundEffect => &[P::GroundEffect],
+            Self::PlannedTilt => &[P::PlannedTilt],
+            Self::Both => &[P::Nominal, P::GroundEffect],
+            Self::All => &[P::Nominal, P::GroundEffect, P::PlannedTilt],
+        }
+    }
 }
 
 pub fn run(
     scenario_path: &Path,
     out: &Path,
     runs: MonteCarloArgs,
-    controller: ControllerArgs,
+    controller: &ControllerArgs,
 ) -> Result<()> {
     let scenario = Scenario::load(scenario_path).with_context(|| "loading the scenario")?;
-    let mut base = ControllerConfig::atmo()?.deterministic();
-    if let Some(path) = &controller.mpc_config {
-        base = base
+    let base = ControllerConfig::atmo()?.deterministic();
+    let base = match &controller.mpc_config {
+        Some(path) => base
             .with_mpc_file(path)
-            .with_context(|| format!("loading --mpc-config {}", path.display()))?;
-    }
-    let ground_effect = controller
+            .with_context(|| format!("loading --mpc-config {}", path.display()))?,
+        None => base,
+    };
+    let surface = controller
         .surface
+        .clone()
         .map_or(GroundEffectSource::PlantDefault, GroundEffectSource::File);
     // Through the texts the flight log stores: a replay rebuilds this controller.
-    let with = |source: &GroundEffectSource, plans_tilt: bool| -> Result<ControllerConfig> {
-        Ok(base
-            .clone()
-            .with_ground_effect(source)?
-            .with_tilt_plan(plans_tilt)?)
-    };
-    let none = GroundEffectSource::None;
-    let controllers: Vec<(&str, ControllerConfig)> = match controller.choice {
-        ControllerChoice::Config => vec![("", base.clone())],
-        ControllerChoice::Nominal => vec![("nominal", with(&none, false)?)],
-        ControllerChoice::GroundEffect => vec![("ground-effect", with(&ground_effect, false)?)],
-        ControllerChoice::PlannedTilt => vec![("planned-tilt", with(&ground_effect, true)?)],
-        ControllerChoice::Both => vec![
-            ("nominal", with(&none, false)?),
-            ("ground-effect", with(&ground_effect, false)?),
-        ],
-        ControllerChoice::All => vec![
-            ("nominal", with(&none, false)?),
-            ("ground-effect", with(&ground_effect, false)?),
-            ("planned-tilt", with(&ground_effect, true)?),
-        ],
-    };
+    let presets = controller.choice.presets();
+    let controllers: Vec<(&str, ControllerConfig)> = presets
+        .iter()
+        .map(|p| {
+            let name = if *p == ControllerPreset::Config {
+                ""
+            } else {
+                p.name()
+            };
+            Ok((name, p.config(&base, &surface)?))
+        })
+        .collect::<Result<_>>()?;
+    if let Some(shard) = runs.shard {
+        let (Some(count), [preset]) = (runs.count, presets) else {
+            bail!("--shard needs --runs and one controller (not `both` or `all`)");
+        };
+        let plan = Plan::monte_carlo(&scenario, *preset, count, runs.seed);
+        let dir = out.join(&scenario.file.name).join("shards");
+        return crate::campaign_cmd::fly_and_write_shard(
+            &plan,
+            &scenario,
+            &controllers[0].1,
+            shard,
+            runs.jobs,
+            &dir,
+        );
+    }
     let dir: PathBuf = out.join(&scenario.file.name);
     if runs.count == Some(0) {
         bail!("--runs must be at least 1");
@@ -267,22 +292,25 @@ fn many(
         ProgressStyle::with_template("{bar:40} {pos}/{len} runs  {elapsed_precise} (eta {eta})")
             .unwrap_or_else(|_| ProgressStyle::default_bar()),
     );
+    let wall = std::time::Instant::now();
     let report = monte_carlo::run(scenario, controller, runs, seed, threads, &|n| {
         bar.set_position(n as u64);
-    })?;
+    });
     bar.finish_and_clear();
+    let wall_time_s = wall.elapsed().as_secs_f64();
     let path = dir.join("monte_carlo.json");
     std::fs::write(&path, serde_json::to_string_pretty(&report)? + "\n")
         .with_context(|| format!("writing {}", path.display()))?;
     println!(
-        "{}: {}/{} successful ({:.1} %), {} crashes, {:.0} s on {} threads",
+        "{}: {}/{} successful ({:.1} %), {} crashes, {} runs without a flight, {:.0} s on {} threads",
         report.scenario,
         report.successes,
         report.runs,
         100.0 * report.success_rate,
         report.crashes,
-        report.wall_time_s,
-        report.threads
+        report.errors,
+        wall_time_s,
+        threads.min(runs)
     );
     if let (Some(t), Some(v)) = (&report.touchdown_tilt_deg, &report.impact_speed_mps) {
         println!(
@@ -310,14 +338,7 @@ fn many(
         );
     }
     for f in report.failures.iter().take(10) {
-        println!(
-            "  failed run {} (seed {}): tilt {:?}, impact {:?}, crash {:?}",
-            f.run,
-            f.seed,
-            f.summary.touchdown_tilt_deg,
-            f.summary.impact_speed_mps,
-            f.summary.crash_reason
-        );
+        println!("  failed run {} (seed {}): {}", f.run, f.seed, f.reason);
     }
     println!("outputs           monte_carlo.json");
     Ok(report)

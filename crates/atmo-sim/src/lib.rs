@@ -6,7 +6,8 @@
 //! - [`closed_loop`]: the flight stack (atmo-daemon) flown against the
 //!   plant in the daemon's own control loop, with a simulated clock and a
 //!   simulated `TickIo` ([`sim_io`]); [`monte_carlo`] runs many
-//!   randomized landings; [`figure`] draws the paper's Fig. 5A.
+//!   randomized landings; [`figure`] draws the paper's Fig. 5A;
+//!   [`campaign`] sweeps them over conditions in shards that merge exactly.
 //! - [`faults`]: a scenario's `[faults]`, injected on the closed loop's
 //!   input path (docs/faults.md).
 //! - [`sitl`]: `atmo-sim serve`, the plant behind the daemon's real
@@ -15,6 +16,7 @@
 //! The discrepancy finder is atmo-explain; the `atmo-sim explain`
 //! subcommand is its CLI.
 
+pub mod campaign;
 pub mod closed_loop;
 pub mod error;
 pub mod faults;

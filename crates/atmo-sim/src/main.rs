@@ -10,6 +10,7 @@ use atmo_core::{ConfigFile, Linkage, Model, RobotConfig};
 use atmo_daemon::cli::DaemonConfigArg;
 use clap::{Parser, Subcommand};
 
+mod campaign_cmd;
 mod fly;
 
 /// ATMO simulator: the built-in plant, scenarios and analysis tools.
@@ -41,7 +42,9 @@ enum Command {
     /// run's seed, draws and outcome (replay one with --runs 1 --seed S),
     /// and OUT/<scenario name>/touchdown.png: impact speed against touchdown
     /// tilt of every run, a cloud per controller (--controller all: the same
-    /// seeds), issue 17's target (>= 64 deg, <= 0.4 m/s) shaded.
+    /// seeds), the wheel-landing target (>= 64 deg, <= 0.4 m/s) shaded.
+    /// With --shard K/N: only the runs g with g % N == K, written to
+    /// OUT/<scenario name>/shards/ for `atmo-sim campaign merge`.
     /// The exit status is 0 when the flight (or every Monte Carlo run) met
     /// the success criteria: no crash, touchdown tilt >= 60 deg, impact speed
     /// <= 0.5 m/s, >= 1 m driven after touchdown.
@@ -61,6 +64,11 @@ enum Command {
         /// Threads for the Monte Carlo (default: all cores).
         #[arg(long)]
         jobs: Option<usize>,
+        /// Fly only shard K of N (0-based) of the --runs Monte Carlo and
+        /// write its partial result; `atmo-sim campaign merge` joins the N
+        /// into the monte_carlo.json one process would write.
+        #[arg(long, requires = "runs")]
+        shard: Option<atmo_sim::campaign::shard::ShardSpec>,
         /// The MPC's prediction model: `nominal` (no ground effect),
         /// `ground-effect` (the plant's documented default surface, the tilt
         /// on the paper's law), `planned-tilt` (the ground-effect model and
@@ -80,6 +88,12 @@ enum Command {
         /// config/mpc.toml (same layout; the flight settings' preset is used).
         #[arg(long)]
         mpc_config: Option<PathBuf>,
+    },
+    /// Landing campaigns: Monte Carlo sweeps in shards, merged exactly,
+    /// with a success map; Slurm array jobs (docs/campaigns.md).
+    Campaign {
+        #[command(subcommand)]
+        command: campaign_cmd::CampaignCommand,
     },
     // The help text is the doc comment of `atmo_explain::cli::Args` (a doc
     // comment here would replace it).
@@ -145,6 +159,7 @@ fn main() -> Result<()> {
             runs,
             seed,
             jobs,
+            shard,
             controller,
             ground_surface,
             mpc_config,
@@ -155,13 +170,15 @@ fn main() -> Result<()> {
                 count: runs,
                 seed,
                 jobs,
+                shard,
             },
-            fly::ControllerArgs {
+            &fly::ControllerArgs {
                 choice: controller,
                 surface: ground_surface,
                 mpc_config,
             },
         ),
+        Command::Campaign { command } => campaign_cmd::run(command),
         Command::Serve {
             scenario,
             config,

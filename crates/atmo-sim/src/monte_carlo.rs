@@ -10,17 +10,21 @@
 //! [0.7, 1.3] and its tilt axis shifted by up to +-3 deg, so that a
 //! controller that models the ground effect never knows the truth exactly.
 //! Run i uses seed `seed + i`, so any run can be replayed alone; the same
-//! seeds give the same plants whichever controller flies them.
+//! seeds give the same plants whichever controller flies them. A run's
+//! record depends on the base seed and its index only (never on the thread
+//! or the machine that flew it), so the report of runs flown in shards
+//! ([`crate::campaign`]) equals the report of the same runs flown here.
 
+use std::panic::AssertUnwindSafe;
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicUsize, Ordering};
+use std::time::{Duration, Instant};
 
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
-use crate::closed_loop::{ControllerConfig, PredictedTouchdown, Summary, fly};
-use crate::error::Result;
+use crate::closed_loop::{ControllerConfig, PredictedTouchdown, Summary, fly_within};
 use crate::scenario::{Scenario, SuccessConfig};
 use atmo_plant::config::{GustConfig, MassErrorConfig};
 
@@ -119,12 +123,13 @@ pub struct CriteriaMet {
     pub no_crash: Count,
 }
 
-/// A run that did not succeed, for replay.
+/// A run that did not succeed, for replay (`--runs 1 --seed SEED`).
 #[derive(Debug, Clone, Serialize, PartialEq)]
 pub struct Failure {
     pub run: usize,
     pub seed: u64,
-    pub summary: Summary,
+    /// What went wrong, in words (the run's record has the numbers).
+    pub reason: String,
 }
 
 /// `monte_carlo.json`.
@@ -140,10 +145,13 @@ pub struct MonteCarloReport {
     pub impact_speed_mps: Option<Distribution>,
     pub drive_distance_m: Option<Distribution>,
     pub max_mean_thrust: Option<Distribution>,
-    /// Runs that landed past the paper: no crash, touchdown tilt >= 64 deg,
-    /// impact speed <= 0.4 m/s (issue 17's Monte Carlo criterion).
+    /// Runs at the wheel-landing target: no crash, touchdown tilt >=
+    /// [`PAST_TILT_DEG`], impact speed <= [`PAST_IMPACT_MPS`].
     pub landed_past_64_deg: usize,
     pub crashes: usize,
+    /// Runs that gave no flight: they panicked, ran past their time limit
+    /// or were refused by the closed loop (`per_run[].error`).
+    pub errors: usize,
     /// Each criterion's count with its Wilson 95 % interval: the
     /// scenario's success criteria, the wheel-landing target, no crash.
     pub criteria_met: CriteriaMet,
@@ -152,12 +160,10 @@ pub struct MonteCarloReport {
     pub prediction: Option<PredictionCheck>,
     /// Every run in order: its draws and its outcome.
     pub per_run: Vec<RunRecord>,
-    pub wall_time_s: f64,
-    pub threads: usize,
 }
 
 /// What one run drew: the plant's truth against the controller's model.
-#[derive(Debug, Clone, Copy, Serialize, PartialEq, Default)]
+#[derive(Debug, Clone, Copy, Serialize, Deserialize, PartialEq, Default)]
 pub struct Draws {
     /// Mass and inertia against the robot file's (1 = as the file says).
     pub mass_scale: f64,
@@ -175,8 +181,9 @@ pub struct Draws {
 }
 
 /// One run of the Monte Carlo: what it drew and how it flew, so that the
-/// runs that missed can be told apart from those that did not.
-#[derive(Debug, Clone, Serialize, PartialEq)]
+/// runs that missed can be told apart from those that did not. Only what
+/// the seed decides: no wall-clock time.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 pub struct RunRecord {
     pub run: usize,
     pub seed: u64,
@@ -186,9 +193,75 @@ pub struct RunRecord {
     pub crashed: bool,
     pub touchdown_tilt_deg: Option<f64>,
     pub impact_speed_mps: Option<f64>,
-    pub max_mean_thrust: f64,
+    /// Null for a run that gave no flight (`error`).
+    pub max_mean_thrust: Option<f64>,
+    pub drive_distance_m: Option<f64>,
     /// The touchdown the flight stack predicted at its decision.
     pub predicted_touchdown: Option<PredictedTouchdown>,
+    pub crash_reason: Option<String>,
+    pub mode_sequence: Vec<String>,
+    /// Why the run gave no flight: a panic's message, its time limit, or
+    /// the closed loop's refusal. Null for a flown run.
+    pub error: Option<String>,
+}
+
+impl RunRecord {
+    fn flown(run: usize, seed: u64, draws: Draws, criteria: &SuccessConfig, s: &Summary) -> Self {
+        Self {
+            run,
+            seed,
+            draws,
+            success: criteria.met_by(s),
+            landed_past_64_deg: landed_past_64_deg(s),
+            crashed: s.crashed,
+            touchdown_tilt_deg: s.touchdown_tilt_deg,
+            impact_speed_mps: s.impact_speed_mps,
+            max_mean_thrust: Some(s.max_mean_thrust),
+            drive_distance_m: Some(s.drive_distance_m),
+            predicted_touchdown: s.predicted_touchdown,
+            crash_reason: s.crash_reason.clone(),
+            mode_sequence: s.mode_sequence.clone(),
+            error: None,
+        }
+    }
+
+    fn errored(run: usize, seed: u64, draws: Draws, error: String) -> Self {
+        Self {
+            run,
+            seed,
+            draws,
+            success: false,
+            landed_past_64_deg: false,
+            crashed: false,
+            touchdown_tilt_deg: None,
+            impact_speed_mps: None,
+            max_mean_thrust: None,
+            drive_distance_m: None,
+            predicted_touchdown: None,
+            crash_reason: None,
+            mode_sequence: Vec::new(),
+            error: Some(error),
+        }
+    }
+
+    /// Why a run that did not succeed missed, in words.
+    fn failure_reason(&self) -> String {
+        if let Some(e) = &self.error {
+            return e.clone();
+        }
+        if let Some(c) = &self.crash_reason {
+            return format!("crashed: {c}");
+        }
+        let fmt =
+            |v: Option<f64>, unit: &str| v.map_or("none".to_string(), |v| format!("{v:.3} {unit}"));
+        format!(
+            "touchdown tilt {}, impact {}, driven {}, modes {}",
+            fmt(self.touchdown_tilt_deg, "deg"),
+            fmt(self.impact_speed_mps, "m/s"),
+            fmt(self.drive_distance_m, "m"),
+            self.mode_sequence.join(" -> ")
+        )
+    }
 }
 
 /// The flown touchdown against the one predicted at the decision, over
@@ -297,53 +370,82 @@ pub fn randomized_with_draws(base: &Scenario, seed: u64) -> (Scenario, Draws) {
     (s, draws)
 }
 
-/// Issue 17's Monte Carlo criterion on the touchdown tilt (deg, at least)
-/// and the impact speed (m/s, at most).
+/// The wheel-landing target: the touchdown tilt (deg, at least) and the
+/// impact speed (m/s, at most), past the paper's 65 deg landing's margin.
 pub const PAST_TILT_DEG: f64 = 64.0;
 pub const PAST_IMPACT_MPS: f64 = 0.4;
 
-/// Issue 17's Monte Carlo criterion: no crash, touchdown tilt >=
-/// [`PAST_TILT_DEG`], impact speed <= [`PAST_IMPACT_MPS`].
+/// The wheel-landing target: no crash, touchdown tilt >= [`PAST_TILT_DEG`],
+/// impact speed <= [`PAST_IMPACT_MPS`].
 pub fn landed_past_64_deg(s: &Summary) -> bool {
     !s.crashed
         && s.touchdown_tilt_deg.is_some_and(|t| t >= PAST_TILT_DEG)
         && s.impact_speed_mps.is_some_and(|v| v <= PAST_IMPACT_MPS)
 }
 
-/// A run as a worker thread hands it back: (run, seed, draws, how it flew).
-type Flown = (usize, u64, Draws, Result<Summary>);
+/// Each run's wall-clock budget unless told otherwise (a normal run of the
+/// shipped scenarios takes well under a second in a release build).
+pub const RUN_TIME_LIMIT: Duration = Duration::from_secs(120);
 
-/// Flies `runs` randomized copies on `threads` threads; `progress` is
-/// called after each run with the number finished.
-pub fn run(
+/// Run `index` of the Monte Carlo from `base_seed`: its seed is
+/// `base_seed + index`; a panic, a run past `time_limit` or a refusal of the
+/// closed loop is recorded as the run's `error`, never lost.
+pub fn fly_run(
     base: &Scenario,
     controller: &ControllerConfig,
-    runs: usize,
+    base_seed: u64,
+    index: usize,
+    time_limit: Duration,
+) -> RunRecord {
+    let seed = base_seed.wrapping_add(index as u64);
+    let (scenario, draws) = randomized_with_draws(base, seed);
+    let deadline = Instant::now() + time_limit;
+    let flown = std::panic::catch_unwind(AssertUnwindSafe(|| {
+        fly_within(&scenario, controller, Some(deadline))
+    }));
+    match flown {
+        Ok(Ok(summary)) => RunRecord::flown(index, seed, draws, &base.file.success, &summary),
+        Ok(Err(e)) => RunRecord::errored(index, seed, draws, e.to_string()),
+        Err(panic) => {
+            let message = panic
+                .downcast_ref::<&str>()
+                .map(|m| (*m).to_string())
+                .or_else(|| panic.downcast_ref::<String>().cloned())
+                .unwrap_or_else(|| "a panic without a message".to_string());
+            RunRecord::errored(index, seed, draws, format!("panicked: {message}"))
+        }
+    }
+}
+
+/// Flies the runs `indices` of the Monte Carlo from `base_seed` on
+/// `threads` threads; the records come back in the order of `indices`.
+/// `progress` is called after each run with the number finished.
+pub fn fly_runs(
+    base: &Scenario,
+    controller: &ControllerConfig,
+    indices: &[usize],
     base_seed: u64,
     threads: usize,
+    time_limit: Duration,
     progress: &(dyn Fn(usize) + Sync),
-) -> Result<MonteCarloReport> {
-    let wall = std::time::Instant::now();
-    let criteria = base.file.success;
+) -> Vec<RunRecord> {
     let next = AtomicUsize::new(0);
     let done = AtomicUsize::new(0);
-    let results: Mutex<Vec<Flown>> = Mutex::new(Vec::with_capacity(runs));
-    let threads = threads.clamp(1, runs.max(1));
+    let results: Mutex<Vec<(usize, RunRecord)>> = Mutex::new(Vec::with_capacity(indices.len()));
+    let threads = threads.clamp(1, indices.len().max(1));
     std::thread::scope(|scope| {
         for _ in 0..threads {
             scope.spawn(|| {
                 loop {
-                    let i = next.fetch_add(1, Ordering::Relaxed);
-                    if i >= runs {
+                    let k = next.fetch_add(1, Ordering::Relaxed);
+                    let Some(&index) = indices.get(k) else {
                         break;
-                    }
-                    let seed = base_seed.wrapping_add(i as u64);
-                    let (scenario, draws) = randomized_with_draws(base, seed);
-                    let summary = fly(&scenario, controller, |_| {});
+                    };
+                    let record = fly_run(base, controller, base_seed, index, time_limit);
                     results
                         .lock()
                         .unwrap_or_else(std::sync::PoisonError::into_inner)
-                        .push((i, seed, draws, summary));
+                        .push((k, record));
                     progress(done.fetch_add(1, Ordering::Relaxed) + 1);
                 }
             });
@@ -353,44 +455,52 @@ pub fn run(
         .into_inner()
         .unwrap_or_else(std::sync::PoisonError::into_inner);
     results.sort_by_key(|r| r.0);
-    let mut summaries = Vec::with_capacity(runs);
-    let mut per_run = Vec::with_capacity(runs);
-    for (i, seed, draws, r) in results {
-        let s = r?;
-        per_run.push(RunRecord {
-            run: i,
-            seed,
-            draws,
-            success: criteria.met_by(&s),
-            landed_past_64_deg: landed_past_64_deg(&s),
-            crashed: s.crashed,
-            touchdown_tilt_deg: s.touchdown_tilt_deg,
-            impact_speed_mps: s.impact_speed_mps,
-            max_mean_thrust: s.max_mean_thrust,
-            predicted_touchdown: s.predicted_touchdown,
-        });
-        summaries.push((i, seed, s));
-    }
-    let successes = summaries
-        .iter()
-        .filter(|(_, _, s)| criteria.met_by(s))
-        .count();
-    let failures = summaries
-        .iter()
-        .filter(|(_, _, s)| !criteria.met_by(s))
-        .map(|(i, seed, s)| Failure {
-            run: *i,
-            seed: *seed,
-            summary: s.clone(),
-        })
-        .collect();
-    let landed = summaries
-        .iter()
-        .filter(|(_, _, s)| landed_past_64_deg(s))
-        .count();
-    let crashes = summaries.iter().filter(|(_, _, s)| s.crashed).count();
-    Ok(MonteCarloReport {
-        scenario: base.file.name.clone(),
+    results.into_iter().map(|(_, r)| r).collect()
+}
+
+/// Flies `runs` randomized copies on `threads` threads and reports them;
+/// `progress` is called after each run with the number finished.
+pub fn run(
+    base: &Scenario,
+    controller: &ControllerConfig,
+    runs: usize,
+    base_seed: u64,
+    threads: usize,
+    progress: &(dyn Fn(usize) + Sync),
+) -> MonteCarloReport {
+    let indices: Vec<usize> = (0..runs).collect();
+    let records = fly_runs(
+        base,
+        controller,
+        &indices,
+        base_seed,
+        threads,
+        RUN_TIME_LIMIT,
+        progress,
+    );
+    report(&base.file.name, base_seed, base.file.success, records)
+}
+
+/// The report of the runs `per_run` (in run order) of the Monte Carlo of
+/// `scenario` from `base_seed`: a pure function of the records, so runs
+/// flown anywhere and merged give the report of runs flown here.
+pub fn report(
+    scenario: &str,
+    base_seed: u64,
+    criteria: SuccessConfig,
+    per_run: Vec<RunRecord>,
+) -> MonteCarloReport {
+    let runs = per_run.len();
+    let count = |f: &dyn Fn(&RunRecord) -> bool| per_run.iter().filter(|r| f(r)).count();
+    let successes = count(&|r| r.success);
+    let landed = count(&|r| r.landed_past_64_deg);
+    let crashes = count(&|r| r.crashed);
+    let errors = count(&|r| r.error.is_some());
+    let values = |f: &dyn Fn(&RunRecord) -> Option<f64>| {
+        Distribution::of(per_run.iter().filter_map(f).collect())
+    };
+    MonteCarloReport {
+        scenario: scenario.to_string(),
         base_seed,
         runs,
         successes,
@@ -400,41 +510,28 @@ pub fn run(
             successes as f64 / runs as f64
         },
         criteria,
-        touchdown_tilt_deg: Distribution::of(
-            summaries
-                .iter()
-                .filter_map(|(_, _, s)| s.touchdown_tilt_deg)
-                .collect(),
-        ),
-        impact_speed_mps: Distribution::of(
-            summaries
-                .iter()
-                .filter_map(|(_, _, s)| s.impact_speed_mps)
-                .collect(),
-        ),
-        drive_distance_m: Distribution::of(
-            summaries
-                .iter()
-                .map(|(_, _, s)| s.drive_distance_m)
-                .collect(),
-        ),
-        max_mean_thrust: Distribution::of(
-            summaries
-                .iter()
-                .map(|(_, _, s)| s.max_mean_thrust)
-                .collect(),
-        ),
+        touchdown_tilt_deg: values(&|r| r.touchdown_tilt_deg),
+        impact_speed_mps: values(&|r| r.impact_speed_mps),
+        drive_distance_m: values(&|r| r.drive_distance_m),
+        max_mean_thrust: values(&|r| r.max_mean_thrust),
         landed_past_64_deg: landed,
         crashes,
+        errors,
         criteria_met: CriteriaMet {
             success: Count::of(successes, runs),
             wheel_landing_target: Count::of(landed, runs),
             no_crash: Count::of(runs - crashes, runs),
         },
-        failures,
+        failures: per_run
+            .iter()
+            .filter(|r| !r.success)
+            .map(|r| Failure {
+                run: r.run,
+                seed: r.seed,
+                reason: r.failure_reason(),
+            })
+            .collect(),
         prediction: PredictionCheck::of(&per_run),
         per_run,
-        wall_time_s: wall.elapsed().as_secs_f64(),
-        threads,
-    })
+    }
 }

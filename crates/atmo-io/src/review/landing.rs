@@ -11,7 +11,7 @@
 //! driven is the sum of the horizontal steps.
 
 use nalgebra::Vector3;
-use serde::Serialize;
+use serde::{Deserialize, Serialize};
 
 use crate::msg::{Mode, SimTruth};
 
@@ -49,7 +49,7 @@ pub struct Summary {
 }
 
 /// A touchdown as predicted at a decision.
-#[derive(Debug, Clone, Copy, Serialize, PartialEq)]
+#[derive(Debug, Clone, Copy, Serialize, Deserialize, PartialEq)]
 pub struct PredictedTouchdown {
     /// When the decision was taken, s.
     pub decided_at_s: f64,

@@ -9,3 +9,4 @@
 pub mod figure;
 pub mod landing;
 pub mod log;
+pub mod success_map;
