@@ -10,7 +10,7 @@ use anyhow::{Context, Result, bail};
 use atmo_io::review::success_map::{MapAxis, MapCell, write_success_map};
 use atmo_sim::campaign::shard::{self, BuildIdentity, Merged, ShardFile, ShardSpec};
 use atmo_sim::campaign::{CampaignFile, Plan, Target, slurm};
-use atmo_sim::closed_loop::ControllerConfig;
+use atmo_sim::closed_loop::{ControllerConfig, ControllerPreset};
 use atmo_sim::monte_carlo::{self, Count, MonteCarloReport};
 use atmo_sim::scenario::Scenario;
 use serde::Serialize;
@@ -23,6 +23,8 @@ pub enum CampaignCommand {
     Plan {
         /// Campaign file (TOML, see config/campaigns/).
         campaign: PathBuf,
+        #[command(flatten)]
+        controller: ControllerOverride,
         #[arg(long, default_value = "out/campaign")]
         out: PathBuf,
     },
@@ -32,6 +34,8 @@ pub enum CampaignCommand {
     /// (--run-index G: prints its record).
     Run {
         campaign: PathBuf,
+        #[command(flatten)]
+        controller: ControllerOverride,
         /// Fly only shard K of N (0-based): the global runs g with g % N == K.
         #[arg(long)]
         shard: Option<ShardSpec>,
@@ -60,6 +64,8 @@ pub enum CampaignCommand {
     /// it with `sbatch`, then `merge OUT/shards`.
     Slurm {
         campaign: PathBuf,
+        #[command(flatten)]
+        controller: ControllerOverride,
         #[arg(long, default_value = "out/campaign")]
         out: PathBuf,
         /// The atmo-sim each task runs (default: this one). It must be
@@ -69,28 +75,48 @@ pub enum CampaignCommand {
     },
 }
 
+/// `--controller`: fly the campaign with another controller than its file
+/// names (the same cells and seeds).
+#[derive(clap::Args, Clone, Copy)]
+pub struct ControllerOverride {
+    #[arg(long, value_enum)]
+    controller: Option<ControllerPreset>,
+}
+
 pub fn run(command: CampaignCommand) -> Result<()> {
     match command {
-        CampaignCommand::Plan { campaign, out } => plan(&campaign, &out),
+        CampaignCommand::Plan {
+            campaign,
+            controller,
+            out,
+        } => plan(&campaign, controller, &out),
         CampaignCommand::Run {
             campaign,
+            controller,
             shard,
             run_index,
             jobs,
             out,
-        } => run_campaign(&campaign, shard, run_index, jobs, &out),
+        } => run_campaign(&campaign, controller, shard, run_index, jobs, &out),
         CampaignCommand::Merge { shards, out } => merge(&shards, &out),
         CampaignCommand::Slurm {
             campaign,
+            controller,
             out,
             binary,
-        } => write_slurm(&campaign, &out, binary),
+        } => write_slurm(&campaign, controller, &out, binary),
     }
 }
 
 /// The campaign file, its scenario (relative to the file) and controller.
-fn load(path: &Path) -> Result<(CampaignFile, Scenario, ControllerConfig, Plan)> {
-    let file = CampaignFile::load(path)?;
+fn load(
+    path: &Path,
+    controller: ControllerOverride,
+) -> Result<(CampaignFile, Scenario, ControllerConfig, Plan)> {
+    let mut file = CampaignFile::load(path)?;
+    if let Some(c) = controller.controller {
+        file.controller = c;
+    }
     let scenario_path = path
         .parent()
         .unwrap_or_else(|| Path::new("."))
@@ -200,8 +226,8 @@ pub fn fly_and_write_shard(
     Ok(())
 }
 
-fn plan(campaign: &Path, out: &Path) -> Result<()> {
-    let (file, _, _, plan) = load(campaign)?;
+fn plan(campaign: &Path, controller: ControllerOverride, out: &Path) -> Result<()> {
+    let (file, _, _, plan) = load(campaign, controller)?;
     println!(
         "campaign          {} ({} on {}, controller {})",
         plan.name,
@@ -238,12 +264,13 @@ fn plan(campaign: &Path, out: &Path) -> Result<()> {
 
 fn run_campaign(
     campaign: &Path,
+    controller_override: ControllerOverride,
     shard: Option<ShardSpec>,
     run_index: Option<usize>,
     jobs: Option<usize>,
     out: &Path,
 ) -> Result<()> {
-    let (_, scenario, controller, plan) = load(campaign)?;
+    let (_, scenario, controller, plan) = load(campaign, controller_override)?;
     if let Some(g) = run_index {
         if g >= plan.total_runs() {
             bail!(
@@ -474,8 +501,13 @@ fn write_map(merged: &Merged, path: &Path) -> Result<()> {
     Ok(())
 }
 
-fn write_slurm(campaign: &Path, out: &Path, binary: Option<PathBuf>) -> Result<()> {
-    let (file, _, _, plan) = load(campaign)?;
+fn write_slurm(
+    campaign: &Path,
+    controller: ControllerOverride,
+    out: &Path,
+    binary: Option<PathBuf>,
+) -> Result<()> {
+    let (file, _, _, plan) = load(campaign, controller)?;
     let absolute =
         |p: &Path| std::path::absolute(p).with_context(|| format!("resolving {}", p.display()));
     let binary = match binary {
@@ -485,14 +517,15 @@ fn write_slurm(campaign: &Path, out: &Path, binary: Option<PathBuf>) -> Result<(
     let out = absolute(out)?;
     std::fs::create_dir_all(out.join("logs"))
         .with_context(|| format!("creating {}", out.display()))?;
-    let script = slurm::sbatch_script(
-        &plan.name,
-        file.shards,
-        &file.slurm,
-        &binary,
-        &absolute(campaign)?,
-        &out,
-    );
+    let script = slurm::sbatch_script(&slurm::ArrayJob {
+        name: &plan.name,
+        shards: file.shards,
+        resources: &file.slurm,
+        binary: &binary,
+        campaign: &absolute(campaign)?,
+        controller: plan.controller.name(),
+        out: &out,
+    });
     let path = out.join("campaign.sbatch");
     std::fs::write(&path, script).with_context(|| format!("writing {}", path.display()))?;
     println!("wrote             {}", path.display());

@@ -196,7 +196,9 @@ impl ControllerConfig {
 }
 
 /// The controllers a simulated flight can be flown with, by name.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize, clap::ValueEnum,
+)]
 #[serde(rename_all = "kebab-case")]
 pub enum ControllerPreset {
     /// The MPC settings as given (config/mpc.toml, or `--mpc-config`).

@@ -72,18 +72,34 @@ fn quote(s: &str) -> String {
     format!("'{}'", s.replace('\'', r"'\''"))
 }
 
+/// What an array job runs. Paths are written as given: pass absolute ones,
+/// the tasks run on other machines.
+#[derive(Debug, Clone, Copy)]
+pub struct ArrayJob<'a> {
+    pub name: &'a str,
+    pub shards: usize,
+    pub resources: &'a SlurmResources,
+    /// The atmo-sim every task runs.
+    pub binary: &'a Path,
+    pub campaign: &'a Path,
+    /// `--controller` of every task (the plan's).
+    pub controller: &'a str,
+    pub out: &'a Path,
+}
+
 /// The array-job script: task `K` runs `atmo-sim campaign run CAMPAIGN
-/// --shard K/SHARDS --out OUT` (which writes `OUT/shards/`); logs in
-/// `OUT/logs/`. Paths are
-/// written as given (pass absolute ones: the tasks run on other machines).
-pub fn sbatch_script(
-    name: &str,
-    shards: usize,
-    resources: &SlurmResources,
-    binary: &Path,
-    campaign: &Path,
-    out: &Path,
-) -> String {
+/// --controller C --shard K/SHARDS --out OUT` (which writes `OUT/shards/`);
+/// logs in `OUT/logs/`.
+pub fn sbatch_script(job: &ArrayJob<'_>) -> String {
+    let ArrayJob {
+        name,
+        shards,
+        resources,
+        binary,
+        campaign,
+        controller,
+        out,
+    } = *job;
     let out_s = out.display().to_string();
     let mut s = String::new();
     let _ = writeln!(s, "#!/bin/bash");
@@ -125,7 +141,7 @@ pub fn sbatch_script(
     let _ = writeln!(s, "set -euo pipefail");
     let _ = writeln!(
         s,
-        "exec {} campaign run {} --shard \"${{SLURM_ARRAY_TASK_ID}}/{shards}\" --jobs \"${{SLURM_CPUS_PER_TASK:-1}}\" --out {}",
+        "exec {} campaign run {} --controller {controller} --shard \"${{SLURM_ARRAY_TASK_ID}}/{shards}\" --jobs \"${{SLURM_CPUS_PER_TASK:-1}}\" --out {}",
         quote(&binary.display().to_string()),
         quote(&campaign.display().to_string()),
         quote(&out_s)
@@ -139,21 +155,22 @@ mod tests {
 
     #[test]
     fn the_script_is_an_array_of_one_task_per_shard() {
-        let s = sbatch_script(
-            "grid",
-            8,
-            &SlurmResources {
+        let s = sbatch_script(&ArrayJob {
+            name: "grid",
+            shards: 8,
+            resources: &SlurmResources {
                 max_parallel: Some(4),
                 partition: Some("cpu".into()),
                 ..SlurmResources::default()
             },
-            Path::new("/opt/atmo sim/atmo-sim"),
-            Path::new("/c/grid.toml"),
-            Path::new("/scratch/grid"),
-        );
+            binary: Path::new("/opt/atmo sim/atmo-sim"),
+            campaign: Path::new("/c/grid.toml"),
+            controller: "nominal",
+            out: Path::new("/scratch/grid"),
+        });
         assert!(s.contains("#SBATCH --array=0-7%4\n"), "{s}");
         assert!(s.contains("#SBATCH --partition=cpu\n"));
-        assert!(s.contains("'/opt/atmo sim/atmo-sim' campaign run '/c/grid.toml' --shard \"${SLURM_ARRAY_TASK_ID}/8\""));
+        assert!(s.contains("'/opt/atmo sim/atmo-sim' campaign run '/c/grid.toml' --controller nominal --shard \"${SLURM_ARRAY_TASK_ID}/8\""));
         assert!(s.contains("--out '/scratch/grid'\n"), "{s}");
     }
 }
