@@ -360,7 +360,7 @@ mod tests {
         Cli::command().debug_assert();
     }
 
-    /// Issue 21: `run --duration nan|inf|1e300` ran until killed.
+    /// `run --duration nan|inf|1e300` must not run until killed.
     #[test]
     fn run_refuses_a_duration_that_never_ends() {
         for value in ["nan", "inf", "1e300", "-1", "0"] {

@@ -17,7 +17,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 pub enum ControllerChoice {
     /// config/mpc.toml's `[model] ground_effect`.
     Config,
-    /// No ground effect in the model (the controller before issue 17).
+    /// No ground effect in the model, the paper's tilt law.
     Nominal,
     /// The ground-effect surface in the model, the tilt on the paper's law.
     GroundEffect,
@@ -144,7 +144,7 @@ pub fn run(
 }
 
 /// The Monte Carlo's touchdowns, a cloud per controller (same seeds), with
-/// issue 17's target region.
+/// the wheel-landing target's region.
 fn write_touchdowns(
     path: &Path,
     scenario: &str,

@@ -129,7 +129,7 @@ pub struct TickTiming {
 /// consumed (see the `.msg`). `Copy` and allocation-free: built on the
 /// control thread, serialized elsewhere.
 ///
-/// Logs written before the ground normal (issue 17) end after
+/// Logs written before the ground normal was logged end after
 /// `solver_cut_overflow`; they decode with `has_ground_normal = false`
 /// (level ground, what those flight stacks assumed), so that old flight
 /// logs still replay.
