@@ -36,6 +36,17 @@ fn plot_err(e: impl std::fmt::Display) -> IoError {
     IoError::Output(format!("success map: {e}"))
 }
 
+/// The grid value under the axis position `v` when `v` is a cell's centre
+/// (the axis is in cell units), else nothing.
+fn cell_label(values: &[f64], v: f64) -> String {
+    let i = v.floor() as usize;
+    let centre = (v - i as f64 - 0.5).abs() < 1e-9;
+    values
+        .get(i)
+        .filter(|_| centre)
+        .map_or(String::new(), ToString::to_string)
+}
+
 /// Red (0) through yellow to green (1).
 fn rate_colour(t: f64) -> RGBColor {
     let t = t.clamp(0.0, 1.0);
@@ -142,20 +153,8 @@ pub fn write_success_map(
             .y_label_area_size(60)
             .build_cartesian_2d(0.0..nx as f64, 0.0..ny as f64)
             .map_err(plot_err)?;
-        let x_label = |v: &f64| {
-            let i = v.floor() as usize;
-            x.values
-                .get(i)
-                .filter(|_| (v - i as f64 - 0.5).abs() < 1e-9)
-                .map_or(String::new(), |x| format!("{x}"))
-        };
-        let y_label = |v: &f64| {
-            let i = v.floor() as usize;
-            y.values
-                .get(i)
-                .filter(|_| (v - i as f64 - 0.5).abs() < 1e-9)
-                .map_or(String::new(), |y| format!("{y}"))
-        };
+        let x_label = |v: &f64| cell_label(x.values, *v);
+        let y_label = |v: &f64| cell_label(y.values, *v);
         chart
             .configure_mesh()
             .disable_mesh()
