@@ -433,6 +433,10 @@ impl Default for SensorsConfig {
     }
 }
 
+/// Largest contact stiffness the plant resolves at its largest step, N/m
+/// (see the check in [`EffectsConfig`]'s validation).
+pub const MAX_CONTACT_STIFFNESS: f64 = 1e6;
+
 /// `[effects.ground_contact]`: compliant wheel contacts, wheel drive, and
 /// crash detection (see [`crate::contact`] for the law).
 #[derive(Debug, Clone, Deserialize, PartialEq)]
@@ -772,7 +776,16 @@ impl EffectsConfig {
         }
         if let Some(e) = &self.ground_contact {
             let p = format!("{prefix}.ground_contact");
-            c.positive(&format!("{p}.stiffness"), e.stiffness)?;
+            // Stiffer than 1e6 N/m a contact is no longer resolved by the
+            // RK4 step (omega dt = sqrt(k / m) dt passes 0.85 for a wheel
+            // carrying a quarter of 5.5 kg at dt = 1 ms; 1e12 N/m reported
+            // impacts of -1.5e10 m/s).
+            c.range(
+                &format!("{p}.stiffness"),
+                e.stiffness,
+                1.0..=MAX_CONTACT_STIFFNESS,
+                "N/m",
+            )?;
             c.within(&format!("{p}.damping"), e.damping, 0.0, 1e6)?;
             c.within(&format!("{p}.friction"), e.friction, 0.0, 3.0)?;
             c.within(
@@ -781,7 +794,12 @@ impl EffectsConfig {
                 0.01,
                 3.0,
             )?;
-            c.positive(&format!("{p}.tangential_stiffness"), e.tangential_stiffness)?;
+            c.range(
+                &format!("{p}.tangential_stiffness"),
+                e.tangential_stiffness,
+                1.0..=MAX_CONTACT_STIFFNESS,
+                "N/m",
+            )?;
             c.within(
                 &format!("{p}.tangential_damping"),
                 e.tangential_damping,

@@ -6,6 +6,7 @@
 mod closed_loop_identification;
 mod config_errors;
 mod faults;
+mod hostile;
 mod replay;
 mod scenarios;
 mod sitl;
