@@ -124,6 +124,14 @@ pub fn recording_csv(data: &[u8]) {
             w[1].t
         );
     }
+    // The reader contract (docs/input-contract.md) holds for what is accepted.
+    use atmo_explain::recording::contract;
+    assert_eq!(rec.at.len(), rec.samples.len(), "origins out of step");
+    if let Err(e) = contract::check_time_axis(&rec) {
+        panic!("accepted a time axis the contract refuses: {e}");
+    }
+    let bounds = contract::JumpBounds::of(&atmo_core::RobotConfig::atmo());
+    let _ = contract::find_jumps(&rec, &bounds);
     let _ = rec.median_dt();
     let _ = rec.to_csv();
 }

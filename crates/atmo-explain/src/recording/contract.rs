@@ -169,6 +169,16 @@ pub fn time_order(n: usize, t: impl Fn(usize) -> f64) -> (Vec<bool>, usize) {
     (keep, skipped)
 }
 
+/// A time for a message: plainly up to 1e7, in exponent form beyond (a
+/// `t = 1e300` is not printed as 301 digits).
+fn t_text(t: f64) -> String {
+    if t.abs() < 1e7 {
+        format!("{t}")
+    } else {
+        format!("{t:e}")
+    }
+}
+
 /// The unit the times look like when read as seconds gives a median spacing
 /// of `dt`: an advice for the error message.
 fn unit_hint(dt: f64) -> &'static str {
@@ -195,9 +205,9 @@ pub fn check_time_axis(rec: &Recording) -> Result<(), String> {
         return Err(format!(
             "{}: t = {} does not advance past {} ({}): the samples must be in increasing time",
             label(rec, k),
-            s[k].t,
+            t_text(s[k].t),
             label(rec, k - 1),
-            s[k - 1].t
+            t_text(s[k - 1].t)
         ));
     }
     if s.len() < 2 {
@@ -207,12 +217,13 @@ pub fn check_time_axis(rec: &Recording) -> Result<(), String> {
     if let Some(k) = (1..s.len()).find(|&k| s[k].t - s[k - 1].t > MAX_ROW_GAP_S) {
         return Err(format!(
             "{}: t = {} is {} s after {} (t = {}): gaps over {MAX_ROW_GAP_S} s are refused \
-             (median spacing {dt} s; {})",
+             (median spacing {} s; {})",
             label(rec, k),
-            s[k].t,
-            s[k].t - s[k - 1].t,
+            t_text(s[k].t),
+            t_text(s[k].t - s[k - 1].t),
             label(rec, k - 1),
-            s[k - 1].t,
+            t_text(s[k - 1].t),
+            t_text(dt),
             if dt > MAX_MEDIAN_DT_S || dt.is_nan() {
                 unit_hint(dt)
             } else {
@@ -222,15 +233,17 @@ pub fn check_time_axis(rec: &Recording) -> Result<(), String> {
     }
     if dt.is_nan() || dt > MAX_MEDIAN_DT_S {
         return Err(format!(
-            "column t: the median spacing of the rows is {dt} s, over {MAX_MEDIAN_DT_S} s \
+            "column t: the median spacing of the rows is {} s, over {MAX_MEDIAN_DT_S} s \
              (a rate under 1 Hz): {}",
+            t_text(dt),
             unit_hint(dt)
         ));
     }
     let span = s[s.len() - 1].t - s[0].t;
     if span > MAX_DURATION_S {
         return Err(format!(
-            "column t: the recording spans {span} s, over the {MAX_DURATION_S} s limit"
+            "column t: the recording spans {} s, over the {MAX_DURATION_S} s limit",
+            t_text(span)
         ));
     }
     Ok(())
