@@ -293,16 +293,9 @@ impl ConfigFile for ScenarioFile {
 }
 
 impl ScenarioFile {
-    /// Range checks, tilts up to `tilt_max_deg`; errors name `file` and the key.
-    pub fn validate_with_tilt_max(&self, file: &Path, tilt_max_deg: f64) -> Result<()> {
-        let c = Checker::new(file);
-        if self.name.trim().is_empty() {
-            return Err(c.fail("name", "a non-empty name", "\"\"").into());
-        }
-        c.within("duration", self.duration, 1e-3, 3600.0)?;
-        self.terrain.validate(&c, "terrain")?;
-        self.effects.validate(&c, "effects")?;
-
+    /// The initial state's position (bounded, above the terrain unless
+    /// standing on it), velocity and rates; errors name the key.
+    fn validate_initial_state(&self, c: &Checker<'_>) -> Result<()> {
         let init = &self.initial;
         for (k, v) in init.position.iter().enumerate() {
             c.range(&format!("initial.position[{k}]"), *v, -1e4..=1e4, "m")?;
@@ -338,6 +331,21 @@ impl ScenarioFile {
                     .into());
             }
         }
+        Ok(())
+    }
+
+    /// Range checks, tilts up to `tilt_max_deg`; errors name `file` and the key.
+    pub fn validate_with_tilt_max(&self, file: &Path, tilt_max_deg: f64) -> Result<()> {
+        let c = Checker::new(file);
+        if self.name.trim().is_empty() {
+            return Err(c.fail("name", "a non-empty name", "\"\"").into());
+        }
+        c.within("duration", self.duration, 1e-3, 3600.0)?;
+        self.terrain.validate(&c, "terrain")?;
+        self.effects.validate(&c, "effects")?;
+
+        self.validate_initial_state(&c)?;
+        let init = &self.initial;
         c.finite("initial.euler_deg", &init.euler_deg)?;
         c.within("initial.euler_deg[1]", init.euler_deg[1], -89.0, 89.0)?;
         c.within("initial.tilt_deg", init.tilt_deg, 0.0, tilt_max_deg)?;

@@ -149,7 +149,7 @@ pub fn time_order(n: usize, t: impl Fn(usize) -> f64) -> (Vec<bool>, usize) {
         let tk = t(k);
         if let Some(&a) = kept.last() {
             let ta = t(a);
-            if !(tk > ta) {
+            if tk.partial_cmp(&ta) != Some(std::cmp::Ordering::Greater) {
                 skipped += 1;
                 let before = kept.len().checked_sub(2).map(|p| t(kept[p]));
                 match before {
@@ -199,9 +199,11 @@ fn unit_hint(dt: f64) -> &'static str {
 /// the times look like.
 pub fn check_time_axis(rec: &Recording) -> Result<(), String> {
     let s = &rec.samples;
-    if let Some(k) =
-        (1..s.len()).find(|&k| s[k].t.partial_cmp(&s[k - 1].t).is_none_or(|o| o.is_le()))
-    {
+    if let Some(k) = (1..s.len()).find(|&k| {
+        s[k].t
+            .partial_cmp(&s[k - 1].t)
+            .is_none_or(std::cmp::Ordering::is_le)
+    }) {
         return Err(format!(
             "{}: t = {} does not advance past {} ({}): the samples must be in increasing time",
             label(rec, k),
@@ -296,7 +298,10 @@ impl JumpBounds {
         let mut out = [false; 6];
         for (c, o) in out.iter_mut().enumerate() {
             let d = (b.x[6 + c] - a.x[6 + c]).abs();
-            *o = !(d <= self.allowed(c, dt));
+            // Beyond the bound, or not comparable (NaN): a jump.
+            *o = d
+                .partial_cmp(&self.allowed(c, dt))
+                .is_none_or(std::cmp::Ordering::is_gt);
         }
         out
     }

@@ -151,7 +151,11 @@ fn summary(
         }
     );
     if !review.missing.is_empty() {
-        let n: u64 = review.missing.iter().map(|h| h.count()).sum();
+        let n: u64 = review
+            .missing
+            .iter()
+            .map(atmo_io::review::log::MissingTicks::count)
+            .sum();
         println!(
             "partial           {n} ticks missing in {} span(s): see stderr",
             review.missing.len()
