@@ -15,6 +15,7 @@
 //! The discrepancy finder is atmo-explain; the `atmo-sim explain`
 //! subcommand is its CLI.
 
+pub mod actuator_faults;
 pub mod closed_loop;
 pub mod error;
 pub mod faults;
