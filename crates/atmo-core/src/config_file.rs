@@ -89,7 +89,7 @@ pub fn parse_toml<T: DeserializeOwned>(text: &str, file: &Path) -> Result<T> {
 
 /// The document's shape, strictly: the document deserializer above leaves
 /// the elements of an array past a fixed-size field's length unread
-/// (`yaw_sign = [1, 1, -1, -1, 1, "x"]` was accepted as its first four), so
+/// (`yaw_sign = [1, 1, -1, -1, 1, "x"]` reads as its first four), so
 /// the same document is read a second time as a [`toml::Table`], whose
 /// deserializer refuses any element left over. The error names the key
 /// path and the line of its last segment.

@@ -658,7 +658,7 @@ impl EffectsConfig {
             let p = format!("{prefix}.ground_contact");
             // Stiffer than 1e6 N/m a contact is no longer resolved by the
             // RK4 step (omega dt = sqrt(k / m) dt passes 0.85 for a wheel
-            // carrying a quarter of 5.5 kg at dt = 1 ms; 1e12 N/m reported
+            // carrying a quarter of 5.5 kg at dt = 1 ms; at 1e12 N/m the plant reports
             // impacts of -1.5e10 m/s).
             c.range(
                 &format!("{p}.stiffness"),
