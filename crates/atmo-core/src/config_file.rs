@@ -70,7 +70,7 @@ pub trait ConfigFile: DeserializeOwned {
 /// [`CoreError::ConfigParse`].
 pub fn parse_toml<T: DeserializeOwned>(text: &str, file: &Path) -> Result<T> {
     let deserializer = toml::Deserializer::new(text);
-    serde_path_to_error::deserialize(deserializer).map_err(|err| {
+    let parsed: T = serde_path_to_error::deserialize(deserializer).map_err(|err| {
         let key = err.path().to_string();
         let inner = err.into_inner();
         let line = inner.span().map_or(0, |span| {
@@ -82,6 +82,55 @@ pub fn parse_toml<T: DeserializeOwned>(text: &str, file: &Path) -> Result<T> {
             key: if key == "." { "(document)".into() } else { key },
             message: inner.message().to_string(),
         }
+    })?;
+    check_shape::<T>(text, file)?;
+    Ok(parsed)
+}
+
+/// The document's shape, strictly: the document deserializer above leaves
+/// the elements of an array past a fixed-size field's length unread
+/// (`yaw_sign = [1, 1, -1, -1, 1, "x"]` reads as its first four), so
+/// the same document is read a second time as a [`toml::Table`], whose
+/// deserializer refuses any element left over. The error names the key
+/// path and the line of its last segment.
+fn check_shape<T: DeserializeOwned>(text: &str, file: &Path) -> Result<()> {
+    let Ok(table) = text.parse::<toml::Table>() else {
+        return Ok(()); // the document parsed above; nothing more to learn
+    };
+    let Err(err) = serde_path_to_error::deserialize::<_, T>(toml::Value::Table(table)) else {
+        return Ok(());
+    };
+    let key = err.path().to_string();
+    let last = key
+        .rsplit('.')
+        .next()
+        .unwrap_or("")
+        .split('[')
+        .next()
+        .unwrap_or("")
+        .to_string();
+    let line = text
+        .lines()
+        .position(|l| {
+            let l = l.trim_start();
+            !last.is_empty()
+                && l.strip_prefix(last.as_str())
+                    .is_some_and(|rest| rest.trim_start().starts_with('='))
+        })
+        .map_or(0, |i| i + 1);
+    let message = err.into_inner().message().to_string();
+    Err(CoreError::ConfigParse {
+        file: file.to_path_buf(),
+        line,
+        key: if key == "." { "(document)".into() } else { key },
+        message: if message.contains("fewer elements in array") {
+            format!(
+                "more elements than the key takes ({}): a fixed-size array takes exactly its size",
+                message.split(',').next().unwrap_or(&message)
+            )
+        } else {
+            message
+        },
     })
 }
 
@@ -268,6 +317,47 @@ mod tests {
             .to_string();
         assert_eq!(msg, "f.toml: key `x`: expected a value in [0, 1], got NaN");
         assert!(c.range("x", 1.0, 0.0..=1.0, "kg").is_ok());
+    }
+
+    #[derive(Debug, serde::Deserialize)]
+    #[serde(deny_unknown_fields)]
+    #[allow(dead_code, reason = "read by serde only")]
+    struct Rotor {
+        k_thrust: f64,
+        yaw_sign: [f64; 4],
+    }
+
+    #[derive(Debug, serde::Deserialize)]
+    #[serde(deny_unknown_fields)]
+    #[allow(dead_code, reason = "read by serde only")]
+    struct Robot {
+        name: String,
+        rotor: Rotor,
+    }
+
+    /// `yaw_sign` with 6 items, one a string, was accepted as its first
+    /// four: an array of a fixed size takes exactly that many elements, and
+    /// the error names the file, the line and the key.
+    #[test]
+    fn fixed_size_arrays_refuse_extra_or_mistyped_elements() {
+        let doc =
+            |signs: &str| format!("name = \"r\"\n\n[rotor]\nk_thrust = 10.0\nyaw_sign = {signs}\n");
+        let ok: Robot = parse_toml(&doc("[1, 1, -1.0, -1]"), Path::new("r.toml")).unwrap();
+        assert_eq!(ok.rotor.yaw_sign, [1.0, 1.0, -1.0, -1.0]);
+        for signs in [
+            "[1.0, 1.0, -1.0, -1.0, 1.0, \"x\"]",
+            "[1.0, 1.0, -1.0, -1.0, 1.0]",
+            "[1.0, 1.0, -1.0]",
+            "[1.0, 1.0, -1.0, \"x\"]",
+        ] {
+            let err = parse_toml::<Robot>(&doc(signs), Path::new("r.toml"))
+                .unwrap_err()
+                .to_string();
+            assert!(
+                err.contains("r.toml:5") && err.contains("rotor.yaw_sign"),
+                "{signs}: {err}"
+            );
+        }
     }
 
     #[test]

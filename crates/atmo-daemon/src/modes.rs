@@ -209,7 +209,7 @@ pub const TRANSITIONS: &[Transition] = &[
     Transition {
         from: &[Mode::Failsafe],
         to: Mode::Touchdown,
-        guard: |c, _| c.grounded,
+        guard: contact_believed,
         reason: "grounded in failsafe",
     },
     Transition {
@@ -227,7 +227,7 @@ pub const TRANSITIONS: &[Transition] = &[
     Transition {
         from: &[Mode::Transition, Mode::Morphing, Mode::Flight],
         to: Mode::Touchdown,
-        guard: |c, _| c.grounded,
+        guard: contact_believed,
         reason: "wheels on the ground",
     },
     Transition {
@@ -273,6 +273,14 @@ pub const TRANSITIONS: &[Transition] = &[
         reason: "thrust cut complete",
     },
 ];
+
+/// A contact report that can be true: the estimate (while fresh) puts the
+/// base at most `takeoff_height` above the ground. A contact reported
+/// higher up is a false one (a sensor fault): believing it cut the thrust
+/// of a robot 1.5 m up. Without a fresh estimate the contact is believed.
+fn contact_believed(c: &Conditions, t: &Thresholds) -> bool {
+    c.grounded && (!c.estimate_fresh || c.height <= t.takeoff_height)
+}
 
 /// The next mode: the first matching row of [`TRANSITIONS`], or `mode`.
 pub fn next_mode(mode: Mode, c: &Conditions, t: &Thresholds) -> (Mode, Option<&'static str>) {

@@ -155,11 +155,9 @@ impl ConfigFile for DaemonConfig {
     /// Checks the values; errors name `file` and the key.
     fn validate(&self, file: &Path) -> Result<()> {
         let c = Checker::new(file);
-        if !self.ground_z.is_finite() {
-            return Err(c
-                .fail("ground_z", "a finite height, m", self.ground_z)
-                .into());
-        }
+        // NED z of the ground: within the 10 km a recording's positions
+        // may span (a number like 1e300 is a typo, not a place).
+        c.range("ground_z", self.ground_z, -1e4..=1e4, "m")?;
         c.range(
             "ground_timeout_ms",
             self.ground_timeout_ms,

@@ -73,3 +73,37 @@ fn check_refuses_an_absurd_mass_at_its_key() {
     );
     std::fs::remove_dir_all(dir).unwrap();
 }
+
+/// `yaw_sign` with 6 items, one a string, and `ground_z = 1e300` passed
+/// `check`: both refused, naming the file and the key.
+#[test]
+fn check_refuses_an_overlong_array_and_an_absurd_ground_height() {
+    let dir = configs_with(
+        "yaw6",
+        "yaw_sign = [1.0, 1.0, -1.0, -1.0]",
+        "yaw_sign = [1.0, 1.0, -1.0, -1.0, 1.0, \"x\"]",
+    );
+    let out = check(&dir);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "accepted: {stderr}");
+    assert!(
+        stderr.contains("atmo.toml") && stderr.contains("rotor.yaw_sign"),
+        "{stderr}"
+    );
+
+    let dir = configs_with("ground", "yaw_sign", "yaw_sign");
+    let daemon = std::fs::read_to_string(dir.join("daemon.toml")).unwrap();
+    assert!(daemon.contains("ground_z = 0.0"));
+    std::fs::write(
+        dir.join("daemon.toml"),
+        daemon.replacen("ground_z = 0.0", "ground_z = 1e300", 1),
+    )
+    .unwrap();
+    let out = check(&dir);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "accepted: {stderr}");
+    assert!(
+        stderr.contains("daemon.toml") && stderr.contains("`ground_z`"),
+        "{stderr}"
+    );
+}

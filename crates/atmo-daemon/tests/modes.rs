@@ -427,6 +427,38 @@ fn transition_to_touchdown_on_contact() {
     );
 }
 
+/// A contact reported while the fresh estimate puts the robot 1.5 m up is
+/// a false one (a sensor fault): believing it cut the thrust in flight and
+/// crashed the robot. Not believed with a fresh estimate; believed without
+/// one (the estimate cannot say otherwise) and at the ground.
+#[test]
+fn a_contact_reported_high_above_the_ground_is_not_believed() {
+    let false_contact = Conditions {
+        grounded: true,
+        height: 1.5,
+        ..flying()
+    };
+    for mode in [
+        Mode::Transition,
+        Mode::Morphing,
+        Mode::Flight,
+        Mode::Failsafe,
+    ] {
+        assert_ne!(step(mode, false_contact), Mode::Touchdown, "{mode:?}");
+    }
+    assert_eq!(step(Mode::Flight, false_contact), Mode::Flight);
+    let stale = Conditions {
+        estimate_fresh: false,
+        ..false_contact
+    };
+    assert_eq!(step(Mode::Failsafe, stale), Mode::Touchdown);
+    let at_takeoff_height = Conditions {
+        height: 0.3,
+        ..false_contact
+    };
+    assert_eq!(step(Mode::Transition, at_takeoff_height), Mode::Touchdown);
+}
+
 #[test]
 fn touchdown_to_drive_once_the_thrust_is_cut() {
     assert_eq!(

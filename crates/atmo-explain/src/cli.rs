@@ -123,6 +123,10 @@ pub fn demo_effects(list: &str) -> Result<EffectsConfig, ExplainError> {
 
 /// Runs the command, telling `progress` where the analysis is; returns
 /// what to print.
+///
+/// Refused before anything is read, generated or written: an `--out` that
+/// is not a folder this tool wrote (`atmo_io::output_dir`), a `--demo` whose
+/// `--duration` x `--rate` passes the row limit.
 pub fn run(args: &Args, progress: &mut dyn FnMut(Progress)) -> Result<String, ExplainError> {
     let robot = RobotConfig::load(&args.robot).map_err(|e| ExplainError::Input {
         file: args.robot.clone(),
@@ -134,6 +138,7 @@ pub fn run(args: &Args, progress: &mut dyn FnMut(Progress)) -> Result<String, Ex
     let rec = match (&args.recording, &args.demo) {
         (Some(path), None) => Recording::load(path)?,
         (None, Some(list)) => {
+            demo_within_row_limit(args.duration, args.rate)?;
             let mut plant = PlantConfig::ideal();
             plant.arm_inertia_convention = robot.arm.inertia_convention;
             plant.effects = demo_effects(list)?;
@@ -262,6 +267,24 @@ fn summary(ex: &crate::Explanation, out: &Path, elapsed: f64) -> String {
     s
 }
 
+/// A `--demo` of `duration` s at `rate` Hz must fit the row limit
+/// ([`crate::recording::MAX_ROWS`]); checked before generating it (3600 s at
+/// 1000 Hz generated for minutes what the limit then refused).
+pub fn demo_within_row_limit(duration: f64, rate: f64) -> Result<(), ExplainError> {
+    let rows = (duration * rate).ceil();
+    let max = crate::recording::MAX_ROWS as f64;
+    if rows.is_finite() && rows <= max {
+        return Ok(());
+    }
+    Err(ExplainError::Input {
+        file: PathBuf::from("--demo"),
+        message: format!(
+            "--duration {duration} s at --rate {rate} Hz is {rows} rows, over the row limit of \
+             {max} (lower --duration or --rate)"
+        ),
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use clap::Parser;
@@ -291,5 +314,63 @@ mod tests {
         }
         let ok = Explain::try_parse_from(["explain", "--demo", "none", "--duration", "12"]);
         assert_eq!(ok.map(|e| e.args.duration).ok(), Some(12.0));
+    }
+
+    /// `--demo --duration 3600 --rate 1000` generated for minutes what the
+    /// row limit then refused; refused before generating, and `--out` at a
+    /// file is refused before anything moves.
+    #[test]
+    fn a_demo_over_the_row_limit_and_an_out_at_a_file_are_refused_up_front() {
+        let dir = std::env::temp_dir().join(format!("atmo-cli-upfront-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap_or_default();
+        let out = dir.join("out");
+        let e = Explain::try_parse_from([
+            "explain",
+            "--robot",
+            concat!(env!("CARGO_MANIFEST_DIR"), "/../../config/atmo.toml"),
+            "--demo",
+            "none",
+            "--duration",
+            "3600",
+            "--rate",
+            "1000",
+            "--out",
+            &out.display().to_string(),
+        ]);
+        let Ok(e) = e else { panic!("parse") };
+        let start = std::time::Instant::now();
+        let err = super::run(&e.args, &mut |_| {})
+            .map(|_| ())
+            .map_err(|e| e.to_string());
+        let Err(err) = err else { panic!("accepted") };
+        assert!(start.elapsed().as_secs_f64() < 5.0);
+        assert!(err.contains("3600000 rows, over the row limit"), "{err}");
+        assert!(!out.exists());
+
+        let file = dir.join("notes.txt");
+        std::fs::write(&file, b"keep me").unwrap_or_default();
+        let e = Explain::try_parse_from([
+            "explain",
+            "--robot",
+            concat!(env!("CARGO_MANIFEST_DIR"), "/../../config/atmo.toml"),
+            "--demo",
+            "none",
+            "--duration",
+            "12",
+            "--out",
+            &file.display().to_string(),
+        ]);
+        let Ok(e) = e else { panic!("parse") };
+        let err = super::run(&e.args, &mut |_| {})
+            .map(|_| ())
+            .map_err(|e| e.to_string());
+        let Err(err) = err else { panic!("accepted") };
+        assert!(err.contains("exists and is a file"), "{err}");
+        assert_eq!(std::fs::read(&file).ok().as_deref(), Some(&b"keep me"[..]));
+        let left: Vec<_> = std::fs::read_dir(&dir)
+            .map(|d| d.filter_map(Result::ok).map(|e| e.file_name()).collect())
+            .unwrap_or_default();
+        assert_eq!(left, [std::ffi::OsString::from("notes.txt")]);
+        let _ = std::fs::remove_dir_all(&dir);
     }
 }

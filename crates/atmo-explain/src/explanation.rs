@@ -133,6 +133,10 @@ pub struct Explanation {
     pub skipped_time: usize,
     /// Rows dropped by the outlier rule (`recording::plausible`).
     pub outliers: crate::recording::plausible::Outliers,
+    /// Rows skipped because their rotation matrix was not a rotation.
+    pub skipped_rotation: usize,
+    /// Rows dropped by the neighbour check (`recording::contract`).
+    pub jumps: crate::recording::plausible::Outliers,
     pub contact_rows: usize,
     pub noise_floor: [f64; 6],
     /// The recorded velocity's band below 3 Hz, taken from the positions.

@@ -62,7 +62,7 @@ use std::time::Instant;
 use atmo_core::RobotConfig;
 
 pub use explanation::{EffectReport, Explanation, GridPoint, Parameter, RmsTable, Series};
-use recording::{Recording, plausible};
+use recording::{Recording, contract, plausible};
 use stages::{
     BaseRegressors, Findings, Residuals, accept_effects, fit_effects, locate_mismatch,
     profile_motor_lag, report, select_effects, validate,
@@ -218,6 +218,39 @@ fn velocity_note(c: &velocity::VelocityCorrection) -> String {
     )
 }
 
+/// The reader contract on a recording about to be analysed
+/// (`recording::contract`): the time axis checked, the rows outside their
+/// plausible ranges (in-memory recordings; the file readers already did) and
+/// the neighbour check's glitches dropped and counted. `None` when nothing
+/// was dropped (no copy made).
+fn screen(rec: &Recording, robot: &RobotConfig) -> Result<Option<Recording>> {
+    let fail = |message: String| ExplainError::Input {
+        file: rec.source.clone(),
+        message,
+    };
+    contract::check_time_axis(rec).map_err(&fail)?;
+    let mut copy = None;
+    if !rec.samples.iter().all(plausible::is_plausible) {
+        let mut c = rec.clone();
+        let (keep, dropped) =
+            plausible::screen(&c.samples, |i| contract::label(rec, i)).map_err(&fail)?;
+        contract::retain(&mut c, &keep);
+        c.outliers.rows += dropped.rows;
+        c.outliers.columns.extend(dropped.columns);
+        copy = Some(c);
+    }
+    let bounds = contract::JumpBounds::of(robot);
+    let current = copy.as_ref().unwrap_or(rec);
+    if let Some((keep, found)) = contract::find_jumps(current, &bounds) {
+        let mut c = copy.take().unwrap_or_else(|| rec.clone());
+        contract::retain(&mut c, &keep);
+        c.jumps.rows += found.rows;
+        c.jumps.columns.extend(found.columns);
+        copy = Some(c);
+    }
+    Ok(copy)
+}
+
 /// Runs the whole analysis.
 pub fn explain(rec: &Recording, robot: &RobotConfig, opts: &Options) -> Result<Explanation> {
     explain_with_progress(rec, robot, opts, &mut |_| {})
@@ -242,22 +275,8 @@ pub fn explain_with_progress(
             message: recording::row_limit_error(&format!("{} rows", rec.samples.len())),
         });
     }
-    let screened;
-    let rec = if rec.samples.iter().all(plausible::is_plausible) {
-        rec
-    } else {
-        // In-memory recordings (the file readers already applied the rule).
-        let mut copy = rec.clone();
-        let dropped = plausible::drop_implausible(&mut copy.samples, |i| format!("row {}", i + 1))
-            .map_err(|message| ExplainError::Input {
-                file: rec.source.clone(),
-                message,
-            })?;
-        copy.outliers.rows += dropped.rows;
-        copy.outliers.columns.extend(dropped.columns);
-        screened = copy;
-        &screened
-    };
+    let screened = screen(rec, robot)?;
+    let rec = screened.as_ref().unwrap_or(rec);
     let (corrected, velocity_correction) = velocity::from_positions(rec);
     let rec = &corrected;
     let res = t.step("residuals", || Residuals::new(rec, robot))?;

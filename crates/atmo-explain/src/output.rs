@@ -57,6 +57,9 @@ pub fn json(ex: &Explanation) -> serde_json::Value {
         "skipped_time_rows": ex.skipped_time,
         "implausible_rows": ex.outliers.rows,
         "implausible_columns": ex.outliers.columns,
+        "skipped_rotation_rows": ex.skipped_rotation,
+        "jump_rows": ex.jumps.rows,
+        "jump_columns": ex.jumps.columns,
         "ground_contact_rows": ex.contact_rows,
         "velocity_from_positions": ex.velocity_from_positions,
         "noise_floor": CHANNELS.iter().zip(ex.noise_floor).map(|(c, v)| (c.to_string(), json!(v))).collect::<serde_json::Map<String, serde_json::Value>>(),
@@ -134,6 +137,21 @@ fn report_header(s: &mut String, ex: &Explanation) {
             "Dropped rows: {} with a cell outside its plausible range (docs/recording_format.md): {}.\n",
             ex.outliers.rows,
             ex.outliers.describe()
+        );
+    }
+    if ex.skipped_rotation > 0 {
+        let _ = writeln!(
+            s,
+            "Skipped rows: {} whose rotation matrix is not a rotation (orthonormal, det +1).\n",
+            ex.skipped_rotation
+        );
+    }
+    if ex.jumps.rows > 0 {
+        let _ = writeln!(
+            s,
+            "Dropped rows: {} jumping from their neighbours by more than the robot can accelerate in one sample (docs/input-contract.md): {}.\n",
+            ex.jumps.rows,
+            ex.jumps.describe()
         );
     }
     if ex.contact_rows > 0 {

@@ -92,7 +92,7 @@ fn assert_names_input(error: &dyn std::fmt::Display) {
 
 /// The recording CSV reader.
 pub fn recording_csv(data: &[u8]) {
-    use atmo_explain::recording::{Recording, neural_fly};
+    use atmo_explain::recording::{Recording, contract, neural_fly};
     // Not UTF-8: `Recording::load` refuses it before parsing.
     let Ok(text) = std::str::from_utf8(data) else {
         return;
@@ -124,6 +124,13 @@ pub fn recording_csv(data: &[u8]) {
             w[1].t
         );
     }
+    // The reader contract (docs/input-contract.md) holds for what is accepted.
+    assert_eq!(rec.at.len(), rec.samples.len(), "origins out of step");
+    if let Err(e) = contract::check_time_axis(&rec) {
+        panic!("accepted a time axis the contract refuses: {e}");
+    }
+    let bounds = contract::JumpBounds::of(&atmo_core::RobotConfig::atmo());
+    let _ = contract::find_jumps(&rec, &bounds);
     let _ = rec.median_dt();
     let _ = rec.to_csv();
 }

@@ -76,3 +76,57 @@ fn the_mcap_seeds_hold_messages() {
         "{report:?}"
     );
 }
+
+/// The hostile reproductions committed as seeds end as the reader contract
+/// says: counted skips or an error naming the line.
+#[test]
+fn the_hostile_seeds_end_in_counted_skips_or_named_errors() {
+    use atmo_explain::recording::Recording;
+    let dir = corpus("recording_csv");
+    let load = |name: &str| Recording::load(dir.join(name));
+    let rec = load("hostile_nf_t_1e300.csv").unwrap();
+    assert_eq!((rec.samples.len(), rec.skipped_time), (2, 1));
+    for name in ["hostile_nf_r_zero.csv", "hostile_nf_r_reflection.csv"] {
+        let rec = load(name).unwrap();
+        assert_eq!((rec.samples.len(), rec.skipped_rotation), (1, 1), "{name}");
+    }
+    let rec = load("hostile_t_1e300.csv").unwrap();
+    assert_eq!((rec.samples.len(), rec.skipped_time), (5, 1));
+    let err = load("hostile_t_ms.csv").unwrap_err().to_string();
+    assert!(
+        err.contains("column t") && err.contains("milliseconds"),
+        "{err}"
+    );
+    let err = load("hostile_duplicate_column.csv")
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("column `c7` appears twice"), "{err}");
+    // The glitch row is within the plausible ranges: the reader keeps it,
+    // the analysis's neighbour check (which knows the robot) drops it.
+    let rec = load("hostile_glitch.csv").unwrap();
+    let bounds = atmo_explain::recording::contract::JumpBounds::of(&atmo_core::RobotConfig::atmo());
+    let (_, jumps) = atmo_explain::recording::contract::find_jumps(&rec, &bounds).unwrap();
+    assert_eq!(jumps.rows, 1);
+    assert_eq!(
+        jumps.describe(),
+        "vx 1 (first at line 4: 9.9e1), wx 1 (first at line 4: 9.9e1)"
+    );
+
+    // Configs: an array longer than its fixed size is refused naming the key.
+    let robot = std::fs::read_to_string(
+        PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../config/atmo.toml"),
+    )
+    .unwrap();
+    let long = robot.replacen(
+        "yaw_sign = [1.0, 1.0, -1.0, -1.0]",
+        "yaw_sign = [1.0, 1.0, -1.0, -1.0, 1.0, \"x\"]",
+        1,
+    );
+    let mut input = vec![0u8];
+    input.extend_from_slice(long.as_bytes());
+    atmo_fuzz::config_toml(&input);
+    let err = atmo_core::RobotConfig::from_toml_str(&long, "r.toml")
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("rotor.yaw_sign"), "{err}");
+}

@@ -9,9 +9,60 @@
 //! renamed to `DIR`, and the earlier one removed. A run that fails (an
 //! error or a panic before `commit`) removes its staging folder and leaves
 //! `DIR` as it was.
+//!
+//! Only a folder this tool wrote is ever replaced: every staged folder
+//! holds the marker file [`MARKER`], and an existing `DIR` is accepted only
+//! if it is a real folder (not a symlink) that is empty or holds the
+//! marker. Anything else (a file, a device, a symlink, someone's folder) is
+//! refused by [`StagedDir::new`] before anything is written or moved, and
+//! checked again by [`StagedDir::commit`] before anything is renamed.
 
 use std::io;
 use std::path::{Path, PathBuf};
+
+/// The file every output folder holds: the sign that this tool wrote it
+/// and may replace it.
+pub const MARKER: &str = ".atmo-output";
+
+/// Whether `target` may be replaced: absent, or a real folder that is empty
+/// or holds [`MARKER`]. The error says what it is and names it.
+pub fn check_replaceable(target: &Path) -> io::Result<()> {
+    let meta = match std::fs::symlink_metadata(target) {
+        Ok(m) => m,
+        Err(e) if e.kind() == io::ErrorKind::NotFound => return Ok(()),
+        Err(e) => return Err(context("inspecting", target, &e)),
+    };
+    let refuse = |what: &str| {
+        Err(io::Error::new(
+            io::ErrorKind::AlreadyExists,
+            format!(
+                "output folder {}: exists and is {what}; nothing was written or moved \
+                 (give a new path, or a folder this tool wrote)",
+                target.display()
+            ),
+        ))
+    };
+    let kind = meta.file_type();
+    if kind.is_symlink() {
+        return refuse("a symbolic link");
+    }
+    if kind.is_file() {
+        return refuse("a file");
+    }
+    if !kind.is_dir() {
+        return refuse("a device, FIFO or socket");
+    }
+    if target.join(MARKER).is_file() {
+        return Ok(());
+    }
+    let mut entries = std::fs::read_dir(target).map_err(|e| context("reading", target, &e))?;
+    if entries.next().is_none() {
+        return Ok(());
+    }
+    refuse(&format!(
+        "a folder this tool did not write (no {MARKER} in it)"
+    ))
+}
 
 /// A run's output folder, staged until [`StagedDir::commit`].
 #[derive(Debug)]
@@ -28,9 +79,11 @@ impl StagedDir {
     /// Stages the folder `target` (its parent is created if missing).
     ///
     /// # Errors
-    /// The parent cannot be created or written; the message names the path.
+    /// The target exists and may not be replaced ([`check_replaceable`]);
+    /// the parent cannot be created or written; the message names the path.
     pub fn new(target: impl Into<PathBuf>) -> io::Result<Self> {
         let target: PathBuf = target.into();
+        check_replaceable(&target)?;
         let name = target
             .file_name()
             .ok_or_else(|| {
@@ -50,6 +103,12 @@ impl StagedDir {
             .prefix(&format!(".{name}.partial-"))
             .tempdir_in(&parent)
             .map_err(|e| context("creating a staging folder in", &parent, &e))?;
+        let marker = staging.path().join(MARKER);
+        std::fs::write(
+            &marker,
+            b"written by an ATMO tool; replaced whole by its next run\n",
+        )
+        .map_err(|e| context("writing", &marker, &e))?;
         Ok(Self { staging, target })
     }
 
@@ -70,8 +129,9 @@ impl StagedDir {
     /// folder was already renamed aside, it is moved back.
     pub fn commit(self) -> io::Result<PathBuf> {
         let Self { staging, target } = self;
+        check_replaceable(&target)?;
         let staged = staging.keep();
-        if !target.exists() {
+        if std::fs::symlink_metadata(&target).is_err() {
             std::fs::rename(&staged, &target).map_err(|e| context("renaming into", &target, &e))?;
             return Ok(target);
         }
@@ -96,7 +156,7 @@ impl StagedDir {
 mod tests {
     #![allow(clippy::unwrap_used)] // test code: an unwrap that fails is the failure report
 
-    use super::StagedDir;
+    use super::{MARKER, StagedDir};
 
     fn scratch(tag: &str) -> std::path::PathBuf {
         let dir = std::env::temp_dir().join(format!("atmo-staged-{tag}-{}", std::process::id()));
@@ -119,17 +179,18 @@ mod tests {
         let root = scratch("commit");
         let out = root.join("out");
         std::fs::create_dir_all(&out).unwrap();
+        std::fs::write(out.join(MARKER), b"").unwrap();
         std::fs::write(out.join("stale.png"), b"old").unwrap();
         std::fs::write(out.join("explain.json"), b"old").unwrap();
         let staged = StagedDir::new(&out).unwrap();
         std::fs::write(staged.path().join("explain.json"), b"new").unwrap();
         assert_eq!(
             names(&out),
-            ["explain.json", "stale.png"],
+            [MARKER, "explain.json", "stale.png"],
             "untouched until commit"
         );
         staged.commit().unwrap();
-        assert_eq!(names(&out), ["explain.json"]);
+        assert_eq!(names(&out), [MARKER, "explain.json"]);
         assert_eq!(std::fs::read(out.join("explain.json")).unwrap(), b"new");
         assert_eq!(names(&root), ["out"], "no staging or replaced folder left");
         std::fs::remove_dir_all(root).unwrap();
@@ -140,6 +201,7 @@ mod tests {
         let root = scratch("fail");
         let out = root.join("out");
         std::fs::create_dir_all(&out).unwrap();
+        std::fs::write(out.join(MARKER), b"").unwrap();
         std::fs::write(out.join("explain.json"), b"old").unwrap();
         {
             let staged = StagedDir::new(&out).unwrap();
@@ -159,7 +221,68 @@ mod tests {
         std::fs::write(staged.path().join("x"), b"1").unwrap();
         assert!(!out.exists());
         assert_eq!(staged.commit().unwrap(), out);
-        assert_eq!(names(&out), ["x"]);
+        assert_eq!(names(&out), [MARKER, "x"]);
+        std::fs::remove_dir_all(root).unwrap();
+    }
+
+    /// `--out` at an existing file put a folder in its place (the file
+    /// renamed aside), at a device node it moved the device: a file, a
+    /// symlink (to a file or a folder), a device and a folder this tool did
+    /// not write are refused before anything is written, and nothing moves.
+    #[test]
+    fn a_target_that_is_not_our_folder_is_refused_and_nothing_moves() {
+        let root = scratch("refuse");
+        let file = root.join("notes.txt");
+        std::fs::write(&file, b"keep me").unwrap();
+        let theirs = root.join("theirs");
+        std::fs::create_dir_all(&theirs).unwrap();
+        std::fs::write(theirs.join("thesis.tex"), b"keep me").unwrap();
+        let link_file = root.join("link_file");
+        let link_dir = root.join("link_dir");
+        std::os::unix::fs::symlink(&file, &link_file).unwrap();
+        std::os::unix::fs::symlink(&theirs, &link_dir).unwrap();
+        let before = names(&root);
+        for (target, what) in [
+            (&file, "is a file"),
+            (&theirs, "a folder this tool did not write"),
+            (&link_file, "a symbolic link"),
+            (&link_dir, "a symbolic link"),
+        ] {
+            let err = StagedDir::new(target).unwrap_err().to_string();
+            assert!(
+                err.contains(what) && err.contains(&target.display().to_string()),
+                "{err}"
+            );
+        }
+        assert_eq!(names(&root), before, "nothing written beside them");
+        assert_eq!(std::fs::read(&file).unwrap(), b"keep me");
+        assert_eq!(names(&theirs), ["thesis.tex"]);
+        let device = std::path::Path::new("/dev/null");
+        let err = StagedDir::new(device).unwrap_err().to_string();
+        assert!(err.contains("a device"), "{err}");
+        assert!(device.exists());
+
+        // A target that turns into a file between staging and commit.
+        let late = root.join("late");
+        let staged = StagedDir::new(&late).unwrap();
+        std::fs::write(&late, b"arrived meanwhile").unwrap();
+        assert!(staged.commit().is_err());
+        assert_eq!(std::fs::read(&late).unwrap(), b"arrived meanwhile");
+        std::fs::remove_dir_all(root).unwrap();
+    }
+
+    #[test]
+    fn an_empty_folder_or_our_own_is_replaced() {
+        let root = scratch("ours");
+        let empty = root.join("empty");
+        std::fs::create_dir_all(&empty).unwrap();
+        let staged = StagedDir::new(&empty).unwrap();
+        std::fs::write(staged.path().join("a"), b"1").unwrap();
+        staged.commit().unwrap();
+        let again = StagedDir::new(&empty).unwrap();
+        std::fs::write(again.path().join("b"), b"2").unwrap();
+        again.commit().unwrap();
+        assert_eq!(names(&empty), [MARKER, "b"]);
         std::fs::remove_dir_all(root).unwrap();
     }
 }

@@ -69,6 +69,11 @@ fn chunk_payloads(bytes: &[u8]) -> Vec<std::ops::Range<usize>> {
 
 /// A copy of `log` with one bit flipped in the middle of its second chunk.
 fn flip_bit_in_second_chunk(log: &Path, name: &str) -> PathBuf {
+    flip_bit_in_chunk(log, name, 1)
+}
+
+/// A copy of `log` with one bit flipped in the middle of chunk `index`.
+fn flip_bit_in_chunk(log: &Path, name: &str, index: usize) -> PathBuf {
     let mut bytes = std::fs::read(log).unwrap();
     let chunks = chunk_payloads(&bytes);
     assert!(
@@ -76,7 +81,7 @@ fn flip_bit_in_second_chunk(log: &Path, name: &str) -> PathBuf {
         "{} chunks: test needs several",
         chunks.len()
     );
-    let target = &chunks[1];
+    let target = &chunks[index];
     bytes[target.start + target.len() / 2] ^= 0x10;
     let out = corruption_dir().join(name);
     std::fs::write(&out, bytes).unwrap();
@@ -334,4 +339,108 @@ fn a_record_or_string_claiming_more_than_the_file_holds_is_an_error_naming_its_o
         );
         assert!(atmo_io::mcap_log::read_extras(&bad).is_ok());
     }
+}
+
+/// A recovered log with a chunk missing was summarized as a landing at
+/// 0.00 m/s with no warning (`replay` refuses it): the review names the
+/// missing span of ticks and withholds the landing values it cannot know.
+#[test]
+fn a_recovered_log_with_a_chunk_missing_is_reviewed_as_partial() {
+    use atmo_io::review::log::review_log;
+    let log = write_log("hole.mcap", Compression::Zstd);
+    let whole = review_log(&log, "/atmo/status").unwrap();
+    assert!(whole.missing.is_empty(), "{:?}", whole.missing);
+    for (index, starts_the_log) in [(1, true), (3, false)] {
+        let bad = flip_bit_in_chunk(&log, &format!("hole{index}_flipped.mcap"), index);
+        let recovered = corruption_dir().join(format!("hole{index}_recovered.mcap"));
+        let report = recover(&bad, &recovered).unwrap();
+        assert_eq!(report.skipped.corrupt_chunks, 1);
+        let review = review_log(&recovered, "/atmo/status").unwrap();
+        assert_eq!(review.missing.len(), 1, "{:?}", review.missing);
+        let hole = review.missing[0];
+        assert_eq!(hole.count(), report.skipped.messages_in_corrupt_chunks);
+        assert_eq!(hole.after.is_none(), starts_the_log, "{hole}");
+        // Withheld when the hole comes first (the first contact may be in
+        // it); kept when the touchdown was found before the hole.
+        let touchdown_first = matches!(
+            (review.summary.touchdown_time_s, hole.from_s),
+            (Some(t), Some(from)) if t < from
+        );
+        assert_eq!(touchdown_first, !starts_the_log, "{:?}", review.summary);
+        if touchdown_first {
+            assert_eq!(
+                review.summary.impact_speed_mps,
+                whole.summary.impact_speed_mps
+            );
+        } else {
+            assert!(review.summary.impact_speed_mps.is_none());
+            assert!(review.summary.touchdown_tilt_deg.is_none());
+        }
+
+        // The command line: a warning naming the span, a partial summary.json.
+        let out = corruption_dir().join(format!("hole{index}_summary"));
+        let _ = std::fs::remove_dir_all(&out);
+        let output = std::process::Command::new(env!("CARGO_BIN_EXE_atmo-mcap"))
+            .arg("summary")
+            .arg(&recovered)
+            .arg("--out")
+            .arg(&out)
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        assert!(
+            stderr.contains("partial summary") && stderr.contains(&hole.to_string()),
+            "{stderr}"
+        );
+        let json: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap())
+                .unwrap();
+        assert_eq!(
+            json["partial"]["missing_ticks"][0]["before"], hole.before,
+            "{json}"
+        );
+        assert_eq!(json["impact_speed_mps"].is_null(), !touchdown_first);
+    }
+}
+
+/// The summary section's CRC in the footer is checked: a byte changed in
+/// the summary (its indexes, which other readers trust) is an error naming
+/// the footer.
+#[test]
+fn a_changed_summary_section_fails_the_footer_crc() {
+    let log = write_log("summary_crc.mcap", Compression::Zstd);
+    let mut bytes = std::fs::read(&log).unwrap();
+    let footer = bytes.len() - 8 - (1 + 8 + 20);
+    assert_eq!(bytes[footer], 0x02, "footer opcode");
+    let summary_start =
+        u64::from_le_bytes(bytes[footer + 9..footer + 17].try_into().unwrap()) as usize;
+    assert!(summary_start > 0 && summary_start < footer);
+    bytes[summary_start + 20] ^= 0x01;
+    let bad = corruption_dir().join("summary_crc_changed.mcap");
+    std::fs::write(&bad, bytes).unwrap();
+    let err = read_log(&bad).unwrap_err().to_string();
+    assert!(err.contains("summary section's CRC"), "{err}");
+    assert!(read_log(&log).is_ok());
+}
+
+/// A device given as a log (`/dev/zero`) was read until memory ran out:
+/// refused before reading, by every reader and by `recover`.
+#[test]
+fn a_device_or_a_folder_is_refused_as_a_log() {
+    for path in ["/dev/zero", "/dev/null"] {
+        if !Path::new(path).exists() {
+            continue;
+        }
+        let err = read_log(path).unwrap_err().to_string();
+        assert!(
+            err.contains(path) && err.contains("not a regular file"),
+            "{err}"
+        );
+        let out = corruption_dir().join("from_device.mcap");
+        let err = recover(path, &out).unwrap_err().to_string();
+        assert!(err.contains("not a regular file"), "{err}");
+        assert!(!out.exists());
+    }
+    let err = read_log(corruption_dir()).unwrap_err().to_string();
+    assert!(err.contains("not a regular file"), "{err}");
 }

@@ -451,7 +451,10 @@ pub fn fly_logged(
             on_tick(r);
         },
         |t| {
-            log.try_log(truth, (t.time * 1e9).round() as u64, t);
+            // One record per plant step (1000 per simulated second at the
+            // default dt, a million at the smallest): the simulation waits
+            // for the writer rather than drop them.
+            log.log_waiting(truth, (t.time * 1e9).round() as u64, t);
         },
     );
     if let Ok(s) = &summary {

@@ -39,6 +39,9 @@
 //! iteration = 1
 //! ```
 //!
+//! The actuator side (`[faults.actuators]`: rotors, tilt encoder, contact
+//! signal) is [`crate::actuator_faults`].
+//!
 //! Dead drivers: heartbeats stop (the flight stack's `driver_lost`), the
 //! encoder and contact readings stop, and the actuators get nothing: the
 //! motor controllers stop the rotors on signal loss, the self-locking
@@ -136,6 +139,10 @@ pub struct FaultsConfig {
     pub driver_death: Option<DriverDeath>,
     #[serde(default)]
     pub solver_overrun: Vec<SolverOverrun>,
+    /// Faults of the rotors, the tilt encoder and the contact signal
+    /// ([`crate::actuator_faults`]).
+    #[serde(default)]
+    pub actuators: crate::actuator_faults::ActuatorFaults,
 }
 
 /// Longest window or delay, s (bounds the transport's queue).
@@ -220,6 +227,7 @@ impl FaultsConfig {
             check_window(&c, &key, o.t, o.duration, duration)?;
             c.range(&format!("{key}.iteration"), o.iteration, 0..=1000, "")?;
         }
+        self.actuators.validate(file, duration)?;
         Ok(())
     }
 

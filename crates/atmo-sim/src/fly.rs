@@ -130,13 +130,34 @@ pub fn run(
     if reports.len() > 1 {
         print_comparison(&reports);
     }
+    // The results (monte_carlo.json) are committed whatever the figure does:
+    // a flight without a touchdown has none to plot, and a figure that
+    // fails is reported after the results are in place.
+    let mut figure_error = None;
     if !reports.is_empty() {
-        let path = staged.path().join("touchdown.png");
-        write_touchdowns(&path, &scenario.file.name, &reports)?;
-        println!("touchdowns        touchdown.png");
+        let touched_down = reports.iter().any(|(_, r)| {
+            r.per_run
+                .iter()
+                .any(|run| run.touchdown_tilt_deg.zip(run.impact_speed_mps).is_some())
+        });
+        if touched_down {
+            let path = staged.path().join("touchdown.png");
+            match write_touchdowns(&path, &scenario.file.name, &reports) {
+                Ok(()) => println!("touchdowns        touchdown.png"),
+                Err(e) => figure_error = Some(e),
+            }
+        } else {
+            println!("touchdowns        none (no run touched down): touchdown.png not drawn");
+        }
     }
     let dir = staged.commit()?;
     println!("wrote             {}", dir.display());
+    if let Some(e) = figure_error {
+        return Err(e.context(format!(
+            "the results are in {}, but touchdown.png could not be drawn",
+            dir.display()
+        )));
+    }
     if !all_ok {
         std::process::exit(1);
     }

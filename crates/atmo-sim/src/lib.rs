@@ -16,6 +16,7 @@
 //! The discrepancy finder is atmo-explain; the `atmo-sim explain`
 //! subcommand is its CLI.
 
+pub mod actuator_faults;
 pub mod campaign;
 pub mod closed_loop;
 pub mod error;

@@ -42,6 +42,19 @@ use atmo_plant::config::{EffectsConfig, PlantConfig, TerrainConfig};
 use atmo_plant::contact::{Plane, rim_lowest_point};
 use atmo_plant::plant::{Command, Event, InitialState, Plant};
 
+/// Largest initial speed per axis, m/s (a robot of this class flies at a
+/// few m/s; 1e6 m/s is a typo).
+pub const MAX_INITIAL_SPEED: f64 = 30.0;
+/// Largest initial body rate per axis, rad/s.
+pub const MAX_INITIAL_RATE: f64 = 30.0;
+
+/// NED z of the terrain plane below (x, y).
+fn terrain_z_at(terrain: &TerrainConfig, x: f64, y: f64) -> f64 {
+    let plane = Plane::new(terrain);
+    let n = &plane.normal;
+    plane.point.z - (n.x * (x - plane.point.x) + n.y * (y - plane.point.y)) / n.z
+}
+
 /// Largest pilot velocity command (m/s).
 pub const MAX_PILOT_SPEED: f64 = 1.0;
 
@@ -280,6 +293,47 @@ impl ConfigFile for ScenarioFile {
 }
 
 impl ScenarioFile {
+    /// The initial state's position (bounded, above the terrain unless
+    /// standing on it), velocity and rates; errors name the key.
+    fn validate_initial_state(&self, c: &Checker<'_>) -> Result<()> {
+        let init = &self.initial;
+        for (k, v) in init.position.iter().enumerate() {
+            c.range(&format!("initial.position[{k}]"), *v, -1e4..=1e4, "m")?;
+        }
+        for (k, v) in init.velocity.iter().enumerate() {
+            c.range(
+                &format!("initial.velocity[{k}]"),
+                *v,
+                -MAX_INITIAL_SPEED..=MAX_INITIAL_SPEED,
+                "m/s",
+            )?;
+        }
+        for (k, v) in init.rates.iter().enumerate() {
+            c.range(
+                &format!("initial.rates[{k}]"),
+                *v,
+                -MAX_INITIAL_RATE..=MAX_INITIAL_RATE,
+                "rad/s",
+            )?;
+        }
+        if !init.on_ground {
+            let ground = terrain_z_at(&self.terrain, init.position[0], init.position[1]);
+            if init.position[2] > ground {
+                return Err(c
+                    .fail(
+                        "initial.position[2]",
+                        format!(
+                            "B above the terrain (NED z <= {ground} m at this x, y; z is down), \
+                             or on_ground = true"
+                        ),
+                        init.position[2],
+                    )
+                    .into());
+            }
+        }
+        Ok(())
+    }
+
     /// Range checks, tilts up to `tilt_max_deg`; errors name `file` and the key.
     pub fn validate_with_tilt_max(&self, file: &Path, tilt_max_deg: f64) -> Result<()> {
         let c = Checker::new(file);
@@ -290,10 +344,8 @@ impl ScenarioFile {
         self.terrain.validate(&c, "terrain")?;
         self.effects.validate(&c, "effects")?;
 
+        self.validate_initial_state(&c)?;
         let init = &self.initial;
-        c.finite("initial.position", &init.position)?;
-        c.finite("initial.velocity", &init.velocity)?;
-        c.finite("initial.rates", &init.rates)?;
         c.finite("initial.euler_deg", &init.euler_deg)?;
         c.within("initial.euler_deg[1]", init.euler_deg[1], -89.0, 89.0)?;
         c.within("initial.tilt_deg", init.tilt_deg, 0.0, tilt_max_deg)?;

@@ -43,6 +43,7 @@ use atmo_plant::plant::{Command, Plant};
 use atmo_io::stamp_order::StampOrder;
 use atmo_mpc::SolverCuts;
 
+use crate::actuator_faults::ActuatorInjector;
 use crate::faults::{FaultCounts, FaultInjector, FaultsConfig};
 use crate::scenario::Scenario;
 
@@ -126,6 +127,7 @@ pub struct SimIo {
     command: Command,
     last: Option<SimTick>,
     faults: FaultInjector,
+    actuators: ActuatorInjector,
     estimate_order: StampOrder,
 }
 
@@ -157,6 +159,7 @@ impl SimIo {
             command: Command::idle(),
             last: None,
             faults: FaultInjector::new(&FaultsConfig::default()),
+            actuators: ActuatorInjector::default(),
             estimate_order: StampOrder::default(),
         }
     }
@@ -165,6 +168,7 @@ impl SimIo {
     #[must_use]
     pub fn with_faults(mut self, faults: &FaultsConfig) -> Self {
         self.faults = FaultInjector::new(faults);
+        self.actuators = ActuatorInjector::new(&faults.actuators);
         self
     }
 
@@ -210,9 +214,11 @@ impl SimIo {
             return;
         }
         if let Ok(counts) = plant.encoder_counts() {
-            self.latch.tilt_counts(counts);
+            self.latch
+                .tilt_counts(self.actuators.encoder(self.now_ns, counts));
         }
-        self.latch.ground_contact(plant.contact_signal());
+        self.latch
+            .ground_contact(self.actuators.contact(self.now_ns, plant.contact_signal()));
     }
 
     /// The command the last tick left for the plant (held until the next).
@@ -253,11 +259,14 @@ impl TickIo for SimIo {
 
     fn emit(&mut self, inputs: &StepInputs, outputs: &StepOutputs, timing: &TickTiming) {
         self.faults.on_mode(outputs.status.mode, self.now_ns);
+        self.actuators.on_mode(outputs.status.mode, self.now_ns);
         self.command = if self.faults.drivers_dead(self.now_ns) {
             Command::idle()
         } else {
             Command {
-                rotors: Input::from(outputs.thrust),
+                rotors: self
+                    .actuators
+                    .rotors(self.now_ns, Input::from(outputs.thrust)),
                 tilt_rate: outputs.tilt_velocity,
                 wheel_rates: outputs.wheel_rates,
             }

@@ -28,6 +28,10 @@ use crate::recording::{Recording, Sample};
 
 /// PWM that maps to the normalized command 1.
 pub const PWM_FULL_SCALE: f64 = 2000.0;
+/// Largest deviation of a row's `R` from a rotation: every entry of
+/// `R^T R - I` and `det R - 1` within it (the logs' `R` are rotations to
+/// about 1e-6; an all-zero `R`, a reflection or `1000 I` are far outside).
+pub const ROTATION_TOLERANCE: f64 = 1e-2;
 /// Columns the importer reads.
 pub const NEURAL_FLY_COLUMNS: [&str; 6] = ["t", "p", "v", "R", "w", "pwm"];
 
@@ -83,6 +87,14 @@ fn flatten(v: &serde_json::Value, out: &mut Vec<f64>) -> Option<()> {
     }
 }
 
+/// Whether the row-major 3x3 `r` is a rotation within
+/// [`ROTATION_TOLERANCE`]: orthonormal with determinant +1.
+pub fn is_rotation(r: &[f64]) -> bool {
+    let m = Matrix3::from_row_slice(r);
+    let defect = (m.transpose() * m - Matrix3::identity()).abs().max();
+    defect <= ROTATION_TOLERANCE && (m.determinant() - 1.0).abs() <= ROTATION_TOLERANCE
+}
+
 /// Euler ZYX (yaw, pitch, roll) of a body-to-world rotation.
 fn euler_zyx(r: &Matrix3<f64>) -> (f64, f64, f64) {
     let yaw = r[(1, 0)].atan2(r[(0, 0)]);
@@ -123,8 +135,9 @@ fn convert(t: f64, p: &[f64], v: &[f64], r: &[f64], w: &[f64], pwm: &[f64]) -> S
 
 /// Reads a Neural-Fly log (see the module docs for the conversion). Rows
 /// with a missing, malformed or non-finite cell are skipped and counted, as
-/// are rows whose time does not increase; other columns are listed as
-/// ignored.
+/// are rows whose `R` is not a rotation ([`is_rotation`]); then the reader
+/// contract ([`super::contract::finish`]: time base, ranges). Other columns
+/// are listed as ignored.
 pub fn from_neural_fly_str(
     text: &str,
     file: impl Into<PathBuf>,
@@ -166,10 +179,9 @@ pub fn from_neural_fly_str(
             .filter(|n| !n.is_empty() && !NEURAL_FLY_COLUMNS.contains(n))
             .map(|n| (*n).to_string())
             .collect(),
+        at_unit: "line",
         ..Recording::default()
     };
-    let mut last_t = f64::NEG_INFINITY;
-    let mut sample_lines: Vec<usize> = Vec::new();
     for (index, line) in lines {
         let cells = split_row(line);
         let cell = |k: usize, len: usize| cells.get(cols[k]).and_then(|c| parse_cell(c, len));
@@ -184,25 +196,22 @@ pub fn from_neural_fly_str(
             rec.skipped_nonfinite += 1;
             continue;
         };
-        if t[0] <= last_t {
-            rec.skipped_time += 1;
+        if !is_rotation(&r) {
+            rec.skipped_rotation += 1;
             continue;
         }
         if rec.samples.len() == super::MAX_ROWS {
             return Err(fail(super::row_limit_error(&format!("line {}", index + 1))));
         }
-        last_t = t[0];
-        sample_lines.push(index + 1);
+        rec.at.push(index + 1);
         rec.samples.push(convert(t[0], &p, &v, &r, &w, &pwm));
     }
-    rec.outliers = super::plausible::drop_implausible(&mut rec.samples, |i| {
-        format!("line {}", sample_lines[i])
-    })
-    .map_err(&fail)?;
+    super::contract::finish(&mut rec).map_err(&fail)?;
     if rec.samples.is_empty() {
         return Err(fail(format!(
-            "no usable Neural-Fly rows ({} malformed or non-finite, {} not advancing in time)",
-            rec.skipped_nonfinite, rec.skipped_time
+            "no usable Neural-Fly rows ({} malformed or non-finite, {} with an R that is not \
+             a rotation, {} not advancing in time)",
+            rec.skipped_nonfinite, rec.skipped_rotation, rec.skipped_time
         )));
     }
     Ok(rec)
@@ -210,10 +219,14 @@ pub fn from_neural_fly_str(
 
 /// Reads a Neural-Fly log from a file.
 pub fn load_neural_fly(path: &Path) -> Result<Recording, ExplainError> {
-    let text = std::fs::read_to_string(path).map_err(|e| ExplainError::Input {
+    let fail = |message: String| ExplainError::Input {
         file: path.to_path_buf(),
-        message: format!("cannot read the Neural-Fly log: {e}"),
-    })?;
+        message,
+    };
+    let bytes = super::contract::read_input(path).map_err(&fail)?;
+    super::contract::check_text(&bytes).map_err(&fail)?;
+    let text = String::from_utf8(bytes)
+        .map_err(|e| fail(format!("not UTF-8 text: {}", e.utf8_error())))?;
     from_neural_fly_str(&text, path)
 }
 

@@ -150,6 +150,23 @@ pub fn drop_implausible(
     samples: &mut Vec<Sample>,
     label: impl Fn(usize) -> String,
 ) -> Result<Outliers, String> {
+    let (keep, out) = screen(samples, label)?;
+    if out.rows > 0 {
+        let mut i = 0;
+        samples.retain(|_| {
+            i += 1;
+            keep[i - 1]
+        });
+    }
+    Ok(out)
+}
+
+/// The rule without changing `samples`: which rows to keep and what the
+/// others were, or the refusal (see [`drop_implausible`]).
+pub fn screen(
+    samples: &[Sample],
+    label: impl Fn(usize) -> String,
+) -> Result<(Vec<bool>, Outliers), String> {
     let total = samples.len();
     let mut counts = [0usize; 22];
     let mut first: [Option<(usize, f64)>; 22] = [None; 22];
@@ -195,14 +212,7 @@ pub fn drop_implausible(
             });
         }
     }
-    if out.rows > 0 {
-        let mut i = 0;
-        samples.retain(|_| {
-            i += 1;
-            keep[i - 1]
-        });
-    }
-    Ok(out)
+    Ok((keep, out))
 }
 
 #[cfg(test)]

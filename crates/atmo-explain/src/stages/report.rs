@@ -448,13 +448,18 @@ pub fn plot_series(res: &Residuals, mismatch: &Mismatch, after: &[f64]) -> Serie
         .and_then(|l| CHANNELS.iter().position(|c| *c == l.channel))
         .unwrap_or(2);
     let duration = res.duration();
-    let (w0, w1) = if duration > 30.0 {
+    // The per-second bins are sized from the time axis, which the reader
+    // contract bounds (`recording::contract::MAX_DURATION_S`); a longer or
+    // non-finite span is plotted whole rather than trusted.
+    let bounded = duration.is_finite() && duration <= crate::recording::contract::MAX_DURATION_S;
+    let (w0, w1) = if duration > 30.0 && bounded {
         let t0 = prep.t[0];
         let nb = duration.ceil() as usize + 1;
         let mut per_s = vec![0.0; nb];
         for &k in &res.fit_rows {
             let r = prep.resid[6 * k + ch];
-            per_s[((prep.t[k] - t0) as usize).min(nb - 1)] += r * r;
+            let bin = (prep.t[k] - t0).max(0.0) as usize;
+            per_s[bin.min(nb - 1)] += r * r;
         }
         let best = (0..nb.saturating_sub(20))
             .max_by(|&a, &b| {
@@ -527,6 +532,8 @@ pub fn report(f: &Findings) -> Explanation {
         skipped_nonfinite: rec.skipped_nonfinite,
         skipped_time: rec.skipped_time,
         outliers: rec.outliers.clone(),
+        skipped_rotation: rec.skipped_rotation,
+        jumps: rec.jumps.clone(),
         contact_rows: prep.contact_rows,
         noise_floor: prep.floor,
         velocity_from_positions: crate::velocity::VelocityCorrection::default(),

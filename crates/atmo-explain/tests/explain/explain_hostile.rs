@@ -13,7 +13,7 @@ use atmo_plant::config::{EffectsConfig, MotorLagConfig, PlantConfig};
 type Poison = fn(&mut Sample);
 
 /// A 24 s cruise at 100 Hz (2400 rows) with a concealed motor lag.
-fn cruise_with_motor_lag() -> Recording {
+pub(crate) fn cruise_with_motor_lag() -> Recording {
     let robot = RobotConfig::atmo();
     let mut plant = PlantConfig::ideal();
     plant.arm_inertia_convention = robot.arm.inertia_convention;
@@ -27,7 +27,7 @@ fn cruise_with_motor_lag() -> Recording {
 }
 
 /// The names of the effects reported as found.
-fn found(ex: &Explanation) -> Vec<&str> {
+pub(crate) fn found(ex: &Explanation) -> Vec<&str> {
     ex.effects
         .iter()
         .filter(|e| e.selected)

@@ -220,7 +220,7 @@ fn csv_round_trip_and_outputs_are_written_and_loadable() {
 /// row's estimate with the commands that make the interval's mean the
 /// recording's applied commands: the log carries the command timing the
 /// simulator had) and returns the path.
-fn write_mcap(rec: &Recording, path: &std::path::Path) {
+pub(crate) fn write_mcap(rec: &Recording, path: &std::path::Path) {
     use atmo_io::mcap_log::{LoggerOptions, McapLogger};
     use atmo_io::msg::MpcStatus;
     let (log, thread) = McapLogger::spawn(path, LoggerOptions::default()).unwrap();

@@ -5,6 +5,7 @@
 
 mod explain_closed_loop;
 mod explain_concealed;
+mod explain_contract;
 mod explain_hostile;
 mod explain_indistinguishable;
 mod explain_inputs;

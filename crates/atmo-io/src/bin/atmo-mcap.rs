@@ -119,7 +119,24 @@ fn summary(
     let review = review_log(log, status_topic)?;
     let output = |e: String| atmo_io::IoError::Output(format!("{}: {e}", out.display()));
     std::fs::create_dir_all(out).map_err(|e| output(e.to_string()))?;
-    let json = serde_json::to_string_pretty(&review.summary).map_err(|e| output(e.to_string()))?;
+    let mut value = serde_json::to_value(&review.summary).map_err(|e| output(e.to_string()))?;
+    if !review.missing.is_empty() {
+        for hole in &review.missing {
+            eprintln!("atmo-mcap: {}: partial summary: {hole}", log.display());
+        }
+        eprintln!(
+            "atmo-mcap: {}: the landing values are withheld when a hole precedes the touchdown \
+             (the first contact may be in it)",
+            log.display()
+        );
+        if let Some(map) = value.as_object_mut() {
+            map.insert(
+                "partial".into(),
+                serde_json::json!({ "missing_ticks": review.missing }),
+            );
+        }
+    }
+    let json = serde_json::to_string_pretty(&value).map_err(|e| output(e.to_string()))?;
     let summary_path = out.join("summary.json");
     std::fs::write(&summary_path, json + "\n").map_err(|e| output(e.to_string()))?;
     let figure_path = out.join("figure.png");
@@ -133,6 +150,17 @@ fn summary(
             TruthSource::FlightStack => "the flight stack's view (estimate, encoder, contact)",
         }
     );
+    if !review.missing.is_empty() {
+        let n: u64 = review
+            .missing
+            .iter()
+            .map(atmo_io::review::log::MissingTicks::count)
+            .sum();
+        println!(
+            "partial           {n} ticks missing in {} span(s): see stderr",
+            review.missing.len()
+        );
+    }
     println!("modes             {}", s.mode_sequence.join(" -> "));
     println!("touchdown tilt    {}", fmt(s.touchdown_tilt_deg, "deg"));
     println!("impact speed      {}", fmt(s.impact_speed_mps, "m/s"));

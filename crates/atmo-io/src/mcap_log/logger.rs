@@ -418,6 +418,44 @@ impl LoggerHandle {
         }
     }
 
+    /// [`Self::try_log`] for a producer that may wait (a simulation, whose
+    /// clock is its own): waits for room in the queue instead of dropping.
+    /// Drops and counts only when the logger has stopped or failed, so it
+    /// never waits on a dead writer. Not for the control thread.
+    pub fn log_waiting<M: Loggable>(
+        &self,
+        channel: Channel<M>,
+        log_time_ns: u64,
+        message: &M,
+    ) -> bool {
+        if self.shared.closed.load(Ordering::Relaxed) || self.failed() {
+            self.shared.dropped.fetch_add(1, Ordering::Relaxed);
+            return false;
+        }
+        let mut command = Command::Message {
+            channel: channel.id,
+            log_time: log_time_ns,
+            publish_time: log_time_ns,
+            payload: message.to_payload(),
+        };
+        loop {
+            match self.tx.try_send(command) {
+                Ok(()) => {
+                    self.shared.accepted.fetch_add(1, Ordering::Relaxed);
+                    return true;
+                }
+                Err(TrySendError::Full(back)) if !self.failed() => {
+                    command = back;
+                    std::thread::sleep(std::time::Duration::from_micros(200));
+                }
+                Err(TrySendError::Full(_) | TrySendError::Disconnected(_)) => {
+                    self.shared.dropped.fetch_add(1, Ordering::Relaxed);
+                    return false;
+                }
+            }
+        }
+    }
+
     /// Records dropped so far.
     pub fn dropped(&self) -> u64 {
         self.shared.dropped.load(Ordering::Relaxed)

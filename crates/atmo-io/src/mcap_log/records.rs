@@ -169,8 +169,11 @@ impl<'a> Records<'a> {
         check_strings(opcode, body).map_err(|reason| (at, format!("{name}: {reason}")))?;
         let record = mcap::parse_record(opcode, body)
             .map_err(|e| (at, format!("{name}: {}", mcap_reason(&e))))?;
-        if matches!(record, Record::Footer(_)) {
+        if let Record::Footer(footer) = &record {
             self.done = true;
+            if !self.truncated_ok {
+                check_summary_crc(self.bytes, at, footer).map_err(|reason| (at, reason))?;
+            }
             let rest = &self.bytes[self.at..];
             if !self.truncated_ok && rest != mcap::MAGIC {
                 return Err((
@@ -184,6 +187,40 @@ impl<'a> Records<'a> {
         }
         Ok(Some((at, record)))
     }
+}
+
+/// The footer's CRC of the summary section (from `summary_start` through
+/// the footer's own fields before the CRC), when the writer gave one
+/// (0: none). The summary indexes a reader may trust instead of the data.
+fn check_summary_crc(
+    bytes: &[u8],
+    footer_at: usize,
+    footer: &mcap::records::Footer,
+) -> Result<(), String> {
+    if footer.summary_crc == 0 {
+        return Ok(());
+    }
+    let end = footer_at + RECORD_PREFIX + 16;
+    let start = if footer.summary_start == 0 {
+        footer_at
+    } else {
+        usize::try_from(footer.summary_start).unwrap_or(usize::MAX)
+    };
+    if start > footer_at || end > bytes.len() {
+        return Err(format!(
+            "footer: summary_start {} is not before the footer at {footer_at}",
+            footer.summary_start
+        ));
+    }
+    let calculated = crc32fast::hash(&bytes[start..end]);
+    if calculated != footer.summary_crc {
+        return Err(format!(
+            "footer: the summary section's CRC is {calculated:#010x}, the footer says {:#010x} \
+             (the summary or the footer was changed)",
+            footer.summary_crc
+        ));
+    }
+    Ok(())
 }
 
 impl<'a> Iterator for Records<'a> {

@@ -47,7 +47,7 @@ pub fn recover(input: impl AsRef<Path>, output: impl AsRef<Path>) -> Result<Reco
         let file = file.to_path_buf();
         move |source| IoError::File { file, source }
     };
-    let bytes = std::fs::read(input).map_err(file_err(input))?;
+    let bytes = super::reader::read_file(input)?;
     check_magic(input, &bytes)?;
     let out = File::create(output).map_err(file_err(output))?;
     let mcap_err = |file: &Path| {

@@ -46,6 +46,51 @@ pub struct LogReview {
     pub truth: TruthSource,
     /// The figure's title.
     pub title: String,
+    /// Spans of control ticks missing from the log (a chunk lost and
+    /// skipped by `recover`): the summary is then partial, and its landing
+    /// values are withheld when a hole comes before the touchdown found.
+    pub missing: Vec<MissingTicks>,
+}
+
+/// Control ticks missing from a log: the status messages' `tick` counter
+/// (0 at the flight stack's first tick) jumps from `after` to `before`.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct MissingTicks {
+    /// The last tick present before the hole; `None`: the hole starts the
+    /// log (its first tick present is not tick 0).
+    pub after: Option<u64>,
+    /// The first tick present after it.
+    pub before: u64,
+    /// Flight stack clock of those two ticks, s.
+    pub from_s: Option<f64>,
+    pub to_s: f64,
+}
+
+impl MissingTicks {
+    pub fn count(&self) -> u64 {
+        self.before - self.after.map_or(0, |a| a + 1)
+    }
+}
+
+impl std::fmt::Display for MissingTicks {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match (self.after, self.from_s) {
+            (Some(after), Some(from_s)) => write!(
+                f,
+                "{} ticks missing between tick {after} ({from_s:.3} s) and tick {} ({:.3} s)",
+                self.count(),
+                self.before,
+                self.to_s
+            ),
+            _ => write!(
+                f,
+                "{} ticks missing before tick {} ({:.3} s), the first in the log",
+                self.count(),
+                self.before,
+                self.to_s
+            ),
+        }
+    }
 }
 
 /// The flight stack's view of a tick as a truth sample (real flights).
@@ -89,6 +134,8 @@ pub fn review_log(path: impl AsRef<Path>, status_topic: &str) -> Result<LogRevie
     let mut trace = FlightTrace::default();
     let mut truth: Option<SimTruth> = None;
     let mut ticks = 0usize;
+    let mut missing = Vec::new();
+    let mut last_tick: Option<(u64, f64)> = None;
     for m in &messages {
         match &m.message {
             AnyMessage::SimTruth(t) if m.topic == TRUTH_TOPIC => {
@@ -99,6 +146,17 @@ pub fn review_log(path: impl AsRef<Path>, status_topic: &str) -> Result<LogRevie
             }
             AnyMessage::MpcStatus(s) if m.topic == status_topic => {
                 ticks += 1;
+                let clock = s.stamp_ns as f64 * 1e-9;
+                let expected = last_tick.map_or(0, |(after, _)| after.saturating_add(1));
+                if s.tick > expected {
+                    missing.push(MissingTicks {
+                        after: last_tick.map(|(a, _)| a),
+                        before: s.tick,
+                        from_s: last_tick.map(|(_, t)| t),
+                        to_s: clock,
+                    });
+                }
+                last_tick = Some((s.tick, clock));
                 control_tick(&mut tracker, s);
                 let now = if has_truth {
                     truth.unwrap_or_else(|| view_of(s))
@@ -138,7 +196,8 @@ pub fn review_log(path: impl AsRef<Path>, status_topic: &str) -> Result<LogRevie
             .cloned(),
         wall_time_s: None,
     };
-    let summary = tracker.summary(&end);
+    let mut summary = tracker.summary(&end);
+    withhold_unknowable(&mut summary, &missing);
     let robot = match extras.attachment(ROBOT_ATTACHMENT) {
         Some(a) => RobotConfig::from_toml_str(
             &String::from_utf8_lossy(&a.data),
@@ -167,5 +226,24 @@ pub fn review_log(path: impl AsRef<Path>, status_topic: &str) -> Result<LogRevie
         trace,
         truth: source,
         title,
+        missing,
     })
+}
+
+/// A hole before (or without) the touchdown found means the first contact
+/// may be in it: the landing values are not known and are withheld.
+fn withhold_unknowable(summary: &mut Summary, missing: &[MissingTicks]) {
+    let Some(first) = missing.first() else {
+        return;
+    };
+    let before_touchdown = match (summary.touchdown_time_s, first.from_s) {
+        (Some(t), Some(from_s)) => from_s <= t,
+        _ => true,
+    };
+    if before_touchdown {
+        summary.touchdown_tilt_deg = None;
+        summary.impact_speed_mps = None;
+        summary.touchdown_time_s = None;
+        summary.predicted_touchdown = None;
+    }
 }

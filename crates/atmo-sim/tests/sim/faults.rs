@@ -13,25 +13,25 @@ use atmo_mpc::settings::FeedbackMethod;
 use atmo_sim::closed_loop::{ControllerConfig, Summary, TickRecord, fly};
 use atmo_sim::scenario::Scenario;
 
-fn scenario_path() -> PathBuf {
+pub(crate) fn scenario_path() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../../config/scenarios/wheel_landing.toml")
 }
 
 /// The wheel landing with `faults` (TOML of the `[faults]` table) added.
-fn scenario(faults: &str) -> Scenario {
+pub(crate) fn scenario(faults: &str) -> Scenario {
     let text = std::fs::read_to_string(scenario_path()).unwrap();
     Scenario::from_toml_str(&format!("{text}\n{faults}\n"), scenario_path())
         .unwrap_or_else(|e| panic!("{e}"))
 }
 
-struct Flight {
-    summary: Summary,
-    ticks: Vec<TickRecord>,
+pub(crate) struct Flight {
+    pub(crate) summary: Summary,
+    pub(crate) ticks: Vec<TickRecord>,
 }
 
 impl Flight {
     /// The modes in the order they were entered.
-    fn modes(&self) -> Vec<Mode> {
+    pub(crate) fn modes(&self) -> Vec<Mode> {
         let mut modes: Vec<Mode> = Vec::new();
         for t in &self.ticks {
             let mode = t.outputs.status.mode;
@@ -43,7 +43,7 @@ impl Flight {
     }
 
     /// The first tick at or after `time` s in `mode`.
-    fn first_in(&self, mode: Mode, after: f64) -> Option<&TickRecord> {
+    pub(crate) fn first_in(&self, mode: Mode, after: f64) -> Option<&TickRecord> {
         self.ticks
             .iter()
             .find(|t| t.time >= after - 1e-9 && t.outputs.status.mode == mode)
@@ -53,7 +53,7 @@ impl Flight {
         self.ticks.last().unwrap()
     }
 
-    fn landed(&self) -> bool {
+    pub(crate) fn landed(&self) -> bool {
         scenario("").file.success.met_by(&self.summary)
     }
 }
@@ -65,12 +65,12 @@ fn fly_scenario(scenario: &Scenario) -> Flight {
     Flight { summary, ticks }
 }
 
-fn fly_with(faults: &str) -> Flight {
+pub(crate) fn fly_with(faults: &str) -> Flight {
     fly_scenario(&scenario(faults))
 }
 
 /// The landing without faults, once per test process.
-fn clean() -> &'static Flight {
+pub(crate) fn clean() -> &'static Flight {
     static CLEAN: OnceLock<Flight> = OnceLock::new();
     CLEAN.get_or_init(|| fly_with(""))
 }
@@ -88,7 +88,7 @@ fn flown(summary: &Summary) -> Summary {
 
 /// Whether two flights commanded the same, tick for tick and bit for bit
 /// (thrust, tilt velocity, wheels, mode; timings aside).
-fn same_commands(a: &Flight, b: &Flight) -> bool {
+pub(crate) fn same_commands(a: &Flight, b: &Flight) -> bool {
     a.ticks.len() == b.ticks.len()
         && a.ticks.iter().zip(&b.ticks).all(|(x, y)| {
             let (x, y) = (&x.outputs, &y.outputs);
@@ -100,7 +100,7 @@ fn same_commands(a: &Flight, b: &Flight) -> bool {
 }
 
 /// When the clean landing enters `mode`, s.
-fn clean_entry(mode: Mode) -> f64 {
+pub(crate) fn clean_entry(mode: Mode) -> f64 {
     clean().first_in(mode, 0.0).unwrap().time
 }
 
@@ -112,7 +112,7 @@ const FLOWN: [Mode; 5] = [
     Mode::Drive,
 ];
 
-fn assert_clean_landing(flight: &Flight, what: &str) {
+pub(crate) fn assert_clean_landing(flight: &Flight, what: &str) {
     assert!(flight.landed(), "{what}: {:#?}", flight.summary);
     let modes = flight.modes();
     let flown: Vec<Mode> = modes

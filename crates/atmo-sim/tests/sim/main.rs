@@ -3,10 +3,12 @@
 //! binaries each re-instantiated and linked the whole flight stack, 21-32 s
 //! of build apiece (cargo `--timings`, 2026-12-03).
 
+mod actuator_faults;
 mod campaign;
 mod closed_loop_identification;
 mod config_errors;
 mod faults;
+mod hostile;
 mod replay;
 mod scenarios;
 mod sitl;
