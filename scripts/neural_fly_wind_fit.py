@@ -1,6 +1,7 @@
 #!/usr/bin/env python3
 """Which drag law explains the fan's force on the Neural-Fly flights, and what
-wind speed it implies (issue 16; docs/explain.md, "Issue 16: wind at high fan").
+wind speed it implies (docs/explain.md, "Limits"; the history:
+docs/decisions/2026-12-05-explain-history.md, wind at high fan).
 
 Data: O'Connell et al., "Neural-Fly enables rapid learning for agile flight in
 strong winds", Science Robotics 7(66), 2022 (conventions: docs/neural_fly.md).

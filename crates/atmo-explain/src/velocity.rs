@@ -6,8 +6,8 @@
 //! differentiates the velocity, so such a drift reads as a force, and the
 //! regressors built from it carry it too. On the generator's drag + wind
 //! flight it made the axial drag and the vertical body area look separable
-//! when the flight cannot tell them apart (docs/explain.md, "What limits
-//! the vertical area"). So below `f_c` the velocity is taken from the
+//! when the flight cannot tell them apart (docs/explain.md, "Limits"). So
+//! below `f_c` the velocity is taken from the
 //! positions:
 //!
 //! ```text

@@ -537,8 +537,8 @@ fn wind_failure(fit: &Fit, e: Effect) -> Option<String> {
 /// drag's columns carry (built at the profiled or refined wind) has
 /// nothing of its own to swap and is not judged here: the drag's swaps
 /// are not used, because on the fan flights an inertia or mass error swaps
-/// for the drag of a 4-9 m/s fan (docs/explain.md, "The acceptance
-/// repeated").
+/// for the drag of a 4-9 m/s fan (docs/explain.md, "Acceptance"; the
+/// measurements: docs/decisions/2026-12-05-explain-history.md).
 fn calibration_confusion(fit: &Fit, e: Effect, model: &[Effect]) -> Option<(String, Vec<Effect>)> {
     if e.is_calibration() || rides_with_wind(e, model) {
         return None;

@@ -348,7 +348,7 @@ fn ground_effect_and_motor_lag() {
 /// one outside it that is marked identified. A value held at a bound is
 /// not identified; what is fitted beside it is not judged here (the 2 m^2
 /// areas, held at 1, leave a 2.9 m/s wind where the truth has 2:
-/// docs/explain.md, "Physical bounds").
+/// docs/explain.md, "Acceptance").
 /// The generator has no drag and its controller cannot hold every such
 /// robot: a flight that runs away past 100 m/s (the 9 cm offset) is refused
 /// by the reader's plausible ranges (docs/recording_format.md), naming the
