@@ -1,4 +1,4 @@
-//! Issue 16's speed budget: `explain()` on 90 000 rows (10 minutes at
+//! The speed budget: `explain()` on 90 000 rows (10 minutes at
 //! 150 Hz) in at most 5 s on one core. The recording is the independent
 //! generator's (`atmo-testgen`, ground effect and motor lag concealed,
 //! seed 3), the one BENCHMARKS.md times through `atmo-sim explain`; it is

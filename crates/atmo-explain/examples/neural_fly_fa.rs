@@ -1,5 +1,5 @@
 //! How much of the Neural-Fly authors' residual force `fa` the fitted model
-//! predicts (issue 16's real-flight target: an MSE cut of >= 80 % at 100 %
+//! predicts (the real-flight target: an MSE cut of >= 80 % at 100 %
 //! fan on held-out data).
 //!
 //! `fa = m a - m g - T_auth`, with their thrust `T_auth = m g (T_sp /

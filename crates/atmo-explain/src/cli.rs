@@ -295,7 +295,7 @@ mod tests {
         args: super::Args,
     }
 
-    /// Issue 21: `--demo --duration inf` panicked, `1e9` aborted allocating.
+    /// `--demo --duration inf` panicked, `1e9` aborted allocating.
     #[test]
     fn demo_duration_and_rate_are_finite_and_bounded() {
         for (flag, value) in [

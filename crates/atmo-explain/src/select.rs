@@ -327,7 +327,7 @@ pub struct Step {
 
 /// Forward-backward selection over the active segments, all candidates
 /// at once. (A two-stage selection, calibration candidates first and the
-/// physics on top, was tried for issue 16: on the independent generator's
+/// physics on top, was tried: on the independent generator's
 /// centre-of-mass and drag + wind flights the calibration stage took thrust
 /// scale, mass and inertia errors that the physics did not push out again,
 /// and the result could not be replayed; the calibration is reported apart

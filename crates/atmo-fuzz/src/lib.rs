@@ -1,4 +1,4 @@
-//! Fuzz targets for every parser of outside input (issue 21).
+//! Fuzz targets for every parser of outside input.
 //!
 //! Each target takes arbitrary bytes and must neither panic, abort, hang
 //! nor allocate without bound; where a parser documents a guarantee, the

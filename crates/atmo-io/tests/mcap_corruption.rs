@@ -1,4 +1,4 @@
-//! Hostile logs (issue 21): a flipped bit inside a chunk is caught by the
+//! Hostile logs: a flipped bit inside a chunk is caught by the
 //! chunk CRC and that chunk alone is skipped and counted; `recover` refuses
 //! input that is not MCAP instead of writing an empty log.
 

@@ -390,7 +390,7 @@ fn the_recover_command_line() {
     std::fs::remove_dir_all(&dir).unwrap();
 }
 
-/// Issue 21, log disk full: on `/dev/full` every write fails with ENOSPC.
+/// Log disk full: on `/dev/full` every write fails with ENOSPC.
 /// The handle never blocks: records queued before the failure and every
 /// record after it are dropped and counted, `failed()` says so with the
 /// writer's error (the file and the OS's reason), and `join` returns it.

@@ -546,7 +546,7 @@ mod time_axis_tests {
         text
     }
 
-    /// Issue 21: 1e20, 1.7e12, a gap of 1e19 s and us timestamps panicked,
+    /// 1e20, 1.7e12, a gap of 1e19 s and us timestamps panicked,
     /// aborted or hung; now an error naming the line and the value.
     #[test]
     fn implausible_time_axes_are_refused_with_line_and_value() {

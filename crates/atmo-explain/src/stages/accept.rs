@@ -527,7 +527,7 @@ fn wind_failure(fit: &Fit, e: Effect) -> Option<String> {
 }
 
 /// A physics effect the data cannot tell apart from a calibration of the
-/// robot file (issue 16, items 3 and 4): a calibration that every flight
+/// robot file: a calibration that every flight
 /// pins down, swapped in for it, explains nearly as much, so it is the
 /// simpler account and no physics is claimed. On a flight at one heading,
 /// a steady wind and a centre of mass or thrust axis off the file push

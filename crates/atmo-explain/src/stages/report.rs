@@ -140,7 +140,7 @@ fn linear_parameters(fit: &Fit) -> Vec<(Effect, usize, usize)> {
         .collect()
 }
 
-/// Item 3 of issue 16: two parameters whose estimates correlate at least
+/// Two parameters whose estimates correlate at least
 /// [`COMBINED_CORRELATION`] (over the jackknife) are not findings alone.
 /// Both are marked not identified, and the combination `a + w b` with the
 /// least variance (`w = -cov_ab / var_b`, deviation `sd_a sqrt(1 - rho^2)`)

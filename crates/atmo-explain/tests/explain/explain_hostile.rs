@@ -1,4 +1,4 @@
-//! Hostile recordings (issue 21): one absurd but finite cell gives a
+//! Hostile recordings: one absurd but finite cell gives a
 //! defined outcome in bounded time, never a hang.
 #![allow(clippy::unwrap_used, reason = "test")]
 

@@ -319,7 +319,7 @@ fn mcap_logs_are_read_and_truncated_ones_are_clear_errors() {
     assert!(msg.contains("empty.mcap"), "{msg}");
 }
 
-/// Issue 21: a 10-million-row CSV was killed by the kernel at 24 GB
+/// A 10-million-row CSV was killed by the kernel at 24 GB
 /// resident. A recording past the row limit is refused at the line where
 /// the limit was passed, and a file past the size limit before it is read
 /// (a sparse file here: nothing is allocated for it).

@@ -186,7 +186,7 @@ fn the_fan_wind_is_named_along_the_fan_and_no_sideways_wind_is_claimed() {
 
 #[test]
 fn rotor_drag_and_body_drag_at_one_airspeed_are_one_combined_finding() {
-    // Issue 16, item 3. In 12 s of the 100 % fan flight the airspeed stays
+    // In 12 s of the 100 % fan flight the airspeed stays
     // near 14 m/s, where the linear rotor drag and the quadratic body drag
     // along x are nearly the same line: neither is a finding alone, their
     // best-determined combination is, with a deviation far below the
@@ -230,7 +230,7 @@ fn rotor_drag_and_body_drag_at_one_airspeed_are_one_combined_finding() {
 
 #[test]
 fn the_model_fitted_on_the_flight_s_start_predicts_its_end() {
-    // Issue 16's held-out data: the whole analysis on the first 12 s of the
+    // Held-out data: the whole analysis on the first 12 s of the
     // 100 % fan flight, its model scored on 12 s from 36 s on, which it
     // never saw (the linear acceleration's residual, which carries the
     // fan's force; the authors' `fa` cut on the whole flights is in
@@ -279,7 +279,7 @@ fn the_model_fitted_on_the_flight_s_start_predicts_its_end() {
     assert!(cut >= 0.8, "cut {:.1} %", 100.0 * cut);
 }
 
-/// Issue 16 on a no-wind piece of a real flight: no effect is claimed as
+/// On a no-wind piece of a real flight: no effect is claimed as
 /// physics (not calibration) with confidence >= 0.5, and the model
 /// reported predicts the 0.5 s velocity no worse than the robot file.
 fn no_physics_claimed_and_prediction_no_worse(name: &str) {

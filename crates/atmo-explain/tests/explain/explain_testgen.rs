@@ -1,7 +1,7 @@
 //! The discrepancy finder on recordings of the independent generator
 //! (`atmo-testgen`: its own rigid body, a cascaded PID at the recording
 //! rate, commands held over each sample, no dither, motion-capture noise
-//! unlike the plant's): issue 16's done-when on recordings this project's
+//! unlike the plant's): the finder's targets on recordings this project's
 //! simulator and controller did not make.
 #![allow(clippy::unwrap_used)] // reason: test code
 

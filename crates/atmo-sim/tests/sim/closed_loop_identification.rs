@@ -1,4 +1,4 @@
-//! Issue 17, the loop closed: a system-identification flight with the
+//! The loop closed: a system-identification flight with the
 //! ground effect concealed from the controller (atmo-explain's synthetic
 //! flight, flown by the nominal MPC against atmo-plant with the default
 //! surface and realistic sensors), the discrepancy finder on its recording,

@@ -1,4 +1,4 @@
-//! Issue 21, the fault campaign: the README's wheel landing flown in closed
+//! The fault campaign: the README's wheel landing flown in closed
 //! loop (the daemon's own control loop on the plant's clock, deterministic)
 //! with one fault of a scenario's `[faults]` table each, and the flight
 //! stack's defined reaction to it (docs/faults.md lists them).

@@ -1,4 +1,4 @@
-//! Issue 19: a simulated landing's flight log replays through a rebuilt
+//! A simulated landing's flight log replays through a rebuilt
 //! flight stack bit for bit; a changed MPC weight is reported at its first
 //! differing tick and field; a log cut mid-flight (after `recover`) replays
 //! to its last complete tick; a missing or damaged inputs channel is an
@@ -93,7 +93,7 @@ fn one_changed_mpc_weight_reports_the_first_differing_tick_and_field() {
 
 #[test]
 fn a_slope_landing_logs_the_ground_normal_and_replays_bit_for_bit() {
-    // Issue 17: the ground plane's normal is a tick input, logged with it.
+    // The ground plane's normal is a tick input, logged with it.
     let scenario =
         Scenario::load(repo().join("config/scenarios/landing_slope_25deg.toml")).unwrap();
     let controller = ControllerConfig::atmo().unwrap().deterministic();

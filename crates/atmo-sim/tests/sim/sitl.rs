@@ -284,7 +284,7 @@ fn the_daemon_binary_lands_on_the_wheels_against_the_plant_server() {
         touchdown.varphi.to_degrees()
     );
     assert!(touchdown.ground_contact);
-    // The estimate-to-command latency the robot felt (issue 18): the MPC
+    // The estimate-to-command latency the robot felt: the MPC
     // feedback phase of every tick that ran it, as the daemon logged it.
     let mut feedback: Vec<f64> = status
         .iter()
@@ -409,7 +409,7 @@ fn drivers_killed_mid_flight_failsafe_then_daemon_killed_log_recovered() {
     );
 }
 
-/// Issue 19: a SITL flight (daemon and plant server, two processes, ROS 2
+/// A SITL flight (daemon and plant server, two processes, ROS 2
 /// and shared memory between them) replays bit for bit from the daemon's
 /// log: `atmo-daemon replay` exits 0 having compared every tick. The MPC's
 /// wall-clock time limit is the shipped one: solves a busy machine cut are
