@@ -369,6 +369,7 @@ impl FlightStack {
             mpc_failed: mpc_failed_ticks > self.mpc.settings().failure.grace_ticks
                 || (self.mode.is_airborne_mode() && !pilot.mpc_enabled),
             driver_lost: inputs.driver_lost,
+            pilot_lost: inputs.pilot_lost,
             tilt,
             time_in_mode: now.saturating_sub(self.mode_since_ns) as f64 * 1e-9,
         };

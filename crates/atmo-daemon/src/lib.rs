@@ -21,6 +21,8 @@
 //!   every output compared bit for bit with the logged one (and what-if).
 //! - [`whatif`]: a what-if replay's per-tick comparison (CSV, PNG overlay,
 //!   largest differences).
+//! - [`rc`]: the radio (PX4's `InputRc`) as a pilot source: channels,
+//!   ranges, switches, kill latch (the daemon config's `[rc]`).
 //! - [`telemetry`]: the tick's status as the `atmo_msgs/MpcStatus` message.
 //! - [`settings`], read from `config/flight.toml`.
 //!
@@ -41,6 +43,7 @@ pub mod inputs;
 pub mod modes;
 pub mod observer;
 pub mod onboard;
+pub mod rc;
 pub mod replay;
 pub mod settings;
 pub mod step_io;

@@ -50,6 +50,7 @@ use crate::error::{DaemonError, Result};
 use crate::flight_log::TickChannels;
 use crate::flight_stack::{Estimate, StepInputs, StepOutputs};
 use crate::inputs::{DriveCommand, InputLatch, InputSettings};
+use crate::rc::{RcConfig, RcPilot};
 use crate::telemetry::pilot_from_message;
 
 /// `config/daemon.toml`: what the onboard binary loads. Paths are relative
@@ -87,6 +88,9 @@ pub struct DaemonConfig {
     pub ros2: Ros2Config,
     #[serde(default)]
     pub drivers: DriverPortsConfig,
+    /// The radio's mapping (used when `ros2.topics.rc` is enabled).
+    #[serde(default)]
+    pub rc: RcConfig,
 }
 
 fn default_input_timeout_ms() -> u64 {
@@ -191,6 +195,17 @@ impl ConfigFile for DaemonConfig {
         self.drivers
             .validate(file)
             .map_err(|e| DaemonError::Setup(format!("[drivers]: {e}")))?;
+        self.rc.validate(file)?;
+        let topics = &self.ros2.topics;
+        if topics.rc.enabled && topics.pilot.enabled {
+            return Err(c
+                .fail(
+                    "ros2.topics.pilot.enabled",
+                    "false while ros2.topics.rc is enabled (one pilot source)",
+                    true,
+                )
+                .into());
+        }
         Ok(())
     }
 }
@@ -207,6 +222,11 @@ pub struct OnboardShared {
     pub driver_deaths: AtomicU64,
     /// Ticks run with the pilot stream silent.
     pub pilot_stale_ticks: AtomicU64,
+    /// Ticks run with the radio lost (radio as the pilot source only).
+    pub pilot_lost_ticks: AtomicU64,
+    /// Radio frames the mapping refused (a mapped channel missing or no
+    /// servo pulse).
+    pub rc_rejected: AtomicU64,
     /// Ticks with no estimate fresh enough to fly on (age > timeout).
     pub estimates_stale_ticks: AtomicU64,
     /// Ticks on the configured ground height because the ground topic had
@@ -230,6 +250,8 @@ pub struct OnboardSettings {
     pub px4_offboard: bool,
     /// The flight stack's estimate timeout, s (for the stale counter).
     pub estimate_timeout: f64,
+    /// The radio's mapping, when it is the pilot source.
+    pub rc: Option<RcConfig>,
 }
 
 impl OnboardSettings {
@@ -241,6 +263,7 @@ impl OnboardSettings {
             pilot_timeout: self.pilot_timeout,
             drive_timeout: self.drive_timeout,
             estimate_timeout: self.estimate_timeout,
+            rc_timeout: self.rc.map(|rc| Duration::from_millis(rc.timeout_ms)),
         }
     }
 
@@ -252,6 +275,7 @@ impl OnboardSettings {
             drive_timeout: Duration::from_millis(config.drive_timeout_ms),
             px4_offboard: config.px4_offboard,
             estimate_timeout,
+            rc: config.ros2.topics.rc.enabled.then_some(config.rc),
         }
     }
 }
@@ -268,6 +292,8 @@ pub struct OnboardIo {
     shared: Arc<OnboardShared>,
     started: Instant,
     latch: InputLatch,
+    /// The radio's mapping, when it is the pilot source.
+    rc: Option<RcPilot>,
     health: Option<DriverHealth>,
     tick: u64,
     /// ROS time (the wall clock, or `/clock` with `use_sim_time`) when this
@@ -305,6 +331,7 @@ impl OnboardIo {
             shared,
             started: Instant::now(),
             latch: InputLatch::new(settings.inputs()),
+            rc: settings.rc.map(RcPilot::new),
             health: None,
             tick: 0,
             tick_ros_ns: 0,
@@ -349,6 +376,19 @@ impl TickIo for OnboardIo {
             let received = stamp_on_tick_clock(deadline_ns, p.received);
             self.latch.pilot(pilot_from_message(&p.input), received);
         }
+        if let Some(frame) = self.ros_in.latest_rc()
+            && let Some(rc) = &mut self.rc
+        {
+            match rc.map(&frame.input) {
+                Ok(reading) => {
+                    let received = stamp_on_tick_clock(deadline_ns, frame.received);
+                    self.latch.radio(reading, received);
+                }
+                Err(_) => {
+                    self.shared.rc_rejected.fetch_add(1, Ordering::Relaxed);
+                }
+            }
+        }
         while let Some(d) = self.ros_in.latest_drive() {
             self.latch.drive(DriveCommand {
                 forward: d.forward,
@@ -371,6 +411,9 @@ impl TickIo for OnboardIo {
             self.shared
                 .pilot_stale_ticks
                 .fetch_add(1, Ordering::Relaxed);
+        }
+        if assembled.inputs.pilot_lost {
+            self.shared.pilot_lost_ticks.fetch_add(1, Ordering::Relaxed);
         }
         if assembled.estimate_stale {
             self.shared

@@ -52,6 +52,10 @@ pub struct StepInputs {
     /// A required driver stopped talking (the I/O layer's liveness check;
     /// always false in simulation): fly the failsafe, do not take off.
     pub driver_lost: bool,
+    /// The pilot's radio is lost (PX4's `rc_lost`, or silent longer than
+    /// the RC timeout; only with the radio as the pilot source): fly the
+    /// failsafe, do not take off.
+    pub pilot_lost: bool,
 }
 
 /// Solver outcome, flattened for logs.

@@ -28,6 +28,7 @@ fn flying() -> Conditions {
         estimate_fresh: true,
         mpc_failed: false,
         driver_lost: false,
+        pilot_lost: false,
         tilt: 0.0,
         time_in_mode: 10.0,
     }
@@ -153,6 +154,17 @@ fn flying_modes_to_failsafe_on_stale_estimate_or_mpc_failure() {
             Mode::Failsafe,
             "{mode:?}"
         );
+        assert_eq!(
+            step(
+                mode,
+                Conditions {
+                    pilot_lost: true,
+                    ..flying()
+                }
+            ),
+            Mode::Failsafe,
+            "{mode:?}: radio lost"
+        );
     }
     // Driving needs neither.
     assert_eq!(
@@ -235,6 +247,17 @@ fn failsafe_to_flight_only_when_healthy_tilted_back_and_after_the_recovery_time(
         ),
         Mode::Failsafe
     );
+    assert_eq!(
+        step(
+            Mode::Failsafe,
+            Conditions {
+                pilot_lost: true,
+                ..flying()
+            }
+        ),
+        Mode::Failsafe,
+        "radio still lost"
+    );
 }
 
 #[test]
@@ -266,6 +289,18 @@ fn drive_to_takeoff_at_half_throttle() {
             Conditions {
                 throttle: 0.9,
                 driver_lost: true,
+                ..on_ground()
+            }
+        ),
+        Mode::Drive
+    );
+    // Nor with the radio lost.
+    assert_eq!(
+        step(
+            Mode::Drive,
+            Conditions {
+                throttle: 0.9,
+                pilot_lost: true,
                 ..on_ground()
             }
         ),

@@ -106,6 +106,7 @@ fn flight_stack_allocations(ground_effect: GroundEffectSource, ground_normal: Op
             ground_z: 0.0,
             ground_normal,
             driver_lost: false,
+            pilot_lost: false,
         };
         // The first ticks warm the MPC up (start-up); count from tick 20 on.
         let before = thread_allocations();
@@ -333,6 +334,7 @@ fn logging_a_tick_does_not_allocate() {
         ground_z: 0.0,
         ground_normal: None,
         driver_lost: false,
+        pilot_lost: false,
     };
     let outputs = stack.step(&inputs);
     let timing = TickTiming::default();

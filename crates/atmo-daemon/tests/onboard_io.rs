@@ -85,6 +85,7 @@ fn onboard_tick_io_allocates_nothing_of_its_own() {
         drive_timeout: Duration::from_millis(500),
         px4_offboard: true, // exercise every output
         estimate_timeout: 0.05,
+        rc: None,
     };
     let mut io = OnboardIo::open(
         &drivers,
@@ -117,6 +118,7 @@ fn onboard_tick_io_allocates_nothing_of_its_own() {
         ground_z: 0.0,
         ground_normal: None,
         driver_lost: false,
+        pilot_lost: false,
     });
 
     let pilot = PilotMsg {
