@@ -191,20 +191,15 @@ fn run(path: &PathBuf, port: Option<String>) -> Result<()> {
         // Wakes on the daemon's tick (commands_sent) or at the next
         // deadline of the own rate: the watchdog and the heartbeat go on
         // without a daemon.
+        // At or past the deadline the wait is zero: it takes what is there.
         let wait = Duration::from_nanos(next_ns.saturating_sub(monotonic_ns()));
-        // A zero timeout would block for good (iceoryx2's socket wait takes
-        // 0 as "no timeout"): at or past the deadline, only take what is there.
-        let commands = if wait < Duration::from_micros(100) {
+        let commands = endpoint.wait_for_commands(wait).unwrap_or_else(|_| {
+            // SIGINT/SIGTERM interrupt the wait: not a port error.
+            if !stop.load(Ordering::SeqCst) {
+                port_errors += 1;
+            }
             endpoint.receive()
-        } else {
-            endpoint.wait_for_commands(wait).unwrap_or_else(|_| {
-                // SIGINT/SIGTERM interrupt the wait: not a port error.
-                if !stop.load(Ordering::SeqCst) {
-                    port_errors += 1;
-                }
-                endpoint.receive()
-            })
-        };
+        });
         let now = monotonic_ns();
         match config.mode {
             Mode::Tilt => {
