@@ -276,6 +276,7 @@ impl InputLatch {
                 ground_normal: fresh_normal.map(|(n, _)| n),
                 driver_lost: !self.drivers_alive,
                 pilot_lost,
+                arming_failures: 0,
             },
             pilot_stale,
             estimate_stale,

@@ -1,5 +1,7 @@
 //! atmo-daemon: the flight stack and the onboard control loop.
 //!
+//! - [`arming`]: the arming checks (estimate rate, radio, drivers, tilt
+//!   encoder against the command, configuration) and their verdict.
 //! - [`modes`]: the paper's mode state machine as an explicit transition table.
 //! - [`flight_stack`]: `FlightStack::step(inputs)` (pure, deterministic, the
 //!   clock is an input): input validation, mode machine, tilt law with limits,
@@ -31,6 +33,7 @@
 //! default `cli` feature.
 //! - `cli` (feature `cli-args`): the command-line argument groups the binaries share.
 
+pub mod arming;
 #[cfg(feature = "cli-args")]
 pub mod cli;
 pub mod control_loop;

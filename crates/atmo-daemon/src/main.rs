@@ -12,6 +12,7 @@ use atmo_daemon::control_loop::ControlThread;
 use atmo_daemon::flight_log::{FlightConfig, FlightConfigFiles, TickChannels};
 use atmo_daemon::onboard::{DaemonConfig, OnboardIo, OnboardSettings, OnboardShared};
 use atmo_io::mcap_log::McapLogger;
+use atmo_io::msg::DiagnosticArray;
 use atmo_io::ros2::{Ros2Node, Ros2StartOptions};
 use clap::{Parser, Subcommand};
 
@@ -284,6 +285,13 @@ fn run(arg: &DaemonConfigArg, log_path: Option<PathBuf>, duration: Option<f64>) 
     );
 
     let started = Instant::now();
+    let flight_problem = l.config.flight_problem();
+    if let Some(problem) = flight_problem {
+        tracing::warn!(problem, "this configuration cannot arm");
+    }
+    let diagnostics_period = Duration::from_millis(l.config.ros2.diagnostics_period_ms);
+    let mut next_diagnostics = Instant::now();
+    let mut reported_arming = u8::MAX;
     let mut reported_mode = Mode::Disarmed.code();
     let mut reported_deaths = 0;
     let mut panicked = false;
@@ -311,6 +319,20 @@ fn run(arg: &DaemonConfigArg, log_path: Option<PathBuf>, duration: Option<f64>) 
                 error = log.failure().unwrap_or_default(),
                 "the log cannot be written: flying on, its records dropped and counted"
             );
+        }
+        let arming = shared.arming_failures.load(Ordering::Relaxed);
+        if shared.started.load(Ordering::Relaxed) && arming != reported_arming {
+            reported_arming = arming;
+            let status = atmo_daemon::arming::diagnostics(arming, flight_problem);
+            tracing::info!(verdict = %status.message, "arming checks");
+        }
+        if Instant::now() >= next_diagnostics {
+            next_diagnostics = Instant::now() + diagnostics_period;
+            let status = atmo_daemon::arming::diagnostics(arming, flight_problem);
+            ros_out.try_publish_diagnostics(DiagnosticArray {
+                status: vec![status],
+                ..DiagnosticArray::default()
+            });
         }
         let deaths = shared.driver_deaths.load(Ordering::Relaxed);
         if deaths != reported_deaths {

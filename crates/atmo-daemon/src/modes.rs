@@ -105,6 +105,8 @@ impl Mode {
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct Conditions {
     pub armed: bool,
+    /// Every arming check passes (only arming looks at it).
+    pub arming_ok: bool,
     /// Wheel contact reported by the ground-contact signal.
     pub grounded: bool,
     /// Height of the base origin above the ground, m.
@@ -193,13 +195,19 @@ pub const TRANSITIONS: &[Transition] = &[
         // the first one arrives, a missing estimate's zero height would put
         // a flying robot in Drive, its thrusters off (seen in SITL on a
         // loaded machine). Without contact or an estimate it stays disarmed.
-        guard: |c, t| c.armed && (c.grounded || (c.estimate_fresh && c.height <= t.takeoff_height)),
+        guard: |c, t| {
+            c.armed
+                && c.arming_ok
+                && (c.grounded || (c.estimate_fresh && c.height <= t.takeoff_height))
+        },
         reason: "armed on the ground",
     },
     Transition {
         from: &[Mode::Disarmed],
         to: Mode::Flight,
-        guard: |c, t| c.armed && !c.grounded && c.height > t.takeoff_height && c.estimate_fresh,
+        guard: |c, t| {
+            c.armed && c.arming_ok && !c.grounded && c.height > t.takeoff_height && c.estimate_fresh
+        },
         reason: "armed in the air",
     },
     Transition {

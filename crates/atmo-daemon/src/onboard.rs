@@ -45,6 +45,7 @@ use atmo_io::msg::{ActuatorMotors, IoHealth, OffboardControlMode};
 use atmo_io::ros2::{Ros2Config, Ros2Inputs, Ros2Publisher};
 use serde::Deserialize;
 
+use crate::arming::{ArmingMonitor, ArmingObservation, ArmingSettings};
 use crate::control_loop::{TickIo, TickTiming};
 use crate::error::{DaemonError, Result};
 use crate::flight_log::TickChannels;
@@ -91,6 +92,9 @@ pub struct DaemonConfig {
     /// The radio's mapping (used when `ros2.topics.rc` is enabled).
     #[serde(default)]
     pub rc: RcConfig,
+    /// The arming checks' rates, windows and tolerances.
+    #[serde(default)]
+    pub arming: ArmingSettings,
 }
 
 fn default_input_timeout_ms() -> u64 {
@@ -196,6 +200,7 @@ impl ConfigFile for DaemonConfig {
             .validate(file)
             .map_err(|e| DaemonError::Setup(format!("[drivers]: {e}")))?;
         self.rc.validate(file)?;
+        self.arming.validate(file)?;
         let topics = &self.ros2.topics;
         if topics.rc.enabled && topics.pilot.enabled {
             return Err(c
@@ -207,6 +212,27 @@ impl ConfigFile for DaemonConfig {
                 .into());
         }
         Ok(())
+    }
+}
+
+impl DaemonConfig {
+    /// Why this configuration cannot fly, if it cannot (the arming checks'
+    /// configuration check: a valid file the daemon runs with, which
+    /// nevertheless could not arm safely).
+    pub fn flight_problem(&self) -> Option<&'static str> {
+        let t = &self.ros2.topics;
+        let required = |name: &str| self.drivers.required.iter().any(|r| r == name);
+        if !t.pilot.enabled && !t.rc.enabled {
+            Some("no pilot source: ros2.topics.pilot and ros2.topics.rc are both disabled")
+        } else if !t.estimate.enabled {
+            Some("no estimate: ros2.topics.estimate is disabled")
+        } else if !required("tilt") {
+            Some("drivers.required lacks \"tilt\": the encoder check needs its liveness")
+        } else if !self.px4_offboard && !required("thrusters") {
+            Some("no thruster path: px4_offboard is off and drivers.required lacks \"thrusters\"")
+        } else {
+            None
+        }
     }
 }
 
@@ -236,6 +262,8 @@ pub struct OnboardShared {
     pub port_send_errors: AtomicU64,
     /// Status records the logger dropped (queue full).
     pub log_dropped: AtomicU64,
+    /// Arming checks failing now (bits of [`crate::arming::ArmingCheck`]).
+    pub arming_failures: AtomicU8,
     /// Set once the first tick has run.
     pub started: AtomicBool,
 }
@@ -252,6 +280,10 @@ pub struct OnboardSettings {
     pub estimate_timeout: f64,
     /// The radio's mapping, when it is the pilot source.
     pub rc: Option<RcConfig>,
+    pub arming: ArmingSettings,
+    /// The configuration check's verdict ([`DaemonConfig::flight_problem`]
+    /// is `None`).
+    pub configuration_ok: bool,
 }
 
 impl OnboardSettings {
@@ -276,6 +308,8 @@ impl OnboardSettings {
             px4_offboard: config.px4_offboard,
             estimate_timeout,
             rc: config.ros2.topics.rc.enabled.then_some(config.rc),
+            arming: config.arming,
+            configuration_ok: config.flight_problem().is_none(),
         }
     }
 }
@@ -294,6 +328,10 @@ pub struct OnboardIo {
     latch: InputLatch,
     /// The radio's mapping, when it is the pilot source.
     rc: Option<RcPilot>,
+    arming: ArmingMonitor,
+    /// The last tick's measured tilt (if an encoder reading had arrived)
+    /// and commanded tilt velocity, for the arming checks.
+    last_tilt: (Option<f64>, f64),
     health: Option<DriverHealth>,
     tick: u64,
     /// ROS time (the wall clock, or `/clock` with `use_sim_time`) when this
@@ -332,6 +370,8 @@ impl OnboardIo {
             started: Instant::now(),
             latch: InputLatch::new(settings.inputs()),
             rc: settings.rc.map(RcPilot::new),
+            arming: ArmingMonitor::new(settings.arming, settings.configuration_ok),
+            last_tilt: (None, 0.0),
             health: None,
             tick: 0,
             tick_ros_ns: 0,
@@ -406,7 +446,20 @@ impl TickIo for OnboardIo {
         self.latch
             .drivers_alive(drivers.health.all_required_alive());
         self.health = Some(drivers.health);
-        let assembled = self.latch.assemble(deadline_ns);
+        let mut assembled = self.latch.assemble(deadline_ns);
+        let (tilt, tilt_velocity) = self.last_tilt;
+        let arming_failures = self.arming.observe(&ArmingObservation {
+            now_ns: deadline_ns,
+            estimates_total: self.ros_in.counters().estimates_accepted,
+            pilot_lost: assembled.inputs.pilot_lost,
+            driver_lost: assembled.inputs.driver_lost,
+            tilt,
+            tilt_velocity,
+        });
+        assembled.inputs.arming_failures = arming_failures;
+        self.shared
+            .arming_failures
+            .store(arming_failures, Ordering::Relaxed);
         if assembled.pilot_stale {
             self.shared
                 .pilot_stale_ticks
@@ -453,6 +506,10 @@ impl TickIo for OnboardIo {
         self.channels
             .log_tick(&self.log, self.tick, inputs, outputs, &status);
         self.latch.mode(outputs.status.mode);
+        self.last_tilt = (
+            inputs.tilt_counts.map(|_| outputs.status.tilt),
+            outputs.tilt_velocity,
+        );
         self.tick += 1;
         let alive = status
             .io

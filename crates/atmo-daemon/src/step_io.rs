@@ -56,6 +56,9 @@ pub struct StepInputs {
     /// the RC timeout; only with the radio as the pilot source): fly the
     /// failsafe, do not take off.
     pub pilot_lost: bool,
+    /// Arming checks that fail (bits of [`crate::arming::ArmingCheck`];
+    /// 0: all pass): the stack does not arm while any is set.
+    pub arming_failures: u8,
 }
 
 /// Solver outcome, flattened for logs.

@@ -30,6 +30,8 @@ struct Loop {
     disturbance: nalgebra::Vector6<f64>,
     /// The pilot's radio is lost (the input latch's verdict).
     pilot_lost: bool,
+    /// Arming checks failing (the onboard monitor's verdict).
+    arming_failures: u8,
 }
 
 impl Loop {
@@ -63,6 +65,7 @@ impl Loop {
             last_estimate: None,
             disturbance: nalgebra::Vector6::zeros(),
             pilot_lost: false,
+            arming_failures: 0,
         }
     }
 
@@ -83,6 +86,7 @@ impl Loop {
             ground_normal: None,
             driver_lost: false,
             pilot_lost: self.pilot_lost,
+            arming_failures: self.arming_failures,
         }
     }
 
@@ -293,6 +297,31 @@ fn a_lost_radio_in_flight_is_a_failsafe_that_holds_and_ends_when_it_is_back() {
     lp.pilot_lost = false;
     let outs = lp.run(1.0);
     assert_eq!(outs.last().unwrap().status.mode, Mode::Flight, "recovered");
+}
+
+#[test]
+fn a_refused_arming_stays_disarmed_and_says_why_until_the_checks_pass() {
+    use atmo_daemon::arming::ArmingCheck;
+    let mut lp = Loop::new(1.5);
+    lp.arming_failures = ArmingCheck::Radio.bit() | ArmingCheck::TiltEncoder.bit();
+    let outs = lp.run(0.1);
+    for o in &outs {
+        assert_eq!(o.status.mode, Mode::Disarmed);
+        assert_eq!(o.thrust, [0.0; 4]);
+        assert_eq!(o.status.transition, Some("arming refused: radio lost"));
+    }
+    lp.arming_failures = ArmingCheck::TiltEncoder.bit();
+    assert_eq!(
+        lp.tick().status.transition,
+        Some("arming refused: tilt encoder disagrees or is silent")
+    );
+    lp.pilot.offboard = false;
+    assert_eq!(lp.tick().status.transition, None, "not asked to arm");
+    lp.pilot.offboard = true;
+    lp.arming_failures = 0;
+    let armed = lp.tick();
+    assert_eq!(armed.status.mode, Mode::Flight);
+    assert_eq!(armed.status.transition, Some("armed in the air"));
 }
 
 #[test]

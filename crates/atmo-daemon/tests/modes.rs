@@ -21,6 +21,7 @@ fn thresholds() -> Thresholds {
 fn flying() -> Conditions {
     Conditions {
         armed: true,
+        arming_ok: true,
         grounded: false,
         height: 2.0,
         throttle: 0.0,
@@ -516,4 +517,22 @@ fn every_row_of_the_table_is_exercised_above() {
             row.reason
         );
     }
+}
+
+#[test]
+fn a_failed_arming_check_keeps_it_disarmed_on_the_ground_and_in_the_air() {
+    for c in [on_ground(), flying()] {
+        let refused = Conditions {
+            arming_ok: false,
+            ..c
+        };
+        assert_eq!(step(Mode::Disarmed, refused), Mode::Disarmed);
+        assert_ne!(step(Mode::Disarmed, c), Mode::Disarmed);
+    }
+    // Once armed the checks do not disarm: the failsafes act instead.
+    let flying_refused = Conditions {
+        arming_ok: false,
+        ..flying()
+    };
+    assert_eq!(step(Mode::Flight, flying_refused), Mode::Flight);
 }

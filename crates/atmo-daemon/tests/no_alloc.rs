@@ -107,6 +107,7 @@ fn flight_stack_allocations(ground_effect: GroundEffectSource, ground_normal: Op
             ground_normal,
             driver_lost: false,
             pilot_lost: false,
+            arming_failures: 0,
         };
         // The first ticks warm the MPC up (start-up); count from tick 20 on.
         let before = thread_allocations();
@@ -335,6 +336,7 @@ fn logging_a_tick_does_not_allocate() {
         ground_normal: None,
         driver_lost: false,
         pilot_lost: false,
+        arming_failures: 0,
     };
     let outputs = stack.step(&inputs);
     let timing = TickTiming::default();

@@ -86,6 +86,8 @@ fn onboard_tick_io_allocates_nothing_of_its_own() {
         px4_offboard: true, // exercise every output
         estimate_timeout: 0.05,
         rc: None,
+        arming: atmo_daemon::arming::ArmingSettings::default(),
+        configuration_ok: true,
     };
     let mut io = OnboardIo::open(
         &drivers,
@@ -119,6 +121,7 @@ fn onboard_tick_io_allocates_nothing_of_its_own() {
         ground_normal: None,
         driver_lost: false,
         pilot_lost: false,
+        arming_failures: 0,
     });
 
     let pilot = PilotMsg {

@@ -133,7 +133,7 @@ pub struct TickTiming {
 /// `solver_cut_overflow`; they decode with `has_ground_normal = false`
 /// (level ground, what those flight stacks assumed), and logs written
 /// before `pilot_lost` end after the normal and decode with the radio
-/// present, so that old flight logs still replay.
+/// present and every arming check passed, so that old flight logs still replay.
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize)]
 #[allow(clippy::struct_excessive_bools)] // the wire layout: presence flags and two signals
 pub struct TickInputs {
@@ -162,6 +162,8 @@ pub struct TickInputs {
     pub ground_normal: [f64; 3],
     /// The pilot's radio is lost (a failsafe input).
     pub pilot_lost: bool,
+    /// Arming checks that failed (bit set; 0: all pass).
+    pub arming_failures: u8,
 }
 
 /// The fields of `TickInputs` in wire order (its .msg definition's, checked
@@ -185,6 +187,7 @@ pub(super) const TICK_INPUTS_FIELDS: &[&str] = &[
     "has_ground_normal",
     "ground_normal",
     "pilot_lost",
+    "arming_failures",
 ];
 
 impl<'de> Deserialize<'de> for TickInputs {
@@ -231,6 +234,7 @@ impl<'de> serde::de::Visitor<'de> for TickInputsVisitor {
             has_ground_normal: false,
             ground_normal: [0.0; 3],
             pilot_lost: false,
+            arming_failures: 0,
         };
         // A log before the ground normal ends here: the payload is used up,
         // reading on fails, and the message is the old one (level ground).
@@ -241,6 +245,7 @@ impl<'de> serde::de::Visitor<'de> for TickInputsVisitor {
             // Likewise a log before the pilot's radio ends after the normal.
             if let Ok(Some(lost)) = seq.next_element::<bool>() {
                 m.pilot_lost = lost;
+                m.arming_failures = next(&mut seq, "arming_failures")?;
             }
         }
         Ok(m)

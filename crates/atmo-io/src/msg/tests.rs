@@ -611,11 +611,12 @@ fn tick_inputs_and_sim_truth_layouts() {
     let decoded: TickInputs = decode("/before-radio", &before_radio).unwrap();
     assert_eq!(decoded, m);
     m.pilot_lost = true;
-    body.push(1);
+    m.arming_failures = 0b10100;
+    body.extend([1, 0b10100]);
     round_trip(&m, &body);
     // A payload cut inside the normal is refused, not read as an old one.
     let mut cut = CDR_LE_HEADER.to_vec();
-    cut.extend(&body[..body.len() - 9]);
+    cut.extend(&body[..body.len() - 10]);
     assert!(decode::<TickInputs>("/cut", &cut).is_err());
     assert_eq!(
         super::definitions::fields("atmo_msgs", definition(TickInputs::TYPE_NAME).unwrap())
