@@ -23,6 +23,8 @@
 //!   every output compared bit for bit with the logged one (and what-if).
 //! - [`whatif`]: a what-if replay's per-tick comparison (CSV, PNG overlay,
 //!   largest differences).
+//! - [`preflight`]: the arming checks and a props-off tilt sweep on the
+//!   robot's transports, as a pass/fail table (`atmo-daemon preflight`).
 //! - [`rc`]: the radio (PX4's `InputRc`) as a pilot source: channels,
 //!   ranges, switches, kill latch (the daemon config's `[rc]`).
 //! - [`telemetry`]: the tick's status as the `atmo_msgs/MpcStatus` message.
@@ -46,6 +48,7 @@ pub mod inputs;
 pub mod modes;
 pub mod observer;
 pub mod onboard;
+pub mod preflight;
 pub mod rc;
 pub mod replay;
 pub mod settings;

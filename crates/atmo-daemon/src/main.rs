@@ -52,6 +52,21 @@ enum Command {
         #[command(flatten)]
         config: DaemonConfigArg,
     },
+    /// Run the arming checks on the robot's transports (ROS 2 inputs,
+    /// driver ports) for one check window, then a props-off tilt sweep
+    /// (0 -> 50 -> 0 deg, the encoder against the command), and print a
+    /// pass/fail table. The thrusters get 0 throughout. Exit 0: all passed;
+    /// 1: a check failed. Not beside a running daemon: it owns the ports.
+    Preflight {
+        #[command(flatten)]
+        config: DaemonConfigArg,
+        /// The sweep's far end, deg (0..=90).
+        #[arg(long, default_value_t = 50.0, value_parser = sweep_deg)]
+        sweep_to_deg: f64,
+        /// Only the checks, no tilt motion.
+        #[arg(long)]
+        no_sweep: bool,
+    },
     /// Replay a flight log: rebuild the flight stack from the configuration
     /// stored in LOG, feed it the logged inputs tick by tick with the logged
     /// clock, and compare every output with the logged one bit for bit.
@@ -95,6 +110,15 @@ fn main() {
             duration,
         } => run(&config, log, duration),
         Command::Check { config } => check(&config),
+        Command::Preflight {
+            config,
+            sweep_to_deg,
+            no_sweep,
+        } => match preflight(&config, (!no_sweep).then_some(sweep_to_deg)) {
+            Ok(true) => Ok(()),
+            Ok(false) => std::process::exit(1),
+            Err(e) => Err(e),
+        },
         Command::Replay {
             log,
             config,
@@ -231,6 +255,40 @@ fn check(arg: &DaemonConfigArg) -> Result<()> {
         l.config.drivers.prefix, l.config.drivers.liveness_timeout_ms
     );
     Ok(())
+}
+
+/// `--sweep-to-deg`: a tilt in 0..=90 deg.
+fn sweep_deg(text: &str) -> std::result::Result<f64, String> {
+    match text.parse::<f64>() {
+        Ok(v) if (0.0..=90.0).contains(&v) => Ok(v),
+        _ => Err(format!("`{text}` is not a tilt in 0..=90 deg")),
+    }
+}
+
+/// `preflight`: true when every row passed.
+fn preflight(arg: &DaemonConfigArg, sweep_to_deg: Option<f64>) -> Result<bool> {
+    let l = load(arg)?;
+    let (_ros_out, ros_in, ros_thread) =
+        Ros2Node::start(&l.config.ros2, Ros2StartOptions::default()).context("ROS 2 node")?;
+    let mut preflight = atmo_daemon::preflight::Preflight::open(
+        &l.config,
+        &l.parsed.robot,
+        ros_in,
+        l.parsed.flight.control_loop.rate_hz,
+        l.parsed.flight.failsafe.estimate_timeout,
+    )?;
+    println!(
+        "preflight {}: arming checks, then {}",
+        arg.config.display(),
+        sweep_to_deg.map_or("no sweep".to_string(), |d| format!(
+            "a props-off tilt sweep 0 -> {d} -> 0 deg"
+        ))
+    );
+    let report = preflight.run(sweep_to_deg);
+    drop(preflight);
+    ros_thread.stop().context("stopping the ROS 2 node")?;
+    println!("{report}");
+    Ok(report.passed())
 }
 
 fn run(arg: &DaemonConfigArg, log_path: Option<PathBuf>, duration: Option<f64>) -> Result<()> {
