@@ -8,6 +8,12 @@
 //! ENU/FLU, `atmo_msgs/PilotInput` from the scenario's script). Topic and
 //! service names come from the same daemon config file as the daemon's.
 //!
+//! With [`ServeOptions::boards`] the tilt and wheel drivers are not played:
+//! real `atmo-roboclaw` processes drive simulated Roboclaw boards on
+//! pseudo-terminals, and the plant's tilt and wheels follow the boards
+//! ([`crate::boards`]); the server still plays the thrusters, the ground
+//! contact and the motion capture.
+//!
 //! Time: the plant steps in real time (wall clock, absolute 1 ms
 //! deadlines). It is frozen at its initial state, with sensors and
 //! heartbeats running, until the daemon reports an armed mode on its
@@ -26,6 +32,7 @@ use atmo_io::msg::{MpcStatus, PilotInput as PilotMsg};
 use atmo_io::ros2::{Ros2Config, Ros2StartOptions, SitlNode};
 use atmo_io::wall_clock_ns;
 
+use crate::boards::{BoardFiles, SimBoards};
 use crate::closed_loop::{LandingTracker, Summary};
 use crate::error::{Result, SimError};
 use crate::scenario::Scenario;
@@ -43,6 +50,9 @@ pub struct ServeOptions {
     pub sensor_rate_hz: f64,
     /// Rate of the heartbeats and of the pilot stream, Hz.
     pub heartbeat_rate_hz: f64,
+    /// Fly the tilt and the wheels through `atmo-roboclaw` processes and
+    /// simulated boards on pseudo-terminals instead of playing their drivers.
+    pub boards: Option<BoardFiles>,
 }
 
 impl ServeOptions {
@@ -53,6 +63,7 @@ impl ServeOptions {
             start_timeout: Duration::from_secs(60),
             sensor_rate_hz: 200.0,
             heartbeat_rate_hz: 50.0,
+            boards: None,
         }
     }
 }
@@ -121,6 +132,9 @@ struct Links {
     last_status: Option<MpcStatus>,
     /// Sequence of the last estimate published.
     last_estimate: Option<u64>,
+    /// The tilt and wheel drivers are real processes (no tilt encoder and
+    /// no heartbeat of theirs from the server).
+    boards: bool,
 }
 
 impl Links {
@@ -150,7 +164,9 @@ impl Links {
             self.counters.estimates_published += u64::from(ok);
         }
         if self.sensors.due(now) {
-            if let Ok(counts) = plant.encoder_counts() {
+            if !self.boards
+                && let Ok(counts) = plant.encoder_counts()
+            {
                 let ok = self.drivers.publish_tilt_encoder(counts.round() as i64);
                 self.count(ok);
             }
@@ -159,6 +175,9 @@ impl Links {
         }
         if self.heartbeats.due(now) {
             for driver in DriverId::ALL {
+                if self.boards && matches!(driver, DriverId::Tilt | DriverId::Wheels) {
+                    continue;
+                }
                 let ok = self.drivers.publish_heartbeat(driver);
                 self.count(ok);
             }
@@ -200,6 +219,11 @@ pub fn serve(
         counters: ServeCounters::default(),
         last_status: None,
         last_estimate: None,
+        boards: options.boards.is_some(),
+    };
+    let mut boards = match &options.boards {
+        Some(files) => Some(SimBoards::start(files, &options.drivers)?),
+        None => None,
     };
     let mode_of = |s: &MpcStatus| Mode::from_code(s.mode.code());
 
@@ -223,6 +247,12 @@ pub fn serve(
                 options.start_timeout.as_secs_f64(),
                 links.counters.status_received
             )));
+        }
+        if let Some(boards) = &mut boards {
+            boards.follow_tilt(plant.tilt());
+            if let Some(exit) = boards.exited_driver() {
+                return Err(SimError::Setup(exit));
+            }
         }
         let now = Instant::now();
         links.publish(&plant, &initial_pilot, |_| wall_clock_ns());
@@ -262,14 +292,21 @@ pub fn serve(
             command.rotors = Input::from(c.thrust);
             links.counters.thrust_commands += 1;
         }
-        if let Some(c) = received.tilt_velocity {
-            command.tilt_rate = c.velocity;
-        }
-        if let Some(c) = received.wheel_rates {
-            command.wheel_rates = atmo_core::control::WheelRates {
-                left: c.rates[0],
-                right: c.rates[1],
-            };
+        if let Some(boards) = &mut boards {
+            boards.follow_tilt(plant.tilt());
+            command.tilt_rate = boards.tilt_rate(plant.tilt());
+            let [left, right] = boards.wheel_rates();
+            command.wheel_rates = atmo_core::control::WheelRates { left, right };
+        } else {
+            if let Some(c) = received.tilt_velocity {
+                command.tilt_rate = c.velocity;
+            }
+            if let Some(c) = received.wheel_rates {
+                command.wheel_rates = atmo_core::control::WheelRates {
+                    left: c.rates[0],
+                    right: c.rates[1],
+                };
+            }
         }
         if let Some(s) = links.take_status() {
             tracker.on_control_tick(

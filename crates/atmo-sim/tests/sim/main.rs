@@ -9,3 +9,4 @@ mod faults;
 mod replay;
 mod scenarios;
 mod sitl;
+mod sitl_boards;
