@@ -252,7 +252,10 @@ fn serve(
         topics.estimate.name = topic;
     }
     if let Some(topic) = pilot_topic {
+        // Played to the daemon by another node (an RC relay, too, when the
+        // daemon's own pilot topic is off): published whatever the file says.
         topics.pilot.name = topic;
+        topics.pilot.enabled = true;
     }
     daemon
         .ros2

@@ -294,7 +294,8 @@ pub struct MpcStatus {
     pub ros_stamp_ns: u64,
     pub tick: u64,
     pub mode: Mode,
-    /// Reason of the transition taken this tick (empty if none).
+    /// Reason of the transition taken this tick, or why arming was refused
+    /// ("arming refused: ..."); empty if neither.
     pub transition: Label,
     pub solver_status: SolverStatus,
     pub solver_iterations: u32,
