@@ -199,6 +199,67 @@ impl Links {
     }
 }
 
+/// Frozen until the daemon is armed: the initial state, freshly stamped,
+/// sensors and heartbeats running. Only the tilt mechanism moves, as the
+/// tilt driver (or the tilt board) commands it: a props-off preflight sweep
+/// runs against the server, and the daemon commands none while disarmed.
+fn wait_for_arming(
+    plant: &mut atmo_plant::Plant,
+    links: &mut Links,
+    mut boards: Option<&mut SimBoards>,
+    scenario: &Scenario,
+    options: &ServeOptions,
+    progress: Progress<'_>,
+) -> Result<()> {
+    let mode_of = |s: &MpcStatus| Mode::from_code(s.mode.code());
+    let waiting = Instant::now();
+    let initial_pilot = pilot_msg(scenario, 0.0);
+    let mut republish = Every::new(100.0);
+    let (mut tilt_rate, mut last) = (0.0, Instant::now());
+    loop {
+        let status = links.take_status();
+        if status
+            .as_ref()
+            .and_then(mode_of)
+            .is_some_and(|m| m != Mode::Disarmed)
+        {
+            return Ok(());
+        }
+        if waiting.elapsed() > options.start_timeout {
+            return Err(SimError::Setup(format!(
+                "no armed daemon on `{}` within {:.0} s ({} status messages seen)",
+                options.ros2.topics.status.name,
+                options.start_timeout.as_secs_f64(),
+                links.counters.status_received
+            )));
+        }
+        let received = links.drivers.receive();
+        if let Some(boards) = boards.as_deref_mut() {
+            boards.follow_tilt(plant.tilt());
+            tilt_rate = boards.tilt_rate(plant.tilt());
+            if let Some(exit) = boards.exited_driver() {
+                return Err(SimError::Setup(exit));
+            }
+        } else if let Some(c) = received.tilt_velocity {
+            tilt_rate = c.velocity;
+        }
+        let dt = last.elapsed().as_secs_f64();
+        last = Instant::now();
+        plant.place_tilt(plant.tilt() + tilt_rate * dt);
+        let now = Instant::now();
+        links.publish(plant, &initial_pilot, |_| wall_clock_ns());
+        if republish.due(now) {
+            // The plant publishes only as it steps: repeat the initial state.
+            let ok = links
+                .ros_out
+                .try_publish_estimate(&plant.state(), wall_clock_ns());
+            links.count(ok);
+        }
+        progress(0.0, links.last_status.as_ref().and_then(mode_of));
+        std::thread::sleep(Duration::from_millis(2));
+    }
+}
+
 /// Runs `scenario` in real time against a daemon on the transports of
 /// `options`; returns the landing summary and the server's counters.
 pub fn serve(
@@ -227,46 +288,15 @@ pub fn serve(
     };
     let mode_of = |s: &MpcStatus| Mode::from_code(s.mode.code());
 
-    // Frozen until the daemon is armed: the initial state, freshly stamped.
     let waiting = Instant::now();
-    let initial_pilot = pilot_msg(scenario, 0.0);
-    let mut republish = Every::new(100.0);
-    loop {
-        let status = links.take_status();
-        if status
-            .as_ref()
-            .and_then(mode_of)
-            .is_some_and(|m| m != Mode::Disarmed)
-        {
-            break;
-        }
-        if waiting.elapsed() > options.start_timeout {
-            return Err(SimError::Setup(format!(
-                "no armed daemon on `{}` within {:.0} s ({} status messages seen)",
-                options.ros2.topics.status.name,
-                options.start_timeout.as_secs_f64(),
-                links.counters.status_received
-            )));
-        }
-        if let Some(boards) = &mut boards {
-            boards.follow_tilt(plant.tilt());
-            if let Some(exit) = boards.exited_driver() {
-                return Err(SimError::Setup(exit));
-            }
-        }
-        let now = Instant::now();
-        links.publish(&plant, &initial_pilot, |_| wall_clock_ns());
-        if republish.due(now) {
-            // The plant publishes only as it steps: repeat the initial state.
-            let ok = links
-                .ros_out
-                .try_publish_estimate(&plant.state(), wall_clock_ns());
-            links.count(ok);
-        }
-        let _ = links.drivers.receive();
-        progress(0.0, links.last_status.as_ref().and_then(mode_of));
-        std::thread::sleep(Duration::from_millis(2));
-    }
+    wait_for_arming(
+        &mut plant,
+        &mut links,
+        boards.as_mut(),
+        scenario,
+        options,
+        progress,
+    )?;
     links.counters.waited_for_daemon_ms =
         u64::try_from(waiting.elapsed().as_millis()).unwrap_or(u64::MAX);
 

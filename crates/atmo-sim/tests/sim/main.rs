@@ -10,3 +10,4 @@ mod replay;
 mod scenarios;
 mod sitl;
 mod sitl_boards;
+mod sitl_preflight;

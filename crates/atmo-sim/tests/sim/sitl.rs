@@ -84,7 +84,7 @@ pub(crate) struct Process {
 }
 
 impl Process {
-    fn spawn(name: &'static str, mut command: Command, dir: &Path) -> Self {
+    pub(crate) fn spawn(name: &'static str, mut command: Command, dir: &Path) -> Self {
         let stderr = dir.join(format!("{name}.stderr"));
         let child = command
             .stdout(std::fs::File::create(dir.join(format!("{name}.stdout"))).unwrap())
