@@ -254,6 +254,24 @@ fn check(arg: &DaemonConfigArg) -> Result<()> {
         "  drivers prefix {}, liveness {} ms",
         l.config.drivers.prefix, l.config.drivers.liveness_timeout_ms
     );
+    if t.rc.enabled {
+        let (rc, s) = (&l.config.rc, &l.config.rc.switches);
+        println!(
+            "  radio  {} ({}..{}..{} us; offboard ch {}, MPC ch {}, kill ch {}; lost after {} ms)",
+            t.rc.name,
+            rc.min_us,
+            rc.center_us,
+            rc.max_us,
+            s.offboard.channel,
+            s.mpc.channel,
+            s.kill.channel,
+            rc.timeout_ms
+        );
+    }
+    match l.config.flight_problem() {
+        None => println!("  arming configuration check: can fly"),
+        Some(problem) => println!("  arming configuration check FAILS: {problem}"),
+    }
     Ok(())
 }
 
