@@ -7,9 +7,13 @@
 #                                          # against DAEMON (default target/debug/atmo-daemon)
 #   scripts/ros2-peer.sh sitl [DAEMON [SIM]]  # the SITL wheel landing, the motion
 #                                          # capture played by rclpy (tests/python/rclpy_sitl.py)
+#   scripts/ros2-peer.sh rc [DAEMON [SIM]]    # the same landing flown on px4_msgs/InputRc and
+#                                          # VehicleOdometry played as PX4 does; radio loss,
+#                                          # kill switch (tests/python/rclpy_rc.py)
 #
 # Everything lives under target/ros2-peer (not in git) and is rebuilt only when
-# tests/python/ros2-requirements.txt or ros2/atmo_msgs change. The env file sets
+# tests/python/ros2-requirements.txt, ros2/atmo_msgs or tests/python/px4_msgs
+# (the test's px4_msgs subset) change. The env file sets
 # what `source install/setup.bash` would (rclpy finds atmo_msgs) plus Fast DDS
 # on 127.0.0.1 only (tests/python/fastdds-loopback.xml).
 set -euo pipefail
@@ -49,16 +53,18 @@ setup() {
         rm -rf "$dir/install" "$dir/build"
     fi
     local msgs_want msgs_stamp=$dir/install/.atmo_msgs.sha256
-    msgs_want=$(cat "$stamp" ros2/atmo_msgs/package.xml ros2/atmo_msgs/CMakeLists.txt ros2/atmo_msgs/msg/*.msg | sha256sum | cut -d' ' -f1)
+    msgs_want=$(cat "$stamp" ros2/atmo_msgs/package.xml ros2/atmo_msgs/CMakeLists.txt ros2/atmo_msgs/msg/*.msg \
+        tests/python/px4_msgs/package.xml tests/python/px4_msgs/CMakeLists.txt tests/python/px4_msgs/msg/*.msg |
+        sha256sum | cut -d' ' -f1)
     if [[ ! -f $msgs_stamp || "$(cat "$msgs_stamp")" != "$msgs_want" ]]; then
-        echo "ros2-peer: colcon build atmo_msgs (about 50 s)" >&2
+        echo "ros2-peer: colcon build atmo_msgs and px4_msgs (about 90 s)" >&2
         rm -rf "$dir/install" "$dir/build"
         (
             # colcon and the rosidl generators run from the venv; the
             # generators find each other in the venv's ament index.
             export PATH=$venv/bin:$PATH VIRTUAL_ENV=$venv AMENT_PREFIX_PATH=$venv
             cd "$dir"
-            colcon --log-base "$dir/log" build --base-paths "$root/ros2" \
+            colcon --log-base "$dir/log" build --base-paths "$root/ros2" "$root/tests/python/px4_msgs" \
                 --build-base "$dir/build" --install-base "$dir/install" \
                 --event-handlers console_cohesion- summary- \
                 --cmake-args -DPython3_EXECUTABLE="$py" -DBUILD_TESTING=OFF >&2
@@ -74,14 +80,15 @@ setup() {
 write_env() {
     local site
     site=$("$py" -c "import sysconfig; print(sysconfig.get_paths()['purelib'])")
-    local pkg_site
+    local pkg_site px4_site
     pkg_site=$(cd "$dir/install/atmo_msgs" && find . -path '*site-packages' -type d | head -n1)
+    px4_site=$(cd "$dir/install/px4_msgs" && find . -path '*site-packages' -type d | head -n1)
     cat <<ENV
 export PATH="$venv/bin:\$PATH"
 export VIRTUAL_ENV="$venv"
-export AMENT_PREFIX_PATH="$dir/install/atmo_msgs:$venv"
-export PYTHONPATH="$dir/install/atmo_msgs/${pkg_site#./}\${PYTHONPATH:+:\$PYTHONPATH}"
-export LD_LIBRARY_PATH="$dir/install/atmo_msgs/lib\${LD_LIBRARY_PATH:+:\$LD_LIBRARY_PATH}"
+export AMENT_PREFIX_PATH="$dir/install/atmo_msgs:$dir/install/px4_msgs:$venv"
+export PYTHONPATH="$dir/install/atmo_msgs/${pkg_site#./}:$dir/install/px4_msgs/${px4_site#./}\${PYTHONPATH:+:\$PYTHONPATH}"
+export LD_LIBRARY_PATH="$dir/install/atmo_msgs/lib:$dir/install/px4_msgs/lib\${LD_LIBRARY_PATH:+:\$LD_LIBRARY_PATH}"
 export RMW_IMPLEMENTATION=rmw_fastrtps_cpp
 export ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST
 export FASTDDS_DEFAULT_PROFILES_FILE="$root/tests/python/fastdds-loopback.xml"
@@ -106,8 +113,16 @@ sitl)
     source "$env_file"
     exec "$py" tests/python/rclpy_sitl.py --daemon "$daemon" --sim "$sim"
     ;;
+rc)
+    env_file=$(setup | tail -n1)
+    daemon=${2:-${CARGO_TARGET_DIR:-target}/debug/atmo-daemon}
+    sim=${3:-${CARGO_TARGET_DIR:-target}/debug/atmo-sim}
+    # shellcheck disable=SC1090
+    source "$env_file"
+    exec "$py" tests/python/rclpy_rc.py --daemon "$daemon" --sim "$sim"
+    ;;
 *)
-    echo "usage: $0 [setup | test [DAEMON] | sitl [DAEMON [ATMO_SIM]]]" >&2
+    echo "usage: $0 [setup | test [DAEMON] | sitl [DAEMON [ATMO_SIM]] | rc [DAEMON [ATMO_SIM]]]" >&2
     exit 2
     ;;
 esac

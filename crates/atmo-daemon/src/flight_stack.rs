@@ -18,6 +18,7 @@ use atmo_core::{GroundPlane, Linkage, Model, RobotConfig};
 use atmo_mpc::{AlphaSchedule, Mpc, MpcSettings, Outcome, SolverCuts, TiltPlan, wheel_clearance};
 use nalgebra::Vector3;
 
+use crate::arming::ArmingCheck;
 use crate::error::{DaemonError, Result};
 use crate::flare::{
     COMMITTED_THRUST_MAX, Decision, Flare, FlareSettings, Touchdown, TouchdownModel,
@@ -361,6 +362,7 @@ impl FlightStack {
         let mpc_failed_ticks = self.mpc.failed_ticks();
         let conditions = Conditions {
             armed: pilot.arm && pilot.offboard,
+            arming_ok: inputs.arming_failures == 0,
             grounded: inputs.ground_contact,
             height,
             throttle: pilot.throttle,
@@ -369,10 +371,16 @@ impl FlightStack {
             mpc_failed: mpc_failed_ticks > self.mpc.settings().failure.grace_ticks
                 || (self.mode.is_airborne_mode() && !pilot.mpc_enabled),
             driver_lost: inputs.driver_lost,
+            pilot_lost: inputs.pilot_lost,
             tilt,
             time_in_mode: now.saturating_sub(self.mode_since_ns) as f64 * 1e-9,
         };
-        let (mode, transition) = next_mode(self.mode, &conditions, &self.thresholds);
+        let (mode, mut transition) = next_mode(self.mode, &conditions, &self.thresholds);
+        if mode == Mode::Disarmed && conditions.armed {
+            // Why the switches did not arm it.
+            transition =
+                ArmingCheck::first_failed(inputs.arming_failures).map(ArmingCheck::refusal);
+        }
         if mode != self.mode {
             self.enter(mode, now, &state);
         }

@@ -14,6 +14,13 @@
 //!   `pilot_timeout` its switches hold (disarming a flying robot because a
 //!   radio dropped would drop it) but velocity, yaw-rate and throttle go to
 //!   zero: the robot holds its position.
+//! - Radio (with `rc_timeout` set: PX4's `InputRc` is the pilot source,
+//!   mapped by [`crate::rc`]): a usable frame is the pilot input. The radio
+//!   is *lost* (`pilot_lost`, a failsafe input like a stale estimate) before
+//!   its first frame, when PX4 flags the frame lost, and when no frame came
+//!   for `rc_timeout`. A lost radio's frames are not used: its switches
+//!   hold (a receiver's failsafe values would disarm a flying robot) and
+//!   velocity, yaw rate and throttle go to zero.
 //! - Drive command: newer than the pilot input and younger than
 //!   `drive_timeout`, it sets velocity (forward along the current yaw) and
 //!   yaw rate while the stack is in [`Mode::Drive`].
@@ -55,6 +62,10 @@ pub struct InputSettings {
     pub drive_timeout: Duration,
     /// The flight stack's estimate timeout, s (for the stale count).
     pub estimate_timeout: f64,
+    /// The radio is the pilot source and is lost after this silence; `None`:
+    /// the pilot source is the `PilotInput` stream (its silence is no
+    /// failsafe).
+    pub rc_timeout: Option<Duration>,
 }
 
 /// A drive command (`geometry_msgs/Twist`) as the latch keeps it.
@@ -81,6 +92,14 @@ pub struct Assembled {
     pub ground_stale: bool,
 }
 
+/// What the latch keeps of the radio.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct RadioLatch {
+    /// When the newest frame arrived (tick clock), and whether PX4 flagged
+    /// it lost.
+    last: Option<(u64, bool)>,
+}
+
 /// The newest value of every source, and the rules that make a tick's
 /// inputs of them. Fixed size, no allocation.
 #[derive(Debug, Clone, Copy)]
@@ -89,6 +108,7 @@ pub struct InputLatch {
     estimate: Option<Estimate>,
     pilot: PilotInput,
     pilot_received_ns: Option<u64>,
+    radio: RadioLatch,
     drive: Option<DriveCommand>,
     tilt_counts: Option<f64>,
     contact: bool,
@@ -115,6 +135,7 @@ impl InputSettings {
             pilot_timeout: timeout,
             drive_timeout: timeout,
             estimate_timeout,
+            rc_timeout: None,
         }
     }
 }
@@ -129,6 +150,7 @@ impl InputLatch {
             estimate: None,
             pilot: PilotInput::default(),
             pilot_received_ns: None,
+            radio: RadioLatch { last: None },
             drive: None,
             tilt_counts: None,
             contact: false,
@@ -152,6 +174,27 @@ impl InputLatch {
     pub fn pilot(&mut self, pilot: PilotInput, received_ns: u64) {
         self.pilot = pilot;
         self.pilot_received_ns = Some(received_ns);
+    }
+
+    /// A usable radio frame arrived at `received_ns` (mapped by
+    /// [`crate::rc::RcPilot`]); a frame PX4 flags lost only marks the
+    /// radio lost.
+    pub fn radio(&mut self, reading: crate::rc::RcReading, received_ns: u64) {
+        if !reading.lost {
+            self.pilot = reading.pilot;
+            self.pilot_received_ns = Some(received_ns);
+        }
+        self.radio.last = Some((received_ns, reading.lost));
+    }
+
+    /// Whether the radio is lost at `now_ns` (always false without one).
+    fn radio_lost(&self, now_ns: u64) -> bool {
+        let Some(timeout) = self.settings.rc_timeout else {
+            return false;
+        };
+        self.radio
+            .last
+            .is_none_or(|(at, lost)| lost || now_ns.saturating_sub(at) > ns(timeout))
     }
 
     /// A drive command arrived.
@@ -206,9 +249,11 @@ impl InputLatch {
 
     /// The inputs of the tick at `now_ns`.
     pub fn assemble(&self, now_ns: u64) -> Assembled {
-        let pilot_stale = self
-            .pilot_received_ns
-            .is_none_or(|at| now_ns.saturating_sub(at) > ns(self.settings.pilot_timeout));
+        let pilot_lost = self.radio_lost(now_ns);
+        let pilot_stale = pilot_lost
+            || self
+                .pilot_received_ns
+                .is_none_or(|at| now_ns.saturating_sub(at) > ns(self.settings.pilot_timeout));
         let estimate_stale = !self.estimate.is_some_and(|e| {
             now_ns.saturating_sub(e.stamp_ns) as f64 * 1e-9 <= self.settings.estimate_timeout
         });
@@ -230,6 +275,8 @@ impl InputLatch {
                 ground_z: fresh_ground.map_or(self.settings.ground_z, |(z, _)| z),
                 ground_normal: fresh_normal.map(|(n, _)| n),
                 driver_lost: !self.drivers_alive,
+                pilot_lost,
+                arming_failures: 0,
             },
             pilot_stale,
             estimate_stale,
@@ -273,7 +320,70 @@ mod tests {
             pilot_timeout: Duration::from_millis(500),
             drive_timeout: Duration::from_millis(300),
             estimate_timeout: 0.1,
+            rc_timeout: None,
         })
+    }
+
+    fn radio_latch() -> InputLatch {
+        let mut l = latch();
+        l.settings.rc_timeout = Some(Duration::from_millis(300));
+        l
+    }
+
+    fn reading(lost: bool) -> crate::rc::RcReading {
+        crate::rc::RcReading {
+            pilot: PilotInput {
+                velocity: [0.5, 0.0, 0.0],
+                yaw_rate: 0.1,
+                throttle: 0.2,
+                arm: true,
+                offboard: true,
+                mpc_enabled: true,
+            },
+            lost,
+        }
+    }
+
+    #[test]
+    fn the_radio_is_lost_before_its_first_frame_and_after_its_timeout() {
+        let mut l = radio_latch();
+        let before = l.assemble(0);
+        assert!(before.inputs.pilot_lost && before.pilot_stale);
+        l.radio(reading(false), 100 * MS);
+        let fresh = l.assemble(400 * MS);
+        assert!(!fresh.inputs.pilot_lost && !fresh.pilot_stale);
+        assert_eq!(fresh.inputs.pilot, reading(false).pilot);
+        let silent = l.assemble(401 * MS);
+        assert!(silent.inputs.pilot_lost, "300 ms of silence");
+        let p = silent.inputs.pilot;
+        assert_eq!((p.velocity, p.yaw_rate, p.throttle), ([0.0; 3], 0.0, 0.0));
+        assert!(p.arm && p.offboard && p.mpc_enabled, "switches held");
+    }
+
+    #[test]
+    fn a_frame_px4_flags_lost_marks_the_radio_lost_and_is_not_used() {
+        let mut l = radio_latch();
+        l.radio(reading(false), 100 * MS);
+        let mut failsafe_values = reading(true);
+        failsafe_values.pilot.arm = false;
+        failsafe_values.pilot.offboard = false;
+        l.radio(failsafe_values, 120 * MS);
+        let a = l.assemble(130 * MS);
+        assert!(a.inputs.pilot_lost);
+        assert!(
+            a.inputs.pilot.arm && a.inputs.pilot.offboard,
+            "not disarmed by it"
+        );
+        assert_eq!(a.inputs.pilot.velocity, [0.0; 3]);
+        l.radio(reading(false), 140 * MS);
+        assert!(!l.assemble(150 * MS).inputs.pilot_lost, "back");
+    }
+
+    #[test]
+    fn without_a_radio_a_silent_pilot_stream_is_no_failsafe() {
+        let l = latch();
+        let a = l.assemble(10_000 * MS);
+        assert!(a.pilot_stale && !a.inputs.pilot_lost);
     }
 
     const MS: u64 = 1_000_000;

@@ -1,5 +1,7 @@
 //! atmo-daemon: the flight stack and the onboard control loop.
 //!
+//! - [`arming`]: the arming checks (estimate rate, radio, drivers, tilt
+//!   encoder against the command, configuration) and their verdict.
 //! - [`modes`]: the paper's mode state machine as an explicit transition table.
 //! - [`flight_stack`]: `FlightStack::step(inputs)` (pure, deterministic, the
 //!   clock is an input): input validation, mode machine, tilt law with limits,
@@ -21,6 +23,10 @@
 //!   every output compared bit for bit with the logged one (and what-if).
 //! - [`whatif`]: a what-if replay's per-tick comparison (CSV, PNG overlay,
 //!   largest differences).
+//! - [`preflight`]: the arming checks and a props-off tilt sweep on the
+//!   robot's transports, as a pass/fail table (`atmo-daemon preflight`).
+//! - [`rc`]: the radio (PX4's `InputRc`) as a pilot source: channels,
+//!   ranges, switches, kill latch (the daemon config's `[rc]`).
 //! - [`telemetry`]: the tick's status as the `atmo_msgs/MpcStatus` message.
 //! - [`settings`], read from `config/flight.toml`.
 //!
@@ -29,6 +35,7 @@
 //! default `cli` feature.
 //! - `cli` (feature `cli-args`): the command-line argument groups the binaries share.
 
+pub mod arming;
 #[cfg(feature = "cli-args")]
 pub mod cli;
 pub mod control_loop;
@@ -41,6 +48,8 @@ pub mod inputs;
 pub mod modes;
 pub mod observer;
 pub mod onboard;
+pub mod preflight;
+pub mod rc;
 pub mod replay;
 pub mod settings;
 pub mod step_io;

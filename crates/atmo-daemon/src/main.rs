@@ -12,6 +12,7 @@ use atmo_daemon::control_loop::ControlThread;
 use atmo_daemon::flight_log::{FlightConfig, FlightConfigFiles, TickChannels};
 use atmo_daemon::onboard::{DaemonConfig, OnboardIo, OnboardSettings, OnboardShared};
 use atmo_io::mcap_log::McapLogger;
+use atmo_io::msg::DiagnosticArray;
 use atmo_io::ros2::{Ros2Node, Ros2StartOptions};
 use clap::{Parser, Subcommand};
 
@@ -50,6 +51,21 @@ enum Command {
     Check {
         #[command(flatten)]
         config: DaemonConfigArg,
+    },
+    /// Run the arming checks on the robot's transports (ROS 2 inputs,
+    /// driver ports) for one check window, then a props-off tilt sweep
+    /// (0 -> 50 -> 0 deg, the encoder against the command), and print a
+    /// pass/fail table. The thrusters get 0 throughout. Exit 0: all passed;
+    /// 1: a check failed. Not beside a running daemon: it owns the ports.
+    Preflight {
+        #[command(flatten)]
+        config: DaemonConfigArg,
+        /// The sweep's far end, deg (0..=90).
+        #[arg(long, default_value_t = 50.0, value_parser = sweep_deg)]
+        sweep_to_deg: f64,
+        /// Only the checks, no tilt motion.
+        #[arg(long)]
+        no_sweep: bool,
     },
     /// Replay a flight log: rebuild the flight stack from the configuration
     /// stored in LOG, feed it the logged inputs tick by tick with the logged
@@ -94,6 +110,15 @@ fn main() {
             duration,
         } => run(&config, log, duration),
         Command::Check { config } => check(&config),
+        Command::Preflight {
+            config,
+            sweep_to_deg,
+            no_sweep,
+        } => match preflight(&config, (!no_sweep).then_some(sweep_to_deg)) {
+            Ok(true) => Ok(()),
+            Ok(false) => std::process::exit(1),
+            Err(e) => Err(e),
+        },
         Command::Replay {
             log,
             config,
@@ -229,7 +254,59 @@ fn check(arg: &DaemonConfigArg) -> Result<()> {
         "  drivers prefix {}, liveness {} ms",
         l.config.drivers.prefix, l.config.drivers.liveness_timeout_ms
     );
+    if t.rc.enabled {
+        let (rc, s) = (&l.config.rc, &l.config.rc.switches);
+        println!(
+            "  radio  {} ({}..{}..{} us; offboard ch {}, MPC ch {}, kill ch {}; lost after {} ms)",
+            t.rc.name,
+            rc.min_us,
+            rc.center_us,
+            rc.max_us,
+            s.offboard.channel,
+            s.mpc.channel,
+            s.kill.channel,
+            rc.timeout_ms
+        );
+    }
+    match l.config.flight_problem() {
+        None => println!("  arming configuration check: can fly"),
+        Some(problem) => println!("  arming configuration check FAILS: {problem}"),
+    }
     Ok(())
+}
+
+/// `--sweep-to-deg`: a tilt in 0..=90 deg.
+fn sweep_deg(text: &str) -> std::result::Result<f64, String> {
+    match text.parse::<f64>() {
+        Ok(v) if (0.0..=90.0).contains(&v) => Ok(v),
+        _ => Err(format!("`{text}` is not a tilt in 0..=90 deg")),
+    }
+}
+
+/// `preflight`: true when every row passed.
+fn preflight(arg: &DaemonConfigArg, sweep_to_deg: Option<f64>) -> Result<bool> {
+    let l = load(arg)?;
+    let (_ros_out, ros_in, ros_thread) =
+        Ros2Node::start(&l.config.ros2, Ros2StartOptions::default()).context("ROS 2 node")?;
+    let mut preflight = atmo_daemon::preflight::Preflight::open(
+        &l.config,
+        &l.parsed.robot,
+        ros_in,
+        l.parsed.flight.control_loop.rate_hz,
+        l.parsed.flight.failsafe.estimate_timeout,
+    )?;
+    println!(
+        "preflight {}: arming checks, then {}",
+        arg.config.display(),
+        sweep_to_deg.map_or("no sweep".to_string(), |d| format!(
+            "a props-off tilt sweep 0 -> {d} -> 0 deg"
+        ))
+    );
+    let report = preflight.run(sweep_to_deg);
+    drop(preflight);
+    ros_thread.stop().context("stopping the ROS 2 node")?;
+    println!("{report}");
+    Ok(report.passed())
 }
 
 fn run(arg: &DaemonConfigArg, log_path: Option<PathBuf>, duration: Option<f64>) -> Result<()> {
@@ -284,6 +361,13 @@ fn run(arg: &DaemonConfigArg, log_path: Option<PathBuf>, duration: Option<f64>) 
     );
 
     let started = Instant::now();
+    let flight_problem = l.config.flight_problem();
+    if let Some(problem) = flight_problem {
+        tracing::warn!(problem, "this configuration cannot arm");
+    }
+    let diagnostics_period = Duration::from_millis(l.config.ros2.diagnostics_period_ms);
+    let mut next_diagnostics = Instant::now();
+    let mut reported_arming = u8::MAX;
     let mut reported_mode = Mode::Disarmed.code();
     let mut reported_deaths = 0;
     let mut panicked = false;
@@ -311,6 +395,20 @@ fn run(arg: &DaemonConfigArg, log_path: Option<PathBuf>, duration: Option<f64>) 
                 error = log.failure().unwrap_or_default(),
                 "the log cannot be written: flying on, its records dropped and counted"
             );
+        }
+        let arming = shared.arming_failures.load(Ordering::Relaxed);
+        if shared.started.load(Ordering::Relaxed) && arming != reported_arming {
+            reported_arming = arming;
+            let status = atmo_daemon::arming::diagnostics(arming, flight_problem);
+            tracing::info!(verdict = %status.message, "arming checks");
+        }
+        if Instant::now() >= next_diagnostics {
+            next_diagnostics = Instant::now() + diagnostics_period;
+            let status = atmo_daemon::arming::diagnostics(arming, flight_problem);
+            ros_out.try_publish_diagnostics(DiagnosticArray {
+                status: vec![status],
+                ..DiagnosticArray::default()
+            });
         }
         let deaths = shared.driver_deaths.load(Ordering::Relaxed);
         if deaths != reported_deaths {

@@ -12,8 +12,8 @@
 //!                        Touchdown <------------------- grounded ------------------------- Transition
 //!                                                              (h < z* once tilted near the flight limit)
 //!
-//! Failsafe: from Takeoff/Flight/Morphing/Transition on a stale estimate or an
-//! MPC failure past its grace; back to Flight once healthy and tilted back;
+//! Failsafe: from Takeoff/Flight/Morphing/Transition on a stale estimate, an
+//! MPC failure past its grace, a lost driver or a lost radio; back to Flight once healthy and tilted back;
 //! to Touchdown when grounded. Any mode -> Disarmed when the arm switch drops.
 //! ```
 //!
@@ -105,6 +105,8 @@ impl Mode {
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct Conditions {
     pub armed: bool,
+    /// Every arming check passes (only arming looks at it).
+    pub arming_ok: bool,
     /// Wheel contact reported by the ground-contact signal.
     pub grounded: bool,
     /// Height of the base origin above the ground, m.
@@ -119,6 +121,8 @@ pub struct Conditions {
     /// A required driver (thrusters, tilt, wheels, contact sensor) stopped
     /// talking: what is commanded may not happen.
     pub driver_lost: bool,
+    /// The pilot's radio is lost (only with the radio as the pilot source).
+    pub pilot_lost: bool,
     /// Measured tilt, rad.
     pub tilt: f64,
     /// Seconds since the current mode was entered.
@@ -191,20 +195,26 @@ pub const TRANSITIONS: &[Transition] = &[
         // the first one arrives, a missing estimate's zero height would put
         // a flying robot in Drive, its thrusters off (seen in SITL on a
         // loaded machine). Without contact or an estimate it stays disarmed.
-        guard: |c, t| c.armed && (c.grounded || (c.estimate_fresh && c.height <= t.takeoff_height)),
+        guard: |c, t| {
+            c.armed
+                && c.arming_ok
+                && (c.grounded || (c.estimate_fresh && c.height <= t.takeoff_height))
+        },
         reason: "armed on the ground",
     },
     Transition {
         from: &[Mode::Disarmed],
         to: Mode::Flight,
-        guard: |c, t| c.armed && !c.grounded && c.height > t.takeoff_height && c.estimate_fresh,
+        guard: |c, t| {
+            c.armed && c.arming_ok && !c.grounded && c.height > t.takeoff_height && c.estimate_fresh
+        },
         reason: "armed in the air",
     },
     Transition {
         from: FLYING,
         to: Mode::Failsafe,
-        guard: |c, _| !c.estimate_fresh || c.mpc_failed || c.driver_lost,
-        reason: "stale estimate, MPC failed past its grace, or a driver lost",
+        guard: |c, _| !c.estimate_fresh || c.mpc_failed || c.driver_lost || c.pilot_lost,
+        reason: "stale estimate, MPC failed past its grace, a driver or the radio lost",
     },
     Transition {
         from: &[Mode::Failsafe],
@@ -219,6 +229,7 @@ pub const TRANSITIONS: &[Transition] = &[
             c.estimate_fresh
                 && !c.mpc_failed
                 && !c.driver_lost
+                && !c.pilot_lost
                 && c.time_in_mode >= t.failsafe_recovery_time
                 && c.tilt <= t.failsafe_recovery_tilt
         },
@@ -233,8 +244,8 @@ pub const TRANSITIONS: &[Transition] = &[
     Transition {
         from: &[Mode::Drive],
         to: Mode::Takeoff,
-        guard: |c, t| c.throttle >= t.takeoff_throttle && !c.driver_lost,
-        reason: "throttle up on the ground, every driver alive",
+        guard: |c, t| c.throttle >= t.takeoff_throttle && !c.driver_lost && !c.pilot_lost,
+        reason: "throttle up on the ground, every driver and the radio alive",
     },
     Transition {
         from: &[Mode::Takeoff],

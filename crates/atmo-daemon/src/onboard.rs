@@ -45,11 +45,13 @@ use atmo_io::msg::{ActuatorMotors, IoHealth, OffboardControlMode};
 use atmo_io::ros2::{Ros2Config, Ros2Inputs, Ros2Publisher};
 use serde::Deserialize;
 
+use crate::arming::{ArmingMonitor, ArmingObservation, ArmingSettings};
 use crate::control_loop::{TickIo, TickTiming};
 use crate::error::{DaemonError, Result};
 use crate::flight_log::TickChannels;
 use crate::flight_stack::{Estimate, StepInputs, StepOutputs};
 use crate::inputs::{DriveCommand, InputLatch, InputSettings};
+use crate::rc::{RcConfig, RcPilot};
 use crate::telemetry::pilot_from_message;
 
 /// `config/daemon.toml`: what the onboard binary loads. Paths are relative
@@ -87,6 +89,12 @@ pub struct DaemonConfig {
     pub ros2: Ros2Config,
     #[serde(default)]
     pub drivers: DriverPortsConfig,
+    /// The radio's mapping (used when `ros2.topics.rc` is enabled).
+    #[serde(default)]
+    pub rc: RcConfig,
+    /// The arming checks' rates, windows and tolerances.
+    #[serde(default)]
+    pub arming: ArmingSettings,
 }
 
 fn default_input_timeout_ms() -> u64 {
@@ -189,7 +197,40 @@ impl ConfigFile for DaemonConfig {
         self.drivers
             .validate(file)
             .map_err(|e| DaemonError::Setup(format!("[drivers]: {e}")))?;
+        self.rc.validate(file)?;
+        self.arming.validate(file)?;
+        let topics = &self.ros2.topics;
+        if topics.rc.enabled && topics.pilot.enabled {
+            return Err(c
+                .fail(
+                    "ros2.topics.pilot.enabled",
+                    "false while ros2.topics.rc is enabled (one pilot source)",
+                    true,
+                )
+                .into());
+        }
         Ok(())
+    }
+}
+
+impl DaemonConfig {
+    /// Why this configuration cannot fly, if it cannot (the arming checks'
+    /// configuration check: a valid file the daemon runs with, which
+    /// nevertheless could not arm safely).
+    pub fn flight_problem(&self) -> Option<&'static str> {
+        let t = &self.ros2.topics;
+        let required = |name: &str| self.drivers.required.iter().any(|r| r == name);
+        if !t.pilot.enabled && !t.rc.enabled {
+            Some("no pilot source: ros2.topics.pilot and ros2.topics.rc are both disabled")
+        } else if !t.estimate.enabled {
+            Some("no estimate: ros2.topics.estimate is disabled")
+        } else if !required("tilt") {
+            Some("drivers.required lacks \"tilt\": the encoder check needs its liveness")
+        } else if !self.px4_offboard && !required("thrusters") {
+            Some("no thruster path: px4_offboard is off and drivers.required lacks \"thrusters\"")
+        } else {
+            None
+        }
     }
 }
 
@@ -205,6 +246,11 @@ pub struct OnboardShared {
     pub driver_deaths: AtomicU64,
     /// Ticks run with the pilot stream silent.
     pub pilot_stale_ticks: AtomicU64,
+    /// Ticks run with the radio lost (radio as the pilot source only).
+    pub pilot_lost_ticks: AtomicU64,
+    /// Radio frames the mapping refused (a mapped channel missing or no
+    /// servo pulse).
+    pub rc_rejected: AtomicU64,
     /// Ticks with no estimate fresh enough to fly on (age > timeout).
     pub estimates_stale_ticks: AtomicU64,
     /// Ticks on the configured ground height because the ground topic had
@@ -214,6 +260,8 @@ pub struct OnboardShared {
     pub port_send_errors: AtomicU64,
     /// Status records the logger dropped (queue full).
     pub log_dropped: AtomicU64,
+    /// Arming checks failing now (bits of [`crate::arming::ArmingCheck`]).
+    pub arming_failures: AtomicU8,
     /// Set once the first tick has run.
     pub started: AtomicBool,
 }
@@ -228,6 +276,12 @@ pub struct OnboardSettings {
     pub px4_offboard: bool,
     /// The flight stack's estimate timeout, s (for the stale counter).
     pub estimate_timeout: f64,
+    /// The radio's mapping, when it is the pilot source.
+    pub rc: Option<RcConfig>,
+    pub arming: ArmingSettings,
+    /// The configuration check's verdict ([`DaemonConfig::flight_problem`]
+    /// is `None`).
+    pub configuration_ok: bool,
 }
 
 impl OnboardSettings {
@@ -239,6 +293,7 @@ impl OnboardSettings {
             pilot_timeout: self.pilot_timeout,
             drive_timeout: self.drive_timeout,
             estimate_timeout: self.estimate_timeout,
+            rc_timeout: self.rc.map(|rc| Duration::from_millis(rc.timeout_ms)),
         }
     }
 
@@ -250,6 +305,9 @@ impl OnboardSettings {
             drive_timeout: Duration::from_millis(config.drive_timeout_ms),
             px4_offboard: config.px4_offboard,
             estimate_timeout,
+            rc: config.ros2.topics.rc.enabled.then_some(config.rc),
+            arming: config.arming,
+            configuration_ok: config.flight_problem().is_none(),
         }
     }
 }
@@ -266,6 +324,12 @@ pub struct OnboardIo {
     shared: Arc<OnboardShared>,
     started: Instant,
     latch: InputLatch,
+    /// The radio's mapping, when it is the pilot source.
+    rc: Option<RcPilot>,
+    arming: ArmingMonitor,
+    /// The last tick's measured tilt (if an encoder reading had arrived)
+    /// and commanded tilt velocity, for the arming checks.
+    last_tilt: (Option<f64>, f64),
     health: Option<DriverHealth>,
     tick: u64,
     /// ROS time (the wall clock, or `/clock` with `use_sim_time`) when this
@@ -303,6 +367,9 @@ impl OnboardIo {
             shared,
             started: Instant::now(),
             latch: InputLatch::new(settings.inputs()),
+            rc: settings.rc.map(RcPilot::new),
+            arming: ArmingMonitor::new(settings.arming, settings.configuration_ok),
+            last_tilt: (None, 0.0),
             health: None,
             tick: 0,
             tick_ros_ns: 0,
@@ -347,6 +414,19 @@ impl TickIo for OnboardIo {
             let received = stamp_on_tick_clock(deadline_ns, p.received);
             self.latch.pilot(pilot_from_message(&p.input), received);
         }
+        if let Some(frame) = self.ros_in.latest_rc()
+            && let Some(rc) = &mut self.rc
+        {
+            match rc.map(&frame.input) {
+                Ok(reading) => {
+                    let received = stamp_on_tick_clock(deadline_ns, frame.received);
+                    self.latch.radio(reading, received);
+                }
+                Err(_) => {
+                    self.shared.rc_rejected.fetch_add(1, Ordering::Relaxed);
+                }
+            }
+        }
         while let Some(d) = self.ros_in.latest_drive() {
             self.latch.drive(DriveCommand {
                 forward: d.forward,
@@ -364,11 +444,27 @@ impl TickIo for OnboardIo {
         self.latch
             .drivers_alive(drivers.health.all_required_alive());
         self.health = Some(drivers.health);
-        let assembled = self.latch.assemble(deadline_ns);
+        let mut assembled = self.latch.assemble(deadline_ns);
+        let (tilt, tilt_velocity) = self.last_tilt;
+        let arming_failures = self.arming.observe(&ArmingObservation {
+            now_ns: deadline_ns,
+            estimates_total: self.ros_in.counters().estimates_accepted,
+            pilot_lost: assembled.inputs.pilot_lost,
+            driver_lost: assembled.inputs.driver_lost,
+            tilt,
+            tilt_velocity,
+        });
+        assembled.inputs.arming_failures = arming_failures;
+        self.shared
+            .arming_failures
+            .store(arming_failures, Ordering::Relaxed);
         if assembled.pilot_stale {
             self.shared
                 .pilot_stale_ticks
                 .fetch_add(1, Ordering::Relaxed);
+        }
+        if assembled.inputs.pilot_lost {
+            self.shared.pilot_lost_ticks.fetch_add(1, Ordering::Relaxed);
         }
         if assembled.estimate_stale {
             self.shared
@@ -408,6 +504,10 @@ impl TickIo for OnboardIo {
         self.channels
             .log_tick(&self.log, self.tick, inputs, outputs, &status);
         self.latch.mode(outputs.status.mode);
+        self.last_tilt = (
+            inputs.tilt_counts.map(|_| outputs.status.tilt),
+            outputs.tilt_velocity,
+        );
         self.tick += 1;
         let alive = status
             .io

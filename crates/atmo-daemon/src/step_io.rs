@@ -52,6 +52,13 @@ pub struct StepInputs {
     /// A required driver stopped talking (the I/O layer's liveness check;
     /// always false in simulation): fly the failsafe, do not take off.
     pub driver_lost: bool,
+    /// The pilot's radio is lost (PX4's `rc_lost`, or silent longer than
+    /// the RC timeout; only with the radio as the pilot source): fly the
+    /// failsafe, do not take off.
+    pub pilot_lost: bool,
+    /// Arming checks that fail (bits of [`crate::arming::ArmingCheck`];
+    /// 0: all pass): the stack does not arm while any is set.
+    pub arming_failures: u8,
 }
 
 /// Solver outcome, flattened for logs.

@@ -34,6 +34,8 @@ pub fn inputs_message(tick: u64, inputs: &StepInputs, cuts: &SolverCuts) -> Tick
         solver_cut_overflow: cuts.overflow,
         has_ground_normal: inputs.ground_normal.is_some(),
         ground_normal: inputs.ground_normal.unwrap_or([0.0; 3]),
+        pilot_lost: inputs.pilot_lost,
+        arming_failures: inputs.arming_failures,
     }
 }
 
@@ -62,6 +64,8 @@ pub fn inputs_from_message(m: &TickInputs) -> StepInputs {
         ground_z: m.ground_z,
         ground_normal: m.has_ground_normal.then_some(m.ground_normal),
         driver_lost: m.driver_lost,
+        pilot_lost: m.pilot_lost,
+        arming_failures: m.arming_failures,
     }
 }
 

@@ -46,6 +46,29 @@ fn check_accepts_the_shipped_configuration() {
 }
 
 #[test]
+fn check_prints_the_radio_and_the_arming_configuration_verdict() {
+    let out = Command::new(env!("CARGO_BIN_EXE_atmo-daemon"))
+        .args(["check", "--config"])
+        .arg(config_dir().join("daemon-robot.toml"))
+        .output()
+        .unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(
+        stdout.contains("radio  /fmu/out/input_rc") && stdout.contains("kill ch 5"),
+        "{stdout}"
+    );
+    assert!(
+        stdout.contains("arming configuration check: can fly"),
+        "{stdout}"
+    );
+}
+
+#[test]
 fn check_refuses_a_robot_with_thrust_to_weight_below_one() {
     // base.mass 20 kg: thrust-to-weight 0.50, the case of issue 21.
     let dir = configs_with("heavy", "mass = 2.33", "mass = 20.0");

@@ -40,6 +40,8 @@ fn ticks_on_its_own_thread_and_drops_instead_of_blocking() {
             ground_z: 0.0,
             ground_normal: None,
             driver_lost: false,
+            pilot_lost: false,
+            arming_failures: 0,
         })
         .unwrap();
     // Let it run without reading: the channel fills and reports are dropped.

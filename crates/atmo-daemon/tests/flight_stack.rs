@@ -28,6 +28,10 @@ struct Loop {
     last_estimate: Option<Estimate>,
     /// A wrench the controller's model does not have (CoM offset, mass error).
     disturbance: nalgebra::Vector6<f64>,
+    /// The pilot's radio is lost (the input latch's verdict).
+    pilot_lost: bool,
+    /// Arming checks failing (the onboard monitor's verdict).
+    arming_failures: u8,
 }
 
 impl Loop {
@@ -60,6 +64,8 @@ impl Loop {
             estimate_alive: true,
             last_estimate: None,
             disturbance: nalgebra::Vector6::zeros(),
+            pilot_lost: false,
+            arming_failures: 0,
         }
     }
 
@@ -79,6 +85,8 @@ impl Loop {
             ground_z: 0.0,
             ground_normal: None,
             driver_lost: false,
+            pilot_lost: self.pilot_lost,
+            arming_failures: self.arming_failures,
         }
     }
 
@@ -275,6 +283,56 @@ fn mpc_switch_off_in_flight_is_a_failsafe() {
     lp.pilot.mpc_enabled = false;
     let out = lp.tick();
     assert_eq!(out.status.mode, Mode::Failsafe);
+}
+
+#[test]
+fn a_lost_radio_in_flight_is_a_failsafe_that_holds_and_ends_when_it_is_back() {
+    let mut lp = Loop::new(1.5);
+    lp.run(0.5);
+    lp.pilot_lost = true;
+    let out = lp.tick();
+    assert_eq!(out.status.mode, Mode::Failsafe, "at once");
+    lp.run(2.0);
+    assert!((lp.height() - 1.5).abs() < 0.05, "held at {}", lp.height());
+    lp.pilot_lost = false;
+    let outs = lp.run(1.0);
+    assert_eq!(outs.last().unwrap().status.mode, Mode::Flight, "recovered");
+}
+
+#[test]
+fn a_refused_arming_stays_disarmed_and_says_why_until_the_checks_pass() {
+    use atmo_daemon::arming::ArmingCheck;
+    let mut lp = Loop::new(1.5);
+    lp.arming_failures = ArmingCheck::Radio.bit() | ArmingCheck::TiltEncoder.bit();
+    let outs = lp.run(0.1);
+    for o in &outs {
+        assert_eq!(o.status.mode, Mode::Disarmed);
+        assert_eq!(o.thrust, [0.0; 4]);
+        assert_eq!(o.status.transition, Some("arming refused: radio lost"));
+    }
+    lp.arming_failures = ArmingCheck::TiltEncoder.bit();
+    assert_eq!(
+        lp.tick().status.transition,
+        Some("arming refused: tilt encoder disagrees or is silent")
+    );
+    lp.pilot.offboard = false;
+    assert_eq!(lp.tick().status.transition, None, "not asked to arm");
+    lp.pilot.offboard = true;
+    lp.arming_failures = 0;
+    let armed = lp.tick();
+    assert_eq!(armed.status.mode, Mode::Flight);
+    assert_eq!(armed.status.transition, Some("armed in the air"));
+}
+
+#[test]
+fn the_kill_switch_disarms_in_one_tick_with_the_thrust_cut() {
+    let mut lp = Loop::new(1.5);
+    lp.run(0.5);
+    lp.pilot.arm = false; // what the radio's kill switch makes of the pilot input
+    let out = lp.tick();
+    assert_eq!(out.status.mode, Mode::Disarmed);
+    assert_eq!(out.thrust, [0.0; 4]);
+    assert_eq!(out.tilt_velocity, 0.0);
 }
 
 #[test]

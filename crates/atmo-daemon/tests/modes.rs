@@ -21,6 +21,7 @@ fn thresholds() -> Thresholds {
 fn flying() -> Conditions {
     Conditions {
         armed: true,
+        arming_ok: true,
         grounded: false,
         height: 2.0,
         throttle: 0.0,
@@ -28,6 +29,7 @@ fn flying() -> Conditions {
         estimate_fresh: true,
         mpc_failed: false,
         driver_lost: false,
+        pilot_lost: false,
         tilt: 0.0,
         time_in_mode: 10.0,
     }
@@ -153,6 +155,17 @@ fn flying_modes_to_failsafe_on_stale_estimate_or_mpc_failure() {
             Mode::Failsafe,
             "{mode:?}"
         );
+        assert_eq!(
+            step(
+                mode,
+                Conditions {
+                    pilot_lost: true,
+                    ..flying()
+                }
+            ),
+            Mode::Failsafe,
+            "{mode:?}: radio lost"
+        );
     }
     // Driving needs neither.
     assert_eq!(
@@ -235,6 +248,17 @@ fn failsafe_to_flight_only_when_healthy_tilted_back_and_after_the_recovery_time(
         ),
         Mode::Failsafe
     );
+    assert_eq!(
+        step(
+            Mode::Failsafe,
+            Conditions {
+                pilot_lost: true,
+                ..flying()
+            }
+        ),
+        Mode::Failsafe,
+        "radio still lost"
+    );
 }
 
 #[test]
@@ -266,6 +290,18 @@ fn drive_to_takeoff_at_half_throttle() {
             Conditions {
                 throttle: 0.9,
                 driver_lost: true,
+                ..on_ground()
+            }
+        ),
+        Mode::Drive
+    );
+    // Nor with the radio lost.
+    assert_eq!(
+        step(
+            Mode::Drive,
+            Conditions {
+                throttle: 0.9,
+                pilot_lost: true,
                 ..on_ground()
             }
         ),
@@ -513,4 +549,22 @@ fn every_row_of_the_table_is_exercised_above() {
             row.reason
         );
     }
+}
+
+#[test]
+fn a_failed_arming_check_keeps_it_disarmed_on_the_ground_and_in_the_air() {
+    for c in [on_ground(), flying()] {
+        let refused = Conditions {
+            arming_ok: false,
+            ..c
+        };
+        assert_eq!(step(Mode::Disarmed, refused), Mode::Disarmed);
+        assert_ne!(step(Mode::Disarmed, c), Mode::Disarmed);
+    }
+    // Once armed the checks do not disarm: the failsafes act instead.
+    let flying_refused = Conditions {
+        arming_ok: false,
+        ..flying()
+    };
+    assert_eq!(step(Mode::Flight, flying_refused), Mode::Flight);
 }

@@ -106,6 +106,8 @@ fn flight_stack_allocations(ground_effect: GroundEffectSource, ground_normal: Op
             ground_z: 0.0,
             ground_normal,
             driver_lost: false,
+            pilot_lost: false,
+            arming_failures: 0,
         };
         // The first ticks warm the MPC up (start-up); count from tick 20 on.
         let before = thread_allocations();
@@ -333,6 +335,8 @@ fn logging_a_tick_does_not_allocate() {
         ground_z: 0.0,
         ground_normal: None,
         driver_lost: false,
+        pilot_lost: false,
+        arming_failures: 0,
     };
     let outputs = stack.step(&inputs);
     let timing = TickTiming::default();

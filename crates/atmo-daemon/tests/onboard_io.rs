@@ -85,6 +85,9 @@ fn onboard_tick_io_allocates_nothing_of_its_own() {
         drive_timeout: Duration::from_millis(500),
         px4_offboard: true, // exercise every output
         estimate_timeout: 0.05,
+        rc: None,
+        arming: atmo_daemon::arming::ArmingSettings::default(),
+        configuration_ok: true,
     };
     let mut io = OnboardIo::open(
         &drivers,
@@ -117,6 +120,8 @@ fn onboard_tick_io_allocates_nothing_of_its_own() {
         ground_z: 0.0,
         ground_normal: None,
         driver_lost: false,
+        pilot_lost: false,
+        arming_failures: 0,
     });
 
     let pilot = PilotMsg {

@@ -470,3 +470,59 @@ fn config_is_checked() {
         "{err}"
     );
 }
+
+/// A zero (or sub-microsecond) wait returns at once, with or without a
+/// pending signal; a real timeout still waits for it.
+#[test]
+fn a_zero_wait_for_commands_does_not_block() {
+    let _serial = serial();
+    let config = config("zw");
+    let mut ports = FlightPorts::open(&config).unwrap();
+    // The driver waits on its own thread (iceoryx2 ports stay on the thread
+    // that opened them), so that a regression fails instead of hanging.
+    let (report_tx, report) = std::sync::mpsc::channel();
+    let (sent_tx, sent) = std::sync::mpsc::channel::<()>();
+    let driver_config = config.clone();
+    let waiter = std::thread::spawn(move || {
+        let mut driver = DriverEndpoint::open(&driver_config, "zero_wait").unwrap();
+        report_tx.send(None).unwrap(); // opened
+        for timeout in [Duration::ZERO, Duration::from_nanos(500)] {
+            let start = std::time::Instant::now();
+            let commands = driver.wait_for_commands(timeout).unwrap();
+            report_tx
+                .send(Some((start.elapsed(), commands.thrust.map(|c| c.thrust))))
+                .unwrap();
+        }
+        sent.recv().unwrap();
+        let commands = driver.wait_for_commands(Duration::ZERO).unwrap();
+        report_tx
+            .send(Some((Duration::ZERO, commands.thrust.map(|c| c.thrust))))
+            .unwrap();
+        let start = std::time::Instant::now();
+        let _ = driver.wait_for_commands(Duration::from_millis(30)).unwrap();
+        report_tx.send(Some((start.elapsed(), None))).unwrap();
+    });
+    let next = || {
+        report
+            .recv_timeout(Duration::from_secs(5))
+            .expect("wait_for_commands blocked")
+    };
+    assert_eq!(next(), None, "driver opened");
+    for _ in 0..2 {
+        let (elapsed, thrust) = next().unwrap();
+        assert!(elapsed < Duration::from_millis(50), "{elapsed:?}");
+        assert_eq!(thrust, None, "nothing was sent");
+    }
+    // With a command and its signal pending, a zero wait takes both.
+    assert!(ports.send_thrust([0.25; 4]) && ports.notify_drivers());
+    sent_tx.send(()).unwrap();
+    assert_eq!(next().unwrap().1, Some([0.25; 4]));
+    let (waited, _) = next().unwrap();
+    assert!(
+        waited >= Duration::from_millis(25),
+        "the signal was consumed: a real timeout waits ({waited:?})"
+    );
+    waiter.join().unwrap();
+    drop(ports);
+    remove_prefix_segment(&config.iceoryx_prefix);
+}

@@ -185,6 +185,36 @@ fn thrust_curve_bends_the_static_thrust() {
     );
 }
 
+/// `place_tilt` moves the linkage (and the encoder) without a step: time
+/// and the state stay, the range is enforced, a non-finite tilt is ignored.
+#[test]
+fn placing_the_tilt_moves_only_the_linkage() {
+    let cfg = robot();
+    let mut plant = Plant::new(
+        &cfg,
+        &PlantConfig::ideal(),
+        &far_above(),
+        &InitialState::at(level_at(0.0), 0.0),
+        1,
+    )
+    .unwrap();
+    let (time, state) = (plant.time(), plant.state());
+    plant.place_tilt(0.5);
+    assert_eq!(
+        (plant.tilt(), plant.time(), plant.state()),
+        (0.5, time, state)
+    );
+    let linkage = atmo_core::Linkage::from_config(&cfg.linkage, cfg.limits.tilt_max()).unwrap();
+    let counts = plant.encoder_counts().unwrap();
+    assert!((linkage.tilt_from_counts(counts).unwrap() - 0.5).abs() < 1e-9);
+    plant.place_tilt(f64::NAN);
+    assert_eq!(plant.tilt(), 0.5);
+    plant.place_tilt(9.0);
+    assert_eq!(plant.tilt(), cfg.limits.tilt_max());
+    plant.place_tilt(-1.0);
+    assert_eq!(plant.tilt(), 0.0);
+}
+
 #[test]
 fn tilt_mechanism_limits_the_rate_holds_and_reports_whole_counts() {
     let effects = EffectsConfig {

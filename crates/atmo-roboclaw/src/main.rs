@@ -44,6 +44,13 @@ enum Command {
         /// Serial port instead of the file's `serial.port`.
         #[arg(long)]
         port: Option<String>,
+        /// Driver-port service prefix instead of the file's `ports.prefix`.
+        #[arg(long)]
+        ports_prefix: Option<String>,
+        /// iceoryx2 file prefix instead of the file's `ports.iceoryx_prefix`
+        /// (isolates a simulation's ports).
+        #[arg(long)]
+        iceoryx_prefix: Option<String>,
     },
     /// A simulated board on a pseudo-terminal in real time; prints the
     /// pty's path on the first line, then a status line every second.
@@ -66,7 +73,12 @@ enum Command {
 
 fn main() -> Result<()> {
     match Cli::parse().command {
-        Command::Run { config, port } => run(&config, port),
+        Command::Run {
+            config,
+            port,
+            ports_prefix,
+            iceoryx_prefix,
+        } => run(&config, port, ports_prefix, iceoryx_prefix),
         Command::Sim {
             mode,
             start_counts,
@@ -164,11 +176,26 @@ fn check(path: &PathBuf) -> Result<()> {
     Ok(())
 }
 
-fn run(path: &PathBuf, port: Option<String>) -> Result<()> {
+fn run(
+    path: &PathBuf,
+    port: Option<String>,
+    ports_prefix: Option<String>,
+    iceoryx_prefix: Option<String>,
+) -> Result<()> {
     let (mut config, settings) = load(path)?;
     if let Some(port) = port {
         config.serial.port = port;
     }
+    if let Some(prefix) = ports_prefix {
+        config.ports.prefix = prefix;
+    }
+    if let Some(prefix) = iceoryx_prefix {
+        config.ports.iceoryx_prefix = prefix;
+    }
+    config
+        .ports
+        .validate(path)
+        .context("--ports-prefix / --iceoryx-prefix")?;
     let stop = stop_flag()?;
     let transport = SerialTransport::open(&config.serial.port, config.serial.baud)?;
     let mut board = Board::new(transport, config.link());
@@ -191,20 +218,15 @@ fn run(path: &PathBuf, port: Option<String>) -> Result<()> {
         // Wakes on the daemon's tick (commands_sent) or at the next
         // deadline of the own rate: the watchdog and the heartbeat go on
         // without a daemon.
+        // At or past the deadline the wait is zero: it takes what is there.
         let wait = Duration::from_nanos(next_ns.saturating_sub(monotonic_ns()));
-        // A zero timeout would block for good (iceoryx2's socket wait takes
-        // 0 as "no timeout"): at or past the deadline, only take what is there.
-        let commands = if wait < Duration::from_micros(100) {
+        let commands = endpoint.wait_for_commands(wait).unwrap_or_else(|_| {
+            // SIGINT/SIGTERM interrupt the wait: not a port error.
+            if !stop.load(Ordering::SeqCst) {
+                port_errors += 1;
+            }
             endpoint.receive()
-        } else {
-            endpoint.wait_for_commands(wait).unwrap_or_else(|_| {
-                // SIGINT/SIGTERM interrupt the wait: not a port error.
-                if !stop.load(Ordering::SeqCst) {
-                    port_errors += 1;
-                }
-                endpoint.receive()
-            })
-        };
+        });
         let now = monotonic_ns();
         match config.mode {
             Mode::Tilt => {

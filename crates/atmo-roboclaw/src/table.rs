@@ -329,6 +329,19 @@ impl TiltCalibration {
             .unwrap_or(0.0)
     }
 
+    /// The board's counts at `tilt` (rad): the inverse of [`Self::read`]
+    /// inside the calibrated range (a table holds its end values outside
+    /// it). A simulation that owns the mechanism sets the board's counter
+    /// with it.
+    pub fn board_counts(&self, tilt: f64) -> f64 {
+        match &self.calibration {
+            Calibration::Table(table) => table.counts_from_tilt(tilt),
+            Calibration::Linkage { sign, home_counts } => {
+                (self.model_counts(tilt) - home_counts) * sign
+            }
+        }
+    }
+
     /// Board counts per rad of tilt at `tilt` (signed).
     pub fn counts_per_rad(&self, tilt: f64) -> f64 {
         match &self.calibration {

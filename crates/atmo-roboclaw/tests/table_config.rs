@@ -168,6 +168,26 @@ fn the_linkage_calibration_follows_the_model() {
     let far = cal.read(home.model_counts + 1.0);
     assert!(far.outside && far.tilt.abs() < 1e-9);
     assert!(cal.counts_per_rad(0.5) < 0.0);
+    board_counts_invert_the_reading(&cal);
+}
+
+/// `board_counts` is the inverse of `read` over the calibrated range.
+fn board_counts_invert_the_reading(cal: &atmo_roboclaw::table::TiltCalibration) {
+    let (lo, hi) = cal.tilt_range();
+    for i in 0..=40 {
+        let tilt = lo + (hi - lo) * f64::from(i) / 40.0;
+        let back = cal.read(cal.board_counts(tilt)).tilt;
+        assert!((back - tilt).abs() < 1e-9, "{tilt} -> {back}");
+    }
+}
+
+#[test]
+fn board_counts_invert_the_table_calibration() {
+    let config = RoboclawConfig::load(common::repo_config("drivers/tilt.toml")).unwrap();
+    let cal = config.tilt_calibration().unwrap().unwrap();
+    board_counts_invert_the_reading(&cal);
+    // Below the table's last point (0.8 deg) the counts hold its end.
+    assert_eq!(cal.board_counts(0.0), 26325.0);
 }
 
 #[test]

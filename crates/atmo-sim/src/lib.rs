@@ -11,12 +11,15 @@
 //! - [`faults`]: a scenario's `[faults]`, injected on the closed loop's
 //!   input path (docs/faults.md).
 //! - [`sitl`]: `atmo-sim serve`, the plant behind the daemon's real
-//!   transports (ROS 2 motion capture, iceoryx2 drivers) in real time.
+//!   transports (ROS 2 motion capture, iceoryx2 drivers) in real time;
+//!   [`boards`]: its tilt and wheels through `atmo-roboclaw` processes and
+//!   simulated Roboclaw boards on pseudo-terminals.
 //!
 //! The discrepancy finder is atmo-explain; the `atmo-sim explain`
 //! subcommand is its CLI.
 
 pub mod actuator_faults;
+pub mod boards;
 pub mod campaign;
 pub mod closed_loop;
 pub mod error;

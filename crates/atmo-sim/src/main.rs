@@ -133,6 +133,19 @@ enum Command {
         /// pilot topic (the same relay then plays them too).
         #[arg(long)]
         pilot_topic: Option<String>,
+        /// Fly the tilt through a real `atmo-roboclaw` process and a
+        /// simulated Roboclaw board on a pseudo-terminal (this driver file,
+        /// e.g. config/drivers/tilt.toml; its serial port is replaced by the
+        /// pty) instead of playing the tilt driver. Needs --roboclaw-wheels.
+        #[arg(long, requires = "roboclaw_wheels", value_name = "FILE")]
+        roboclaw_tilt: Option<PathBuf>,
+        /// The wheel board's driver file, likewise (config/drivers/wheels.toml).
+        #[arg(long, requires = "roboclaw_tilt", value_name = "FILE")]
+        roboclaw_wheels: Option<PathBuf>,
+        /// The `atmo-roboclaw` binary (default: beside this one). The
+        /// drivers' stderr goes to OUT/roboclaw-{tilt,wheels}.log.
+        #[arg(long, value_name = "FILE")]
+        roboclaw_bin: Option<PathBuf>,
         /// No progress bar.
         #[arg(long)]
         quiet: bool,
@@ -186,6 +199,9 @@ fn main() -> Result<()> {
             start_timeout,
             estimate_topic,
             pilot_topic,
+            roboclaw_tilt,
+            roboclaw_wheels,
+            roboclaw_bin,
             quiet,
         } => serve(
             &scenario.scenario,
@@ -193,6 +209,13 @@ fn main() -> Result<()> {
             &out,
             start_timeout,
             [estimate_topic, pilot_topic],
+            roboclaw_tilt.zip(roboclaw_wheels).map(|(tilt, wheels)| {
+                (
+                    tilt,
+                    wheels,
+                    roboclaw_bin.unwrap_or_else(|| beside_this_binary("atmo-roboclaw")),
+                )
+            }),
             quiet,
         ),
         Command::Explain(args) => explain(&args),
@@ -220,12 +243,22 @@ fn explain(args: &atmo_explain::cli::Args) -> Result<()> {
     Ok(())
 }
 
+/// `name` in the folder of the running binary (as cargo builds them).
+fn beside_this_binary(name: &str) -> PathBuf {
+    let file = format!("{name}{}", std::env::consts::EXE_SUFFIX);
+    std::env::current_exe()
+        .ok()
+        .and_then(|exe| exe.parent().map(|dir| dir.join(&file)))
+        .unwrap_or_else(|| PathBuf::from(file))
+}
+
 fn serve(
     scenario_path: &std::path::Path,
     config: &DaemonConfigArg,
     out: &std::path::Path,
     start_timeout: f64,
     [estimate_topic, pilot_topic]: [Option<String>; 2],
+    roboclaw: Option<(PathBuf, PathBuf, PathBuf)>,
     quiet: bool,
 ) -> Result<()> {
     use atmo_sim::sitl::{ServeOptions, serve};
@@ -236,7 +269,10 @@ fn serve(
         topics.estimate.name = topic;
     }
     if let Some(topic) = pilot_topic {
+        // Played to the daemon by another node (an RC relay, too, when the
+        // daemon's own pilot topic is off): published whatever the file says.
         topics.pilot.name = topic;
+        topics.pilot.enabled = true;
     }
     daemon
         .ros2
@@ -245,6 +281,14 @@ fn serve(
     let mut options = ServeOptions::new(daemon.ros2, daemon.drivers);
     options.start_timeout = std::time::Duration::from_secs_f64(start_timeout.max(0.0));
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    options.boards = roboclaw.map(
+        |(tilt, wheels, driver_binary)| atmo_sim::boards::BoardFiles {
+            tilt,
+            wheels,
+            driver_binary,
+            log_dir: Some(out.to_path_buf()),
+        },
+    );
     let bar = if quiet {
         indicatif::ProgressBar::hidden()
     } else {

@@ -8,6 +8,12 @@
 //! ENU/FLU, `atmo_msgs/PilotInput` from the scenario's script). Topic and
 //! service names come from the same daemon config file as the daemon's.
 //!
+//! With [`ServeOptions::boards`] the tilt and wheel drivers are not played:
+//! real `atmo-roboclaw` processes drive simulated Roboclaw boards on
+//! pseudo-terminals, and the plant's tilt and wheels follow the boards
+//! ([`crate::boards`]); the server still plays the thrusters, the ground
+//! contact and the motion capture.
+//!
 //! Time: the plant steps in real time (wall clock, absolute 1 ms
 //! deadlines). It is frozen at its initial state, with sensors and
 //! heartbeats running, until the daemon reports an armed mode on its
@@ -26,6 +32,7 @@ use atmo_io::msg::{MpcStatus, PilotInput as PilotMsg};
 use atmo_io::ros2::{Ros2Config, Ros2StartOptions, SitlNode};
 use atmo_io::wall_clock_ns;
 
+use crate::boards::{BoardFiles, SimBoards};
 use crate::closed_loop::{LandingTracker, Summary};
 use crate::error::{Result, SimError};
 use crate::scenario::Scenario;
@@ -43,6 +50,9 @@ pub struct ServeOptions {
     pub sensor_rate_hz: f64,
     /// Rate of the heartbeats and of the pilot stream, Hz.
     pub heartbeat_rate_hz: f64,
+    /// Fly the tilt and the wheels through `atmo-roboclaw` processes and
+    /// simulated boards on pseudo-terminals instead of playing their drivers.
+    pub boards: Option<BoardFiles>,
 }
 
 impl ServeOptions {
@@ -53,6 +63,7 @@ impl ServeOptions {
             start_timeout: Duration::from_secs(60),
             sensor_rate_hz: 200.0,
             heartbeat_rate_hz: 50.0,
+            boards: None,
         }
     }
 }
@@ -121,6 +132,9 @@ struct Links {
     last_status: Option<MpcStatus>,
     /// Sequence of the last estimate published.
     last_estimate: Option<u64>,
+    /// The tilt and wheel drivers are real processes (no tilt encoder and
+    /// no heartbeat of theirs from the server).
+    boards: bool,
 }
 
 impl Links {
@@ -150,7 +164,9 @@ impl Links {
             self.counters.estimates_published += u64::from(ok);
         }
         if self.sensors.due(now) {
-            if let Ok(counts) = plant.encoder_counts() {
+            if !self.boards
+                && let Ok(counts) = plant.encoder_counts()
+            {
                 let ok = self.drivers.publish_tilt_encoder(counts.round() as i64);
                 self.count(ok);
             }
@@ -159,6 +175,9 @@ impl Links {
         }
         if self.heartbeats.due(now) {
             for driver in DriverId::ALL {
+                if self.boards && matches!(driver, DriverId::Tilt | DriverId::Wheels) {
+                    continue;
+                }
                 let ok = self.drivers.publish_heartbeat(driver);
                 self.count(ok);
             }
@@ -177,6 +196,67 @@ impl Links {
             self.last_status = newest;
         }
         newest
+    }
+}
+
+/// Frozen until the daemon is armed: the initial state, freshly stamped,
+/// sensors and heartbeats running. Only the tilt mechanism moves, as the
+/// tilt driver (or the tilt board) commands it: a props-off preflight sweep
+/// runs against the server, and the daemon commands none while disarmed.
+fn wait_for_arming(
+    plant: &mut atmo_plant::Plant,
+    links: &mut Links,
+    mut boards: Option<&mut SimBoards>,
+    scenario: &Scenario,
+    options: &ServeOptions,
+    progress: Progress<'_>,
+) -> Result<()> {
+    let mode_of = |s: &MpcStatus| Mode::from_code(s.mode.code());
+    let waiting = Instant::now();
+    let initial_pilot = pilot_msg(scenario, 0.0);
+    let mut republish = Every::new(100.0);
+    let (mut tilt_rate, mut last) = (0.0, Instant::now());
+    loop {
+        let status = links.take_status();
+        if status
+            .as_ref()
+            .and_then(mode_of)
+            .is_some_and(|m| m != Mode::Disarmed)
+        {
+            return Ok(());
+        }
+        if waiting.elapsed() > options.start_timeout {
+            return Err(SimError::Setup(format!(
+                "no armed daemon on `{}` within {:.0} s ({} status messages seen)",
+                options.ros2.topics.status.name,
+                options.start_timeout.as_secs_f64(),
+                links.counters.status_received
+            )));
+        }
+        let received = links.drivers.receive();
+        if let Some(boards) = boards.as_deref_mut() {
+            boards.follow_tilt(plant.tilt());
+            tilt_rate = boards.tilt_rate(plant.tilt());
+            if let Some(exit) = boards.exited_driver() {
+                return Err(SimError::Setup(exit));
+            }
+        } else if let Some(c) = received.tilt_velocity {
+            tilt_rate = c.velocity;
+        }
+        let dt = last.elapsed().as_secs_f64();
+        last = Instant::now();
+        plant.place_tilt(plant.tilt() + tilt_rate * dt);
+        let now = Instant::now();
+        links.publish(plant, &initial_pilot, |_| wall_clock_ns());
+        if republish.due(now) {
+            // The plant publishes only as it steps: repeat the initial state.
+            let ok = links
+                .ros_out
+                .try_publish_estimate(&plant.state(), wall_clock_ns());
+            links.count(ok);
+        }
+        progress(0.0, links.last_status.as_ref().and_then(mode_of));
+        std::thread::sleep(Duration::from_millis(2));
     }
 }
 
@@ -200,43 +280,23 @@ pub fn serve(
         counters: ServeCounters::default(),
         last_status: None,
         last_estimate: None,
+        boards: options.boards.is_some(),
+    };
+    let mut boards = match &options.boards {
+        Some(files) => Some(SimBoards::start(files, &options.drivers)?),
+        None => None,
     };
     let mode_of = |s: &MpcStatus| Mode::from_code(s.mode.code());
 
-    // Frozen until the daemon is armed: the initial state, freshly stamped.
     let waiting = Instant::now();
-    let initial_pilot = pilot_msg(scenario, 0.0);
-    let mut republish = Every::new(100.0);
-    loop {
-        let status = links.take_status();
-        if status
-            .as_ref()
-            .and_then(mode_of)
-            .is_some_and(|m| m != Mode::Disarmed)
-        {
-            break;
-        }
-        if waiting.elapsed() > options.start_timeout {
-            return Err(SimError::Setup(format!(
-                "no armed daemon on `{}` within {:.0} s ({} status messages seen)",
-                options.ros2.topics.status.name,
-                options.start_timeout.as_secs_f64(),
-                links.counters.status_received
-            )));
-        }
-        let now = Instant::now();
-        links.publish(&plant, &initial_pilot, |_| wall_clock_ns());
-        if republish.due(now) {
-            // The plant publishes only as it steps: repeat the initial state.
-            let ok = links
-                .ros_out
-                .try_publish_estimate(&plant.state(), wall_clock_ns());
-            links.count(ok);
-        }
-        let _ = links.drivers.receive();
-        progress(0.0, links.last_status.as_ref().and_then(mode_of));
-        std::thread::sleep(Duration::from_millis(2));
-    }
+    wait_for_arming(
+        &mut plant,
+        &mut links,
+        boards.as_mut(),
+        scenario,
+        options,
+        progress,
+    )?;
     links.counters.waited_for_daemon_ms =
         u64::try_from(waiting.elapsed().as_millis()).unwrap_or(u64::MAX);
 
@@ -262,14 +322,21 @@ pub fn serve(
             command.rotors = Input::from(c.thrust);
             links.counters.thrust_commands += 1;
         }
-        if let Some(c) = received.tilt_velocity {
-            command.tilt_rate = c.velocity;
-        }
-        if let Some(c) = received.wheel_rates {
-            command.wheel_rates = atmo_core::control::WheelRates {
-                left: c.rates[0],
-                right: c.rates[1],
-            };
+        if let Some(boards) = &mut boards {
+            boards.follow_tilt(plant.tilt());
+            command.tilt_rate = boards.tilt_rate(plant.tilt());
+            let [left, right] = boards.wheel_rates();
+            command.wheel_rates = atmo_core::control::WheelRates { left, right };
+        } else {
+            if let Some(c) = received.tilt_velocity {
+                command.tilt_rate = c.velocity;
+            }
+            if let Some(c) = received.wheel_rates {
+                command.wheel_rates = atmo_core::control::WheelRates {
+                    left: c.rates[0],
+                    right: c.rates[1],
+                };
+            }
         }
         if let Some(s) = links.take_status() {
             tracker.on_control_tick(

@@ -660,11 +660,21 @@ impl DriverEndpoint {
 
     /// Sleeps until the daemon signals new commands
     /// ([`FlightPorts::notify_drivers`]) or `timeout` passes, then returns
-    /// what [`Self::receive`] returns.
+    /// what [`Self::receive`] returns. A timeout under 1 us does not sleep:
+    /// iceoryx2 0.10 waits on a socket whose timeout is a `timeval` in whole
+    /// microseconds, and 0 there means "no timeout" (blocked until the next
+    /// signal, for good without a daemon); it takes the pending signals and
+    /// returns at once.
     pub fn wait_for_commands(&mut self, timeout: std::time::Duration) -> Result<DriverCommands> {
-        self.listener
-            .timed_wait(|_| {}, timeout)
-            .map_err(|e| iox_err("commands_sent", e))?;
+        if timeout < std::time::Duration::from_micros(1) {
+            self.listener
+                .try_wait(|_| {})
+                .map_err(|e| iox_err("commands_sent", e))?;
+        } else {
+            self.listener
+                .timed_wait(|_| {}, timeout)
+                .map_err(|e| iox_err("commands_sent", e))?;
+        }
         Ok(self.receive())
     }
 

@@ -131,8 +131,9 @@ pub struct TickTiming {
 ///
 /// Logs written before the ground normal was logged end after
 /// `solver_cut_overflow`; they decode with `has_ground_normal = false`
-/// (level ground, what those flight stacks assumed), so that old flight
-/// logs still replay.
+/// (level ground, what those flight stacks assumed), and logs written
+/// before `pilot_lost` end after the normal and decode with the radio
+/// present and every arming check passed, so that old flight logs still replay.
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize)]
 #[allow(clippy::struct_excessive_bools)] // the wire layout: presence flags and two signals
 pub struct TickInputs {
@@ -159,6 +160,10 @@ pub struct TickInputs {
     pub has_ground_normal: bool,
     /// The ground plane's unit normal, NED, out of the ground.
     pub ground_normal: [f64; 3],
+    /// The pilot's radio is lost (a failsafe input).
+    pub pilot_lost: bool,
+    /// Arming checks that failed (bit set; 0: all pass).
+    pub arming_failures: u8,
 }
 
 /// The fields of `TickInputs` in wire order (its .msg definition's, checked
@@ -181,6 +186,8 @@ pub(super) const TICK_INPUTS_FIELDS: &[&str] = &[
     "solver_cut_overflow",
     "has_ground_normal",
     "ground_normal",
+    "pilot_lost",
+    "arming_failures",
 ];
 
 impl<'de> Deserialize<'de> for TickInputs {
@@ -226,6 +233,8 @@ impl<'de> serde::de::Visitor<'de> for TickInputsVisitor {
             solver_cut_overflow: next(&mut seq, "solver_cut_overflow")?,
             has_ground_normal: false,
             ground_normal: [0.0; 3],
+            pilot_lost: false,
+            arming_failures: 0,
         };
         // A log before the ground normal ends here: the payload is used up,
         // reading on fails, and the message is the old one (level ground).
@@ -233,6 +242,11 @@ impl<'de> serde::de::Visitor<'de> for TickInputsVisitor {
         if let Ok(Some(has)) = seq.next_element::<bool>() {
             m.has_ground_normal = has;
             m.ground_normal = next(&mut seq, "ground_normal")?;
+            // Likewise a log before the pilot's radio ends after the normal.
+            if let Ok(Some(lost)) = seq.next_element::<bool>() {
+                m.pilot_lost = lost;
+                m.arming_failures = next(&mut seq, "arming_failures")?;
+            }
         }
         Ok(m)
     }
@@ -280,7 +294,8 @@ pub struct MpcStatus {
     pub ros_stamp_ns: u64,
     pub tick: u64,
     pub mode: Mode,
-    /// Reason of the transition taken this tick (empty if none).
+    /// Reason of the transition taken this tick, or why arming was refused
+    /// ("arming refused: ..."); empty if neither.
     pub transition: Label,
     pub solver_status: SolverStatus,
     pub solver_iterations: u32,

@@ -74,6 +74,10 @@ const DEFINITIONS: &[(&str, &str)] = &[
         include_str!("../../msg/px4_msgs/VehicleOdometry.msg"),
     ),
     (
+        "px4_msgs/InputRc",
+        include_str!("../../msg/px4_msgs/InputRc.msg"),
+    ),
+    (
         "px4_msgs/ActuatorMotors",
         include_str!("../../msg/px4_msgs/ActuatorMotors.msg"),
     ),

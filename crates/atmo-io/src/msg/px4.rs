@@ -100,3 +100,40 @@ impl RosMessage for ActuatorMotors {
 impl RosMessage for OffboardControlMode {
     const TYPE_NAME: &'static str = "px4_msgs/msg/OffboardControlMode";
 }
+
+/// `px4_msgs/msg/InputRc`: the receiver's raw channels as PX4 publishes
+/// them (`/fmu/out/input_rc` over uXRCE-DDS). Pulse widths in us; what
+/// they mean (sticks, switches) is the reader's mapping.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+pub struct InputRc {
+    /// us since PX4 boot.
+    pub timestamp: u64,
+    /// Last valid reception, us since PX4 boot.
+    pub timestamp_last_signal: u64,
+    /// Channels the receiver delivers (the first `channel_count` of `values`).
+    pub channel_count: u8,
+    /// < 0 undefined, 0 no signal, 100 full reception.
+    pub rssi: i32,
+    /// The receiver's own failsafe flag (true is reliable, false is not).
+    pub rc_failsafe: bool,
+    /// No frame within the expected time.
+    pub rc_lost: bool,
+    pub rc_lost_frame_count: u16,
+    pub rc_total_frame_count: u16,
+    pub rc_ppm_frame_length: u16,
+    pub input_source: u8,
+    /// Pulse width of each channel, us (channel 1 is `values[0]`).
+    pub values: [u16; 18],
+    /// 0..100 %, -1 invalid.
+    pub link_quality: i8,
+    /// dBm, NaN invalid.
+    pub rssi_dbm: f32,
+}
+
+impl InputRc {
+    pub const RC_INPUT_MAX_CHANNELS: u8 = 18;
+}
+
+impl RosMessage for InputRc {
+    const TYPE_NAME: &'static str = "px4_msgs/msg/InputRc";
+}

@@ -605,10 +605,18 @@ fn tick_inputs_and_sim_truth_layouts() {
         body.push(0);
     }
     body.extend(f64s(&[-0.25, 0.0, -0.5]));
+    // A log written before the pilot's radio ends here: the radio present.
+    let mut before_radio = CDR_LE_HEADER.to_vec();
+    before_radio.extend(&body);
+    let decoded: TickInputs = decode("/before-radio", &before_radio).unwrap();
+    assert_eq!(decoded, m);
+    m.pilot_lost = true;
+    m.arming_failures = 0b10100;
+    body.extend([1, 0b10100]);
     round_trip(&m, &body);
     // A payload cut inside the normal is refused, not read as an old one.
     let mut cut = CDR_LE_HEADER.to_vec();
-    cut.extend(&body[..body.len() - 8]);
+    cut.extend(&body[..body.len() - 10]);
     assert!(decode::<TickInputs>("/cut", &cut).is_err());
     assert_eq!(
         super::definitions::fields("atmo_msgs", definition(TickInputs::TYPE_NAME).unwrap())
@@ -632,4 +640,44 @@ fn tick_inputs_and_sim_truth_layouts() {
     let schema = schema_text(TickInputs::TYPE_NAME).unwrap();
     assert!(schema.contains("MSG: atmo_msgs/PilotInput\n"));
     schema_text(SimTruth::TYPE_NAME).unwrap();
+}
+
+#[test]
+fn input_rc_layout() {
+    let mut rc = InputRc {
+        timestamp: 7,
+        timestamp_last_signal: 6,
+        channel_count: 16,
+        rssi: 100,
+        rc_failsafe: false,
+        rc_lost: true,
+        rc_lost_frame_count: 3,
+        rc_total_frame_count: 900,
+        rc_ppm_frame_length: 0,
+        input_source: 9,
+        link_quality: -1,
+        rssi_dbm: -50.0,
+        ..InputRc::default()
+    };
+    for (i, v) in rc.values.iter_mut().enumerate() {
+        *v = 1000 + i as u16;
+    }
+    let mut body = Vec::new();
+    body.extend(7u64.to_le_bytes());
+    body.extend(6u64.to_le_bytes());
+    body.extend([16, 0, 0, 0]); // channel_count + pad to 4
+    body.extend(100i32.to_le_bytes());
+    body.extend([0, 1]);
+    for v in [3u16, 900, 0] {
+        body.extend(v.to_le_bytes());
+    }
+    body.extend([9, 0]); // input_source + pad to 2
+    for v in rc.values {
+        body.extend(v.to_le_bytes());
+    }
+    body.extend([0xff, 0]); // link_quality + pad to 4
+    body.extend((-50.0f32).to_le_bytes());
+    round_trip(&rc, &body);
+    schema_text(InputRc::TYPE_NAME).unwrap();
+    type_hash(InputRc::TYPE_NAME).unwrap();
 }

@@ -7,8 +7,8 @@ use serde::Deserialize;
 
 use crate::error::{IoError, Result};
 use crate::msg::{
-    ActuatorMotors, Clock, DiagnosticArray, MpcStatus, Odometry, OffboardControlMode, PilotInput,
-    PointStamped, RosMessage, Twist, Vector3Stamped, VehicleOdometry,
+    ActuatorMotors, Clock, DiagnosticArray, InputRc, MpcStatus, Odometry, OffboardControlMode,
+    PilotInput, PointStamped, RosMessage, Twist, Vector3Stamped, VehicleOdometry,
 };
 
 /// The node's settings: a `[ros2]`-style table (or a whole file).
@@ -75,6 +75,9 @@ pub struct Topics {
     pub ground_normal: TopicConfig,
     /// In, with `use_sim_time` only: ROS time (`rosgraph_msgs/msg/Clock`).
     pub clock: TopicConfig,
+    /// In: the radio through PX4 (`px4_msgs/msg/InputRc`, raw pulse
+    /// widths); off unless enabled. The daemon's `[rc]` table maps it.
+    pub rc: TopicConfig,
 }
 
 fn topic(name: &str, type_name: &str) -> TopicConfig {
@@ -101,6 +104,10 @@ impl Default for Topics {
             ground: topic("/atmo/ground", PointStamped::TYPE_NAME),
             ground_normal: topic("/atmo/ground_normal", Vector3Stamped::TYPE_NAME),
             clock: topic("/clock", Clock::TYPE_NAME),
+            rc: TopicConfig {
+                enabled: false,
+                ..topic("/fmu/out/input_rc", InputRc::TYPE_NAME)
+            },
         }
     }
 }
@@ -175,7 +182,7 @@ impl ConfigFile for Ros2Config {
                 )
                 .into());
         }
-        let roles: [(&str, &TopicConfig, &[&str]); 10] = [
+        let roles: [(&str, &TopicConfig, &[&str]); 11] = [
             ("topics.status", &t.status, &[MpcStatus::TYPE_NAME]),
             (
                 "topics.estimate",
@@ -210,6 +217,7 @@ impl ConfigFile for Ros2Config {
                 &[Vector3Stamped::TYPE_NAME],
             ),
             ("topics.clock", &t.clock, &[Clock::TYPE_NAME]),
+            ("topics.rc", &t.rc, &[InputRc::TYPE_NAME]),
         ];
         let mut names: Vec<&str> = Vec::new();
         for (key, topic, types) in roles {

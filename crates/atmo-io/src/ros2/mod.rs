@@ -77,7 +77,9 @@ use std::time::Instant;
 use atmo_core::model::State;
 
 use crate::error::{IoError, Result};
-use crate::msg::{ActuatorMotors, DiagnosticArray, MpcStatus, OffboardControlMode, PilotInput};
+use crate::msg::{
+    ActuatorMotors, DiagnosticArray, InputRc, MpcStatus, OffboardControlMode, PilotInput,
+};
 use dds::try_queue;
 
 /// Reads `ROS_DOMAIN_ID` (unset or empty: 0). Valid ids are 0..=232.
@@ -145,6 +147,16 @@ pub struct GroundNormal {
     pub received: Instant,
 }
 
+/// An RC frame accepted from ROS 2 (`topics.rc`, PX4's `InputRc`):
+/// `channel_count` at most 18; the pulse widths as received (the daemon's
+/// RC mapping checks them).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RcFrame {
+    pub input: InputRc,
+    /// When the node thread accepted it.
+    pub received: Instant,
+}
+
 /// ROS time as the node keeps it: the wall clock, or with `use_sim_time`
 /// the newest `/clock` (0 until one arrives, as ROS 2 does). Shared by the
 /// node thread (which writes `/clock`) and the control thread (which reads
@@ -187,6 +199,10 @@ pub struct Ros2Counters {
     pub pilot_received: u64,
     /// Pilot inputs with a non-finite number or a throttle outside [0, 1].
     pub pilot_rejected: u64,
+    /// RC frames (`InputRc`) that decoded, whatever their values.
+    pub rc_received: u64,
+    /// RC frames with more than 18 channels.
+    pub rc_rejected: u64,
     /// Ground heights that decoded, whatever their values.
     pub ground_received: u64,
     /// Ground heights with a non-finite `point.z`.
@@ -220,6 +236,8 @@ struct Counters {
     drive_rejected: AtomicU64,
     pilot_received: AtomicU64,
     pilot_rejected: AtomicU64,
+    rc_received: AtomicU64,
+    rc_rejected: AtomicU64,
     ground_received: AtomicU64,
     ground_rejected: AtomicU64,
     ground_normal_received: AtomicU64,
@@ -246,6 +264,8 @@ impl Counters {
             drive_rejected: g(&self.drive_rejected),
             pilot_received: g(&self.pilot_received),
             pilot_rejected: g(&self.pilot_rejected),
+            rc_received: g(&self.rc_received),
+            rc_rejected: g(&self.rc_rejected),
             ground_received: g(&self.ground_received),
             ground_rejected: g(&self.ground_rejected),
             ground_normal_received: g(&self.ground_normal_received),
@@ -311,6 +331,7 @@ pub struct Ros2Inputs {
     estimates: Receiver<RosEstimate>,
     drive: Receiver<DriveCommand>,
     pilot: Receiver<PilotCommand>,
+    rc: Receiver<RcFrame>,
     ground: Receiver<GroundHeight>,
     ground_normal: Receiver<GroundNormal>,
     clock: Arc<RosClock>,
@@ -331,6 +352,11 @@ impl Ros2Inputs {
     /// The newest pilot input accepted since the last call, if any. Never blocks.
     pub fn latest_pilot(&mut self) -> Option<PilotCommand> {
         self.pilot.try_iter().last()
+    }
+
+    /// The newest RC frame accepted since the last call, if any. Never blocks.
+    pub fn latest_rc(&mut self) -> Option<RcFrame> {
+        self.rc.try_iter().last()
     }
 
     /// The newest ground height accepted since the last call, if any.

@@ -17,15 +17,16 @@ use super::dds::{
     reliable_qos, spawn_node_thread, stream_qos, subscription, take_burst,
 };
 use super::{
-    Counters, DriveCommand, GroundHeight, GroundNormal, Outgoing, PilotCommand, Ros2Config,
-    Ros2Inputs, Ros2Node, Ros2Publisher, Ros2StartOptions, Ros2Thread, RosClock, RosEstimate,
+    Counters, DriveCommand, GroundHeight, GroundNormal, Outgoing, PilotCommand, RcFrame,
+    Ros2Config, Ros2Inputs, Ros2Node, Ros2Publisher, Ros2StartOptions, Ros2Thread, RosClock,
+    RosEstimate,
 };
 use crate::error::{IoError, Result};
 use crate::msg::frames::{odometry_to_state, vehicle_odometry_to_state};
 use crate::msg::{
-    ActuatorMotors, Clock, DiagnosticArray, DiagnosticStatus, KeyValue, MpcStatus, Odometry,
-    OffboardControlMode, PilotInput, PointStamped, RosMessage, Time, Twist, Vector3Stamped,
-    VehicleOdometry,
+    ActuatorMotors, Clock, DiagnosticArray, DiagnosticStatus, InputRc, KeyValue, MpcStatus,
+    Odometry, OffboardControlMode, PilotInput, PointStamped, RosMessage, Time, Twist,
+    Vector3Stamped, VehicleOdometry,
 };
 use crate::stamp_order::StampOrder;
 
@@ -50,6 +51,7 @@ struct NodeThread {
     estimate: Option<EstimateSub>,
     drive: Option<Subscription<Twist>>,
     pilot: Option<Subscription<PilotInput>>,
+    rc: Option<Subscription<InputRc>>,
     ground: Option<Subscription<PointStamped>>,
     ground_normal: Option<Subscription<Vector3Stamped>>,
     /// `topics.clock`, with `use_sim_time` only.
@@ -58,6 +60,7 @@ struct NodeThread {
     estimate_tx: SyncSender<RosEstimate>,
     drive_tx: SyncSender<DriveCommand>,
     pilot_tx: SyncSender<PilotCommand>,
+    rc_tx: SyncSender<RcFrame>,
     ground_tx: SyncSender<GroundHeight>,
     ground_normal_tx: SyncSender<GroundNormal>,
     clock: Arc<RosClock>,
@@ -86,6 +89,7 @@ fn topic_type_hashes(config: &Ros2Config) -> Result<Vec<KeyValue>> {
         &topics.diagnostics,
         &topics.ground,
         &topics.ground_normal,
+        &topics.rc,
     ];
     let clock = config.use_sim_time.then_some(&topics.clock);
     all.into_iter()
@@ -116,6 +120,7 @@ impl Ros2Node {
         let (estimate_tx, estimate_rx) = sync_channel(16);
         let (drive_tx, drive_rx) = sync_channel(16);
         let (pilot_tx, pilot_rx) = sync_channel(16);
+        let (rc_tx, rc_rx) = sync_channel(16);
         let (ground_tx, ground_rx) = sync_channel(16);
         let (ground_normal_tx, ground_normal_rx) = sync_channel(16);
         let clock = Arc::new(RosClock {
@@ -127,6 +132,7 @@ impl Ros2Node {
             estimate_tx,
             drive_tx,
             pilot_tx,
+            rc_tx,
             ground_tx,
             ground_normal_tx,
             clock: Arc::clone(&clock),
@@ -148,6 +154,7 @@ impl Ros2Node {
                 estimates: estimate_rx,
                 drive: drive_rx,
                 pilot: pilot_rx,
+                rc: rc_rx,
                 ground: ground_rx,
                 ground_normal: ground_normal_rx,
                 clock,
@@ -164,6 +171,7 @@ struct NodeChannels {
     estimate_tx: SyncSender<RosEstimate>,
     drive_tx: SyncSender<DriveCommand>,
     pilot_tx: SyncSender<PilotCommand>,
+    rc_tx: SyncSender<RcFrame>,
     ground_tx: SyncSender<GroundHeight>,
     ground_normal_tx: SyncSender<GroundNormal>,
     clock: Arc<RosClock>,
@@ -191,6 +199,7 @@ impl NodeThread {
         };
         let drive = subscription::<Twist>(node, &t.drive_command)?;
         let pilot = subscription::<PilotInput>(node, &t.pilot)?;
+        let rc = subscription::<InputRc>(node, &t.rc)?;
         let ground = subscription::<PointStamped>(node, &t.ground)?;
         let ground_normal = subscription::<Vector3Stamped>(node, &t.ground_normal)?;
         let clock_sub = if config.use_sim_time {
@@ -204,6 +213,7 @@ impl NodeThread {
             estimate_tx,
             drive_tx,
             pilot_tx,
+            rc_tx,
             ground_tx,
             ground_normal_tx,
             clock,
@@ -217,6 +227,7 @@ impl NodeThread {
             estimate,
             drive,
             pilot,
+            rc,
             ground,
             ground_normal,
             clock_sub,
@@ -224,6 +235,7 @@ impl NodeThread {
             estimate_tx,
             drive_tx,
             pilot_tx,
+            rc_tx,
             ground_tx,
             ground_normal_tx,
             clock,
@@ -244,6 +256,7 @@ impl NodeThread {
             self.take_estimates();
             self.take_drive();
             self.take_pilot();
+            self.take_rc();
             self.take_ground();
             self.take_ground_normal();
             self.take_clock();
@@ -260,6 +273,7 @@ impl NodeThread {
             estimate,
             drive,
             pilot,
+            rc,
             ground,
             ground_normal,
             clock_sub,
@@ -274,6 +288,7 @@ impl NodeThread {
             estimate,
             drive,
             pilot,
+            rc,
             ground,
             ground_normal,
             clock_sub,
@@ -307,10 +322,11 @@ impl NodeThread {
             + c.stamp_backwards
             + c.drive_rejected
             + c.pilot_rejected
+            + c.rc_rejected
             + c.ground_rejected
             + c.ground_normal_rejected
             + c.clock_rejected;
-        let pairs: [(&str, u64); 20] = [
+        let pairs: [(&str, u64); 22] = [
             ("estimates_received", c.estimates_received),
             ("estimates_accepted", c.estimates_accepted),
             ("malformed", c.malformed),
@@ -321,6 +337,8 @@ impl NodeThread {
             ("drive_rejected", c.drive_rejected),
             ("pilot_received", c.pilot_received),
             ("pilot_rejected", c.pilot_rejected),
+            ("rc_received", c.rc_received),
+            ("rc_rejected", c.rc_rejected),
             ("ground_received", c.ground_received),
             ("ground_rejected", c.ground_rejected),
             ("ground_normal_received", c.ground_normal_received),
@@ -469,6 +487,22 @@ impl NodeThread {
             &self.pilot_tx,
             |input: PilotInput| {
                 pilot_is_valid(&input).then(|| PilotCommand {
+                    input,
+                    received: Instant::now(),
+                })
+            },
+        );
+    }
+
+    fn take_rc(&self) {
+        let c = &self.counters;
+        self.take_input(
+            self.rc.as_ref(),
+            &c.rc_received,
+            &c.rc_rejected,
+            &self.rc_tx,
+            |input: InputRc| {
+                (input.channel_count <= InputRc::RC_INPUT_MAX_CHANNELS).then(|| RcFrame {
                     input,
                     received: Instant::now(),
                 })

@@ -487,6 +487,19 @@ impl Plant {
         self.tilt
     }
 
+    /// Moves the linkage to `tilt` (clamped to its range) without a step:
+    /// the tilt mechanism driven while the rest of the plant is held (SITL
+    /// before the flight, a props-off tilt sweep). The body's inertia and
+    /// geometry follow; time, state and contacts do not change.
+    pub fn place_tilt(&mut self, tilt: f64) {
+        if !tilt.is_finite() {
+            return;
+        }
+        let tilt = tilt.clamp(0.0, self.tilt_max);
+        self.update_body(tilt, false);
+        self.tilt = tilt;
+    }
+
     /// The tilt encoder: counts via the linkage, whole counts when the tilt
     /// mechanism effect is on.
     pub fn encoder_counts(&self) -> Result<f64> {

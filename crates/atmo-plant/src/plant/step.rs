@@ -222,7 +222,7 @@ impl Plant {
     /// of the 0.25 deg grid built at start-up, so that morphing does not
     /// rebuild and refactor the body every step.
     #[inline(always)]
-    fn update_body(&mut self, mid: f64, moving: bool) {
+    pub(super) fn update_body(&mut self, mid: f64, moving: bool) {
         if moving {
             let cells = self.tilt_grid.len() - 1;
             let k = ((mid / TILT_GRID).floor().max(0.0) as usize).min(cells - 1);

@@ -12,3 +12,5 @@ mod hostile;
 mod replay;
 mod scenarios;
 mod sitl;
+mod sitl_boards;
+mod sitl_preflight;

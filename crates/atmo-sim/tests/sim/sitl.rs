@@ -20,7 +20,7 @@ use std::time::{Duration, Instant};
 use atmo_io::mcap_log::read_topic;
 use atmo_io::msg::{MpcStatus, SolverStatus};
 
-fn repo() -> PathBuf {
+pub(crate) fn repo() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
 }
 
@@ -28,26 +28,28 @@ fn repo() -> PathBuf {
 /// if it is not there (once per test process).
 fn daemon_binary() -> PathBuf {
     static DAEMON: OnceLock<PathBuf> = OnceLock::new();
-    DAEMON
-        .get_or_init(|| {
-            let sim = PathBuf::from(env!("CARGO_BIN_EXE_atmo-sim"));
-            let daemon = sim.with_file_name(format!("atmo-daemon{}", std::env::consts::EXE_SUFFIX));
-            if !daemon.exists() {
-                build_daemon(&sim);
-            }
-            assert!(
-                daemon.exists(),
-                "{} is still missing after building it; run `cargo build -p atmo-daemon`",
-                daemon.display()
-            );
-            daemon
-        })
-        .clone()
+    DAEMON.get_or_init(|| sibling_binary("atmo-daemon")).clone()
 }
 
-/// `cargo build -p atmo-daemon --bin atmo-daemon` into the target directory
-/// and profile `sim` (.../<target dir>/<profile>/atmo-sim) was built in.
-fn build_daemon(sim: &Path) {
+/// The binary of workspace package `name` (its binary has the package's
+/// name) next to this package's `atmo-sim`, built there first if missing.
+pub(crate) fn sibling_binary(name: &str) -> PathBuf {
+    let sim = PathBuf::from(env!("CARGO_BIN_EXE_atmo-sim"));
+    let binary = sim.with_file_name(format!("{name}{}", std::env::consts::EXE_SUFFIX));
+    if !binary.exists() {
+        build_sibling(&sim, name);
+    }
+    assert!(
+        binary.exists(),
+        "{} is still missing after building it; run `cargo build -p {name}`",
+        binary.display()
+    );
+    binary
+}
+
+/// `cargo build -p NAME --bin NAME` into the target directory and profile
+/// `sim` (.../<target dir>/<profile>/atmo-sim) was built in.
+fn build_sibling(sim: &Path, name: &str) {
     let profile_dir = sim.parent().expect("atmo-sim's directory");
     let target_dir = profile_dir.parent().expect("the target directory");
     let profile = match profile_dir.file_name().and_then(|n| n.to_str()) {
@@ -57,18 +59,11 @@ fn build_daemon(sim: &Path) {
     };
     eprintln!(
         "sitl: {} is not built (not a workspace build): building it",
-        profile_dir.join("atmo-daemon").display()
+        profile_dir.join(name).display()
     );
     let status = Command::new(env!("CARGO"))
         .current_dir(repo())
-        .args([
-            "build",
-            "-p",
-            "atmo-daemon",
-            "--bin",
-            "atmo-daemon",
-            "--profile",
-        ])
+        .args(["build", "-p", name, "--bin", name, "--profile"])
         .arg(profile)
         .arg("--target-dir")
         .arg(target_dir)
@@ -76,20 +71,20 @@ fn build_daemon(sim: &Path) {
         .unwrap_or_else(|e| panic!("running {} build: {e}", env!("CARGO")));
     assert!(
         status.success(),
-        "`cargo build -p atmo-daemon --profile {profile}` failed ({status}); \
+        "`cargo build -p {name} --profile {profile}` failed ({status}); \
          build it yourself or run `cargo test --workspace`"
     );
 }
 
 /// A child process killed when dropped (a failing test leaves nothing behind).
-struct Process {
+pub(crate) struct Process {
     name: &'static str,
     child: Child,
     stderr: PathBuf,
 }
 
 impl Process {
-    fn spawn(name: &'static str, mut command: Command, dir: &Path) -> Self {
+    pub(crate) fn spawn(name: &'static str, mut command: Command, dir: &Path) -> Self {
         let stderr = dir.join(format!("{name}.stderr"));
         let child = command
             .stdout(std::fs::File::create(dir.join(format!("{name}.stdout"))).unwrap())
@@ -104,7 +99,7 @@ impl Process {
         }
     }
 
-    fn wait(&mut self, timeout: Duration) -> ExitStatus {
+    pub(crate) fn wait(&mut self, timeout: Duration) -> ExitStatus {
         let start = Instant::now();
         loop {
             if let Some(status) = self.child.try_wait().unwrap() {
@@ -122,7 +117,7 @@ impl Process {
         }
     }
 
-    fn signal(&self, signal: &str) {
+    pub(crate) fn signal(&self, signal: &str) {
         let status = Command::new("kill")
             .args([format!("-{signal}"), self.child.id().to_string()])
             .status()
@@ -130,7 +125,7 @@ impl Process {
         assert!(status.success(), "kill -{signal} {}", self.name);
     }
 
-    fn stderr(&self) -> String {
+    pub(crate) fn stderr(&self) -> String {
         std::fs::read_to_string(&self.stderr).unwrap_or_default()
     }
 }
@@ -146,7 +141,7 @@ impl Drop for Process {
 
 /// A daemon config for this run: the shipped one with loopback-only DDS,
 /// an iceoryx2 prefix of its own and absolute config paths.
-fn daemon_config(dir: &Path, tag: &str) -> PathBuf {
+pub(crate) fn daemon_config(dir: &Path, tag: &str) -> PathBuf {
     let shipped = std::fs::read_to_string(repo().join("config/daemon.toml")).unwrap();
     let config = repo().join("config").canonicalize().unwrap();
     let text = shipped
@@ -173,26 +168,38 @@ fn daemon_config(dir: &Path, tag: &str) -> PathBuf {
     path
 }
 
-fn run_dir(name: &str) -> PathBuf {
+pub(crate) fn run_dir(name: &str) -> PathBuf {
     let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("{name}-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
     dir
 }
 
-fn domain() -> String {
+pub(crate) fn domain() -> String {
     // Away from 0 and from the other test binaries' domains (100..200).
     (200 + std::process::id() % 30).to_string()
 }
 
 /// The tests run real time against the wall clock: one at a time.
-fn serial() -> std::sync::MutexGuard<'static, ()> {
+pub(crate) fn serial() -> std::sync::MutexGuard<'static, ()> {
     static LOCK: std::sync::Mutex<()> = std::sync::Mutex::new(());
     LOCK.lock()
         .unwrap_or_else(std::sync::PoisonError::into_inner)
 }
 
 fn spawn_pair(dir: &Path, config: &Path, log: &Path, domain: &str) -> (Process, Process) {
+    spawn_pair_with(dir, config, log, domain, &[])
+}
+
+/// The daemon and `atmo-sim serve` (the wheel landing, its summary in
+/// DIR/sitl) with `serve_args` added to the server's arguments.
+pub(crate) fn spawn_pair_with(
+    dir: &Path,
+    config: &Path,
+    log: &Path,
+    domain: &str,
+    serve_args: &[std::ffi::OsString],
+) -> (Process, Process) {
     let mut daemon = Command::new(daemon_binary());
     daemon
         .args(["run", "--config"])
@@ -211,6 +218,7 @@ fn spawn_pair(dir: &Path, config: &Path, log: &Path, domain: &str) -> (Process, 
         .arg("--out")
         .arg(dir.join("sitl"))
         .args(["--quiet", "--start-timeout", "60"])
+        .args(serve_args)
         .env("ROS_DOMAIN_ID", domain);
     let server = Process::spawn("atmo-sim serve", server, dir);
     (daemon, server)

@@ -1,0 +1,403 @@
+//! The radio as a pilot source: PX4's `InputRc` (raw pulse widths per
+//! channel) mapped to the flight stack's [`PilotInput`] by the daemon
+//! config's `[rc]` table.
+//!
+//! Shipped defaults: the ATMO authors' Futaba T18SZ mapping
+//! (mandralis/ATMO, `atmo_ws/src/atmo/atmo/mpc/parameters.py`; their
+//! 0-based indices into `values` are the channel numbers here minus one):
+//! roll 1, pitch 2, throttle 3, yaw 4, MPC switch 8, offboard switch 9,
+//! pulses 1094..1934 us centred at 1514 us, 0.75 m/s and 45 deg/s at full
+//! stick, with their signs (pitch forward is north negative, and so on:
+//! each stick `reversed`). The kill switch is not in the authors' code
+//! (PX4's own kill switch cut their motors); channel 5 high is this
+//! mapping's default and must be set to the radio's kill switch.
+//!
+//! Sticks: a pulse within `deadband_us` of `center_us` is 0; beyond it the
+//! stick grows linearly to +-1 at `max_us` / `min_us` (each side scaled on
+//! its own, clamped). The vertical stick also gives the throttle, its
+//! upper half only (0 at centre, 1 at full up): a spring-less throttle
+//! stick left at centre must not read as "take off" (the flight stack
+//! takes off at throttle 0.5).
+//!
+//! Switches: on when the normalized pulse is above `switch_threshold`
+//! (`on = "high"`) or below minus it (`on = "low"`); a three-position
+//! switch's middle is off.
+//!
+//! The kill switch disarms at once and stays latched: the robot re-arms
+//! only once the kill switch is off *and* the offboard switch has been
+//! off (so releasing the kill switch alone never restarts the rotors).
+//!
+//! Lost radio: PX4's `rc_lost` or `rc_failsafe` (its "true" is reliable),
+//! or no usable frame for `timeout_ms` ([`crate::inputs::InputLatch`]).
+//! A frame whose mapped channels are missing (`channel_count` too small)
+//! or outside 800..2200 us is rejected and counted, never used.
+//!
+//! Mapping is pure, allocation-free and never panics: it runs on the
+//! control thread.
+
+use std::path::Path;
+
+use atmo_core::config_file::Checker;
+use atmo_io::msg::InputRc;
+use serde::Deserialize;
+
+use crate::error::{DaemonError, Result};
+use crate::flight_stack::PilotInput;
+
+/// A pulse outside this range is no servo pulse (a missing or broken
+/// channel), us.
+pub const PLAUSIBLE_PULSE_US: std::ops::RangeInclusive<u16> = 800..=2200;
+
+/// One stick: its channel (1-based, as on the radio and in PX4's
+/// `RC_MAP_*`) and whether its sign is turned.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Stick {
+    pub channel: u32,
+    #[serde(default)]
+    pub reversed: bool,
+}
+
+/// Which end of a switch's travel is "on".
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum SwitchOn {
+    High,
+    Low,
+}
+
+/// One switch: its channel (1-based) and the position that is "on".
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Switch {
+    pub channel: u32,
+    pub on: SwitchOn,
+}
+
+/// `[rc.sticks]`: the velocity command's axes (NED world frame, as the
+/// flight stack's pilot input) and the yaw rate (FRD, positive right).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Sticks {
+    pub north: Stick,
+    pub east: Stick,
+    /// Up (negative NED z); its upper half is also the throttle.
+    pub up: Stick,
+    pub yaw: Stick,
+}
+
+/// `[rc.switches]`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Switches {
+    /// Offboard: the daemon flies (with the kill switch off, this is arming).
+    pub offboard: Switch,
+    /// MPC on: off in the air is a failsafe (open-loop hover trim).
+    pub mpc: Switch,
+    /// Kill: disarmed at once, latched until the offboard switch is off.
+    pub kill: Switch,
+}
+
+/// `[rc]` of `config/daemon.toml`: how `px4_msgs/InputRc` becomes the
+/// pilot input (used when `ros2.topics.rc` is enabled).
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct RcConfig {
+    /// No usable frame for this long: the radio is lost, ms.
+    pub timeout_ms: u64,
+    /// Pulse at full stick down / left, us.
+    pub min_us: u32,
+    /// Pulse at the stick's centre, us.
+    pub center_us: u32,
+    /// Pulse at full stick up / right, us.
+    pub max_us: u32,
+    /// Half-width of the band around the centre that reads as 0, us.
+    pub deadband_us: u32,
+    /// A switch is on beyond this fraction of its half travel.
+    pub switch_threshold: f64,
+    /// Horizontal speed at full stick (each axis), m/s.
+    pub max_horizontal_speed: f64,
+    /// Vertical speed at full stick, m/s.
+    pub max_vertical_speed: f64,
+    /// Yaw rate at full stick, deg/s.
+    pub max_yaw_rate_deg_s: f64,
+    pub sticks: Sticks,
+    pub switches: Switches,
+}
+
+const fn stick(channel: u32, reversed: bool) -> Stick {
+    Stick { channel, reversed }
+}
+
+impl Default for Sticks {
+    fn default() -> Self {
+        Self {
+            north: stick(2, true),
+            east: stick(1, true),
+            up: stick(3, false),
+            yaw: stick(4, true),
+        }
+    }
+}
+
+impl Default for Switches {
+    fn default() -> Self {
+        Self {
+            offboard: Switch {
+                channel: 9,
+                on: SwitchOn::High,
+            },
+            mpc: Switch {
+                channel: 8,
+                on: SwitchOn::High,
+            },
+            kill: Switch {
+                channel: 5,
+                on: SwitchOn::High,
+            },
+        }
+    }
+}
+
+impl Default for RcConfig {
+    fn default() -> Self {
+        Self {
+            timeout_ms: 300,
+            min_us: 1094,
+            center_us: 1514,
+            max_us: 1934,
+            deadband_us: 10,
+            switch_threshold: 0.5,
+            max_horizontal_speed: 0.75,
+            max_vertical_speed: 0.75,
+            max_yaw_rate_deg_s: 45.0,
+            sticks: Sticks::default(),
+            switches: Switches::default(),
+        }
+    }
+}
+
+impl RcConfig {
+    /// Every mapped channel with its key, sticks first.
+    fn channels(&self) -> [(&'static str, u32); 7] {
+        let (s, w) = (&self.sticks, &self.switches);
+        [
+            ("rc.sticks.north.channel", s.north.channel),
+            ("rc.sticks.east.channel", s.east.channel),
+            ("rc.sticks.up.channel", s.up.channel),
+            ("rc.sticks.yaw.channel", s.yaw.channel),
+            ("rc.switches.offboard.channel", w.offboard.channel),
+            ("rc.switches.mpc.channel", w.mpc.channel),
+            ("rc.switches.kill.channel", w.kill.channel),
+        ]
+    }
+
+    /// Checks ranges and consistency; errors name `file` and the key.
+    pub fn validate(&self, file: &Path) -> Result<()> {
+        let c = Checker::new(file);
+        c.range("rc.timeout_ms", self.timeout_ms, 20..=5000, "ms")?;
+        let (lo, hi) = (
+            u32::from(*PLAUSIBLE_PULSE_US.start()),
+            u32::from(*PLAUSIBLE_PULSE_US.end()),
+        );
+        c.range("rc.min_us", self.min_us, lo..=hi, "us")?;
+        c.range("rc.center_us", self.center_us, self.min_us + 1..=hi, "us")?;
+        c.range("rc.max_us", self.max_us, self.center_us + 1..=hi, "us")?;
+        let half = (self.center_us - self.min_us).min(self.max_us - self.center_us);
+        c.range("rc.deadband_us", self.deadband_us, 0..=half / 2, "us")?;
+        c.range(
+            "rc.switch_threshold",
+            self.switch_threshold,
+            0.05..=0.95,
+            "",
+        )?;
+        c.range(
+            "rc.max_horizontal_speed",
+            self.max_horizontal_speed,
+            0.0..=5.0,
+            "m/s",
+        )?;
+        c.range(
+            "rc.max_vertical_speed",
+            self.max_vertical_speed,
+            0.0..=3.0,
+            "m/s",
+        )?;
+        c.range(
+            "rc.max_yaw_rate_deg_s",
+            self.max_yaw_rate_deg_s,
+            0.0..=360.0,
+            "deg/s",
+        )?;
+        let channels = self.channels();
+        for (i, (key, channel)) in channels.iter().enumerate() {
+            c.range(
+                key,
+                *channel,
+                1..=u32::from(InputRc::RC_INPUT_MAX_CHANNELS),
+                "",
+            )?;
+            if let Some((other, _)) = channels[..i].iter().find(|(_, ch)| ch == channel) {
+                return Err(DaemonError::from(c.fail(
+                    key,
+                    format!("a channel no other function uses ({other} is {channel})"),
+                    channel,
+                )));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Why a frame was not used (counted by the daemon).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum RcReject {
+    /// The receiver delivers fewer channels than the mapping reads.
+    MissingChannel { channel: u32, channel_count: u8 },
+    /// A mapped channel's pulse is no servo pulse.
+    ImplausiblePulse { channel: u32, pulse_us: u16 },
+}
+
+impl std::fmt::Display for RcReject {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::MissingChannel {
+                channel,
+                channel_count,
+            } => write!(
+                f,
+                "channel {channel} is mapped but the receiver delivers {channel_count}"
+            ),
+            Self::ImplausiblePulse { channel, pulse_us } => write!(
+                f,
+                "channel {channel}: {pulse_us} us is outside {}..{} us",
+                PLAUSIBLE_PULSE_US.start(),
+                PLAUSIBLE_PULSE_US.end()
+            ),
+        }
+    }
+}
+
+/// One usable frame as the flight stack's pilot input.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RcReading {
+    pub pilot: PilotInput,
+    /// PX4 says the radio is lost (`rc_lost` or `rc_failsafe`): the values
+    /// are the receiver's failsafe values or stale, not the pilot's.
+    pub lost: bool,
+}
+
+/// The mapping with its one piece of state, the kill latch.
+#[derive(Debug, Clone, Copy)]
+pub struct RcPilot {
+    config: RcConfig,
+    kill_latched: bool,
+}
+
+impl RcPilot {
+    /// `config` must have passed [`RcConfig::validate`].
+    pub fn new(config: RcConfig) -> Self {
+        Self {
+            config,
+            kill_latched: false,
+        }
+    }
+
+    /// Whether the kill switch has disarmed the robot and re-arming waits
+    /// for the offboard switch to go off.
+    pub fn kill_latched(&self) -> bool {
+        self.kill_latched
+    }
+
+    fn pulse(rc: &InputRc, channel: u32) -> std::result::Result<u16, RcReject> {
+        let index = channel.saturating_sub(1) as usize;
+        if index >= usize::from(rc.channel_count) || index >= rc.values.len() {
+            return Err(RcReject::MissingChannel {
+                channel,
+                channel_count: rc.channel_count,
+            });
+        }
+        let pulse_us = rc.values[index];
+        if PLAUSIBLE_PULSE_US.contains(&pulse_us) {
+            Ok(pulse_us)
+        } else {
+            Err(RcReject::ImplausiblePulse { channel, pulse_us })
+        }
+    }
+
+    /// A pulse as -1..1: 0 within the dead band, each side scaled on its own.
+    fn normalized(&self, pulse_us: u16) -> f64 {
+        let c = &self.config;
+        let (p, centre, band) = (
+            f64::from(pulse_us),
+            f64::from(c.center_us),
+            f64::from(c.deadband_us),
+        );
+        let offset = p - centre;
+        if offset.abs() <= band {
+            return 0.0;
+        }
+        let span = if offset > 0.0 {
+            f64::from(c.max_us) - centre - band
+        } else {
+            centre - f64::from(c.min_us) - band
+        };
+        ((offset.abs() - band) / span).min(1.0).copysign(offset)
+    }
+
+    fn stick(&self, rc: &InputRc, stick: Stick) -> std::result::Result<f64, RcReject> {
+        let v = self.normalized(Self::pulse(rc, stick.channel)?);
+        Ok(if stick.reversed { -v } else { v })
+    }
+
+    fn switch(&self, rc: &InputRc, switch: Switch) -> std::result::Result<bool, RcReject> {
+        let v = self.normalized(Self::pulse(rc, switch.channel)?);
+        let t = self.config.switch_threshold;
+        Ok(match switch.on {
+            SwitchOn::High => v > t,
+            SwitchOn::Low => v < -t,
+        })
+    }
+
+    /// The pilot input of one frame, or why it cannot be used. Updates the
+    /// kill latch only for a usable frame.
+    pub fn map(&mut self, rc: &InputRc) -> std::result::Result<RcReading, RcReject> {
+        let c = self.config;
+        let (s, w) = (&c.sticks, &c.switches);
+        let north = self.stick(rc, s.north)?;
+        let east = self.stick(rc, s.east)?;
+        let up = self.stick(rc, s.up)?;
+        let yaw = self.stick(rc, s.yaw)?;
+        let offboard = self.switch(rc, w.offboard)?;
+        let mpc_enabled = self.switch(rc, w.mpc)?;
+        let kill = self.switch(rc, w.kill)?;
+        let lost = rc.rc_lost || rc.rc_failsafe;
+        if !lost {
+            if kill {
+                self.kill_latched = true;
+            } else if !offboard {
+                self.kill_latched = false;
+            }
+        }
+        Ok(RcReading {
+            pilot: PilotInput {
+                velocity: [
+                    north * c.max_horizontal_speed,
+                    east * c.max_horizontal_speed,
+                    -up * c.max_vertical_speed,
+                ],
+                yaw_rate: yaw * c.max_yaw_rate_deg_s.to_radians(),
+                throttle: up.max(0.0),
+                // A lost radio's kill switch is not read: the latch holds.
+                arm: !self.kill_latched && (lost || !kill),
+                offboard,
+                mpc_enabled,
+            },
+            lost,
+        })
+    }
+}
+
+#[cfg(test)]
+#[path = "rc_tests.rs"]
+mod tests;

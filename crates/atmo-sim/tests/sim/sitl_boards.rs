@@ -1,0 +1,101 @@
+//! SITL down to the serial bytes: the wheel landing flown by the daemon
+//! binary with its tilt and wheels through real `atmo-roboclaw` processes
+//! and simulated Roboclaw boards on pseudo-terminals (`atmo-sim serve
+//! --roboclaw-tilt --roboclaw-wheels`), against the same scenario with the
+//! server playing those drivers on the ports. Both run in real time, so
+//! each is one sample; the touchdowns must agree within 1 deg and
+//! 0.05 m/s.
+// Test, bench and example code: an unwrap that fails is the failure report.
+#![allow(clippy::unwrap_used)]
+
+use std::ffi::OsString;
+use std::path::Path;
+use std::time::Duration;
+
+use atmo_io::mcap_log::read_topic;
+use atmo_io::msg::MpcStatus;
+
+use crate::sitl::{daemon_config, domain, repo, run_dir, serial, sibling_binary, spawn_pair_with};
+
+/// One SITL landing; returns the server's summary and the daemon's status.
+fn land(name: &str, serve_args: &[OsString]) -> (serde_json::Value, Vec<(u64, MpcStatus)>) {
+    let dir = run_dir(name);
+    let tag = format!("atmo_{name}_{}", std::process::id());
+    let config = daemon_config(&dir, &tag);
+    let log = dir.join("flight.mcap");
+    let (mut daemon, mut server) = spawn_pair_with(&dir, &config, &log, &domain(), serve_args);
+    let served = server.wait(Duration::from_secs(150));
+    daemon.signal("TERM");
+    let stopped = daemon.wait(Duration::from_secs(20));
+    assert!(stopped.success(), "daemon stderr:\n{}", daemon.stderr());
+    let summary: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(dir.join("sitl/summary.json")).unwrap_or_else(|e| {
+            panic!("no summary.json ({e}); server stderr:\n{}", server.stderr())
+        }),
+    )
+    .unwrap();
+    assert!(
+        served.success(),
+        "{name}: {summary:#}\nserver stderr:\n{}",
+        server.stderr()
+    );
+    let status = read_topic(&log, "/atmo/status").expect("daemon log");
+    (summary, status)
+}
+
+fn touchdown(summary: &serde_json::Value) -> (f64, f64) {
+    let s = &summary["summary"];
+    (
+        s["touchdown_tilt_deg"].as_f64().unwrap(),
+        s["impact_speed_mps"].as_f64().unwrap(),
+    )
+}
+
+#[test]
+fn the_wheel_landing_through_the_roboclaw_drivers_matches_the_driver_ports() {
+    let _serial = serial();
+    let roboclaw = sibling_binary("atmo-roboclaw");
+    let (ports, _) = land("ports", &[]);
+    let drivers = repo().join("config/drivers");
+    let args: Vec<OsString> = vec![
+        "--roboclaw-tilt".into(),
+        drivers.join("tilt.toml").into(),
+        "--roboclaw-wheels".into(),
+        drivers.join("wheels.toml").into(),
+        "--roboclaw-bin".into(),
+        roboclaw.into(),
+    ];
+    let (boards, status) = land("boards", &args);
+    let (tilt_p, speed_p) = touchdown(&ports);
+    let (tilt_b, speed_b) = touchdown(&boards);
+    println!(
+        "touchdown: driver ports {tilt_p:.2} deg {speed_p:.3} m/s; roboclaw boards {tilt_b:.2} deg {speed_b:.3} m/s"
+    );
+    assert!((tilt_b - tilt_p).abs() <= 1.0, "{boards:#}\n{ports:#}");
+    assert!((speed_b - speed_p).abs() <= 0.05, "{boards:#}\n{ports:#}");
+    assert_eq!(boards["summary"]["crashed"], false);
+    assert!(boards["summary"]["drive_distance_m"].as_f64().unwrap() >= 1.0);
+
+    // The daemon heard the real drivers: alive from arming on, never dead.
+    let armed: Vec<&MpcStatus> = status
+        .iter()
+        .map(|(_, s)| s)
+        .skip_while(|s| s.mode.name() == "disarmed")
+        .collect();
+    assert!(armed.len() > 150 * 5, "{} armed ticks", armed.len());
+    for s in &armed {
+        assert_eq!(s.io.drivers_alive, [true; 4], "tick {}", s.tick);
+        assert_eq!(s.io.driver_deaths, [0; 4], "tick {}", s.tick);
+    }
+    // The tilt driver homed once and its serial link stayed clean.
+    let log = std::fs::read_to_string(
+        Path::new(env!("CARGO_TARGET_TMPDIR"))
+            .join(format!("boards-{}", std::process::id()))
+            .join("sitl/roboclaw-tilt.log"),
+    )
+    .unwrap();
+    let last = log.lines().rev().find(|l| l.contains("running")).unwrap();
+    for clean in ["homings 1,", "crc 0 ", "failed 0 ", "resets 0 "] {
+        assert!(last.contains(clean), "{clean}: {last}");
+    }
+}
