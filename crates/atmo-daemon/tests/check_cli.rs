@@ -1,5 +1,5 @@
 //! `atmo-daemon check` refuses a robot the physics cannot fly, naming the
-//! file, the key and the reason (issue 21), and accepts the shipped files.
+//! file, the key and the reason, and accepts the shipped files.
 // Test code: an unwrap that fails is the failure report.
 #![allow(clippy::unwrap_used)]
 
@@ -70,7 +70,7 @@ fn check_prints_the_radio_and_the_arming_configuration_verdict() {
 
 #[test]
 fn check_refuses_a_robot_with_thrust_to_weight_below_one() {
-    // base.mass 20 kg: thrust-to-weight 0.50, the case of issue 21.
+    // base.mass 20 kg: thrust-to-weight 0.50: a robot that cannot hover.
     let dir = configs_with("heavy", "mass = 2.33", "mass = 20.0");
     let out = check(&dir);
     let stderr = String::from_utf8_lossy(&out.stderr);

@@ -298,7 +298,7 @@ fn control_loop_tick_does_not_allocate_after_start_up() {
     );
 }
 
-/// Issue 19: logging a tick (its `TickInputs` and `MpcStatus` records, as
+/// Logging a tick (its `TickInputs` and `MpcStatus` records, as
 /// `OnboardIo::emit` and the simulator do) allocates nothing on the
 /// control thread. Counted on this thread only: the logger's writer thread
 /// encodes and compresses (and allocates) off the control thread.

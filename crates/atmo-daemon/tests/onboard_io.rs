@@ -200,7 +200,7 @@ fn onboard_tick_io_allocates_nothing_of_its_own() {
     log.finish();
     let written = log_thread.join().unwrap();
     assert_eq!(written.dropped, 0);
-    // Every tick's inputs and status (issue 19: the log replays).
+    // Every tick's inputs and status (the log replays).
     assert!(written.written >= 2 * (warm_up + measured));
     let inputs = atmo_io::mcap_log::read_topic::<TickInputs>(&log_path, INPUTS_TOPIC).unwrap();
     assert_eq!(inputs.len() as u64, warm_up + measured);

@@ -1,4 +1,4 @@
-//! `atmo-daemon run` with its log on a full disk (issue 21's fault campaign,
+//! `atmo-daemon run` with its log on a full disk (the fault campaign,
 //! docs/faults.md): the binary flies on, says so once at the first failed
 //! write (naming the file and the OS error), and exits non-zero at the end
 //! with that error. The logger's own reaction (every record counted, the

@@ -1,4 +1,4 @@
-//! Issue 21: the two-process SITL wheel landing (the `atmo-daemon` binary
+//! The two-process SITL wheel landing (the `atmo-daemon` binary
 //! against `atmo-sim serve`, ROS 2 on loopback, iceoryx2 drivers), with
 //! `--load N` busy-loop processes competing for the CPUs, and the daemon's
 //! tick timing read back from its MCAP log: wake-up jitter (wake-up minus
