@@ -31,8 +31,9 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
-    /// Fly: run until SIGINT or SIGTERM, then stop the control thread, finish
-    /// the MCAP log (a valid file, every record accepted so far) and exit 0.
+    /// Fly the robot until SIGINT or SIGTERM.
+    ///
+    /// Then stop the control thread, finish the MCAP log (a valid file, every record accepted so far) and exit 0.
     /// ROS_DOMAIN_ID selects the DDS domain; RUST_LOG the log level
     /// (default `info,rustdds=off`; `rustdds=warn` shows the DDS layer).
     Run {
@@ -46,14 +47,17 @@ enum Command {
         #[arg(long, value_parser = atmo_core::cli_numbers::run_duration_s)]
         duration: Option<f64>,
     },
-    /// Load and validate every config file the daemon would use, print what
-    /// it would run with, and exit (0: valid).
+    /// Validate every config file the daemon would use.
+    ///
+    /// Prints what it would run with, and exits (0: valid).
     Check {
         #[command(flatten)]
         config: DaemonConfigArg,
     },
-    /// Run the arming checks on the robot's transports (ROS 2 inputs,
-    /// driver ports) for one check window, then a props-off tilt sweep
+    /// Run the arming checks and a props-off tilt sweep; print a table.
+    ///
+    /// The checks run on the robot's transports (ROS 2 inputs, driver
+    /// ports) for one check window, then a props-off tilt sweep
     /// (0 -> 50 -> 0 deg, the encoder against the command), and print a
     /// pass/fail table. The thrusters get 0 throughout. Exit 0: all passed;
     /// 1: a check failed. Not beside a running daemon: it owns the ports.
@@ -67,10 +71,11 @@ enum Command {
         #[arg(long)]
         no_sweep: bool,
     },
-    /// Replay a flight log: rebuild the flight stack from the configuration
-    /// stored in LOG, feed it the logged inputs tick by tick with the logged
-    /// clock, and compare every output with the logged one bit for bit.
-    /// Exit 0: identical; 1: a difference (the first is printed: tick, time,
+    /// Replay a flight log bit for bit, or a what-if with changed files.
+    ///
+    /// Rebuild the flight stack from the configuration stored in LOG, feed
+    /// it the logged inputs tick by tick with the logged clock, and compare
+    /// every output with the logged one bit for bit. Exit 0: identical; 1: a difference (the first is printed: tick, time,
     /// field, logged, replayed); 2: the log cannot be replayed.
     ///
     /// With --config (what-if) the inputs go through a changed flight stack

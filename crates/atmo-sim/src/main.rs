@@ -23,15 +23,18 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
-    /// Print what the physics of a robot file gives: mass, thrust-to-weight,
-    /// critical angle, in-flight tilt limit, hover trims and linkage travel.
+    /// Print what the physics of a robot file gives.
+    ///
+    /// Mass, thrust-to-weight, critical angle, in-flight tilt limit, hover
+    /// trims and linkage travel.
     Physics {
         /// Robot parameter file (TOML, see config/atmo.toml).
         #[arg(long, default_value = "config/atmo.toml")]
         robot: PathBuf,
     },
-    /// Fly a scenario in closed loop: the flight stack (mode machine +
-    /// RTI MPC) against the built-in plant (ground effect, motor lag, sensor
+    /// Fly a scenario in closed loop, once or as a Monte Carlo.
+    ///
+    /// The flight stack (mode machine + RTI MPC) against the built-in plant (ground effect, motor lag, sensor
     /// noise, wheel contact...). Writes into OUT/<scenario name>/:
     /// summary.json (touchdown tilt, impact speed, max mean thrust, crash,
     /// drive distance, mode sequence, MPC failures, times) and figure.png (the
@@ -98,8 +101,10 @@ enum Command {
     // The help text is the doc comment of `atmo_explain::cli::Args` (a doc
     // comment here would replace it).
     Explain(atmo_explain::cli::Args),
-    /// Software in the loop: run the plant in real time on the robot's
-    /// transports, for the unmodified daemon (`atmo-daemon run`) to fly.
+    /// Software in the loop: the plant in real time for `atmo-daemon run`.
+    ///
+    /// Runs the plant on the robot's transports, for the unmodified daemon
+    /// to fly.
     /// Plays every driver on the iceoryx2 driver ports (takes thruster,
     /// tilt-velocity and wheel-rate commands; publishes the tilt encoder,
     /// ground contact and heartbeats) and the motion-capture system and
