@@ -75,8 +75,9 @@ enum Command {
     ///
     /// Rebuild the flight stack from the configuration stored in LOG, feed
     /// it the logged inputs tick by tick with the logged clock, and compare
-    /// every output with the logged one bit for bit. Exit 0: identical; 1: a difference (the first is printed: tick, time,
-    /// field, logged, replayed); 2: the log cannot be replayed.
+    /// every output with the logged one bit for bit. Exit 0: identical; 1: a
+    /// difference (the first is printed: tick, time, field, logged,
+    /// replayed); 2: the log cannot be replayed.
     ///
     /// With --config (what-if) the inputs go through a changed flight stack
     /// and --out gets a per-tick comparison (whatif.csv, whatif.png) and the
