@@ -7,11 +7,8 @@
 use std::path::Path;
 use std::sync::Arc;
 
-use atmo_core::ConfigFile as _;
-use atmo_core::ground_effect::ThrustGainSurface;
+use atmo_core::ground_effect::{GroundEffect, GroundEffectConfig, ThrustGainSurface};
 use atmo_mpc::settings::GroundEffectSource;
-use atmo_plant::config::PlantConfig;
-use atmo_plant::ground_effect::GroundEffect;
 
 use crate::error::{DaemonError, Result};
 
@@ -34,9 +31,9 @@ pub fn ground_surface(source: &GroundEffectSource) -> Result<Option<Surface>> {
 /// The enabled `[effects.ground_effect]` of a plant file's `text` (read
 /// from `source`, named in errors).
 pub fn surface_from_text(text: &str, source: &Path) -> Result<Surface> {
-    let plant = PlantConfig::from_toml_str(text, source)
+    let config = GroundEffectConfig::from_plant_file(text, source)
         .map_err(|e| DaemonError::Setup(format!("model.ground_effect: {e}")))?;
-    let Some(config) = plant.effects.ground_effect.filter(|g| g.enabled) else {
+    let Some(config) = config else {
         return Err(DaemonError::Setup(format!(
             "model.ground_effect: {} has no enabled [effects.ground_effect]",
             source.display()

@@ -11,11 +11,11 @@ use crate::output::write_all;
 use crate::recording::Recording;
 use crate::synth::{Flight, Profile, record};
 use crate::{ExplainError, Options, Progress, explain_with_progress};
+use atmo_core::ground_effect::table::GroundEffectConfig;
 use atmo_plant::config::{
     BatterySagConfig, ComOffsetConfig, DragConfig, EffectsConfig, MassErrorConfig, MotorLagConfig,
     PlantConfig, SensorsConfig, WindConfig,
 };
-use atmo_plant::ground_effect::GroundEffectConfig;
 
 /// Discrepancy finder: where a recording and the model disagree, which
 /// missing physics explains it, and the fit with it.

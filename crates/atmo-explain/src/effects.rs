@@ -234,8 +234,8 @@ pub fn ge_basis(h: f64, varphi: f64, scale: f64, out: &mut [f64]) {
     }
     if wc < 1.0 {
         let tilts: Vec<f64> = GE_TILTS_DEG.iter().map(|d| d.to_radians()).collect();
-        let (i, wt) = atmo_plant::ground_effect::bracket(&tilts, varphi);
-        let (j, wh) = atmo_plant::ground_effect::bracket(&GE_HEIGHTS, h);
+        let (i, wt) = atmo_core::ground_effect::table::bracket(&tilts, varphi);
+        let (j, wh) = atmo_core::ground_effect::table::bracket(&GE_HEIGHTS, h);
         let s = scale * (1.0 - wc);
         for (ri, rw) in [(i, 1.0 - wt), (i + 1, wt)] {
             for (cj, cw) in [(j, 1.0 - wh), (j + 1, wh)] {

@@ -5,7 +5,7 @@
 use std::fmt::Write as _;
 
 use atmo_core::config::ArmInertiaConvention;
-use atmo_plant::ground_effect::GroundEffectConfig;
+use atmo_core::ground_effect::table::GroundEffectConfig;
 use nalgebra::DVector;
 
 use crate::effects::{self, DRAG_WIDTH, Effect, GE_HEIGHTS, GE_TILTS_DEG, Layout};

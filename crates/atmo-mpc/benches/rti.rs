@@ -12,9 +12,9 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use atmo_core::RobotConfig;
+use atmo_core::ground_effect::table::GroundEffect;
 use atmo_core::model::{Model, idx};
 use atmo_mpc::{FeedbackMethod, Formulation, Mpc, Outcome, QpSnapshot, TiltPlan};
-use atmo_plant::ground_effect::GroundEffect;
 use clarabel::solver::IPSolver;
 use criterion::{Criterion, criterion_group, criterion_main};
 use scenarios::{NAMES, scenario};

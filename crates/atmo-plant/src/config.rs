@@ -14,8 +14,8 @@ use atmo_core::config_file::{Checker, ConfigFile, default_true};
 use serde::Deserialize;
 
 use crate::error::{PlantError, Result};
-use crate::ground_effect::GroundEffectConfig;
 pub use crate::motor::ThrustCurveConfig;
+use atmo_core::ground_effect::GroundEffectConfig;
 pub use ground_contact::{GroundContactConfig, MAX_CONTACT_STIFFNESS};
 
 mod ground_contact;

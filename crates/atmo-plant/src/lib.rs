@@ -15,7 +15,8 @@
 //! `[effects.<name>]` of the plant file ([`config::PlantConfig`]); with every
 //! effect off the plant's accelerations are atmo-core's, bit for bit.
 //!
-//! - `ground_effect` ([`ground_effect`]): rotor i's thrust is multiplied by
+//! - `ground_effect` (atmo-core's [`atmo_core::ground_effect::GroundEffect`], the
+//!   controller's surface used as the truth): rotor i's thrust is multiplied by
 //!   `1 + g(h_i, varphi) + sigma(h_i, varphi) n_i(t)`, h_i the hub height
 //!   above the ground plane. Classical Cheeseman-Bennett law
 //!   `T/T_inf = 1 / (1 - (R_p / 4z)^2)` below 30 deg (z = h / cos varphi),
@@ -62,7 +63,6 @@ mod body;
 pub mod config;
 pub mod contact;
 pub mod error;
-pub mod ground_effect;
 pub mod motor;
 pub mod noise;
 pub mod plant;

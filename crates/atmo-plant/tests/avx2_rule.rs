@@ -26,10 +26,11 @@ const STEP_FILES: [(&str, &str, Option<&str>); 7] = [
     ("src/body.rs", include_str!("../src/body.rs"), None),
     ("src/noise.rs", include_str!("../src/noise.rs"), None),
     ("src/sensors.rs", include_str!("../src/sensors.rs"), None),
-    // The file's first half is the config type, read at start-up.
+    // atmo-core's surface, the plant's truth table: the file's first half is
+    // the config type, read at start-up.
     (
-        "src/ground_effect.rs",
-        include_str!("../src/ground_effect.rs"),
+        "../atmo-core/src/ground_effect/table.rs",
+        include_str!("../../atmo-core/src/ground_effect/table.rs"),
         Some("// AVX2 rule: from here to the end of the file, step code"),
     ),
 ];

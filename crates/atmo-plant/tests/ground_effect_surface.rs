@@ -1,7 +1,7 @@
 //! The ground-effect component returns the surface documented in
 //! docs/ground_effect.md, and that surface has the shape the paper reports.
 
-use atmo_plant::ground_effect::{GroundEffect, GroundEffectConfig, cheeseman_bennett};
+use atmo_core::ground_effect::table::{GroundEffect, GroundEffectConfig, cheeseman_bennett};
 
 const DOC: &str = include_str!("../../../docs/ground_effect.md");
 

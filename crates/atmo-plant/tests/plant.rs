@@ -3,12 +3,12 @@
 mod common;
 
 use atmo_core::config::ArmInertiaConvention;
+use atmo_core::ground_effect::table::GroundEffectConfig;
 use atmo_core::model::{Input, Model, State, idx};
 use atmo_plant::config::{
     BatterySagConfig, EffectsConfig, GroundContactConfig, MotorLagConfig, PlantConfig,
     TerrainConfig, TiltMechanismConfig,
 };
-use atmo_plant::ground_effect::GroundEffectConfig;
 use atmo_plant::plant::{Command, InitialState, Plant};
 use common::{level_at, plant_with, robot};
 use rand::{Rng, SeedableRng};
@@ -274,7 +274,7 @@ fn ground_effect_scales_the_thrust_by_the_documented_surface() {
         ground_effect: Some(ge.clone()),
         ..EffectsConfig::none()
     };
-    let surface = atmo_plant::ground_effect::GroundEffect::new(&ge);
+    let surface = atmo_core::ground_effect::table::GroundEffect::new(&ge);
     let model = truth_model();
     for tilt_deg in [0.0_f64, 40.0, 50.0, 70.0] {
         let tilt = tilt_deg.to_radians();

@@ -4,7 +4,7 @@
 //! notes on how far the results can be trusted. Assembled into the
 //! [`Explanation`].
 
-use atmo_plant::ground_effect::GroundEffect;
+use atmo_core::ground_effect::table::GroundEffect;
 
 use crate::data::CHANNELS;
 use crate::effects::Effect;

@@ -4,6 +4,7 @@
 // Helpers outside #[test] functions unwrap too (clippy.toml allows it in tests only).
 #![allow(clippy::unwrap_used)]
 
+use atmo_core::ground_effect::table::GroundEffectConfig;
 use atmo_core::{ConfigFile, RobotConfig};
 use atmo_explain::data::Prepared;
 use atmo_explain::output::write_all;
@@ -12,7 +13,6 @@ use atmo_explain::synth::{Flight, Profile, record};
 use atmo_explain::{Options, explain};
 use atmo_plant::PlantTemplate;
 use atmo_plant::config::{EffectsConfig, PlantConfig, SensorsConfig};
-use atmo_plant::ground_effect::GroundEffectConfig;
 
 #[test]
 fn fitted_ground_effect_makes_a_replayed_landing_match_better() {

@@ -7,6 +7,7 @@
 // Helpers outside #[test] functions unwrap too (clippy.toml allows it in tests only).
 #![allow(clippy::unwrap_used)]
 
+use atmo_core::ground_effect::table::{GroundEffect, GroundEffectConfig};
 use atmo_core::{ConfigFile, RobotConfig};
 use atmo_explain::data::{CHANNEL_UNITS, CHANNELS};
 use atmo_explain::synth::{Flight, Profile, record};
@@ -15,7 +16,6 @@ use atmo_plant::config::{
     ComOffsetConfig, DragConfig, EffectsConfig, MotorLagConfig, PlantConfig, SensorsConfig,
     WindConfig,
 };
-use atmo_plant::ground_effect::{GroundEffect, GroundEffectConfig};
 
 /// The plant: the robot file's own model (same arm-inertia reading, so that
 /// "nothing concealed" means nothing) plus `effects` and realistic sensors.

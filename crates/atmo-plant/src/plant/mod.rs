@@ -44,9 +44,9 @@ use crate::config::{
 };
 use crate::contact::{ContactLaw, Plane, WheelLanes};
 use crate::error::{PlantError, Result};
-use crate::ground_effect::{GroundEffect, TiltSlice};
 use crate::noise::{GaussMarkov, rng, stream};
 use crate::sensors::{Estimate, Mocap};
+use atmo_core::ground_effect::table::{GroundEffect, TiltSlice};
 use effects::{Drive, Wind};
 
 /// Contact points: the four wheels (rotor order), then the 8 base-box corners.

@@ -21,11 +21,11 @@
 use std::path::PathBuf;
 
 use atmo_core::RobotConfig;
+use atmo_core::ground_effect::table::GroundEffectConfig;
 use atmo_explain::synth::{Flight, Profile, record};
 use atmo_explain::{Options, explain};
 use atmo_mpc::settings::GroundEffectSource;
 use atmo_plant::config::{PlantConfig, SensorsConfig};
-use atmo_plant::ground_effect::GroundEffectConfig;
 use atmo_sim::closed_loop::{ControllerConfig, fly};
 use atmo_sim::monte_carlo::randomized;
 use atmo_sim::scenario::Scenario;

@@ -23,11 +23,11 @@
 
 use std::path::Path;
 
-use atmo_core::config_file::{Checker, default_true};
-use atmo_core::ground_effect::{GainPartials, ThrustGainSurface};
+use super::{GainPartials, ThrustGainSurface};
+use crate::config_file::{Checker, default_true};
 use serde::Deserialize;
 
-use crate::error::Result;
+use crate::Result;
 
 /// Heights of the default table (m of rotor hub above the ground plane).
 pub const DEFAULT_HEIGHTS: [f64; 6] = [0.25, 0.35, 0.45, 0.55, 0.65, 0.72];
@@ -115,6 +115,20 @@ impl Default for GroundEffectConfig {
     }
 }
 
+/// A plant file's `[effects.ground_effect]` and nothing else of it: the
+/// controller reads a plant file (`config/plant.toml`, a `fitted_effects.toml`)
+/// for its surface only, so the other sections are the plant's to check.
+#[derive(Deserialize)]
+struct PlantFileEffects {
+    #[serde(default)]
+    effects: EffectsGroundEffect,
+}
+
+#[derive(Deserialize, Default)]
+struct EffectsGroundEffect {
+    ground_effect: Option<GroundEffectConfig>,
+}
+
 impl GroundEffectConfig {
     /// The same surface with the table's mean gains scaled by `scale` (the
     /// classical law below 30 deg and the spreads unchanged) and the tilt
@@ -133,6 +147,22 @@ impl GroundEffectConfig {
         }
         out.classical_below_deg += shift_deg;
         out
+    }
+
+    /// The enabled `[effects.ground_effect]` of a plant file's `text` (read
+    /// from `file`, named in errors), checked; `None` if it has none or it
+    /// is disabled.
+    ///
+    /// # Errors
+    /// Bad TOML, an unknown or mistyped key of the section (with line and
+    /// key), a value out of range.
+    pub fn from_plant_file(text: &str, file: &Path) -> Result<Option<Self>> {
+        let parsed: PlantFileEffects = crate::config_file::parse_toml(text, file)?;
+        let Some(config) = parsed.effects.ground_effect.filter(|g| g.enabled) else {
+            return Ok(None);
+        };
+        config.validate(&Checker::new(file), "effects.ground_effect")?;
+        Ok(Some(config))
     }
 
     /// Checks the table's shape and values; `prefix` is the key of the section.

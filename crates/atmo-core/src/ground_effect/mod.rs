@@ -13,15 +13,21 @@
 //! dh_i/dpitch = -(dR/dpitch r_i)_z,  dh_i/droll = -(dR/droll r_i)_z  (yaw: 0)
 //! ```
 //!
-//! The surface `g` itself lives with the plant (atmo-plant's
-//! `GroundEffect`, the same table and law the simulator flies through); this
-//! module needs only its value and partials, through [`ThrustGainSurface`].
+//! The surface `g` is [`table::GroundEffect`] (the classical law, the
+//! table after the paper's Fig. 3C and their blend, [`GroundEffectConfig`]),
+//! the one the MPC predicts with and the plant flies through as its truth;
+//! the dynamics need only its value and partials, through
+//! [`ThrustGainSurface`].
 //! RK4 and its exact sensitivities are shared with the nominal body
 //! (atmo-core's `rk4_step` and `rk4_step_sensitivity` over [`Dynamics`]).
+
+pub mod table;
 
 use std::fmt::Debug;
 
 use nalgebra::Vector3;
+
+pub use table::{GroundEffect, GroundEffectConfig};
 
 use crate::model::{
     Dynamics, Input, InputJacobian, Linearization, State, TiltPartial, TiltedBody, idx, rk4_step,
@@ -223,7 +229,7 @@ mod tests {
     }
 
     fn model() -> Model {
-        let text = include_str!("../../../config/atmo.toml");
+        let text = include_str!("../../../../config/atmo.toml");
         Model::new(&RobotConfig::from_toml_str(text, "config/atmo.toml").unwrap())
     }
 
