@@ -37,7 +37,7 @@ fn wheel_landing(c: &mut Criterion) {
     group.finish();
 }
 
-/// The flare's touchdown prediction (`atmo_daemon::flare::predict_touchdown`),
+/// The flare's touchdown prediction (`atmo_flight::flare::predict_touchdown`),
 /// run in each preparation of a flare's approach until its decision: from
 /// 57 deg rolled 3 deg, on the default ground-effect surface,
 /// the rotors spinning up from 0.88 with the motors' lag, 5 ms steps (as
@@ -45,8 +45,8 @@ fn wheel_landing(c: &mut Criterion) {
 fn flare_prediction(c: &mut Criterion) {
     use atmo_core::model::{Input, State, idx};
     use atmo_core::{Model, RobotConfig};
-    use atmo_daemon::flare::{TouchdownModel, predict_touchdown};
-    use atmo_daemon::ground_model::ground_surface;
+    use atmo_flight::flare::{TouchdownModel, predict_touchdown};
+    use atmo_flight::ground_model::ground_surface;
     use atmo_mpc::settings::GroundEffectSource;
 
     let robot = RobotConfig::atmo();

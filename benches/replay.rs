@@ -17,10 +17,10 @@ use std::hint::black_box;
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
-use atmo_daemon::control_loop::TickTiming;
-use atmo_daemon::flight_log::TickChannels;
-use atmo_daemon::replay::{CutReplay, RecordedFlight, replay};
-use atmo_daemon::telemetry::status_message;
+use atmo_flight::control_loop::TickTiming;
+use atmo_flight::flight_log::TickChannels;
+use atmo_flight::replay::{CutReplay, RecordedFlight, replay};
+use atmo_flight::telemetry::status_message;
 use atmo_io::mcap_log::{LoggerOptions, McapLogger};
 use atmo_sim::closed_loop::{ControllerConfig, STATUS_TOPIC, TickRecord, fly_logged};
 use atmo_sim::scenario::Scenario;

@@ -316,7 +316,7 @@ fn attitude_at_the_touchdown(scenario: &Scenario, controller: &ControllerConfig)
     use atmo_core::model::idx;
     let mut last = f64::NAN;
     let summary = fly(scenario, controller, |tick| {
-        if tick.outputs.status.mode == atmo_daemon::Mode::Transition {
+        if tick.outputs.status.mode == atmo_flight::Mode::Transition {
             let angle = tick.truth[idx::ROLL]
                 .abs()
                 .max(tick.truth[idx::PITCH].abs());

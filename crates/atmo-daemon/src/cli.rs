@@ -7,8 +7,8 @@ use std::path::PathBuf;
 
 use atmo_core::ConfigFile;
 
-use crate::error::Result;
 use crate::onboard::DaemonConfig;
+use atmo_flight::error::Result;
 
 /// `--config`: the daemon's config file.
 #[derive(Debug, Clone, clap::Args)]

@@ -1,64 +1,18 @@
-//! atmo-daemon: the flight stack and the onboard control loop.
+//! atmo-daemon: the onboard binary around atmo-flight's control loop.
 //!
-//! - [`arming`]: the arming checks (estimate rate, radio, drivers, tilt
-//!   encoder against the command, configuration) and their verdict.
-//! - [`modes`]: the paper's mode state machine as an explicit transition table.
-//! - [`flight_stack`]: `FlightStack::step(inputs)` (pure, deterministic, the
-//!   clock is an input): input validation, mode machine, tilt law with limits,
-//!   MPC feedback (thrusters), drive controller (wheels), failsafes, status;
-//!   its inputs and outputs are the types of [`step_io`].
-//! - [`observer`]: disturbance observer that makes the MPC offset-free.
-//! - [`ground_model`]: the ground-effect surface of the MPC's model, from its settings.
-//! - [`control_loop`]: the one tick (gather -> step -> emit -> prepare)
-//!   with absolute deadlines and per-tick timing, and the 150 Hz control
-//!   thread that runs it; the simulator runs the same tick.
-//! - [`inputs`]: how a tick's inputs are made of what arrived (newest
-//!   estimate, pilot with staleness, drive command, encoder, contact,
-//!   driver liveness, ground height), shared by every `TickIo`.
 //! - [`onboard`]: the onboard binary's I/O (ROS 2, iceoryx2 driver ports,
-//!   MCAP log) around the control thread, and `config/daemon.toml`.
-//! - [`flight_log`]: what a flight log holds for a replay (per-tick inputs
-//!   and status, the configuration files) and how it is written.
-//! - [`replay`]: a flight log's inputs through a rebuilt flight stack,
-//!   every output compared bit for bit with the logged one (and what-if).
-//! - [`whatif`]: a what-if replay's per-tick comparison (CSV, PNG overlay,
-//!   largest differences).
+//!   MCAP logger thread) around the control thread, and `config/daemon.toml`.
 //! - [`preflight`]: the arming checks and a props-off tilt sweep on the
 //!   robot's transports, as a pass/fail table (`atmo-daemon preflight`).
-//! - [`rc`]: the radio (PX4's `InputRc`) as a pilot source: channels,
-//!   ranges, switches, kill latch (the daemon config's `[rc]`).
-//! - [`telemetry`]: the tick's status as the `atmo_msgs/MpcStatus` message.
-//! - [`settings`], read from `config/flight.toml`.
+//! - `cli` (feature `cli-args`): the command-line argument groups the
+//!   binaries share (`atmo-sim serve` reads the same daemon config).
 //!
-//! The library is the flight stack and the control loop; the `atmo-daemon`
+//! The flight software itself (flight stack, mode machine, landing
+//! decision, control loop, replay) is the `atmo-flight` library; the
 //! binary's own dependencies (clap, signal-hook, tracing, anyhow) are the
 //! default `cli` feature.
-//! - `cli` (feature `cli-args`): the command-line argument groups the binaries share.
 
-pub mod arming;
 #[cfg(feature = "cli-args")]
 pub mod cli;
-pub mod control_loop;
-pub mod error;
-pub mod flare;
-pub mod flight_log;
-pub mod flight_stack;
-pub mod ground_model;
-pub mod inputs;
-pub mod modes;
-pub mod observer;
 pub mod onboard;
 pub mod preflight;
-pub mod rc;
-pub mod replay;
-pub mod settings;
-pub mod step_io;
-pub mod telemetry;
-pub mod whatif;
-
-pub use error::{DaemonError, Result};
-pub use flight_stack::{
-    Estimate, FlightStack, PilotInput, RejectCounters, SolverState, Status, StepInputs, StepOutputs,
-};
-pub use modes::Mode;
-pub use settings::FlightSettings;

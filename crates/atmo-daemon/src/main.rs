@@ -6,11 +6,11 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use anyhow::{Context, Result, bail};
-use atmo_daemon::Mode;
 use atmo_daemon::cli::DaemonConfigArg;
-use atmo_daemon::control_loop::ControlThread;
-use atmo_daemon::flight_log::{FlightConfig, FlightConfigFiles, TickChannels};
 use atmo_daemon::onboard::{DaemonConfig, OnboardIo, OnboardSettings, OnboardShared};
+use atmo_flight::Mode;
+use atmo_flight::control_loop::ControlThread;
+use atmo_flight::flight_log::{FlightConfig, FlightConfigFiles, TickChannels};
 use atmo_io::mcap_log::McapLogger;
 use atmo_io::msg::DiagnosticArray;
 use atmo_io::ros2::{Ros2Node, Ros2StartOptions};
@@ -149,7 +149,7 @@ fn replay_command(
     out: &std::path::Path,
     status_topic: &str,
 ) -> Result<bool> {
-    use atmo_daemon::replay::{CutReplay, RecordedFlight, replay};
+    use atmo_flight::replay::{CutReplay, RecordedFlight, replay};
     let flight = RecordedFlight::read(log, status_topic)?;
     let mut files = flight.files.clone();
     if let Some(path) = what_if {
@@ -160,7 +160,7 @@ fn replay_command(
     let config = RecordedFlight::config(&files)
         .with_context(|| format!("the configuration to replay {} with", log.display()))?;
     let started = Instant::now();
-    let mut table = atmo_daemon::whatif::WhatIfTable::default();
+    let mut table = atmo_flight::whatif::WhatIfTable::default();
     // A what-if's solves are other solves: none is cut (see `CutReplay`).
     let cuts = if what_if.is_some() {
         CutReplay::None
@@ -208,13 +208,41 @@ fn replay_command(
     }
     if what_if.is_some() {
         table.write(out)?;
-        println!("{}", atmo_daemon::whatif::OPEN_LOOP_NOTE);
+        write_whatif_figure(&table, out)?;
+        println!("{}", atmo_flight::whatif::OPEN_LOOP_NOTE);
         for line in table.largest_differences() {
             println!("  {line}");
         }
         println!("wrote {}", out.display());
     }
     Ok(report.identical())
+}
+
+/// `whatif.png` in `out`: altitude, tilt, mean thrust and mode, logged
+/// against what-if.
+fn write_whatif_figure(
+    table: &atmo_flight::whatif::WhatIfTable,
+    out: &std::path::Path,
+) -> Result<()> {
+    use atmo_flight::whatif::mean_thrust;
+    use atmo_io::review::figure::{Overlay, OverlayPanel, write_overlay_figure};
+    let panel = |label: &'static str, (logged, replayed): (Vec<f64>, Vec<f64>)| OverlayPanel {
+        label,
+        logged,
+        replayed,
+    };
+    let overlay = Overlay {
+        title: "what-if replay (open loop w.r.t. the plant): logged vs what-if",
+        time: table.time().to_vec(),
+        panels: vec![
+            panel("altitude [m]", table.series(|s| s.height)),
+            panel("tilt varphi [deg]", table.series(|s| s.varphi.to_degrees())),
+            panel("mean thrust (normalized)", table.series(mean_thrust)),
+            panel("mode (code)", table.series(|s| f64::from(s.mode.code()))),
+        ],
+    };
+    write_overlay_figure(&out.join("whatif.png"), &overlay)?;
+    Ok(())
 }
 
 /// Everything loaded and validated before anything starts.
@@ -319,7 +347,7 @@ fn run(arg: &DaemonConfigArg, log_path: Option<PathBuf>, duration: Option<f64>) 
     let l = load(arg)?;
     let path = &arg.config;
     let stack = l.parsed.stack()?;
-    let period = atmo_daemon::control_loop::tick_period(stack.period());
+    let period = atmo_flight::control_loop::tick_period(stack.period());
 
     // SIGINT/SIGTERM only set a flag: the main thread shuts down in order.
     let terminate = Arc::new(AtomicBool::new(false));
@@ -405,12 +433,12 @@ fn run(arg: &DaemonConfigArg, log_path: Option<PathBuf>, duration: Option<f64>) 
         let arming = shared.arming_failures.load(Ordering::Relaxed);
         if shared.started.load(Ordering::Relaxed) && arming != reported_arming {
             reported_arming = arming;
-            let status = atmo_daemon::arming::diagnostics(arming, flight_problem);
+            let status = atmo_flight::arming::diagnostics(arming, flight_problem);
             tracing::info!(verdict = %status.message, "arming checks");
         }
         if Instant::now() >= next_diagnostics {
             next_diagnostics = Instant::now() + diagnostics_period;
-            let status = atmo_daemon::arming::diagnostics(arming, flight_problem);
+            let status = atmo_flight::arming::diagnostics(arming, flight_problem);
             ros_out.try_publish_diagnostics(DiagnosticArray {
                 status: vec![status],
                 ..DiagnosticArray::default()

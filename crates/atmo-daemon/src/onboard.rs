@@ -20,7 +20,7 @@
 //! the wall clock, or with `[ros2] use_sim_time` the newest `/clock`
 //! ([`atmo_io::ros2::Ros2Inputs::ros_time_ns`]).
 //!
-//! Input semantics (the shared [`crate::inputs::InputLatch`]): the estimate's
+//! Input semantics (the shared [`atmo_flight::inputs::InputLatch`]): the estimate's
 //! age is measured from when the ROS 2 thread accepted it (message stamps
 //! come from another clock, ROS time; the node checks they increase); the
 //! pilot stream goes stale after `pilot_timeout_ms`, a drive command counts
@@ -45,14 +45,14 @@ use atmo_io::msg::{ActuatorMotors, IoHealth, OffboardControlMode};
 use atmo_io::ros2::{Ros2Config, Ros2Inputs, Ros2Publisher};
 use serde::Deserialize;
 
-use crate::arming::{ArmingMonitor, ArmingObservation, ArmingSettings};
-use crate::control_loop::{TickIo, TickTiming};
-use crate::error::{DaemonError, Result};
-use crate::flight_log::TickChannels;
-use crate::flight_stack::{Estimate, StepInputs, StepOutputs};
-use crate::inputs::{DriveCommand, InputLatch, InputSettings};
-use crate::rc::{RcConfig, RcPilot};
-use crate::telemetry::pilot_from_message;
+use atmo_flight::arming::{ArmingMonitor, ArmingObservation, ArmingSettings};
+use atmo_flight::control_loop::{TickIo, TickTiming};
+use atmo_flight::error::{FlightError, Result};
+use atmo_flight::flight_log::TickChannels;
+use atmo_flight::flight_stack::{Estimate, StepInputs, StepOutputs};
+use atmo_flight::inputs::{DriveCommand, InputLatch, InputSettings};
+use atmo_flight::rc::{RcConfig, RcPilot};
+use atmo_flight::telemetry::pilot_from_message;
 
 /// `config/daemon.toml`: what the onboard binary loads. Paths are relative
 /// to the folder of the file that names them.
@@ -98,11 +98,11 @@ pub struct DaemonConfig {
 }
 
 fn default_input_timeout_ms() -> u64 {
-    crate::inputs::DEFAULT_INPUT_TIMEOUT_MS
+    atmo_flight::inputs::DEFAULT_INPUT_TIMEOUT_MS
 }
 
 fn default_ground_timeout_ms() -> u64 {
-    crate::inputs::DEFAULT_GROUND_TIMEOUT_MS
+    atmo_flight::inputs::DEFAULT_GROUND_TIMEOUT_MS
 }
 
 /// `[log]`: the MCAP flight log.
@@ -148,7 +148,7 @@ impl LogConfig {
 }
 
 impl ConfigFile for DaemonConfig {
-    type Error = DaemonError;
+    type Error = FlightError;
 
     /// The robot, flight and MPC paths are relative to the folder of `file`.
     fn locate(&mut self, file: &Path) {
@@ -193,10 +193,10 @@ impl ConfigFile for DaemonConfig {
         }
         self.ros2
             .validate(file)
-            .map_err(|e| DaemonError::Setup(format!("[ros2]: {e}")))?;
+            .map_err(|e| FlightError::Setup(format!("[ros2]: {e}")))?;
         self.drivers
             .validate(file)
-            .map_err(|e| DaemonError::Setup(format!("[drivers]: {e}")))?;
+            .map_err(|e| FlightError::Setup(format!("[drivers]: {e}")))?;
         self.rc.validate(file)?;
         self.arming.validate(file)?;
         let topics = &self.ros2.topics;
@@ -260,7 +260,7 @@ pub struct OnboardShared {
     pub port_send_errors: AtomicU64,
     /// Status records the logger dropped (queue full).
     pub log_dropped: AtomicU64,
-    /// Arming checks failing now (bits of [`crate::arming::ArmingCheck`]).
+    /// Arming checks failing now (bits of [`atmo_flight::arming::ArmingCheck`]).
     pub arming_failures: AtomicU8,
     /// Set once the first tick has run.
     pub started: AtomicBool,
@@ -496,7 +496,7 @@ impl TickIo for OnboardIo {
             self.ros_out
                 .try_publish_motors(&ActuatorMotors::from_thrust(us, outputs.thrust));
         }
-        let mut status = crate::telemetry::status_message(self.tick, inputs, outputs, timing);
+        let mut status = atmo_flight::telemetry::status_message(self.tick, inputs, outputs, timing);
         status.io = self.io_health();
         status.ros_stamp_ns = self.tick_ros_ns;
         // Both drop and count when full; neither blocks.

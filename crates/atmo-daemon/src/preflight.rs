@@ -23,13 +23,13 @@ use atmo_core::{Linkage, RobotConfig};
 use atmo_io::drivers::{DriverId, FlightPorts, monotonic_ns};
 use atmo_io::ros2::Ros2Inputs;
 
-use crate::arming::{ArmingCheck, ArmingMonitor, ArmingObservation};
-use crate::error::{DaemonError, Result};
-use crate::flight_stack::Estimate;
-use crate::inputs::{Assembled, InputLatch};
 use crate::onboard::{DaemonConfig, OnboardSettings};
-use crate::rc::RcPilot;
-use crate::telemetry::pilot_from_message;
+use atmo_flight::arming::{ArmingCheck, ArmingMonitor, ArmingObservation};
+use atmo_flight::error::{FlightError, Result};
+use atmo_flight::flight_stack::Estimate;
+use atmo_flight::inputs::{Assembled, InputLatch};
+use atmo_flight::rc::RcPilot;
+use atmo_flight::telemetry::pilot_from_message;
 
 /// A sweep leg has arrived within this of its target, deg.
 pub const ARRIVAL_DEG: f64 = 1.5;
@@ -106,7 +106,7 @@ impl Preflight {
         estimate_timeout: f64,
     ) -> Result<Self> {
         let ports = FlightPorts::open(&config.drivers)
-            .map_err(|e| DaemonError::Setup(format!("driver ports: {e}")))?;
+            .map_err(|e| FlightError::Setup(format!("driver ports: {e}")))?;
         let settings = OnboardSettings::new(config, estimate_timeout);
         let linkage = Linkage::from_config(&robot.linkage, robot.limits.tilt_max())?;
         let a = config.arming;

@@ -20,10 +20,10 @@ use std::time::{Duration, Instant};
 use atmo_core::RobotConfig;
 use atmo_core::alloc_counter::thread_allocations;
 use atmo_core::model::{State, idx};
-use atmo_daemon::control_loop::{TickIo, TickTiming};
-use atmo_daemon::flight_log::{INPUTS_TOPIC, TickChannels};
 use atmo_daemon::onboard::{OnboardIo, OnboardSettings, OnboardShared};
-use atmo_daemon::{Estimate, FlightSettings, FlightStack, PilotInput, StepInputs};
+use atmo_flight::control_loop::{TickIo, TickTiming};
+use atmo_flight::flight_log::{INPUTS_TOPIC, TickChannels};
+use atmo_flight::{Estimate, FlightSettings, FlightStack, PilotInput, StepInputs};
 use atmo_io::drivers::{DriverEndpoint, DriverId, DriverPortsConfig};
 use atmo_io::mcap_log::{LoggerOptions, McapLogger};
 use atmo_io::msg::{PilotInput as PilotMsg, TickInputs};
@@ -86,7 +86,7 @@ fn onboard_tick_io_allocates_nothing_of_its_own() {
         px4_offboard: true, // exercise every output
         estimate_timeout: 0.05,
         rc: None,
-        arming: atmo_daemon::arming::ArmingSettings::default(),
+        arming: atmo_flight::arming::ArmingSettings::default(),
         configuration_ok: true,
     };
     let mut io = OnboardIo::open(

@@ -151,7 +151,7 @@ pub fn config_toml(data: &[u8]) {
         1 => atmo_plant::PlantConfig::from_toml_str(text, file)
             .err()
             .map(|e| e.to_string()),
-        2 => atmo_daemon::FlightSettings::from_toml_str(text, file)
+        2 => atmo_flight::FlightSettings::from_toml_str(text, file)
             .err()
             .map(|e| e.to_string()),
         3 => atmo_daemon::onboard::DaemonConfig::from_toml_str(text, file)

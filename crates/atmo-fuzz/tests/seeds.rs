@@ -45,7 +45,7 @@ fn the_text_seeds_are_accepted() {
         let ok = match data[0] {
             0 => atmo_core::RobotConfig::from_toml_str(text, &file).is_ok(),
             1 => atmo_plant::PlantConfig::from_toml_str(text, &file).is_ok(),
-            2 => atmo_daemon::FlightSettings::from_toml_str(text, &file).is_ok(),
+            2 => atmo_flight::FlightSettings::from_toml_str(text, &file).is_ok(),
             3 => atmo_daemon::onboard::DaemonConfig::from_toml_str(text, &file).is_ok(),
             _ => atmo_mpc::MpcFile::from_toml_str(text, &file).is_ok(),
         };

@@ -32,7 +32,7 @@ use std::path::Path;
 
 use atmo_core::config_file::Checker;
 use atmo_core::model::Input;
-use atmo_daemon::Mode;
+use atmo_flight::Mode;
 use serde::Deserialize;
 
 use crate::error::Result;

@@ -2,7 +2,7 @@
 //! atmo-mpc) against the plant, tick by tick, with a summary of the landing.
 //!
 //! The flight stack runs in the daemon's own control loop
-//! ([`atmo_daemon::control_loop::ControlLoop`]) with a simulated clock and
+//! ([`atmo_flight::control_loop::ControlLoop`]) with a simulated clock and
 //! a simulated `TickIo` ([`crate::sim_io`]): every input it sees comes
 //! through the interface the onboard daemon uses.
 //!
@@ -16,10 +16,10 @@ use std::time::Instant;
 
 use atmo_core::RobotConfig;
 use atmo_core::model::{State, idx};
-use atmo_daemon::control_loop::{TickTiming, tick_period};
-use atmo_daemon::flight_log::{FlightConfig, FlightConfigFiles, TickChannels};
-use atmo_daemon::inputs::InputSettings;
-use atmo_daemon::{FlightSettings, FlightStack, Mode, StepInputs, StepOutputs};
+use atmo_flight::control_loop::{TickTiming, tick_period};
+use atmo_flight::flight_log::{FlightConfig, FlightConfigFiles, TickChannels};
+use atmo_flight::inputs::InputSettings;
+use atmo_flight::{FlightSettings, FlightStack, Mode, StepInputs, StepOutputs};
 use atmo_io::msg::{Mode as ModeMsg, MpcStatus, SimTruth};
 use atmo_io::review::figure::FlightTrace;
 use atmo_mpc::MpcSettings;
@@ -339,7 +339,7 @@ fn fly_until(
             tracker.on_control_tick(
                 mode_message(s.mode),
                 &tick.outputs.thrust,
-                (s.solver != atmo_daemon::SolverState::Idle).then_some(s.feedback_time),
+                (s.solver != atmo_flight::SolverState::Idle).then_some(s.feedback_time),
                 s.mpc_failures_total,
                 [
                     s.rejected.estimate,
@@ -444,7 +444,7 @@ pub fn fly_logged(
         controller,
         |r| {
             let message =
-                atmo_daemon::telemetry::status_message(tick, &r.inputs, &r.outputs, &r.timing);
+                atmo_flight::telemetry::status_message(tick, &r.inputs, &r.outputs, &r.timing);
             // Counted if dropped (queue full): reported as an error below.
             channels.log_tick(&log, tick, &r.inputs, &r.outputs, &message);
             tick += 1;

@@ -52,7 +52,7 @@ use std::path::Path;
 
 use atmo_core::config_file::Checker;
 use atmo_core::model::State;
-use atmo_daemon::Mode;
+use atmo_flight::Mode;
 use atmo_mpc::SolverCuts;
 use atmo_mpc::qp::cuts::MAX_CUTS;
 use serde::Deserialize;

@@ -306,9 +306,9 @@ fn serve(
         .progress_chars("=> "),
     );
     bar.set_message("waiting for the daemon to arm");
-    let mut progress = |t: f64, mode: Option<atmo_daemon::Mode>| {
+    let mut progress = |t: f64, mode: Option<atmo_flight::Mode>| {
         bar.set_position((t * 1000.0) as u64);
-        bar.set_message(mode.map_or("no status yet", atmo_daemon::Mode::name));
+        bar.set_message(mode.map_or("no status yet", atmo_flight::Mode::name));
     };
     let (summary, counters) = serve(&scenario, &options, &mut progress)?;
     bar.finish_and_clear();

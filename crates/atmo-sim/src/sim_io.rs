@@ -34,9 +34,9 @@ use std::cell::Cell;
 use std::time::Duration;
 
 use atmo_core::model::{Input, idx};
-use atmo_daemon::control_loop::{Clock, ControlLoop, TickIo, TickTiming};
-use atmo_daemon::inputs::{InputLatch, InputSettings};
-use atmo_daemon::{Estimate, FlightStack, PilotInput, StepInputs, StepOutputs};
+use atmo_flight::control_loop::{Clock, ControlLoop, TickIo, TickTiming};
+use atmo_flight::inputs::{InputLatch, InputSettings};
+use atmo_flight::{Estimate, FlightStack, PilotInput, StepInputs, StepOutputs};
 use atmo_plant::contact::Plane;
 use atmo_plant::plant::{Command, Plant};
 

@@ -25,8 +25,8 @@
 use std::time::{Duration, Instant};
 
 use atmo_core::model::Input;
-use atmo_daemon::Mode;
-use atmo_daemon::telemetry::pilot_message;
+use atmo_flight::Mode;
+use atmo_flight::telemetry::pilot_message;
 use atmo_io::drivers::{DriverEndpoint, DriverId, DriverPortsConfig};
 use atmo_io::msg::{MpcStatus, PilotInput as PilotMsg};
 use atmo_io::ros2::{Ros2Config, Ros2StartOptions, SitlNode};

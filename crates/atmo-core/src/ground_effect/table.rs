@@ -21,6 +21,11 @@
 //! (correlation time `correlation_time`), so the thrust of rotor i is
 //! `kT u_i (1 + mean(h_i, varphi) + std(h_i, varphi) n_i(t))`.
 
+// What the plant's step calls here is `inline(always)`: atmo-plant compiles
+// its step twice, portable and AVX2, and only code inlined into it gets the
+// AVX2 copy (atmo-plant's `plant::step` and its `avx2_rule` test).
+#![allow(clippy::inline_always)]
+
 use std::path::Path;
 
 use super::{GainPartials, ThrustGainSurface};
@@ -191,24 +196,20 @@ impl GroundEffectConfig {
         )?;
         for (name, table, min) in [("gain", &self.gain, -0.99), ("std", &self.std, 0.0)] {
             if table.len() != self.tilts_deg.len() {
-                return Err(c
-                    .fail(
-                        &format!("{prefix}.{name}"),
-                        format!("{} rows (one per tilt)", self.tilts_deg.len()),
-                        table.len(),
-                    )
-                    .into());
+                return Err(c.fail(
+                    &format!("{prefix}.{name}"),
+                    format!("{} rows (one per tilt)", self.tilts_deg.len()),
+                    table.len(),
+                ));
             }
             for (r, row) in table.iter().enumerate() {
                 let key = format!("{prefix}.{name}[{r}]");
                 if row.len() != self.heights.len() {
-                    return Err(c
-                        .fail(
-                            &key,
-                            format!("{} entries (one per height)", self.heights.len()),
-                            row.len(),
-                        )
-                        .into());
+                    return Err(c.fail(
+                        &key,
+                        format!("{} entries (one per height)", self.heights.len()),
+                        row.len(),
+                    ));
                 }
                 for v in row {
                     c.within(&key, *v, min, 10.0)?;
@@ -221,15 +222,13 @@ impl GroundEffectConfig {
 
 fn increasing(c: &Checker<'_>, key: &str, values: &[f64], min: f64, max: f64) -> Result<()> {
     if values.len() < 2 {
-        return Err(c.fail(key, "at least two values", values.len()).into());
+        return Err(c.fail(key, "at least two values", values.len()));
     }
     for v in values {
         c.within(key, *v, min, max)?;
     }
     if values.windows(2).any(|w| w[1] <= w[0]) {
-        return Err(c
-            .fail(key, "strictly increasing values", format!("{values:?}"))
-            .into());
+        return Err(c.fail(key, "strictly increasing values", format!("{values:?}")));
     }
     Ok(())
 }

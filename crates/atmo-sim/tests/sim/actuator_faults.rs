@@ -4,7 +4,7 @@
 //! the test pins the outcome, so a change to it is seen.
 #![allow(clippy::unwrap_used, reason = "test")]
 
-use atmo_daemon::Mode;
+use atmo_flight::Mode;
 
 use super::faults::{Flight, assert_clean_landing, clean, fly_with};
 

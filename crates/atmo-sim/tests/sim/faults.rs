@@ -8,7 +8,7 @@
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
-use atmo_daemon::{Mode, SolverState};
+use atmo_flight::{Mode, SolverState};
 use atmo_mpc::settings::FeedbackMethod;
 use atmo_sim::closed_loop::{ControllerConfig, Summary, TickRecord, fly};
 use atmo_sim::scenario::Scenario;
@@ -396,7 +396,7 @@ fn solver_time_limit_hit_repeatedly_cuts_counted_then_failsafe_past_the_grace() 
 #[cfg(target_os = "linux")]
 #[test]
 fn log_disk_full_flight_unaffected_records_dropped_and_counted() {
-    use atmo_daemon::flight_log::TickChannels;
+    use atmo_flight::flight_log::TickChannels;
     use atmo_io::mcap_log::{LoggerOptions, McapLogger};
     let (log, thread) = McapLogger::spawn("/dev/full", LoggerOptions::default()).unwrap();
     let channels = TickChannels::register(&log, "/atmo/status").unwrap();
@@ -404,7 +404,7 @@ fn log_disk_full_flight_unaffected_records_dropped_and_counted() {
     let mut ticks = Vec::new();
     let summary = fly(&scenario(""), &controller, |r| {
         let status =
-            atmo_daemon::telemetry::status_message(r.timing.tick, &r.inputs, &r.outputs, &r.timing);
+            atmo_flight::telemetry::status_message(r.timing.tick, &r.inputs, &r.outputs, &r.timing);
         channels.log_tick(&log, r.timing.tick, &r.inputs, &r.outputs, &status);
         ticks.push(*r);
     })
@@ -505,7 +505,7 @@ fn estimate_dropout_mid_morph_fails_safe_then_holds_below_z_star_until_tilted_an
 /// bit with its logged cuts (`atmo-daemon replay`), and differs without them.
 #[test]
 fn injected_solver_cuts_are_logged_and_a_replay_repeats_them() {
-    use atmo_daemon::replay::{CutReplay, RecordedFlight, replay};
+    use atmo_flight::replay::{CutReplay, RecordedFlight, replay};
     use atmo_sim::closed_loop::{STATUS_TOPIC, fly_logged};
     let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("issue21-faults");
     std::fs::create_dir_all(&dir).unwrap();
@@ -542,7 +542,7 @@ fn injected_solver_cuts_are_logged_and_a_replay_repeats_them() {
 /// does not.
 #[test]
 fn the_tilt_planning_solves_are_in_the_window_and_their_cuts_replay() {
-    use atmo_daemon::replay::{CutReplay, RecordedFlight, replay};
+    use atmo_flight::replay::{CutReplay, RecordedFlight, replay};
     use atmo_sim::closed_loop::{STATUS_TOPIC, fly_logged};
     let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("issue21-faults");
     std::fs::create_dir_all(&dir).unwrap();

@@ -12,8 +12,8 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
-use atmo_daemon::flight_log::INPUTS_TOPIC;
-use atmo_daemon::replay::{CutReplay, RecordedFlight, replay};
+use atmo_flight::flight_log::INPUTS_TOPIC;
+use atmo_flight::replay::{CutReplay, RecordedFlight, replay};
 use atmo_mpc::settings::GroundEffectSource;
 use atmo_sim::closed_loop::{ControllerConfig, STATUS_TOPIC, Summary, fly_logged};
 use atmo_sim::scenario::Scenario;

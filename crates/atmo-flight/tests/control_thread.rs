@@ -8,8 +8,8 @@ use std::time::Duration;
 
 use atmo_core::RobotConfig;
 use atmo_core::model::{State, idx};
-use atmo_daemon::control_loop::ControlThread;
-use atmo_daemon::{Estimate, FlightSettings, FlightStack, Mode, PilotInput, StepInputs};
+use atmo_flight::control_loop::ControlThread;
+use atmo_flight::{Estimate, FlightSettings, FlightStack, Mode, PilotInput, StepInputs};
 use atmo_mpc::MpcSettings;
 
 #[test]

@@ -19,7 +19,7 @@ use std::time::{Duration, Instant};
 
 use atmo_mpc::SolverCuts;
 
-use crate::error::{DaemonError, Result};
+use crate::error::{FlightError, Result};
 use crate::flight_stack::{FlightStack, StepInputs, StepOutputs};
 
 /// Monotonic time source, ns since an arbitrary origin.
@@ -350,7 +350,7 @@ impl ControlThread {
                     }
                 }
             })
-            .map_err(|e| DaemonError::Setup(format!("control thread: {e}")))?;
+            .map_err(|e| FlightError::Setup(format!("control thread: {e}")))?;
         match ready_rx.recv() {
             Ok(Ok(())) => Ok(Self {
                 stop,
@@ -359,9 +359,9 @@ impl ControlThread {
             }),
             Ok(Err(reason)) => {
                 let _ = join.join();
-                Err(DaemonError::Setup(format!("control thread I/O: {reason}")))
+                Err(FlightError::Setup(format!("control thread I/O: {reason}")))
             }
-            Err(_) => Err(DaemonError::Setup(
+            Err(_) => Err(FlightError::Setup(
                 "control thread ended before its I/O was ready".into(),
             )),
         }

@@ -195,29 +195,3 @@ fn diagnostics_name_every_check_and_the_failed_ones() {
     assert_eq!(value("radio"), Some("pass"));
     assert_eq!(value("configuration problem"), Some("no pilot source"));
 }
-
-#[test]
-fn the_configuration_check_finds_a_daemon_that_cannot_fly() {
-    use crate::onboard::DaemonConfig;
-    use atmo_core::ConfigFile as _;
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../config");
-    for name in ["daemon.toml", "daemon-robot.toml"] {
-        let config = DaemonConfig::load(dir.join(name)).unwrap();
-        assert_eq!(config.flight_problem(), None, "{name}");
-    }
-    let base = "robot = \"atmo.toml\"\nflight = \"flight.toml\"\nmpc = \"mpc.toml\"\n";
-    let file = dir.join("test.toml");
-    let cases = [
-        (
-            "[ros2.topics]\npilot = { name = \"/p\", type = \"atmo_msgs/msg/PilotInput\", enabled = false }\n",
-            "no pilot source",
-        ),
-        ("[drivers]\nrequired = [\"thrusters\"]\n", "lacks \"tilt\""),
-        ("[drivers]\nrequired = [\"tilt\"]\n", "no thruster path"),
-    ];
-    for (text, problem) in cases {
-        let config = DaemonConfig::from_toml_str(&format!("{base}{text}"), &file).unwrap();
-        let found = config.flight_problem().unwrap_or_default();
-        assert!(found.contains(problem), "{text}: {found}");
-    }
-}

@@ -3,7 +3,7 @@
 /// What the flight stack can refuse at start-up. Nothing in `step` returns
 /// an error: bad inputs are rejected, counted and reported in the status.
 #[derive(Debug, thiserror::Error)]
-pub enum DaemonError {
+pub enum FlightError {
     #[error(transparent)]
     Config(#[from] atmo_core::CoreError),
     #[error(transparent)]
@@ -21,4 +21,4 @@ pub enum DaemonError {
     },
 }
 
-pub type Result<T> = std::result::Result<T, DaemonError>;
+pub type Result<T> = std::result::Result<T, FlightError>;

@@ -17,7 +17,7 @@
 
 use std::path::Path;
 
-use atmo_daemon::replay::{CutReplay, RecordedFlight, replay};
+use atmo_flight::replay::{CutReplay, RecordedFlight, replay};
 
 /// The burst: tick 356 took the estimate accepted 39 us after tick 355's.
 const BURST_TICK: u64 = 356;

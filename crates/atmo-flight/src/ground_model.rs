@@ -10,7 +10,7 @@ use std::sync::Arc;
 use atmo_core::ground_effect::{GroundEffect, GroundEffectConfig, ThrustGainSurface};
 use atmo_mpc::settings::GroundEffectSource;
 
-use crate::error::{DaemonError, Result};
+use crate::error::{FlightError, Result};
 
 /// A shared surface, as the MPC takes it.
 pub type Surface = Arc<dyn ThrustGainSurface>;
@@ -22,7 +22,7 @@ pub fn ground_surface(source: &GroundEffectSource) -> Result<Option<Surface>> {
         GroundEffectSource::PlantDefault => Some(Arc::new(GroundEffect::default_surface())),
         GroundEffectSource::File(path) => {
             let text = atmo_core::config_file::read_config_file(path)
-                .map_err(|e| DaemonError::Setup(format!("model.ground_effect: {e}")))?;
+                .map_err(|e| FlightError::Setup(format!("model.ground_effect: {e}")))?;
             Some(surface_from_text(&text, path)?)
         }
     })
@@ -32,9 +32,9 @@ pub fn ground_surface(source: &GroundEffectSource) -> Result<Option<Surface>> {
 /// from `source`, named in errors).
 pub fn surface_from_text(text: &str, source: &Path) -> Result<Surface> {
     let config = GroundEffectConfig::from_plant_file(text, source)
-        .map_err(|e| DaemonError::Setup(format!("model.ground_effect: {e}")))?;
+        .map_err(|e| FlightError::Setup(format!("model.ground_effect: {e}")))?;
     let Some(config) = config else {
-        return Err(DaemonError::Setup(format!(
+        return Err(FlightError::Setup(format!(
             "model.ground_effect: {} has no enabled [effects.ground_effect]",
             source.display()
         )));

@@ -3,7 +3,7 @@
 
 use atmo_core::model::{Input, State, idx};
 use atmo_core::{Model, RobotConfig};
-use atmo_daemon::observer::{DisturbanceObserver, ObserverSettings};
+use atmo_flight::observer::{DisturbanceObserver, ObserverSettings};
 use nalgebra::Vector6;
 
 fn settings() -> ObserverSettings {
@@ -114,7 +114,7 @@ fn a_burst_of_estimates_does_not_throw_the_estimate() {
 fn with_the_mpcs_surface_the_ground_effect_is_not_learned_twice() {
     use atmo_core::ground_effect::GroundedBody;
     use atmo_core::model::rk4_step;
-    use atmo_daemon::ground_model::ground_surface;
+    use atmo_flight::ground_model::ground_surface;
     use atmo_mpc::settings::GroundEffectSource;
 
     let model = Model::new(&RobotConfig::atmo());

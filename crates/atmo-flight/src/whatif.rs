@@ -1,15 +1,14 @@
 //! What-if replay output: the logged and the changed flight stack's
-//! outputs tick by tick (`whatif.csv`), an overlay of altitude, tilt,
-//! thrust and mode (`whatif.png`), and the largest difference of every
-//! compared field.
+//! outputs tick by tick (`whatif.csv`, and the series `atmo-daemon replay`
+//! plots as `whatif.png`), and the largest difference of every compared
+//! field.
 
 use std::fmt::Write as _;
 use std::path::Path;
 
 use atmo_io::msg::MpcStatus;
-use atmo_io::review::figure::{Overlay, OverlayPanel, write_overlay_figure};
 
-use crate::error::{DaemonError, Result};
+use crate::error::{FlightError, Result};
 use crate::replay::{TickPair, compared_fields};
 
 /// Printed with every what-if result.
@@ -140,14 +139,15 @@ impl WhatIfTable {
         out
     }
 
-    /// Writes `whatif.csv`, `whatif.png` and `whatif.txt` (the largest
-    /// differences and the open-loop note) into `dir`.
+    /// Writes `whatif.csv` and `whatif.txt` (the largest differences and
+    /// the open-loop note) into `dir`; the overlay figure is the binary's
+    /// (`atmo-daemon replay`), which links the plotting.
     ///
     /// # Errors
-    /// A file that cannot be written, or too few ticks to plot.
+    /// A file that cannot be written.
     pub fn write(&self, dir: &Path) -> Result<()> {
         let write_err =
-            |file: &Path, e: std::io::Error| DaemonError::Setup(format!("{}: {e}", file.display()));
+            |file: &Path, e: std::io::Error| FlightError::Setup(format!("{}: {e}", file.display()));
         std::fs::create_dir_all(dir).map_err(|e| write_err(dir, e))?;
         let csv = dir.join("whatif.csv");
         std::fs::write(&csv, self.csv()).map_err(|e| write_err(&csv, e))?;
@@ -158,28 +158,24 @@ impl WhatIfTable {
             text.push('\n');
         }
         std::fs::write(&txt, text).map_err(|e| write_err(&txt, e))?;
-        let series = |f: fn(&MpcStatus) -> f64| {
-            (
-                self.logged.iter().map(f).collect::<Vec<_>>(),
-                self.replayed.iter().map(f).collect::<Vec<_>>(),
-            )
-        };
-        let panel = |label: &'static str, (logged, replayed): (Vec<f64>, Vec<f64>)| OverlayPanel {
-            label,
-            logged,
-            replayed,
-        };
-        let overlay = Overlay {
-            title: "what-if replay (open loop w.r.t. the plant): logged vs what-if",
-            time: self.time.clone(),
-            panels: vec![
-                panel("altitude [m]", series(|s| s.height)),
-                panel("tilt varphi [deg]", series(|s| s.varphi.to_degrees())),
-                panel("mean thrust (normalized)", series(|s| mean(&s.thrust))),
-                panel("mode (code)", series(|s| f64::from(s.mode.code()))),
-            ],
-        };
-        write_overlay_figure(&dir.join("whatif.png"), &overlay)?;
         Ok(())
     }
+
+    /// The replayed ticks' times, s.
+    pub fn time(&self) -> &[f64] {
+        &self.time
+    }
+
+    /// One quantity of every tick, logged and what-if.
+    pub fn series(&self, f: fn(&MpcStatus) -> f64) -> (Vec<f64>, Vec<f64>) {
+        (
+            self.logged.iter().map(f).collect(),
+            self.replayed.iter().map(f).collect(),
+        )
+    }
+}
+
+/// The mean of a tick's four thruster commands.
+pub fn mean_thrust(status: &MpcStatus) -> f64 {
+    mean(&status.thrust)
 }

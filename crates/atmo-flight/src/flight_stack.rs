@@ -19,7 +19,7 @@ use atmo_mpc::{AlphaSchedule, Mpc, MpcSettings, Outcome, SolverCuts, TiltPlan, w
 use nalgebra::Vector3;
 
 use crate::arming::ArmingCheck;
-use crate::error::{DaemonError, Result};
+use crate::error::{FlightError, Result};
 use crate::flare::{
     COMMITTED_THRUST_MAX, Decision, Flare, FlareSettings, Touchdown, TouchdownModel,
     predict_touchdown, predicted_vertical_force,
@@ -151,13 +151,13 @@ impl FlightStack {
         let alpha = AlphaSchedule::new(mpc.settings().cost.alpha_refresh_ticks);
         let lim = &robot.limits;
         if settings.modes.takeoff_max_tilt_deg > lim.tilt_flight_max_deg {
-            return Err(DaemonError::Setup(format!(
+            return Err(FlightError::Setup(format!(
                 "modes.takeoff_max_tilt_deg ({}) must not exceed the robot's limits.tilt_flight_max_deg ({})",
                 settings.modes.takeoff_max_tilt_deg, lim.tilt_flight_max_deg
             )));
         }
         if settings.modes.transition_full_tilt_height >= lim.transition_height {
-            return Err(DaemonError::Setup(format!(
+            return Err(FlightError::Setup(format!(
                 "modes.transition_full_tilt_height ({} m) must be below the robot's limits.transition_height ({} m)",
                 settings.modes.transition_full_tilt_height, lim.transition_height
             )));

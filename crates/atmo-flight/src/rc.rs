@@ -41,7 +41,7 @@ use atmo_core::config_file::Checker;
 use atmo_io::msg::InputRc;
 use serde::Deserialize;
 
-use crate::error::{DaemonError, Result};
+use crate::error::{FlightError, Result};
 use crate::flight_stack::PilotInput;
 
 /// A pulse outside this range is no servo pulse (a missing or broken
@@ -238,7 +238,7 @@ impl RcConfig {
                 "",
             )?;
             if let Some((other, _)) = channels[..i].iter().find(|(_, ch)| ch == channel) {
-                return Err(DaemonError::from(c.fail(
+                return Err(FlightError::from(c.fail(
                     key,
                     format!("a channel no other function uses ({other} is {channel})"),
                     channel,

@@ -183,7 +183,7 @@ pub struct ArmingMonitor {
 
 impl ArmingMonitor {
     /// `configuration_ok`: the configuration check's verdict, found once at
-    /// start ([`crate::onboard::DaemonConfig::flight_problem`]).
+    /// start (atmo-daemon's `DaemonConfig::flight_problem`).
     pub fn new(settings: ArmingSettings, configuration_ok: bool) -> Self {
         let mut monitor = Self {
             settings,

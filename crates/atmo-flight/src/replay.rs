@@ -35,7 +35,7 @@ use atmo_io::mcap_log::{Integrity, LogExtras, read_extras, read_topic_lossy};
 use atmo_io::msg::{Label, Mode, MpcStatus, RosMessage, SolverStatus, TickInputs};
 
 use crate::control_loop::TickTiming;
-use crate::error::{DaemonError, Result};
+use crate::error::{FlightError, Result};
 use crate::flight_log::{FlightConfig, FlightConfigFiles, INPUTS_TOPIC};
 use crate::telemetry::{cuts_from_message, inputs_from_message, status_message};
 
@@ -59,8 +59,8 @@ pub struct RecordedFlight {
     pub incomplete_tail: (usize, usize),
 }
 
-fn log_error(path: &Path, reason: String) -> DaemonError {
-    DaemonError::Log {
+fn log_error(path: &Path, reason: String) -> FlightError {
+    FlightError::Log {
         file: path.to_path_buf(),
         reason,
     }

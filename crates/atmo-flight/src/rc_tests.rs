@@ -291,37 +291,3 @@ fn mapping_never_panics_on_any_pulse() {
         }
     }
 }
-
-#[test]
-fn the_daemon_config_takes_one_pilot_source_and_names_a_bad_rc_key() {
-    use crate::onboard::DaemonConfig;
-    use atmo_core::ConfigFile as _;
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../config");
-    for name in ["daemon.toml", "daemon-robot.toml"] {
-        let config = DaemonConfig::load(dir.join(name)).unwrap();
-        let topics = &config.ros2.topics;
-        assert!(topics.rc.enabled != topics.pilot.enabled, "{name}");
-    }
-    let base = "robot = \"atmo.toml\"\nflight = \"flight.toml\"\nmpc = \"mpc.toml\"\n";
-    let file = dir.join("test.toml");
-    let both = format!(
-        "{base}[ros2.topics]\nrc = {{ name = \"/fmu/out/input_rc\", type = \"px4_msgs/msg/InputRc\" }}\n"
-    );
-    let err = DaemonConfig::from_toml_str(&both, &file)
-        .unwrap_err()
-        .to_string();
-    assert!(
-        err.contains("ros2.topics.pilot.enabled") && err.contains("test.toml"),
-        "{err}"
-    );
-    let bad = format!("{base}[rc.sticks.yaw]\nchannel = 0\n");
-    let err = DaemonConfig::from_toml_str(&bad, &file)
-        .unwrap_err()
-        .to_string();
-    assert!(err.contains("rc.sticks.yaw.channel"), "{err}");
-    let unknown = format!("{base}[rc]\nkill_channel = 5\n");
-    let err = DaemonConfig::from_toml_str(&unknown, &file)
-        .unwrap_err()
-        .to_string();
-    assert!(err.contains("kill_channel"), "{err}");
-}

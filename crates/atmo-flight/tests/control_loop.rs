@@ -3,7 +3,7 @@
 
 use std::cell::Cell;
 
-use atmo_daemon::control_loop::{Clock, Scheduler};
+use atmo_flight::control_loop::{Clock, Scheduler};
 
 /// Time moves only when the loop sleeps or the test says so.
 struct FakeClock {

@@ -5,7 +5,7 @@
 
 use atmo_core::model::{Input, State, idx};
 use atmo_core::{Linkage, Model, RobotConfig};
-use atmo_daemon::{
+use atmo_flight::{
     Estimate, FlightSettings, FlightStack, Mode, PilotInput, SolverState, StepInputs, StepOutputs,
 };
 use atmo_mpc::MpcSettings;
@@ -301,7 +301,7 @@ fn a_lost_radio_in_flight_is_a_failsafe_that_holds_and_ends_when_it_is_back() {
 
 #[test]
 fn a_refused_arming_stays_disarmed_and_says_why_until_the_checks_pass() {
-    use atmo_daemon::arming::ArmingCheck;
+    use atmo_flight::arming::ArmingCheck;
     let mut lp = Loop::new(1.5);
     lp.arming_failures = ArmingCheck::Radio.bit() | ArmingCheck::TiltEncoder.bit();
     let outs = lp.run(0.1);

@@ -1,7 +1,7 @@
 //! One test per transition of the mode table, and the guards that must not fire.
 
-use atmo_daemon::Mode;
-use atmo_daemon::modes::{Conditions, TRANSITIONS, Thresholds, next_mode};
+use atmo_flight::Mode;
+use atmo_flight::modes::{Conditions, TRANSITIONS, Thresholds, next_mode};
 
 fn thresholds() -> Thresholds {
     Thresholds {

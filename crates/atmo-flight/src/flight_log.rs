@@ -24,7 +24,7 @@ use atmo_mpc::settings::GroundEffectSource;
 use atmo_mpc::{MpcFile, MpcSettings};
 use sha2::{Digest, Sha256};
 
-use crate::error::{DaemonError, Result};
+use crate::error::{FlightError, Result};
 use crate::flight_stack::{FlightStack, StepInputs, StepOutputs};
 use crate::ground_model::{ground_surface, surface_from_text};
 use crate::settings::FlightSettings;
@@ -137,7 +137,7 @@ impl FlightConfig {
                 Some(surface_from_text(&file.text, &file.source)?)
             }
             (GroundEffectSource::File(path), None) => {
-                return Err(DaemonError::Setup(format!(
+                return Err(FlightError::Setup(format!(
                     "model.ground_effect: {}: its text is not loaded",
                     path.display()
                 )));
@@ -217,7 +217,7 @@ impl FlightConfigFiles {
         let mpc = MpcFile::from_toml_str(&self.mpc.text, &self.mpc.source)?
             .settings(&flight.mpc_preset)
             .map_err(|e| {
-                DaemonError::Setup(format!(
+                FlightError::Setup(format!(
                     "{}: preset `{}` of {}: {e}",
                     self.mpc.source.display(),
                     flight.mpc_preset,
@@ -272,7 +272,7 @@ impl FlightConfigFiles {
             .mpc
             .text
             .parse()
-            .map_err(|e| DaemonError::Setup(format!("{}: {e}", self.mpc.source.display())))?;
+            .map_err(|e| FlightError::Setup(format!("{}: {e}", self.mpc.source.display())))?;
         doc[table][key] = toml_edit::value(value);
         self.mpc.text = doc.to_string();
         Ok(())
@@ -298,7 +298,7 @@ impl FlightConfigFiles {
         if let (GroundEffectSource::File(path), None) =
             (&mpc.model.ground_effect, &self.ground_effect)
         {
-            return Err(DaemonError::Setup(format!(
+            return Err(FlightError::Setup(format!(
                 "{}: model.ground_effect names {}, whose text is missing",
                 self.mpc.source.display(),
                 path.display()
@@ -343,7 +343,7 @@ impl FlightConfigFiles {
     /// No [`CONFIG_METADATA`] record, a missing attachment, text that is not
     /// UTF-8 or whose SHA-256 differs from the recorded one.
     pub fn from_log(extras: &LogExtras, file: &Path) -> Result<Self> {
-        let fail = |reason: String| DaemonError::Log {
+        let fail = |reason: String| FlightError::Log {
             file: file.to_path_buf(),
             reason,
         };
@@ -421,7 +421,7 @@ impl FlightConfigFiles {
             }
         }
         if replaced.is_empty() {
-            return Err(DaemonError::Setup(format!(
+            return Err(FlightError::Setup(format!(
                 "--config {}: replaces none of the logged files ({})",
                 path.display(),
                 names.join(", ")

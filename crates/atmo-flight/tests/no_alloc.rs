@@ -12,9 +12,9 @@
 use atmo_core::alloc_counter::thread_allocations;
 use atmo_core::model::{Input, State, idx};
 use atmo_core::{Linkage, Model, RobotConfig};
-use atmo_daemon::control_loop::{Clock, ControlLoop, TickIo, TickTiming};
-use atmo_daemon::inputs::{InputLatch, InputSettings};
-use atmo_daemon::{
+use atmo_flight::control_loop::{Clock, ControlLoop, TickIo, TickTiming};
+use atmo_flight::inputs::{InputLatch, InputSettings};
+use atmo_flight::{
     Estimate, FlightSettings, FlightStack, Mode, PilotInput, SolverState, StepInputs, StepOutputs,
 };
 use atmo_mpc::MpcSettings;
@@ -304,7 +304,7 @@ fn control_loop_tick_does_not_allocate_after_start_up() {
 /// encodes and compresses (and allocates) off the control thread.
 #[test]
 fn logging_a_tick_does_not_allocate() {
-    use atmo_daemon::flight_log::{INPUTS_TOPIC, TickChannels};
+    use atmo_flight::flight_log::{INPUTS_TOPIC, TickChannels};
     use atmo_io::mcap_log::{LoggerOptions, McapLogger, read_topic};
     use atmo_io::msg::TickInputs;
     let dir = std::path::PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("issue19");
@@ -343,7 +343,7 @@ fn logging_a_tick_does_not_allocate() {
     let before = thread_allocations();
     for tick in 0..ticks {
         inputs.now_ns += 6_666_666;
-        let status = atmo_daemon::telemetry::status_message(tick, &inputs, &outputs, &timing);
+        let status = atmo_flight::telemetry::status_message(tick, &inputs, &outputs, &timing);
         channels.log_tick(&log, tick, &inputs, &outputs, &status);
     }
     let allocations = thread_allocations() - before;

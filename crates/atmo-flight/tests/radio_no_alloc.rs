@@ -8,9 +8,9 @@
 use std::time::Duration;
 
 use atmo_core::alloc_counter::thread_allocations;
-use atmo_daemon::arming::{ArmingMonitor, ArmingObservation, ArmingSettings};
-use atmo_daemon::inputs::{InputLatch, InputSettings};
-use atmo_daemon::rc::{RcConfig, RcPilot};
+use atmo_flight::arming::{ArmingMonitor, ArmingObservation, ArmingSettings};
+use atmo_flight::inputs::{InputLatch, InputSettings};
+use atmo_flight::rc::{RcConfig, RcPilot};
 use atmo_io::msg::InputRc;
 
 #[global_allocator]
