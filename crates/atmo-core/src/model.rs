@@ -97,6 +97,75 @@ pub fn rotation(yaw: f64, pitch: f64, roll: f64) -> Matrix3<f64> {
     )
 }
 
+/// The sines and cosines of one attitude's pitch and roll, and its
+/// rotation: computed once per evaluation where several formulas need them.
+#[derive(Debug, Clone, Copy)]
+pub struct Attitude {
+    pub sp: f64,
+    pub cp: f64,
+    pub sr: f64,
+    pub cr: f64,
+    /// Body to world, [`rotation`].
+    pub r: Matrix3<f64>,
+}
+
+impl Attitude {
+    /// The attitude of state `x` (the same operations as [`rotation`]).
+    #[allow(clippy::inline_always)] // the plant's AVX2 step inlines it (atmo-plant `avx2_rule`)
+    #[inline(always)]
+    pub fn of(x: &State) -> Self {
+        let (sy, cy) = sin_cos(x[idx::YAW]);
+        let (sp, cp) = sin_cos(x[idx::PITCH]);
+        let (sr, cr) = sin_cos(x[idx::ROLL]);
+        let r = Matrix3::new(
+            cy * cp,
+            cy * sp * sr - sy * cr,
+            cy * sp * cr + sy * sr,
+            sy * cp,
+            sy * sp * sr + cy * cr,
+            sy * sp * cr - cy * sr,
+            -sp,
+            cp * sr,
+            cp * cr,
+        );
+        Self { sp, cp, sr, cr, r }
+    }
+
+    /// Gravity in the body frame for a gravitational acceleration `g`.
+    #[allow(clippy::inline_always)] // the plant's AVX2 step inlines it (atmo-plant `avx2_rule`)
+    #[inline(always)]
+    pub fn gravity_body(&self, g: f64) -> Vector3<f64> {
+        Vector3::new(-self.sp, self.cp * self.sr, self.cp * self.cr) * g
+    }
+}
+
+/// `x_dot` of state `x` at attitude `att` (that of `x`) given body-frame
+/// accelerations (a, w_dot): the kinematics of the 12-state model, the one
+/// copy ([`TiltedBody::state_derivative`] and the plant's step).
+/// `inline(always)`: the plant's AVX2 step inlines it.
+#[allow(clippy::inline_always)] // the plant's AVX2 step inlines it (atmo-plant `avx2_rule`)
+#[inline(always)]
+pub fn state_derivative_at(x: &State, att: &Attitude, acc: &Vector6<f64>) -> State {
+    let a = att.r * Vector3::new(acc[0], acc[1], acc[2]);
+    let (sr, cr, sp, cp) = (att.sr, att.cr, att.sp, att.cp);
+    let (wx, wy, wz) = (x[idx::WX], x[idx::WY], x[idx::WZ]);
+    let q = sr * wy + cr * wz;
+    let mut xdot = State::zeros();
+    xdot[idx::X] = x[idx::VX];
+    xdot[idx::Y] = x[idx::VY];
+    xdot[idx::Z] = x[idx::VZ];
+    xdot[idx::YAW] = q / cp;
+    xdot[idx::PITCH] = cr * wy - sr * wz;
+    xdot[idx::ROLL] = wx + sp / cp * q;
+    xdot[idx::VX] = a.x;
+    xdot[idx::VY] = a.y;
+    xdot[idx::VZ] = a.z;
+    xdot[idx::WX] = acc[3];
+    xdot[idx::WY] = acc[4];
+    xdot[idx::WZ] = acc[5];
+    xdot
+}
+
 /// Partial derivatives of [`rotation`] with respect to yaw, pitch and roll.
 pub fn rotation_partials(yaw: f64, pitch: f64, roll: f64) -> [Matrix3<f64>; 3] {
     let (sy, cy) = sin_cos(yaw);
@@ -412,11 +481,27 @@ impl TiltedBody {
     /// torque about B from everything but gravity and the rotors (`extra`).
     /// atmo-sim passes its aerodynamic and contact wrenches here.
     pub fn accelerations(&self, x: &State, u: &Input, extra: &Vector6<f64>) -> Vector6<f64> {
-        let w = Vector3::new(x[idx::WX], x[idx::WY], x[idx::WZ]);
         let g_b = self.gravity_body(x[idx::PITCH], x[idx::ROLL]);
+        self.accelerations_with_gravity(x, &g_b, u, extra)
+    }
+
+    /// [`Self::accelerations`] with the gravity in the body frame already
+    /// computed (`g_b = g (-sin p, cos p sin r, cos p cos r)`): the one
+    /// formula, shared by the plant, which holds the attitude's sines once
+    /// per evaluation. `inline(always)`: the plant's AVX2 step inlines it.
+    #[allow(clippy::inline_always)] // the plant's AVX2 step inlines it (atmo-plant `avx2_rule`)
+    #[inline(always)]
+    pub fn accelerations_with_gravity(
+        &self,
+        x: &State,
+        g_b: &Vector3<f64>,
+        u: &Input,
+        extra: &Vector6<f64>,
+    ) -> Vector6<f64> {
+        let w = Vector3::new(x[idx::WX], x[idx::WY], x[idx::WZ]);
         let c = &self.first_moment;
         let force = self.thrust_force * u + g_b * self.mass - w.cross(&w.cross(c));
-        let torque = self.thrust_torque * u + c.cross(&g_b) - w.cross(&(self.inertia * w));
+        let torque = self.thrust_torque * u + c.cross(g_b) - w.cross(&(self.inertia * w));
         let rhs = Vector6::new(force.x, force.y, force.z, torque.x, torque.y, torque.z)
             + extra
             + self.disturbance;
@@ -425,27 +510,7 @@ impl TiltedBody {
 
     /// `x_dot` given body-frame accelerations (a, w_dot).
     pub fn state_derivative(x: &State, acc: &Vector6<f64>) -> State {
-        let (yaw, pitch, roll) = (x[idx::YAW], x[idx::PITCH], x[idx::ROLL]);
-        let r = rotation(yaw, pitch, roll);
-        let a = r * Vector3::new(acc[0], acc[1], acc[2]);
-        let (sr, cr) = sin_cos(roll);
-        let (sp, cp) = sin_cos(pitch);
-        let (wx, wy, wz) = (x[idx::WX], x[idx::WY], x[idx::WZ]);
-        let q = sr * wy + cr * wz;
-        let mut xdot = State::zeros();
-        xdot[idx::X] = x[idx::VX];
-        xdot[idx::Y] = x[idx::VY];
-        xdot[idx::Z] = x[idx::VZ];
-        xdot[idx::YAW] = q / cp;
-        xdot[idx::PITCH] = cr * wy - sr * wz;
-        xdot[idx::ROLL] = wx + sp / cp * q;
-        xdot[idx::VX] = a.x;
-        xdot[idx::VY] = a.y;
-        xdot[idx::VZ] = a.z;
-        xdot[idx::WX] = acc[3];
-        xdot[idx::WY] = acc[4];
-        xdot[idx::WZ] = acc[5];
-        xdot
+        state_derivative_at(x, &Attitude::of(x), acc)
     }
 
     /// `x_dot = f(x, u)` at this tilt.

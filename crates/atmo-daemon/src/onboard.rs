@@ -52,7 +52,6 @@ use atmo_flight::flight_log::TickChannels;
 use atmo_flight::flight_stack::{Estimate, StepInputs, StepOutputs};
 use atmo_flight::inputs::{DriveCommand, InputLatch, InputSettings};
 use atmo_flight::rc::{RcConfig, RcPilot};
-use atmo_flight::telemetry::pilot_from_message;
 
 /// `config/daemon.toml`: what the onboard binary loads. Paths are relative
 /// to the folder of the file that names them.
@@ -412,7 +411,7 @@ impl TickIo for OnboardIo {
         }
         while let Some(p) = self.ros_in.latest_pilot() {
             let received = stamp_on_tick_clock(deadline_ns, p.received);
-            self.latch.pilot(pilot_from_message(&p.input), received);
+            self.latch.pilot(p.input, received);
         }
         if let Some(frame) = self.ros_in.latest_rc()
             && let Some(rc) = &mut self.rc

@@ -29,7 +29,6 @@ use atmo_flight::error::{FlightError, Result};
 use atmo_flight::flight_stack::Estimate;
 use atmo_flight::inputs::{Assembled, InputLatch};
 use atmo_flight::rc::RcPilot;
-use atmo_flight::telemetry::pilot_from_message;
 
 /// A sweep leg has arrived within this of its target, deg.
 pub const ARRIVAL_DEG: f64 = 1.5;
@@ -156,8 +155,7 @@ impl Preflight {
             });
         }
         while let Some(p) = self.ros_in.latest_pilot() {
-            self.latch
-                .pilot(pilot_from_message(&p.input), stamp(p.received));
+            self.latch.pilot(p.input, stamp(p.received));
         }
         if let Some(frame) = self.ros_in.latest_rc()
             && let Some(rc) = &mut self.rc

@@ -26,7 +26,7 @@ use atmo_flight::flight_log::{INPUTS_TOPIC, TickChannels};
 use atmo_flight::{Estimate, FlightSettings, FlightStack, PilotInput, StepInputs};
 use atmo_io::drivers::{DriverEndpoint, DriverId, DriverPortsConfig};
 use atmo_io::mcap_log::{LoggerOptions, McapLogger};
-use atmo_io::msg::{PilotInput as PilotMsg, TickInputs};
+use atmo_io::msg::TickInputs;
 use atmo_io::ros2::{Ros2Config, Ros2Node, Ros2StartOptions, SitlNode};
 use atmo_mpc::MpcSettings;
 
@@ -124,13 +124,13 @@ fn onboard_tick_io_allocates_nothing_of_its_own() {
         arming_failures: 0,
     });
 
-    let pilot = PilotMsg {
+    let pilot = PilotInput {
         velocity: [0.1, 0.0, 0.0],
         throttle: 0.3,
         arm: true,
         offboard: true,
         mpc_enabled: true,
-        ..PilotMsg::default()
+        ..PilotInput::default()
     };
     let start = Instant::now();
     let (warm_up, measured) = (150, 300);

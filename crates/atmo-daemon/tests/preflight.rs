@@ -15,7 +15,7 @@ use atmo_core::{ConfigFile, Linkage, RobotConfig};
 use atmo_daemon::onboard::DaemonConfig;
 use atmo_daemon::preflight::{Preflight, Report};
 use atmo_io::drivers::{DriverEndpoint, DriverId};
-use atmo_io::msg::PilotInput as PilotMsg;
+use atmo_io::msg::PilotInput;
 use atmo_io::ros2::{Ros2Node, Ros2StartOptions, SitlNode};
 
 fn config(tag: &str) -> DaemonConfig {
@@ -49,11 +49,11 @@ fn preflight(tag: &str, follows: f64, start_deg: f64, sweep_to_deg: f64) -> Repo
         let mut driver = DriverEndpoint::open(&drivers, "preflight_test").unwrap();
         let mut state = State::zeros();
         state[idx::Z] = -0.1;
-        let pilot = PilotMsg {
+        let pilot = PilotInput {
             arm: true,
             offboard: true,
             mpc_enabled: true,
-            ..PilotMsg::default()
+            ..PilotInput::default()
         };
         let mut tilt = start_deg.to_radians();
         let mut velocity = 0.0;

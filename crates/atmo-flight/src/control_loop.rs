@@ -62,23 +62,7 @@ impl Clock for MonotonicClock {
     }
 }
 
-/// Timing of one tick, for the status record.
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub struct TickTiming {
-    /// Tick number since start.
-    pub tick: u64,
-    /// The deadline this tick was scheduled for, ns.
-    pub deadline_ns: u64,
-    /// Wake-up minus deadline, s (the period jitter; >= 0).
-    pub wake_latency: f64,
-    /// Time spent in the tick body, s.
-    pub compute: f64,
-    /// The body ran past the next deadline.
-    pub overrun: bool,
-    pub overruns_total: u64,
-    /// Deadlines skipped because the loop fell behind.
-    pub skipped_total: u64,
-}
+pub use atmo_io::msg::TickTiming;
 
 /// Scheduler state of a periodic loop.
 #[derive(Debug, Clone)]

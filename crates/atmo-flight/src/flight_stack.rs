@@ -30,7 +30,7 @@ use crate::observer::{DisturbanceObserver, ObserverSettings};
 use crate::settings::FlightSettings;
 
 pub use crate::step_io::{
-    Estimate, PilotInput, RejectCounters, SolverState, Status, StepInputs, StepOutputs,
+    Estimate, PilotInput, RejectCounters, SolverStatus, Status, StepInputs, StepOutputs,
 };
 
 /// Morphing hands over to the transition below z* once the tilt is within
@@ -413,7 +413,7 @@ impl FlightStack {
             state,
             reference: self.reference[0],
             predicted_next: self.mpc.plan_states().get(1).copied().unwrap_or(state),
-            solver: SolverState::Idle,
+            solver: SolverStatus::Idle,
             mpc_failed_ticks,
             mpc_failures_total: self.mpc_failures_total,
             feedback_fallbacks_total: self.mpc.homotopy_fallbacks(),
@@ -581,7 +581,7 @@ impl FlightStack {
         if !self.mpc_warm {
             // First MPC tick of this flight: start the plan at the estimate.
             if self.mpc.reset(state).is_err() {
-                status.solver = SolverState::Failed;
+                status.solver = SolverStatus::Failed;
                 return self.last_thrust;
             }
             self.fill_reference(state);
@@ -610,15 +610,15 @@ impl FlightStack {
         };
         let Ok(out) = result else {
             self.mpc_failures_total += 1;
-            status.solver = SolverState::Failed;
+            status.solver = SolverStatus::Failed;
             return self.last_thrust;
         };
         self.mpc_tilt_rate = out.tilt_rate;
         status.solver = match out.outcome {
-            Outcome::Solved => SolverState::Solved,
-            Outcome::Degraded(_) => SolverState::Degraded,
-            Outcome::Fallback { .. } => SolverState::Fallback,
-            Outcome::Failed { .. } => SolverState::Failed,
+            Outcome::Solved => SolverStatus::Solved,
+            Outcome::Degraded(_) => SolverStatus::Degraded,
+            Outcome::Fallback { .. } => SolverStatus::Fallback,
+            Outcome::Failed { .. } => SolverStatus::Failed,
         };
         if !out.outcome.is_fresh() {
             self.mpc_failures_total += 1;

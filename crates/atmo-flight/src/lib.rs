@@ -52,7 +52,8 @@ pub mod whatif;
 
 pub use error::{FlightError, Result};
 pub use flight_stack::{
-    Estimate, FlightStack, PilotInput, RejectCounters, SolverState, Status, StepInputs, StepOutputs,
+    Estimate, FlightStack, PilotInput, RejectCounters, SolverStatus, Status, StepInputs,
+    StepOutputs,
 };
 pub use modes::Mode;
 pub use settings::FlightSettings;

@@ -20,84 +20,9 @@
 //! Rows are checked in order; the first whose `from` contains the current
 //! mode and whose guard holds fires. At most one transition per tick.
 
-use serde::Serialize;
-
-/// Flight-stack modes.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Serialize)]
-#[serde(rename_all = "snake_case")]
-pub enum Mode {
-    /// Outputs zero. Start-up state.
-    Disarmed,
-    /// On the wheels; thrusters off; wheels follow the pilot.
-    Drive,
-    /// Tilting back towards the flight configuration; thrusters start at or
-    /// below the take-off tilt, then climb.
-    Takeoff,
-    /// Free flight; the MPC tracks the pilot's velocity command.
-    Flight,
-    /// Below z_varphi and descending: tilting at v_max up to the flight limit.
-    Morphing,
-    /// Below z*: cost blended by alpha, tilt up to the transition limit,
-    /// descent reference, wheels spun up before impact.
-    Transition,
-    /// Grounded after a transition: thrust ramped to zero.
-    Touchdown,
-    /// Something is wrong: tilt back to 0 and hold.
-    Failsafe,
-}
-
-impl Mode {
-    pub const ALL: [Mode; 8] = [
-        Mode::Disarmed,
-        Mode::Drive,
-        Mode::Takeoff,
-        Mode::Flight,
-        Mode::Morphing,
-        Mode::Transition,
-        Mode::Touchdown,
-        Mode::Failsafe,
-    ];
-
-    pub fn name(self) -> &'static str {
-        match self {
-            Mode::Disarmed => "disarmed",
-            Mode::Drive => "drive",
-            Mode::Takeoff => "takeoff",
-            Mode::Flight => "flight",
-            Mode::Morphing => "morphing",
-            Mode::Transition => "transition",
-            Mode::Touchdown => "touchdown",
-            Mode::Failsafe => "failsafe",
-        }
-    }
-
-    /// Small integer for logs and messages (stable: append only).
-    pub fn code(self) -> u8 {
-        match self {
-            Mode::Disarmed => 0,
-            Mode::Drive => 1,
-            Mode::Takeoff => 2,
-            Mode::Flight => 3,
-            Mode::Morphing => 4,
-            Mode::Transition => 5,
-            Mode::Touchdown => 6,
-            Mode::Failsafe => 7,
-        }
-    }
-
-    /// The mode of a [`Self::code`].
-    pub fn from_code(code: u8) -> Option<Self> {
-        Self::ALL.iter().copied().find(|m| m.code() == code)
-    }
-
-    /// Whether the MPC flies the thrusters in this mode.
-    pub fn is_airborne_mode(self) -> bool {
-        matches!(
-            self,
-            Mode::Takeoff | Mode::Flight | Mode::Morphing | Mode::Transition | Mode::Failsafe
-        )
-    }
-}
+/// The flight stack's modes (atmo-io's type: the same codes on the wire
+/// and in the logs).
+pub use atmo_io::msg::Mode;
 
 /// Everything the guards look at, computed by the flight stack each tick.
 // The guards read switches and signals that are booleans by nature.

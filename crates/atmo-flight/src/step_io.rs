@@ -15,19 +15,7 @@ pub struct Estimate {
     pub state: State,
 }
 
-/// Pilot (or scenario) inputs.
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub struct PilotInput {
-    /// Velocity command, NED world frame, m/s (limited to the configured norm).
-    pub velocity: [f64; 3],
-    /// Yaw-rate command, rad/s (FRD: positive turns right).
-    pub yaw_rate: f64,
-    /// Throttle stick in [0, 1].
-    pub throttle: f64,
-    pub arm: bool,
-    pub offboard: bool,
-    pub mpc_enabled: bool,
-}
+pub use atmo_io::msg::{PilotInput, SolverStatus};
 
 /// Everything one tick sees.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -59,34 +47,6 @@ pub struct StepInputs {
     /// Arming checks that fail (bits of [`crate::arming::ArmingCheck`];
     /// 0: all pass): the stack does not arm while any is set.
     pub arming_failures: u8,
-}
-
-/// Solver outcome, flattened for logs.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize)]
-#[serde(rename_all = "snake_case")]
-pub enum SolverState {
-    /// The MPC did not run this tick.
-    #[default]
-    Idle,
-    Solved,
-    Degraded,
-    Fallback,
-    Failed,
-}
-
-impl SolverState {
-    pub fn code(self) -> u8 {
-        self as u8
-    }
-    pub fn name(self) -> &'static str {
-        match self {
-            Self::Idle => "idle",
-            Self::Solved => "solved",
-            Self::Degraded => "degraded",
-            Self::Fallback => "fallback",
-            Self::Failed => "failed",
-        }
-    }
 }
 
 /// Inputs rejected so far, by kind.
@@ -125,7 +85,7 @@ pub struct Status {
     pub reference: State,
     /// Predicted state at the next MPC stage.
     pub predicted_next: State,
-    pub solver: SolverState,
+    pub solver: SolverStatus,
     pub mpc_failed_ticks: u32,
     pub mpc_failures_total: u64,
     /// Feedbacks that fell back from the homotopy to a full Clarabel solve, since start.

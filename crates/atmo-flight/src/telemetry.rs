@@ -3,14 +3,11 @@
 //! control thread.
 
 use atmo_core::model::State;
-use atmo_io::msg::{
-    IoHealth, Label, Mode as ModeMsg, MpcStatus, PilotInput as PilotMsg, SolverStatus, TickInputs,
-    TickTiming as TimingMsg,
-};
+use atmo_io::msg::{IoHealth, Label, MpcStatus, TickInputs};
 use atmo_mpc::SolverCuts;
 
 use crate::control_loop::TickTiming;
-use crate::flight_stack::{Estimate, PilotInput, StepInputs, StepOutputs};
+use crate::flight_stack::{Estimate, StepInputs, StepOutputs};
 
 /// The tick's inputs as the `atmo_msgs/TickInputs` message (every field of
 /// [`StepInputs`], bit for bit, and the solves the time limit cut).
@@ -24,7 +21,7 @@ pub fn inputs_message(tick: u64, inputs: &StepInputs, cuts: &SolverCuts) -> Tick
         estimate: estimate.map_or([0.0; 12], |e| MpcStatus::array(&e.state)),
         has_tilt_counts: inputs.tilt_counts.is_some(),
         tilt_counts: inputs.tilt_counts.unwrap_or(0.0),
-        pilot: pilot_message(&inputs.pilot),
+        pilot: inputs.pilot,
         ground_contact: inputs.ground_contact,
         ground_z: inputs.ground_z,
         driver_lost: inputs.driver_lost,
@@ -59,38 +56,13 @@ pub fn inputs_from_message(m: &TickInputs) -> StepInputs {
             state: State::from_column_slice(&m.estimate),
         }),
         tilt_counts: m.has_tilt_counts.then_some(m.tilt_counts),
-        pilot: pilot_from_message(&m.pilot),
+        pilot: m.pilot,
         ground_contact: m.ground_contact,
         ground_z: m.ground_z,
         ground_normal: m.has_ground_normal.then_some(m.ground_normal),
         driver_lost: m.driver_lost,
         pilot_lost: m.pilot_lost,
         arming_failures: m.arming_failures,
-    }
-}
-
-/// The pilot input as the `atmo_msgs/PilotInput` message (same fields, same
-/// frames: NED velocity, FRD yaw rate).
-pub fn pilot_message(p: &PilotInput) -> PilotMsg {
-    PilotMsg {
-        velocity: p.velocity,
-        yaw_rate: p.yaw_rate,
-        throttle: p.throttle,
-        arm: p.arm,
-        offboard: p.offboard,
-        mpc_enabled: p.mpc_enabled,
-    }
-}
-
-/// The `atmo_msgs/PilotInput` message as the flight stack's pilot input.
-pub fn pilot_from_message(m: &PilotMsg) -> PilotInput {
-    PilotInput {
-        velocity: m.velocity,
-        yaw_rate: m.yaw_rate,
-        throttle: m.throttle,
-        arm: m.arm,
-        offboard: m.offboard,
-        mpc_enabled: m.mpc_enabled,
     }
 }
 
@@ -109,9 +81,9 @@ pub fn status_message(
         // stamps the wall clock instead (its clock starts at 0).
         ros_stamp_ns: s.now_ns,
         tick,
-        mode: ModeMsg::from_code(s.mode.code()).unwrap_or_default(),
+        mode: s.mode,
         transition: Label::new(s.transition.unwrap_or("")),
-        solver_status: SolverStatus::from_code(s.solver.code()).unwrap_or_default(),
+        solver_status: s.solver,
         solver_iterations: s.solver_iterations,
         mpc_failed_ticks: s.mpc_failed_ticks,
         mpc_failures_total: s.mpc_failures_total,
@@ -135,16 +107,8 @@ pub fn status_message(
         },
         feedback_time: s.feedback_time,
         preparation_time: s.preparation_time,
-        pilot: pilot_message(p),
-        timing: TimingMsg {
-            tick: timing.tick,
-            deadline_ns: timing.deadline_ns,
-            wake_latency: timing.wake_latency,
-            compute: timing.compute,
-            overrun: timing.overrun,
-            overruns_total: timing.overruns_total,
-            skipped_total: timing.skipped_total,
-        },
+        pilot: *p,
+        timing: *timing,
         rejected_estimate: s.rejected.estimate,
         rejected_tilt: s.rejected.tilt,
         rejected_pilot: s.rejected.pilot,

@@ -6,7 +6,7 @@
 use atmo_core::model::{Input, State, idx};
 use atmo_core::{Linkage, Model, RobotConfig};
 use atmo_flight::{
-    Estimate, FlightSettings, FlightStack, Mode, PilotInput, SolverState, StepInputs, StepOutputs,
+    Estimate, FlightSettings, FlightStack, Mode, PilotInput, SolverStatus, StepInputs, StepOutputs,
 };
 use atmo_mpc::MpcSettings;
 
@@ -128,7 +128,10 @@ fn armed_in_the_air_it_hovers_with_inputs_in_range() {
     for o in &outs {
         assert!(o.thrust.iter().all(|u| (0.0..=1.0).contains(u)));
         assert!(
-            matches!(o.status.solver, SolverState::Solved | SolverState::Degraded),
+            matches!(
+                o.status.solver,
+                SolverStatus::Solved | SolverStatus::Degraded
+            ),
             "{:?}",
             o.status.solver
         );

@@ -15,7 +15,7 @@ use atmo_core::{Linkage, Model, RobotConfig};
 use atmo_flight::control_loop::{Clock, ControlLoop, TickIo, TickTiming};
 use atmo_flight::inputs::{InputLatch, InputSettings};
 use atmo_flight::{
-    Estimate, FlightSettings, FlightStack, Mode, PilotInput, SolverState, StepInputs, StepOutputs,
+    Estimate, FlightSettings, FlightStack, Mode, PilotInput, SolverStatus, StepInputs, StepOutputs,
 };
 use atmo_mpc::MpcSettings;
 use atmo_mpc::settings::GroundEffectSource;
@@ -128,7 +128,7 @@ fn flight_stack_allocations(ground_effect: GroundEffectSource, ground_normal: Op
             let solves = out.status.qp_solves as usize;
             assert_eq!(
                 out.status.qp_solves > 0,
-                out.status.solver != SolverState::Idle
+                out.status.solver != SolverStatus::Idle
             );
             step_allocations += mid - before;
             allowed += solves * clarabel_per_solve;

@@ -5,47 +5,16 @@
 //!
 //! `TiltedBody::accelerations` and `TiltedBody::state_derivative` each take
 //! the sines and cosines of the Euler angles again (7 `sin_cos` per `f`);
-//! the plant also needs the rotation for its effects. Here the same
-//! formulas, operation for operation, share one set of 3 `sin_cos`. The
-//! plant test `with_every_effect_off_the_plant_is_atmo_core` checks that
-//! the result is atmo-core's bit for bit.
+//! the plant also needs the rotation for its effects, so it computes one
+//! [`Attitude`] (3 `sin_cos`) and calls atmo-core's formulas at it
+//! (`accelerations_with_gravity`, `state_derivative_at`). The plant test
+//! `with_every_effect_off_the_plant_is_atmo_core` checks that the result is
+//! atmo-core's bit for bit.
 
-use atmo_core::model::{Input, Model, State, TiltedBody, idx, sin_cos};
+use atmo_core::model::{Attitude, Input, Model, State, TiltedBody};
 use nalgebra::{Cholesky, Matrix3, U6, Vector3, Vector6};
 
-/// Sines, cosines and rotation of one attitude.
-#[derive(Debug, Clone, Copy)]
-pub(crate) struct Attitude {
-    pub sp: f64,
-    pub cp: f64,
-    pub sr: f64,
-    pub cr: f64,
-    /// Body to world, `Rz(yaw) Ry(pitch) Rx(roll)` (atmo_core::model::rotation).
-    pub r: Matrix3<f64>,
-}
-
-impl Attitude {
-    #[inline(always)]
-    pub fn of(x: &State) -> Self {
-        let (sy, cy) = sin_cos(x[idx::YAW]);
-        let (sp, cp) = sin_cos(x[idx::PITCH]);
-        let (sr, cr) = sin_cos(x[idx::ROLL]);
-        let r = Matrix3::new(
-            cy * cp,
-            cy * sp * sr - sy * cr,
-            cy * sp * cr + sy * sr,
-            sy * cp,
-            sy * sp * sr + cy * cr,
-            sy * sp * cr - cy * sr,
-            -sp,
-            cp * sr,
-            cp * cr,
-        );
-        Self { sp, cp, sr, cr, r }
-    }
-}
-
-/// `TiltedBody::accelerations`.
+/// `TiltedBody::accelerations` at a precomputed attitude.
 #[inline(always)]
 pub(crate) fn accelerations(
     body: &TiltedBody,
@@ -54,38 +23,7 @@ pub(crate) fn accelerations(
     u: &Input,
     extra: &Vector6<f64>,
 ) -> Vector6<f64> {
-    let w = Vector3::new(x[idx::WX], x[idx::WY], x[idx::WZ]);
-    let g_b = Vector3::new(-att.sp, att.cp * att.sr, att.cp * att.cr) * body.gravity;
-    let c = &body.first_moment;
-    let force = body.thrust_force * u + g_b * body.mass - w.cross(&w.cross(c));
-    let torque = body.thrust_torque * u + c.cross(&g_b) - w.cross(&(body.inertia * w));
-    let rhs = Vector6::new(force.x, force.y, force.z, torque.x, torque.y, torque.z)
-        + extra
-        + body.disturbance;
-    body.mass_matrix_inv * rhs
-}
-
-/// `TiltedBody::state_derivative`.
-#[inline(always)]
-pub(crate) fn state_derivative(x: &State, att: &Attitude, acc: &Vector6<f64>) -> State {
-    let a = att.r * Vector3::new(acc[0], acc[1], acc[2]);
-    let (sr, cr, sp, cp) = (att.sr, att.cr, att.sp, att.cp);
-    let (wx, wy, wz) = (x[idx::WX], x[idx::WY], x[idx::WZ]);
-    let q = sr * wy + cr * wz;
-    let mut xdot = State::zeros();
-    xdot[idx::X] = x[idx::VX];
-    xdot[idx::Y] = x[idx::VY];
-    xdot[idx::Z] = x[idx::VZ];
-    xdot[idx::YAW] = q / cp;
-    xdot[idx::PITCH] = cr * wy - sr * wz;
-    xdot[idx::ROLL] = wx + sp / cp * q;
-    xdot[idx::VX] = a.x;
-    xdot[idx::VY] = a.y;
-    xdot[idx::VZ] = a.z;
-    xdot[idx::WX] = acc[3];
-    xdot[idx::WY] = acc[4];
-    xdot[idx::WZ] = acc[5];
-    xdot
+    body.accelerations_with_gravity(x, &att.gravity_body(body.gravity), u, extra)
 }
 
 /// The composite body a fraction `w` of the way from `a` to `b` (two

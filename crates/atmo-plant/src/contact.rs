@@ -481,9 +481,9 @@ impl WheelLanes {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::body::Attitude;
     use crate::config::PlantConfig;
     use atmo_core::RobotConfig;
+    use atmo_core::model::Attitude;
     use atmo_core::model::{Model, State, idx};
     use rand::{Rng, SeedableRng};
     use rand_chacha::ChaCha8Rng;

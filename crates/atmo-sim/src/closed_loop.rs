@@ -19,8 +19,8 @@ use atmo_core::model::{State, idx};
 use atmo_flight::control_loop::{TickTiming, tick_period};
 use atmo_flight::flight_log::{FlightConfig, FlightConfigFiles, TickChannels};
 use atmo_flight::inputs::InputSettings;
-use atmo_flight::{FlightSettings, FlightStack, Mode, StepInputs, StepOutputs};
-use atmo_io::msg::{Mode as ModeMsg, MpcStatus, SimTruth};
+use atmo_flight::{FlightSettings, FlightStack, StepInputs, StepOutputs};
+use atmo_io::msg::{MpcStatus, SimTruth};
 use atmo_io::review::figure::FlightTrace;
 use atmo_mpc::MpcSettings;
 use atmo_mpc::settings::GroundEffectSource;
@@ -80,11 +80,6 @@ pub fn run_end(scenario: &Scenario, plant: &Plant, wall_time_s: f64) -> RunEnd {
             .map(|e| format!("{:?} at t = {:.3} s", e.kind, e.time)),
         wall_time_s: Some(wall_time_s),
     }
-}
-
-/// The daemon's mode as the log's.
-pub fn mode_message(mode: Mode) -> ModeMsg {
-    ModeMsg::from_code(mode.code()).unwrap_or_default()
 }
 
 /// The controller side of a closed-loop run: the robot model it believes
@@ -337,9 +332,9 @@ fn fly_until(
         if let Some(tick) = control.tick_if_due(&plant, &mut stack) {
             let s = &tick.outputs.status;
             tracker.on_control_tick(
-                mode_message(s.mode),
+                s.mode,
                 &tick.outputs.thrust,
-                (s.solver != atmo_flight::SolverState::Idle).then_some(s.feedback_time),
+                (s.solver != atmo_flight::SolverStatus::Idle).then_some(s.feedback_time),
                 s.mpc_failures_total,
                 [
                     s.rejected.estimate,
@@ -392,7 +387,7 @@ pub fn trace_of(records: &[TickRecord]) -> FlightTrace {
             r.time,
             r.truth_height,
             r.truth_tilt,
-            mode_message(s.mode),
+            s.mode,
             s.alpha,
             &r.outputs.thrust,
         );

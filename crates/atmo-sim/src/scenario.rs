@@ -98,10 +98,10 @@ pub struct DisturbanceConfig {
     pub torque: [f64; 3],
 }
 
-/// `[[pilot]]`: the pilot's inputs from `t` on.
+/// `[[pilot]]`: the sticks and switches the scripted pilot holds from `t` on.
 #[derive(Debug, Clone, Default, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
-pub struct PilotInput {
+pub struct PilotSetpoint {
     pub t: f64,
     #[serde(default)]
     pub arm: bool,
@@ -174,7 +174,7 @@ pub struct ScenarioFile {
     #[serde(default)]
     pub disturbances: Vec<DisturbanceConfig>,
     #[serde(default)]
-    pub pilot: Vec<PilotInput>,
+    pub pilot: Vec<PilotSetpoint>,
     #[serde(default)]
     pub reference: Vec<ReferenceInput>,
     #[serde(default)]
@@ -590,7 +590,7 @@ impl Scenario {
     }
 
     /// The pilot input in force at `t`.
-    pub fn pilot_at(&self, t: f64) -> Option<&PilotInput> {
+    pub fn pilot_at(&self, t: f64) -> Option<&PilotSetpoint> {
         active(&self.file.pilot, t, |p| p.t)
     }
 

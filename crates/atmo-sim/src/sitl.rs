@@ -26,9 +26,8 @@ use std::time::{Duration, Instant};
 
 use atmo_core::model::Input;
 use atmo_flight::Mode;
-use atmo_flight::telemetry::pilot_message;
 use atmo_io::drivers::{DriverEndpoint, DriverId, DriverPortsConfig};
-use atmo_io::msg::{MpcStatus, PilotInput as PilotMsg};
+use atmo_io::msg::{MpcStatus, PilotInput};
 use atmo_io::ros2::{Ros2Config, Ros2StartOptions, SitlNode};
 use atmo_io::wall_clock_ns;
 
@@ -86,8 +85,8 @@ pub struct ServeCounters {
 /// Progress callback: (plant time, daemon mode if known).
 pub type Progress<'a> = &'a mut dyn FnMut(f64, Option<Mode>);
 
-fn pilot_msg(scenario: &Scenario, t: f64) -> PilotMsg {
-    pilot_message(&pilot_input(scenario, t))
+fn pilot_msg(scenario: &Scenario, t: f64) -> PilotInput {
+    pilot_input(scenario, t)
 }
 
 #[allow(clippy::needless_pass_by_value)] // used as `map_err(ros_err)`
@@ -149,7 +148,7 @@ impl Links {
     fn publish(
         &mut self,
         plant: &atmo_plant::Plant,
-        pilot: &PilotMsg,
+        pilot: &PilotInput,
         stamp_ns: impl Fn(f64) -> u64,
     ) {
         let now = Instant::now();

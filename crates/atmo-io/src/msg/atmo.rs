@@ -6,18 +6,31 @@ use serde::{Deserialize, Serialize, Serializer};
 use super::standard::Time;
 use super::{Label, RosMessage};
 
-/// Flight-stack mode (`MpcStatus.MODE_*`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+/// The flight stack's mode: one type for the mode machine (atmo-flight's
+/// `modes`), the `MpcStatus.MODE_*` code on the wire and the logs, and the
+/// snake-case name in JSON summaries (stable codes: append only).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, Serialize)]
+#[serde(rename_all = "snake_case")]
 #[repr(u8)]
 pub enum Mode {
+    /// Outputs zero. Start-up state.
     #[default]
     Disarmed = 0,
+    /// On the wheels; thrusters off; wheels follow the pilot.
     Drive = 1,
+    /// Tilting back towards the flight configuration; thrusters start at or
+    /// below the take-off tilt, then climb.
     Takeoff = 2,
+    /// Free flight; the MPC tracks the pilot's velocity command.
     Flight = 3,
+    /// Below z_varphi and descending: tilting at v_max up to the flight limit.
     Morphing = 4,
+    /// Below z*: cost blended by alpha, tilt up to the transition limit,
+    /// descent reference, wheels spun up before impact.
     Transition = 5,
+    /// Grounded after a transition: thrust ramped to zero.
     Touchdown = 6,
+    /// Something is wrong: tilt back to 0 and hold.
     Failsafe = 7,
 }
 
@@ -53,10 +66,21 @@ impl Mode {
             Self::Failsafe => "failsafe",
         }
     }
+
+    /// Whether the MPC flies the thrusters in this mode.
+    pub fn is_airborne_mode(self) -> bool {
+        matches!(
+            self,
+            Mode::Takeoff | Mode::Flight | Mode::Morphing | Mode::Transition | Mode::Failsafe
+        )
+    }
 }
 
-/// MPC solver outcome (`MpcStatus.SOLVER_*`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default)]
+/// How a tick's MPC solve ended: one type for the flight stack's status,
+/// the `MpcStatus.SOLVER_*` code on the wire and the snake-case name in
+/// JSON summaries (stable codes: append only).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, Serialize)]
+#[serde(rename_all = "snake_case")]
 #[repr(u8)]
 pub enum SolverStatus {
     /// The MPC did not run this tick.
@@ -96,11 +120,12 @@ impl SolverStatus {
     }
 }
 
-/// `atmo_msgs/msg/PilotInput`.
+/// The pilot's (or a scenario's) commands: the flight stack's pilot input
+/// and the `atmo_msgs/msg/PilotInput` message, one type.
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
 #[allow(clippy::struct_excessive_bools)] // the pilot's three switches
 pub struct PilotInput {
-    /// NED world velocity command, m/s.
+    /// NED world velocity command, m/s (the flight stack limits its norm).
     pub velocity: [f64; 3],
     /// rad/s, FRD (positive turns right).
     pub yaw_rate: f64,
@@ -111,17 +136,22 @@ pub struct PilotInput {
     pub mpc_enabled: bool,
 }
 
-/// `atmo_msgs/msg/TickTiming`.
+/// Timing of one control tick: the control loop's record and the
+/// `atmo_msgs/msg/TickTiming` message, one type.
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
 pub struct TickTiming {
+    /// Tick number since start.
     pub tick: u64,
+    /// The deadline this tick was scheduled for, ns.
     pub deadline_ns: u64,
-    /// s.
+    /// Wake-up minus deadline, s (the period jitter; >= 0).
     pub wake_latency: f64,
-    /// s.
+    /// Time spent in the tick body, s.
     pub compute: f64,
+    /// The body ran past the next deadline.
     pub overrun: bool,
     pub overruns_total: u64,
+    /// Deadlines skipped because the loop fell behind.
     pub skipped_total: u64,
 }
 

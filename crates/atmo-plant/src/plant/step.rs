@@ -40,7 +40,9 @@ use super::{
     Command, ContactInfo, CrashKind, ENERGY, EVENT_CAPACITY, Event, EventKind, Ext, N_CONTACTS,
     N_EXT, N_WHEELS, Plant, SPRING, THRUST, TILT_GRID, WHEEL, WHEEL_INT,
 };
-use crate::body::{Attitude, accelerations, effective_body, lerp_body, state_derivative};
+use atmo_core::model::{Attitude, state_derivative_at};
+
+use crate::body::{accelerations, effective_body, lerp_body};
 use crate::contact::{Pose, SPIN_SIGN, WHEEL_SIDE, WheelLanes};
 use crate::error::{PlantError, Result};
 
@@ -673,7 +675,7 @@ impl Plant {
 
         let acc = accelerations(body, &x, &att, &u_eff, &extra);
         d.fixed_rows_mut::<12>(0)
-            .copy_from(&state_derivative(&x, &att, &acc));
+            .copy_from(&state_derivative_at(&x, &att, &acc));
     }
 }
 

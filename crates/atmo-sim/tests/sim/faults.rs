@@ -8,7 +8,7 @@
 use std::path::{Path, PathBuf};
 use std::sync::OnceLock;
 
-use atmo_flight::{Mode, SolverState};
+use atmo_flight::{Mode, SolverStatus};
 use atmo_mpc::settings::FeedbackMethod;
 use atmo_sim::closed_loop::{ControllerConfig, Summary, TickRecord, fly};
 use atmo_sim::scenario::Scenario;
@@ -367,7 +367,7 @@ fn solver_time_limit_hit_repeatedly_cuts_counted_then_failsafe_past_the_grace() 
     let fallbacks: Vec<&TickRecord> = clarabel
         .ticks
         .iter()
-        .filter(|r| r.outputs.status.solver == SolverState::Fallback)
+        .filter(|r| r.outputs.status.solver == SolverStatus::Fallback)
         .collect();
     assert!(fallbacks.len() >= 15, "{} fallback ticks", fallbacks.len());
     assert!(fallbacks[0].time >= 0.3 && fallbacks[0].time < 0.32);
