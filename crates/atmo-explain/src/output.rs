@@ -216,10 +216,19 @@ fn report_residuals(s: &mut String, ex: &Explanation) {
 fn report_multistep(s: &mut String, ex: &Explanation) {
     let mb = &ex.multistep_before;
     let ma = &ex.multistep_after;
-    if mb.starts == 0 {
+    if mb.attempted == 0 {
         let _ = writeln!(
             s,
             "Multi-step prediction: no start (no airborne stretch of the horizon in the recording).\n"
+        );
+        return;
+    }
+    if mb.starts == 0 {
+        let _ = writeln!(
+            s,
+            "Multi-step prediction: none of the {} starts was replayed by both models (the nominal \
+             model failed on {}, the held-out fitted plant files on {}); no error is reported.\n",
+            mb.attempted, mb.failed, ma.failed
         );
         return;
     }
@@ -228,10 +237,14 @@ fn report_multistep(s: &mut String, ex: &Explanation) {
         "Multi-step prediction ({:.2} s horizon, {} starts, plant replayed with the recorded commands; after = held-out fitted effects{}):\n",
         mb.horizon_s,
         mb.starts,
-        if ma.starts == 0 {
-            "; none of the starts could be replayed with the fitted plant files, so the after column is empty"
+        if mb.failed + ma.failed > 0 {
+            format!(
+                "; of {} starts, {} could not be replayed with the nominal model and {} with the \
+                 fitted plant files, and both columns leave them out",
+                mb.attempted, mb.failed, ma.failed
+            )
         } else {
-            ""
+            String::new()
         }
     );
     let _ = writeln!(
@@ -239,13 +252,6 @@ fn report_multistep(s: &mut String, ex: &Explanation) {
         "| error at horizon | before | after |\n| --- | --- | --- |"
     );
     let three = |v: [f64; 3]| format!("{:.4}, {:.4}, {:.4}", v[0], v[1], v[2]);
-    let after = |v: [f64; 3]| {
-        if ma.starts == 0 {
-            "none replayed".to_string()
-        } else {
-            three(v)
-        }
-    };
     let rows = [
         ("position (m) x, y, z", mb.position, ma.position),
         ("attitude (rad) yaw, pitch, roll", mb.attitude, ma.attitude),
@@ -253,7 +259,7 @@ fn report_multistep(s: &mut String, ex: &Explanation) {
         ("body rates (rad/s) x, y, z", mb.rate, ma.rate),
     ];
     for (name, before, aft) in rows {
-        let _ = writeln!(s, "| {name} | {} | {} |", three(before), after(aft));
+        let _ = writeln!(s, "| {name} | {} | {} |", three(before), three(aft));
     }
     s.push('\n');
     let _ = writeln!(s, "![time series](timeseries.png)\n");

@@ -211,10 +211,12 @@ pub(crate) fn effect_parameters(fit: &Fit, e: Effect, selected: bool) -> Vec<Par
         let (idx, theta, cov) = select::fit_with_uncertainty(&fit.stats, layout, &more);
         (idx, theta, select::deviations(&cov))
     };
+    // A coefficient the fit does not have is missing (NaN, not
+    // identified), not a zero.
     let coef = |c: usize| -> (f64, f64) {
         pidx.iter()
             .position(|i| *i == c)
-            .map_or((0.0, 0.0), |p| (ptheta[p], psd[p]))
+            .map_or((f64::NAN, f64::NAN), |p| (ptheta[p], psd[p]))
     };
     let param = |name: String, (value, std): (f64, f64), unit: &str| Parameter {
         identified: true,
@@ -268,7 +270,9 @@ pub(crate) fn effect_parameters(fit: &Fit, e: Effect, selected: bool) -> Vec<Par
                             cs / kr.abs(),
                         )
                     } else {
-                        (0.0, f64::NAN)
+                        // No rotor drag to divide by: the wind is not
+                        // measured, and not a zero wind either.
+                        (f64::NAN, f64::NAN)
                     };
                     Parameter {
                         identified: true,
@@ -493,8 +497,21 @@ pub fn plot_series(res: &Residuals, mismatch: &Mismatch, after: &[f64]) -> Serie
 }
 
 /// Warnings about how far the results can be trusted.
-pub fn notes(res: &Residuals, fit: &Fit) -> Vec<String> {
+pub fn notes(res: &Residuals, fit: &Fit, decisions: &[(Effect, Decision)]) -> Vec<String> {
     let mut notes = Vec::new();
+    let unjudged: Vec<&str> = decisions
+        .iter()
+        .filter(|(_, d)| matches!(d, Decision::PredictionFailed { .. }))
+        .map(|(e, _)| e.name())
+        .collect();
+    if !unjudged.is_empty() {
+        notes.push(format!(
+            "{} selected effect(s) not claimed because a 0.5 s prediction they were judged by \
+             could not be replayed ({}): a missing prediction is not compared",
+            unjudged.len(),
+            unjudged.join(", ")
+        ));
+    }
     let used_segments = (0..res.nseg).filter(|&s| fit.stats.entries[s] > 0).count();
     if used_segments < 10 {
         notes.push(format!(
@@ -564,6 +581,6 @@ pub fn report(f: &Findings) -> Explanation {
         location_after: Some(val.location.clone()),
         series: Some(plot_series(res, f.mismatch, &val.after)),
         timings_s: Vec::new(),
-        notes: notes(res, fit),
+        notes: notes(res, fit, f.decisions),
     }
 }

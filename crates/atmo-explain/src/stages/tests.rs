@@ -299,3 +299,54 @@ fn report_states_the_verdict_and_ranks_selected_effects_first() {
     assert_eq!(ex.effects.len(), Effect::ALL.len());
     assert_eq!(ex.ground_effect_gain_grid.len(), 20);
 }
+
+#[test]
+fn acceptance_never_compares_against_a_prediction_that_failed() {
+    use crate::replay::{self, ReplayError};
+    let (robot, rec) = hover(MASS_SCALE);
+    let res = &heavy().res;
+    let starts = replay::start_rows(&res.prep, crate::HORIZON, crate::HORIZON);
+    assert!(starts.len() >= 4, "{} starts", starts.len());
+    let mut cfg = PlantConfig::ideal();
+    cfg.arm_inertia_convention = robot.arm.inertia_convention;
+    let nominal = atmo_plant::PlantTemplate::new(&robot, &cfg).unwrap();
+    let replayed = replay::replay_each(&rec, &res.prep, &starts, &|_| Some(&nominal), &|_| 0.0);
+    assert!(replayed.iter().all(Option::is_some));
+    // A model whose plant file the plant refuses: no start replays.
+    let failed = replay::replay_each(&rec, &res.prep, &starts, &|_| None, &|_| 0.0);
+    assert!(failed.iter().all(Option::is_none));
+    let e = ReplayError::from_each(&failed, &|_| true);
+    assert_eq!((e.starts, e.failed, e.attempted), (0, starts.len(), starts.len()));
+    assert_eq!(e.velocity(), None);
+    assert!(e.velocity_norm().is_nan(), "a missing error read as {e:?}");
+
+    // Without the effect, nothing replays: no verdict reads that as 0 m/s.
+    for (with, without) in [(&replayed, &failed), (&failed, &replayed)] {
+        let d = super::accept::prediction_decision(with, without, false);
+        assert!(
+            matches!(d, Decision::PredictionFailed { attempted, .. } if attempted == starts.len()),
+            "{d:?}"
+        );
+        assert!(!d.describe().contains("0.0000"), "{}", d.describe());
+    }
+
+    // Half the starts fail without the effect: both errors are over the
+    // starts both replayed, not the one over all and the other over half.
+    let half: Vec<_> = (0..starts.len())
+        .map(|i| replayed[i].filter(|_| i % 2 == 0))
+        .collect();
+    let on_half = ReplayError::from_each(&replayed, &|i| i % 2 == 0);
+    let (w, wo) = replay::paired(&replayed, &half);
+    assert_eq!((w.starts, w.unpaired, wo.failed), (on_half.starts, starts.len() / 2, starts.len() / 2));
+    assert_eq!(w.velocity(), on_half.velocity());
+    match super::accept::prediction_decision(&replayed, &half, false) {
+        Decision::RejectedByPrediction { with, without, .. } => {
+            assert_eq!(Some(with), on_half.velocity());
+            assert_eq!(with, without, "the same model over the same starts");
+        }
+        d => panic!("{d:?}"),
+    }
+    // More failures with the effect than without it: not claimed.
+    let d = super::accept::prediction_decision(&half, &replayed, false);
+    assert!(matches!(d, Decision::PredictionFailed { .. }), "{d:?}");
+}
