@@ -215,9 +215,10 @@ fn summary(ex: &crate::Explanation, out: &Path, elapsed: f64) -> String {
             .collect();
         let _ = writeln!(
             s,
-            "  {:<14} confidence {:.2}  {}",
+            "  {:<14} confidence {}  {}",
             e.name,
-            e.confidence,
+            e.confidence
+                .map_or_else(|| "-".into(), |c| format!("{c:.2}")),
             params.join(", ")
         );
         for c in &e.combined {

@@ -27,7 +27,9 @@ pub fn json(ex: &Explanation) -> serde_json::Value {
                 "physics": e.physics,
                 "selected": e.selected,
                 "confidence": e.confidence,
-                "high_confidence": e.selected && e.confidence >= HIGH_CONFIDENCE,
+                "high_confidence": e.selected && e.confidence.is_some_and(|c| c >= HIGH_CONFIDENCE),
+                "selection_frequency": e.selection_frequency,
+                "decision": e.decision,
                 "heldout_gain": e.heldout_gain,
                 "parameters": e.parameters,
                 "indistinguishable_from": e.indistinguishable_from,
@@ -306,7 +308,7 @@ fn report_physics(s: &mut String, ex: &Explanation) {
     let _ = writeln!(s, "## 3. Which physics\n");
     let _ = writeln!(
         s,
-        "Forward-backward selection on held-out segments; confidence = inclusion frequency over {} random halves of the segments; high confidence >= {HIGH_CONFIDENCE}.\n",
+        "Forward-backward selection on held-out segments; confidence (of found effects only) = inclusion frequency over {} random halves of the segments; high confidence >= {HIGH_CONFIDENCE}.\n",
         crate::select::STABILITY_RUNS
     );
     let _ = writeln!(
@@ -346,7 +348,7 @@ fn report_physics(s: &mut String, ex: &Explanation) {
         );
         let _ = writeln!(
             s,
-            "| {} ({}) | {}{} | {:.2} | {:.4} | {} |",
+            "| {} ({}) | {}{} | {} | {:.4} | {} |",
             e.name,
             e.physics,
             verdict,
@@ -358,7 +360,7 @@ fn report_physics(s: &mut String, ex: &Explanation) {
                     e.indistinguishable_from.join(", ")
                 )
             },
-            e.confidence,
+            e.confidence.map_or_else(|| "-".into(), |c| format!("{c:.2}")),
             e.heldout_gain,
             params
         );
@@ -594,7 +596,7 @@ fn effects_png(path: &Path, ex: &Explanation) -> Result<(), ExplainError> {
     let n = ex.effects.len();
     let mut chart = ChartBuilder::on(&root)
         .caption(
-            "effect scores: confidence (inclusion frequency)",
+            "confidence of the found effects (inclusion frequency)",
             ("sans-serif", 20),
         )
         .margin(10)
@@ -615,16 +617,16 @@ fn effects_png(path: &Path, ex: &Explanation) -> Result<(), ExplainError> {
         })
         .draw()
         .map_err(out_err)?;
+    // Only a found effect has a confidence; the others get no bar.
     for (i, e) in ex.effects.iter().enumerate() {
         let y = n - 1 - i;
-        let color = if e.selected {
-            GREEN
-        } else {
-            RGBColor(160, 160, 160)
+        let Some(confidence) = e.confidence else {
+            continue;
         };
+        let color = GREEN;
         chart
             .draw_series(std::iter::once(Rectangle::new(
-                [(0.0, y), (e.confidence.max(0.005), y + 1)],
+                [(0.0, y), (confidence.max(0.005), y + 1)],
                 color.filled(),
             )))
             .map_err(out_err)?;

@@ -140,8 +140,10 @@ pub fn param_status(value: f64, std: Option<f64>, range: Option<(f64, f64)>) -> 
     ParamStatus::Identified
 }
 
-/// Which test decided an effect's verdict.
-#[derive(Debug, Clone, PartialEq)]
+/// Which test decided an effect's verdict (in `explain.json` as
+/// `decision`, tagged by `kind`, with its numbers).
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+#[serde(tag = "kind", rename_all = "snake_case")]
 pub enum Decision {
     /// Passed both tests (multi-step velocity error at the horizon with
     /// and without it, m/s; `None` when no 0.5 s stretch exists).

@@ -39,8 +39,9 @@ pub struct Findings<'a> {
     pub validation: &'a Validation,
 }
 
-/// Candidates' verdicts, sorted (selected first, then by confidence and
-/// held-out gain), and the pairs of effects the data cannot tell apart.
+/// Candidates' verdicts, sorted (claimed first; then by confidence, by
+/// selection frequency and by held-out gain), and the pairs of effects the
+/// data cannot tell apart.
 pub fn effect_reports(
     fit: &Fit,
     confidence: &[(Effect, f64)],
@@ -62,7 +63,11 @@ pub fn effect_reports(
         } else {
             e
         };
-        let conf = confidence.iter().find(|c| c.0 == of).map_or(0.0, |c| c.1);
+        // A confidence is what a claim carries; an effect not claimed
+        // carries its decision instead.
+        let frequency = confidence.iter().find(|c| c.0 == of).map(|c| c.1);
+        let conf = frequency.filter(|_| selected);
+        let decision = decisions.iter().find(|d| d.0 == e).map(|d| d.1.clone());
         let gain = if selected {
             let rest: Vec<Effect> = chosen.iter().copied().filter(|x| *x != e).collect();
             (cv(&rest) - cv_sel) / entries
@@ -93,6 +98,9 @@ pub fn effect_reports(
             calibration: e.is_calibration(),
             selected,
             confidence: conf,
+            // Not computed (no stability run) reads as never proposed.
+            selection_frequency: frequency.unwrap_or(0.0),
+            decision,
             heldout_gain: gain,
             parameters: effect_parameters(fit, e, selected)
                 .into_iter()
@@ -111,7 +119,8 @@ pub fn effect_reports(
     reports.sort_by(|a, b| {
         b.selected
             .cmp(&a.selected)
-            .then(b.confidence.total_cmp(&a.confidence))
+            .then(b.confidence.unwrap_or(-1.0).total_cmp(&a.confidence.unwrap_or(-1.0)))
+            .then(b.selection_frequency.total_cmp(&a.selection_frequency))
             .then(b.heldout_gain.total_cmp(&a.heldout_gain))
     });
     (reports, pairs)
@@ -378,7 +387,7 @@ pub fn gain_grid(res: &Residuals, fit: &Fit) -> Vec<GridPoint> {
 pub fn verdict(reports: &[EffectReport], chosen: &[Effect], mismatch: &Mismatch) -> (bool, String) {
     let high = reports
         .iter()
-        .any(|r| r.selected && r.confidence >= HIGH_CONFIDENCE);
+        .any(|r| r.selected && r.confidence.is_some_and(|c| c >= HIGH_CONFIDENCE));
     let mismatch_found = !chosen.is_empty() || !mismatch.location.located.is_empty();
     let verdict = if !mismatch_found {
         "no significant mismatch: the nominal model explains the recording to its noise floor"
@@ -388,16 +397,15 @@ pub fn verdict(reports: &[EffectReport], chosen: &[Effect], mismatch: &Mismatch)
             .to_string()
     } else {
         let describe = |r: &EffectReport| {
+            let conf = r
+                .confidence
+                .map_or_else(|| "confidence not computed".into(), |c| format!("confidence {c:.2}"));
             if r.indistinguishable_from.is_empty() {
-                format!(
-                    "{} (confidence {:.2}; {})",
-                    r.name, r.confidence, r.decided_by
-                )
+                format!("{} ({conf}; {})", r.name, r.decided_by)
             } else {
                 format!(
-                    "{} (confidence {:.2}; this data cannot tell it apart from {})",
+                    "{} ({conf}; this data cannot tell it apart from {})",
                     r.name,
-                    r.confidence,
                     r.indistinguishable_from.join(", ")
                 )
             }

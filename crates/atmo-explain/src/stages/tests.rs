@@ -301,6 +301,22 @@ fn report_states_the_verdict_and_ranks_selected_effects_first() {
 }
 
 #[test]
+fn only_a_claimed_effect_carries_a_confidence() {
+    for run in [heavy(), nominal()] {
+        let json = crate::output::json(&run.explanation);
+        for (e, j) in run.explanation.effects.iter().zip(json["effects"].as_array().unwrap()) {
+            assert_eq!(e.confidence.is_some(), e.selected, "{}", e.name);
+            assert_eq!(j["confidence"].is_null(), !e.selected, "{j}");
+            // What the acceptance judged carries its decision, claimed or not.
+            assert_eq!(j["decision"].is_null(), e.decision.is_none(), "{j}");
+            if e.selected {
+                assert_eq!(j["decision"]["kind"], "found", "{j}");
+            }
+        }
+    }
+}
+
+#[test]
 fn acceptance_never_compares_against_a_prediction_that_failed() {
     use crate::replay::{self, ReplayError};
     let (robot, rec) = hover(MASS_SCALE);
