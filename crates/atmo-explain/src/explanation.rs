@@ -85,6 +85,10 @@ pub struct EffectReport {
     pub parameters: Vec<Parameter>,
     /// Effects this one cannot be told apart from with this data.
     pub indistinguishable_from: Vec<String>,
+    /// Physics and calibration this data cannot tell apart, reported as
+    /// one finding: on a claimed calibration, the physics it stands for as
+    /// well; on that physics, the claimed calibration that carries it.
+    pub same_finding_as: Vec<String>,
     /// Pairs of parameters (one of them this effect's) the data determine
     /// only in combination.
     pub combined: Vec<CombinedFinding>,

@@ -33,6 +33,7 @@ pub fn json(ex: &Explanation) -> serde_json::Value {
                 "heldout_gain": e.heldout_gain,
                 "parameters": e.parameters,
                 "indistinguishable_from": e.indistinguishable_from,
+                "same_finding_as": e.same_finding_as,
                 "combined": e.combined,
                 "decided_by": e.decided_by,
                 "stage": if e.calibration { "calibration" } else { "physics" },
@@ -359,8 +360,13 @@ fn report_physics(s: &mut String, ex: &Explanation) {
                     "; cannot be told apart from {}",
                     e.indistinguishable_from.join(", ")
                 )
+            } + &if e.same_finding_as.is_empty() {
+                String::new()
+            } else {
+                format!("; one finding with {}", e.same_finding_as.join(", "))
             },
-            e.confidence.map_or_else(|| "-".into(), |c| format!("{c:.2}")),
+            e.confidence
+                .map_or_else(|| "-".into(), |c| format!("{c:.2}")),
             e.heldout_gain,
             params
         );

@@ -153,6 +153,11 @@ pub enum Decision {
     },
     /// A parameter outside its physical range, or none identified.
     NotIdentified { reason: String },
+    /// Physics a calibration of the robot file explains as well (swapped
+    /// in for it, at least [`SWAP_RECOVERY`] of its held-out gain): with
+    /// those calibrations one finding, which the model carries as the
+    /// calibration (the simpler account) and the report names as both.
+    OneFindingWith { calibrations: Vec<String> },
     /// Lowers the one-step residual but not the 0.5 s prediction;
     /// `reduced` when judged on the model left after other rejections.
     /// Both errors are over the same starts (those both models replayed).
@@ -207,6 +212,13 @@ impl Decision {
                 "found by the held-out residual alone (no 0.5 s stretch to predict)".into()
             }
             Decision::NotIdentified { reason } => format!("not identified: {reason}"),
+            Decision::OneFindingWith { calibrations } => format!(
+                "one finding with {}: this data cannot tell it apart from that calibration of the \
+                 robot file (swapped in for it, it explains at least {:.0} % as much); the model \
+                 carries the calibration, and no physics is claimed alone",
+                calibrations.join(", "),
+                100.0 * SWAP_RECOVERY
+            ),
             Decision::RejectedByPrediction {
                 with,
                 without,
@@ -318,7 +330,7 @@ pub fn accept_effects(
         }
         match failure(&fit, e, &chosen, &chosen) {
             // (No calibration to swap in yet: the selection's are all in.)
-            Some((reason, _)) => decisions.push((e, Decision::NotIdentified { reason })),
+            Some((d, _)) => decisions.push((e, d)),
             None => tested.push(e),
         }
     }
@@ -348,17 +360,17 @@ pub fn accept_effects(
     let mut settled = kept == chosen;
     while !settled {
         fit.restrict(&kept);
-        if let Some((e, (reason, swap))) = kept
+        if let Some((e, (d, swap))) = kept
             .iter()
             .find_map(|&e| failure(&fit, e, &kept, &chosen).map(|f| (e, f)))
         {
-            let reason = format!("after the refit without the rejected effects, {reason}");
-            reject(
-                &mut decisions,
-                &mut kept,
-                e,
-                &Decision::NotIdentified { reason },
-            );
+            let d = match d {
+                Decision::NotIdentified { reason } => Decision::NotIdentified {
+                    reason: format!("after the refit without the rejected effects, {reason}"),
+                },
+                d => d,
+            };
+            reject(&mut decisions, &mut kept, e, &d);
             if let Some(c) = swap.filter(|c| !kept.contains(c)) {
                 kept.push(c);
             }
@@ -397,9 +409,10 @@ pub fn accept_effects(
     Ok((fit, decisions))
 }
 
-/// Why effect `e` of the fit of `model` is not a finding, if it is not:
-/// out of range or not identified, a wind without a drag, or a physics
-/// effect a calibration explains as well (then with the best such
+/// Why effect `e` of the fit of `model` is not a finding alone, if it is
+/// not: out of range or not identified, a wind without a drag (both
+/// [`Decision::NotIdentified`]), or a physics effect a calibration
+/// explains as well ([`Decision::OneFindingWith`], with the best such
 /// calibration the selection `proposed`, to take its place: one rejected
 /// only because the physics did its work beside it).
 fn failure(
@@ -407,14 +420,15 @@ fn failure(
     e: Effect,
     model: &[Effect],
     proposed: &[Effect],
-) -> Option<(String, Option<Effect>)> {
+) -> Option<(Decision, Option<Effect>)> {
     identification_failure(fit, e)
         .or_else(|| wind_failure(fit, e))
-        .map(|r| (r, None))
+        .map(|reason| (Decision::NotIdentified { reason }, None))
         .or_else(|| {
-            calibration_confusion(fit, e, model).map(|(r, alike)| {
-                let swap = alike.into_iter().find(|c| proposed.contains(c));
-                (r, swap)
+            calibration_confusion(fit, e, model).map(|alike| {
+                let swap = alike.iter().copied().find(|c| proposed.contains(c));
+                let calibrations = alike.iter().map(|c| c.name().to_string()).collect();
+                (Decision::OneFindingWith { calibrations }, swap)
             })
         })
 }
@@ -609,7 +623,7 @@ fn wind_failure(fit: &Fit, e: Effect) -> Option<String> {
 /// are not used, because on the fan flights an inertia or mass error swaps
 /// for the drag of a 4-9 m/s fan (docs/explain.md, "Acceptance"; the
 /// measurements: docs/decisions/2026-12-05-explain-history.md).
-fn calibration_confusion(fit: &Fit, e: Effect, model: &[Effect]) -> Option<(String, Vec<Effect>)> {
+fn calibration_confusion(fit: &Fit, e: Effect, model: &[Effect]) -> Option<Vec<Effect>> {
     if e.is_calibration() || rides_with_wind(e, model) {
         return None;
     }
@@ -618,20 +632,7 @@ fn calibration_confusion(fit: &Fit, e: Effect, model: &[Effect]) -> Option<(Stri
         .into_iter()
         .filter(|f| f.is_calibration())
         .collect();
-    if calibrations.is_empty() {
-        return None;
-    }
-    let names: Vec<&str> = calibrations.iter().map(|c| c.name()).collect();
-    Some((
-        format!(
-            "this data cannot tell it apart from {}, a calibration of the robot file (swapped \
-             in for it, it explains at least {:.0} % as much): the calibration is the simpler \
-             account, no physics is claimed",
-            names.join(", "),
-            100.0 * SWAP_RECOVERY
-        ),
-        calibrations,
-    ))
+    (!calibrations.is_empty()).then_some(calibrations)
 }
 
 /// Why effect `e` of the fit is not identified, if it is not.

@@ -112,18 +112,67 @@ pub fn effect_reports(
                 })
                 .collect(),
             indistinguishable_from: indist,
+            same_finding_as: Vec::new(),
             combined: Vec::new(),
         });
     }
+    link_physics_and_calibration(fit, decisions, &mut reports);
     combine_inseparable(fit, &mut reports);
     reports.sort_by(|a, b| {
         b.selected
             .cmp(&a.selected)
-            .then(b.confidence.unwrap_or(-1.0).total_cmp(&a.confidence.unwrap_or(-1.0)))
+            .then(
+                b.confidence
+                    .unwrap_or(-1.0)
+                    .total_cmp(&a.confidence.unwrap_or(-1.0)),
+            )
             .then(b.selection_frequency.total_cmp(&a.selection_frequency))
             .then(b.heldout_gain.total_cmp(&a.heldout_gain))
     });
     (reports, pairs)
+}
+
+/// Physics and a claimed calibration that explain the same thing are one
+/// finding (the selection's swap test either way, or the acceptance's
+/// [`Decision::OneFindingWith`]): each names the other in
+/// `same_finding_as`, so neither is silently preferred.
+fn link_physics_and_calibration(
+    fit: &Fit,
+    decisions: &[(Effect, Decision)],
+    reports: &mut [EffectReport],
+) {
+    let mut pairs: Vec<(Effect, Effect)> = Vec::new();
+    for &c in fit.chosen.iter().filter(|c| c.is_calibration()) {
+        for p in fit.swaps_for(c).into_iter().filter(|p| !p.is_calibration()) {
+            pairs.push((p, c));
+        }
+        for (p, d) in decisions {
+            if let Decision::OneFindingWith { calibrations } = d
+                && calibrations.iter().any(|n| n == c.name())
+                && !pairs.contains(&(*p, c))
+            {
+                pairs.push((*p, c));
+            }
+        }
+    }
+    for r in reports.iter_mut() {
+        for (p, c) in &pairs {
+            let other = if r.name == p.name() {
+                c
+            } else if r.name == c.name() {
+                p
+            } else {
+                continue;
+            };
+            r.same_finding_as.push(other.name().to_string());
+        }
+        if matches!(r.decision, Some(Decision::OneFindingWith { .. }))
+            && r.same_finding_as.is_empty()
+        {
+            r.decided_by
+                .push_str("; that calibration was not claimed either (see its decision)");
+        }
+    }
 }
 
 /// The selected effects' parameters that are their linear coefficients
@@ -397,9 +446,10 @@ pub fn verdict(reports: &[EffectReport], chosen: &[Effect], mismatch: &Mismatch)
             .to_string()
     } else {
         let describe = |r: &EffectReport| {
-            let conf = r
-                .confidence
-                .map_or_else(|| "confidence not computed".into(), |c| format!("confidence {c:.2}"));
+            let conf = r.confidence.map_or_else(
+                || "confidence not computed".into(),
+                |c| format!("confidence {c:.2}"),
+            );
             if r.indistinguishable_from.is_empty() {
                 format!("{} ({conf}; {})", r.name, r.decided_by)
             } else {
@@ -410,20 +460,46 @@ pub fn verdict(reports: &[EffectReport], chosen: &[Effect], mismatch: &Mismatch)
                 )
             }
         };
-        let is_cal = |r: &EffectReport| r.calibration;
-        let list = |cal: bool| {
+        // Physics, then what physics or a calibration explains alike (one
+        // finding, carried by the calibration), then calibration alone.
+        let group = |r: &EffectReport| match (r.calibration, r.same_finding_as.is_empty()) {
+            (false, _) => 0,
+            (true, false) => 1,
+            (true, true) => 2,
+        };
+        let list = |g: u8| {
             reports
                 .iter()
-                .filter(|r| r.selected && is_cal(r) == cal)
-                .map(describe)
+                .filter(|r| r.selected && group(r) == g)
+                .map(|r| {
+                    if g == 1 {
+                        format!(
+                            "{} or {} (one finding, carried by the calibration {}; {})",
+                            r.name,
+                            r.same_finding_as.join(" or "),
+                            r.name,
+                            describe(r)
+                        )
+                    } else {
+                        describe(r)
+                    }
+                })
                 .collect::<Vec<_>>()
                 .join(", ")
         };
-        let (physics, calibration) = (list(false), list(true));
-        let explained = match (physics.is_empty(), calibration.is_empty()) {
-            (false, true) => physics,
-            (true, false) => format!("the nominal calibration alone: {calibration}"),
-            _ => format!("{physics}; nominal calibration: {calibration}"),
+        let parts: Vec<String> = [
+            (list(0), ""),
+            (list(1), "physics or calibration: "),
+            (list(2), "nominal calibration: "),
+        ]
+        .into_iter()
+        .filter(|(l, _)| !l.is_empty())
+        .map(|(l, head)| format!("{head}{l}"))
+        .collect();
+        let explained = if parts.len() == 1 && list(0).is_empty() && list(1).is_empty() {
+            format!("the nominal calibration alone: {}", list(2))
+        } else {
+            parts.join("; ")
         };
         format!(
             "mismatch found; explained by {explained}{}",
@@ -434,9 +510,16 @@ pub fn verdict(reports: &[EffectReport], chosen: &[Effect], mismatch: &Mismatch)
             }
         )
     };
+    // Physics the acceptance made one finding with a claimed calibration
+    // is listed with it above, not as rejected; physics refused for its
+    // own reasons stays listed with them.
     let rejected: Vec<String> = reports
         .iter()
         .filter(|r| !r.selected && !r.decided_by.starts_with("not selected"))
+        .filter(|r| {
+            !matches!(r.decision, Some(Decision::OneFindingWith { .. }))
+                || r.same_finding_as.is_empty()
+        })
         .map(|r| format!("{} ({})", r.name, r.decided_by))
         .collect();
     let verdict = if rejected.is_empty() {

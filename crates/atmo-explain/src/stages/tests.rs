@@ -304,7 +304,12 @@ fn report_states_the_verdict_and_ranks_selected_effects_first() {
 fn only_a_claimed_effect_carries_a_confidence() {
     for run in [heavy(), nominal()] {
         let json = crate::output::json(&run.explanation);
-        for (e, j) in run.explanation.effects.iter().zip(json["effects"].as_array().unwrap()) {
+        for (e, j) in run
+            .explanation
+            .effects
+            .iter()
+            .zip(json["effects"].as_array().unwrap())
+        {
             assert_eq!(e.confidence.is_some(), e.selected, "{}", e.name);
             assert_eq!(j["confidence"].is_null(), !e.selected, "{j}");
             // What the acceptance judged carries its decision, claimed or not.
@@ -332,7 +337,10 @@ fn acceptance_never_compares_against_a_prediction_that_failed() {
     let failed = replay::replay_each(&rec, &res.prep, &starts, &|_| None, &|_| 0.0);
     assert!(failed.iter().all(Option::is_none));
     let e = ReplayError::from_each(&failed, &|_| true);
-    assert_eq!((e.starts, e.failed, e.attempted), (0, starts.len(), starts.len()));
+    assert_eq!(
+        (e.starts, e.failed, e.attempted),
+        (0, starts.len(), starts.len())
+    );
     assert_eq!(e.velocity(), None);
     assert!(e.velocity_norm().is_nan(), "a missing error read as {e:?}");
 
@@ -353,7 +361,10 @@ fn acceptance_never_compares_against_a_prediction_that_failed() {
         .collect();
     let on_half = ReplayError::from_each(&replayed, &|i| i % 2 == 0);
     let (w, wo) = replay::paired(&replayed, &half);
-    assert_eq!((w.starts, w.unpaired, wo.failed), (on_half.starts, starts.len() / 2, starts.len() / 2));
+    assert_eq!(
+        (w.starts, w.unpaired, wo.failed),
+        (on_half.starts, starts.len() / 2, starts.len() / 2)
+    );
     assert_eq!(w.velocity(), on_half.velocity());
     match super::accept::prediction_decision(&replayed, &half, false) {
         Decision::RejectedByPrediction { with, without, .. } => {
@@ -365,4 +376,44 @@ fn acceptance_never_compares_against_a_prediction_that_failed() {
     // More failures with the effect than without it: not claimed.
     let d = super::accept::prediction_decision(&half, &replayed, false);
     assert!(matches!(d, Decision::PredictionFailed { .. }), "{d:?}");
+}
+
+#[test]
+fn physics_a_claimed_calibration_explains_alike_is_one_finding_not_a_rejection() {
+    let run = heavy();
+    let report = |name: &str, calibration: bool, selected: bool, other: &str, d: Decision| {
+        crate::EffectReport {
+            name: name.into(),
+            physics: String::new(),
+            selected,
+            confidence: selected.then_some(1.0),
+            selection_frequency: 1.0,
+            decided_by: d.describe(),
+            decision: Some(d),
+            heldout_gain: 0.1,
+            parameters: Vec::new(),
+            indistinguishable_from: Vec::new(),
+            same_finding_as: vec![other.into()],
+            combined: Vec::new(),
+            calibration,
+        }
+    };
+    let found = Decision::Found {
+        with: Some(0.5),
+        without: Some(0.6),
+    };
+    let alike = Decision::OneFindingWith {
+        calibrations: vec!["thrust_axis".into()],
+    };
+    let reports = [
+        report("thrust_axis", true, true, "wind", found),
+        report("wind", false, false, "thrust_axis", alike),
+    ];
+    let (_, v) = verdict(&reports, &[Effect::ThrustAxis], &run.mismatch);
+    assert!(
+        v.contains("physics or calibration: thrust_axis or wind (one finding"),
+        "{v}"
+    );
+    assert!(!v.contains("rejected"), "{v}");
+    assert!(!v.contains("nominal calibration alone"), "{v}");
 }
