@@ -298,8 +298,20 @@ pub fn accept_effects(
     // finding, carried by the thrust scale.
     if fit.chosen.contains(&Effect::ThrustScale) && fit.chosen.contains(&Effect::MassError) {
         let combination = match thrust_to_mass(&fit) {
-            Some((ratio, sd)) => format!("thrust / mass - 1 = {ratio:.4} +- {sd:.4}"),
-            None => "thrust / mass - 1 (not computed: the fit lacks a coefficient of the two)"
+            // Either held at a bound: the ratio of two bounds is not a
+            // measurement (both at -0.5 read as "0.0000 +- 0.0000").
+            Some(t) if t.at_bound => format!(
+                "their combination thrust / mass - 1 is not identified either (thrust_scale = \
+                 {:.4} and mass_error = {:.4} are held at bounds of their ranges)",
+                t.scale, t.mass
+            ),
+            Some(t) => format!(
+                "the identified combination is thrust / mass - 1 = {:.4} +- {:.4}, reported as \
+                 thrust_scale",
+                t.ratio, t.sd
+            ),
+            None => "their combination thrust / mass - 1 is not computed (the fit lacks a \
+                     coefficient of the two)"
                 .to_string(),
         };
         let kept: Vec<Effect> = fit
@@ -312,10 +324,7 @@ pub fn accept_effects(
         decisions.push((
             Effect::MassError,
             Decision::NotIdentified {
-                reason: format!(
-                    "not separable from thrust_scale: the identified combination is \
-                     {combination}, reported as thrust_scale"
-                ),
+                reason: format!("not separable from thrust_scale: {combination}"),
             },
         ));
     }
@@ -566,7 +575,7 @@ fn prediction_verdicts(
 /// `r = (1 + s) / (1 + m) - 1` of the thrust scale s and mass error m of
 /// the fit, with its deviation from the fit's jackknife covariance (first
 /// order: `g^T C g`, `g = (1 / (1 + m), -(1 + s) / (1 + m)^2)`).
-fn thrust_to_mass(fit: &Fit) -> Option<(f64, f64)> {
+fn thrust_to_mass(fit: &Fit) -> Option<ThrustToMass> {
     let s_col = fit.layout.columns(Effect::ThrustScale).start;
     let m_col = fit.layout.columns(Effect::MassError).start;
     let pos = |c: usize| fit.idx.iter().position(|i| *i == c);
@@ -575,7 +584,28 @@ fn thrust_to_mass(fit: &Fit) -> Option<(f64, f64)> {
     let (gs, gm) = (1.0 / (1.0 + m), -(1.0 + s) / (1.0 + m).powi(2));
     let c = &fit.cov;
     let var = gs * gs * c[(ps, ps)] + 2.0 * gs * gm * c[(ps, pm)] + gm * gm * c[(pm, pm)];
-    Some(((1.0 + s) / (1.0 + m) - 1.0, var.max(0.0).sqrt()))
+    let at_bound = |v: f64, e: Effect| {
+        coefficient_bounds(e)
+            .first()
+            .is_some_and(|&(lo, hi)| v <= lo || v >= hi)
+    };
+    Some(ThrustToMass {
+        ratio: (1.0 + s) / (1.0 + m) - 1.0,
+        sd: var.max(0.0).sqrt(),
+        scale: s,
+        mass: m,
+        at_bound: at_bound(s, Effect::ThrustScale) || at_bound(m, Effect::MassError),
+    })
+}
+
+/// Thrust per mass from the thrust scale and mass error of a fit.
+struct ThrustToMass {
+    ratio: f64,
+    sd: f64,
+    scale: f64,
+    mass: f64,
+    /// Either coefficient held at a bound of its range.
+    at_bound: bool,
 }
 
 /// Wind without an identified drag: the wind speed is only known through
