@@ -215,9 +215,10 @@ fn summary(ex: &crate::Explanation, out: &Path, elapsed: f64) -> String {
             .collect();
         let _ = writeln!(
             s,
-            "  {:<14} confidence {:.2}  {}",
+            "  {:<14} confidence {}  {}",
             e.name,
-            e.confidence,
+            e.confidence
+                .map_or_else(|| "-".into(), |c| format!("{c:.2}")),
             params.join(", ")
         );
         for c in &e.combined {
@@ -232,30 +233,36 @@ fn summary(ex: &crate::Explanation, out: &Path, elapsed: f64) -> String {
         b.located_rows, b.located_normalized, a.located_normalized
     );
     let (mb, ma) = (&ex.multistep_before, &ex.multistep_after);
-    let _ = if mb.starts == 0 {
+    let _ = if mb.attempted == 0 {
         writeln!(
             s,
             "multi-step     none: no airborne stretch of {:.2} s to start from",
             crate::HORIZON
         )
-    } else if ma.starts == 0 {
+    } else if mb.starts == 0 {
         writeln!(
             s,
-            "multi-step     {:.2} s: position {:.4} m, velocity {:.4} m/s with the nominal model; \
-             with the fitted effects: no held-out start could be replayed",
-            mb.horizon_s,
-            mb.position_norm(),
-            mb.velocity_norm()
+            "multi-step     none: no start of {} replayed by both models (nominal failed on {}, \
+             fitted on {})",
+            mb.attempted, mb.failed, ma.failed
         )
     } else {
         writeln!(
             s,
-            "multi-step     {:.2} s: position {:.4} -> {:.4} m, velocity {:.4} -> {:.4} m/s",
+            "multi-step     {:.2} s: position {:.4} -> {:.4} m, velocity {:.4} -> {:.4} m/s{}",
             mb.horizon_s,
             mb.position_norm(),
             ma.position_norm(),
             mb.velocity_norm(),
-            ma.velocity_norm()
+            ma.velocity_norm(),
+            if mb.failed + ma.failed > 0 {
+                format!(
+                    " ({} of {} starts: nominal failed on {}, fitted on {})",
+                    mb.starts, mb.attempted, mb.failed, ma.failed
+                )
+            } else {
+                String::new()
+            }
         )
     };
     let _ = writeln!(s, "analysed in    {elapsed:.2} s");

@@ -64,15 +64,31 @@ impl CombinedFinding {
 pub struct EffectReport {
     pub name: String,
     pub physics: String,
+    /// Claimed: selected and passed the acceptance.
     pub selected: bool,
-    /// Inclusion frequency over random halves of the segments, in [0, 1].
-    pub confidence: f64,
+    /// Of a claimed effect only: the inclusion frequency over random
+    /// halves of the segments, in [0, 1]. `None` for an effect not claimed
+    /// (rejected, not identified, not selected): its `decision` says why,
+    /// with the numbers, and no confidence stands beside it to read as a
+    /// claim.
+    pub confidence: Option<f64>,
+    /// How often the selection proposed the effect (inclusion frequency
+    /// over the random halves), whatever the acceptance then decided: a
+    /// diagnostic of the selection, not a confidence in the effect.
+    pub selection_frequency: f64,
+    /// The acceptance's decision with its numbers; `None` when the
+    /// selection did not propose the effect.
+    pub decision: Option<crate::stages::Decision>,
     /// Held-out improvement (noise-floor variances per residual entry) from
     /// adding it to the selected model (or lost by removing it).
     pub heldout_gain: f64,
     pub parameters: Vec<Parameter>,
     /// Effects this one cannot be told apart from with this data.
     pub indistinguishable_from: Vec<String>,
+    /// Physics and calibration this data cannot tell apart, reported as
+    /// one finding: on a claimed calibration, the physics it stands for as
+    /// well; on that physics, the claimed calibration that carries it.
+    pub same_finding_as: Vec<String>,
     /// Pairs of parameters (one of them this effect's) the data determine
     /// only in combination.
     pub combined: Vec<CombinedFinding>,
@@ -197,7 +213,7 @@ impl Explanation {
     pub fn confidently_claimed_besides(&self, expected: &[&str]) -> Vec<&str> {
         self.effects
             .iter()
-            .filter(|e| e.selected && e.confidence >= HIGH_CONFIDENCE)
+            .filter(|e| e.selected && e.confidence.is_some_and(|c| c >= HIGH_CONFIDENCE))
             .map(|e| e.name.as_str())
             .filter(|n| !expected.contains(n))
             .collect()

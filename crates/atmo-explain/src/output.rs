@@ -27,10 +27,13 @@ pub fn json(ex: &Explanation) -> serde_json::Value {
                 "physics": e.physics,
                 "selected": e.selected,
                 "confidence": e.confidence,
-                "high_confidence": e.selected && e.confidence >= HIGH_CONFIDENCE,
+                "high_confidence": e.selected && e.confidence.is_some_and(|c| c >= HIGH_CONFIDENCE),
+                "selection_frequency": e.selection_frequency,
+                "decision": e.decision,
                 "heldout_gain": e.heldout_gain,
                 "parameters": e.parameters,
                 "indistinguishable_from": e.indistinguishable_from,
+                "same_finding_as": e.same_finding_as,
                 "combined": e.combined,
                 "decided_by": e.decided_by,
                 "stage": if e.calibration { "calibration" } else { "physics" },
@@ -216,10 +219,19 @@ fn report_residuals(s: &mut String, ex: &Explanation) {
 fn report_multistep(s: &mut String, ex: &Explanation) {
     let mb = &ex.multistep_before;
     let ma = &ex.multistep_after;
-    if mb.starts == 0 {
+    if mb.attempted == 0 {
         let _ = writeln!(
             s,
             "Multi-step prediction: no start (no airborne stretch of the horizon in the recording).\n"
+        );
+        return;
+    }
+    if mb.starts == 0 {
+        let _ = writeln!(
+            s,
+            "Multi-step prediction: none of the {} starts was replayed by both models (the nominal \
+             model failed on {}, the held-out fitted plant files on {}); no error is reported.\n",
+            mb.attempted, mb.failed, ma.failed
         );
         return;
     }
@@ -228,10 +240,14 @@ fn report_multistep(s: &mut String, ex: &Explanation) {
         "Multi-step prediction ({:.2} s horizon, {} starts, plant replayed with the recorded commands; after = held-out fitted effects{}):\n",
         mb.horizon_s,
         mb.starts,
-        if ma.starts == 0 {
-            "; none of the starts could be replayed with the fitted plant files, so the after column is empty"
+        if mb.failed + ma.failed > 0 {
+            format!(
+                "; of {} starts, {} could not be replayed with the nominal model and {} with the \
+                 fitted plant files, and both columns leave them out",
+                mb.attempted, mb.failed, ma.failed
+            )
         } else {
-            ""
+            String::new()
         }
     );
     let _ = writeln!(
@@ -239,13 +255,6 @@ fn report_multistep(s: &mut String, ex: &Explanation) {
         "| error at horizon | before | after |\n| --- | --- | --- |"
     );
     let three = |v: [f64; 3]| format!("{:.4}, {:.4}, {:.4}", v[0], v[1], v[2]);
-    let after = |v: [f64; 3]| {
-        if ma.starts == 0 {
-            "none replayed".to_string()
-        } else {
-            three(v)
-        }
-    };
     let rows = [
         ("position (m) x, y, z", mb.position, ma.position),
         ("attitude (rad) yaw, pitch, roll", mb.attitude, ma.attitude),
@@ -253,7 +262,7 @@ fn report_multistep(s: &mut String, ex: &Explanation) {
         ("body rates (rad/s) x, y, z", mb.rate, ma.rate),
     ];
     for (name, before, aft) in rows {
-        let _ = writeln!(s, "| {name} | {} | {} |", three(before), after(aft));
+        let _ = writeln!(s, "| {name} | {} | {} |", three(before), three(aft));
     }
     s.push('\n');
     let _ = writeln!(s, "![time series](timeseries.png)\n");
@@ -300,7 +309,7 @@ fn report_physics(s: &mut String, ex: &Explanation) {
     let _ = writeln!(s, "## 3. Which physics\n");
     let _ = writeln!(
         s,
-        "Forward-backward selection on held-out segments; confidence = inclusion frequency over {} random halves of the segments; high confidence >= {HIGH_CONFIDENCE}.\n",
+        "Forward-backward selection on held-out segments; confidence (of found effects only) = inclusion frequency over {} random halves of the segments; high confidence >= {HIGH_CONFIDENCE}.\n",
         crate::select::STABILITY_RUNS
     );
     let _ = writeln!(
@@ -340,7 +349,7 @@ fn report_physics(s: &mut String, ex: &Explanation) {
         );
         let _ = writeln!(
             s,
-            "| {} ({}) | {}{} | {:.2} | {:.4} | {} |",
+            "| {} ({}) | {}{} | {} | {:.4} | {} |",
             e.name,
             e.physics,
             verdict,
@@ -351,8 +360,13 @@ fn report_physics(s: &mut String, ex: &Explanation) {
                     "; cannot be told apart from {}",
                     e.indistinguishable_from.join(", ")
                 )
+            } + &if e.same_finding_as.is_empty() {
+                String::new()
+            } else {
+                format!("; one finding with {}", e.same_finding_as.join(", "))
             },
-            e.confidence,
+            e.confidence
+                .map_or_else(|| "-".into(), |c| format!("{c:.2}")),
             e.heldout_gain,
             params
         );
@@ -588,7 +602,7 @@ fn effects_png(path: &Path, ex: &Explanation) -> Result<(), ExplainError> {
     let n = ex.effects.len();
     let mut chart = ChartBuilder::on(&root)
         .caption(
-            "effect scores: confidence (inclusion frequency)",
+            "confidence of the found effects (inclusion frequency)",
             ("sans-serif", 20),
         )
         .margin(10)
@@ -609,16 +623,16 @@ fn effects_png(path: &Path, ex: &Explanation) -> Result<(), ExplainError> {
         })
         .draw()
         .map_err(out_err)?;
+    // Only a found effect has a confidence; the others get no bar.
     for (i, e) in ex.effects.iter().enumerate() {
         let y = n - 1 - i;
-        let color = if e.selected {
-            GREEN
-        } else {
-            RGBColor(160, 160, 160)
+        let Some(confidence) = e.confidence else {
+            continue;
         };
+        let color = GREEN;
         chart
             .draw_series(std::iter::once(Rectangle::new(
-                [(0.0, y), (e.confidence.max(0.005), y + 1)],
+                [(0.0, y), (confidence.max(0.005), y + 1)],
                 color.filled(),
             )))
             .map_err(out_err)?;

@@ -11,10 +11,21 @@ use atmo_plant::PlantTemplate;
 use atmo_plant::config::TerrainConfig;
 use atmo_plant::plant::{Command, InitialState};
 
-/// Prediction errors at the end of the horizon, RMS over the starts.
-#[derive(Debug, Clone, Copy, Default, serde::Serialize)]
+/// Prediction errors at the end of the horizon, RMS over the starts that
+/// were replayed. With no start replayed every error is NaN (null in
+/// `explain.json`): a missing prediction is not a zero error.
+#[derive(Debug, Clone, Copy, serde::Serialize)]
 pub struct ReplayError {
+    /// Starts replayed to the horizon (the RMS is over these).
     pub starts: usize,
+    /// Starts tried; `attempted - starts - skipped` could not be replayed.
+    pub attempted: usize,
+    /// Starts tried that could not be replayed (the plant refused its
+    /// file, or the state left what the plant integrates).
+    pub failed: usize,
+    /// Starts left out because the model they are compared with failed
+    /// there (see [`paired`]).
+    pub unpaired: usize,
     pub horizon_s: f64,
     /// m, per axis x, y, z (NED).
     pub position: [f64; 3],
@@ -27,14 +38,82 @@ pub struct ReplayError {
 }
 
 impl ReplayError {
-    /// Norm of the position error (m).
+    /// Norm of the position error (m); NaN when no start was replayed.
     pub fn position_norm(&self) -> f64 {
         self.position.iter().map(|v| v * v).sum::<f64>().sqrt()
     }
-    /// Norm of the velocity error (m/s).
+    /// Norm of the velocity error (m/s); NaN when no start was replayed.
     pub fn velocity_norm(&self) -> f64 {
         self.velocity.iter().map(|v| v * v).sum::<f64>().sqrt()
     }
+    /// The velocity error, or `None` when no start was replayed: the one
+    /// accessor a comparison should use.
+    pub fn velocity(&self) -> Option<f64> {
+        (self.starts > 0).then(|| self.velocity_norm())
+    }
+
+    /// RMS over the replayed starts of `each` that `keep` admits (a start
+    /// not admitted counts as unpaired, a failed one as failed).
+    pub fn from_each(each: &[Option<StartError>], keep: &dyn Fn(usize) -> bool) -> Self {
+        let mut sq = [[0.0; 3]; 4];
+        let (mut count, mut failed, mut unpaired) = (0usize, 0usize, 0usize);
+        let mut horizon_sum = 0.0;
+        for (i, e) in each.iter().enumerate() {
+            let Some(e) = e else {
+                failed += 1;
+                continue;
+            };
+            if !keep(i) {
+                unpaired += 1;
+                continue;
+            }
+            for a in 0..3 {
+                sq[0][a] += e.position[a].powi(2);
+                sq[1][a] += e.attitude[a].powi(2);
+                sq[2][a] += e.velocity[a].powi(2);
+                sq[3][a] += e.rate[a].powi(2);
+            }
+            horizon_sum += e.horizon_s;
+            count += 1;
+        }
+        // No start: NaN, never the 0 an empty sum would give.
+        let n = if count == 0 { f64::NAN } else { count as f64 };
+        let r = |v: [f64; 3]| v.map(|s| (s / n).sqrt());
+        ReplayError {
+            starts: count,
+            attempted: each.len(),
+            failed,
+            unpaired,
+            horizon_s: horizon_sum / n,
+            position: r(sq[0]),
+            attitude: r(sq[1]),
+            velocity: r(sq[2]),
+            rate: r(sq[3]),
+        }
+    }
+}
+
+/// The errors of one start at the end of its horizon.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StartError {
+    pub horizon_s: f64,
+    pub position: [f64; 3],
+    pub attitude: [f64; 3],
+    pub velocity: [f64; 3],
+    pub rate: [f64; 3],
+}
+
+/// Two models' errors over the same starts: those both replayed. An RMS
+/// over different subsets of starts compares different flights, so a
+/// start one model failed on is left out of the other's RMS too (and
+/// counted as `unpaired` there, as `failed` in the one that failed).
+pub fn paired(a: &[Option<StartError>], b: &[Option<StartError>]) -> (ReplayError, ReplayError) {
+    let both =
+        |i: usize| a.get(i).is_some_and(Option::is_some) && b.get(i).is_some_and(Option::is_some);
+    (
+        ReplayError::from_each(a, &both),
+        ReplayError::from_each(b, &both),
+    )
 }
 
 fn wrap(a: f64) -> f64 {
@@ -93,9 +172,8 @@ pub fn start_rows(prep: &Prepared, horizon: f64, spacing: f64) -> Vec<(usize, us
 }
 
 /// Runs the plant from each start for the horizon and returns the RMS
-/// error at the end; `plant_for(k)` picks the plant (robot and plant file,
-/// checked once) for the start row k (held-out fits), `None` where the
-/// plant refused its file (the start is skipped).
+/// error at the end over the starts replayed, with the failed ones
+/// counted ([`replay_each`]).
 pub fn replay<'t>(
     rec: &Recording,
     prep: &Prepared,
@@ -103,12 +181,27 @@ pub fn replay<'t>(
     plant_for: &dyn Fn(usize) -> Option<&'t PlantTemplate>,
     lag_tau: &dyn Fn(usize) -> f64,
 ) -> ReplayError {
-    let mut sq = [[0.0; 3]; 4];
-    let mut count = 0usize;
+    ReplayError::from_each(&replay_each(rec, prep, starts, plant_for, lag_tau), &|_| {
+        true
+    })
+}
+
+/// Runs the plant from each start for the horizon: the error at its end
+/// per start, `None` where it could not be replayed. `plant_for(k)` picks
+/// the plant (robot and plant file, checked once) for the start row k
+/// (held-out fits), `None` where the plant refused its file.
+pub fn replay_each<'t>(
+    rec: &Recording,
+    prep: &Prepared,
+    starts: &[(usize, usize)],
+    plant_for: &dyn Fn(usize) -> Option<&'t PlantTemplate>,
+    lag_tau: &dyn Fn(usize) -> f64,
+) -> Vec<Option<StartError>> {
     let u = &prep.u_eff;
-    let mut horizon_sum = 0.0;
+    let mut out = Vec::with_capacity(starts.len());
     for &(k, j) in starts {
         let Some(template) = plant_for(k) else {
+            out.push(None);
             continue;
         };
         let tau = lag_tau(k);
@@ -126,6 +219,7 @@ pub fn replay<'t>(
         };
         let terrain = TerrainConfig::flat(-s.ground_z);
         let Ok(mut plant) = template.start(&terrain, &initial, 1) else {
+            out.push(None);
             continue;
         };
         let t_end = prep.t[j];
@@ -152,32 +246,20 @@ pub fn replay<'t>(
                 break;
             }
         }
-        if !ok {
-            continue;
-        }
         let x = plant.state();
         let y = &rec.samples[j].x;
-        for a in 0..3 {
-            let dp = x[idx::X + a] - y[idx::X + a];
-            let da = wrap(x[idx::YAW + a] - y[idx::YAW + a]);
-            let dv = x[idx::VX + a] - y[idx::VX + a];
-            let dw = x[idx::WX + a] - y[idx::WX + a];
-            sq[0][a] += dp * dp;
-            sq[1][a] += da * da;
-            sq[2][a] += dv * dv;
-            sq[3][a] += dw * dw;
-        }
-        horizon_sum += t_end - prep.t[k];
-        count += 1;
+        let e = StartError {
+            horizon_s: t_end - prep.t[k],
+            position: std::array::from_fn(|a| x[idx::X + a] - y[idx::X + a]),
+            attitude: std::array::from_fn(|a| wrap(x[idx::YAW + a] - y[idx::YAW + a])),
+            velocity: std::array::from_fn(|a| x[idx::VX + a] - y[idx::VX + a]),
+            rate: std::array::from_fn(|a| x[idx::WX + a] - y[idx::WX + a]),
+        };
+        // A state that is not a number is a failed replay, not an error.
+        let finite = [e.position, e.attitude, e.velocity, e.rate]
+            .iter()
+            .all(|v| v.iter().all(|c| c.is_finite()));
+        out.push((ok && finite).then_some(e));
     }
-    let n = count.max(1) as f64;
-    let r = |v: [f64; 3]| v.map(|s| (s / n).sqrt());
-    ReplayError {
-        starts: count,
-        horizon_s: horizon_sum / n,
-        position: r(sq[0]),
-        attitude: r(sq[1]),
-        velocity: r(sq[2]),
-        rate: r(sq[3]),
-    }
+    out
 }

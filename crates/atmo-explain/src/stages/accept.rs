@@ -31,7 +31,7 @@ use atmo_plant::config::PlantConfig;
 use crate::effects::Effect;
 use crate::physical::Physical;
 use crate::recording::Recording;
-use crate::replay::{self, ReplayError};
+use crate::replay::{self, StartError};
 use crate::select::{FOLDS, fold_of};
 use crate::stages::fit::SWAP_RECOVERY;
 use crate::stages::report::effect_parameters;
@@ -116,6 +116,11 @@ pub enum ParamStatus {
 
 /// The status of a value with standard deviation `std` in `range`.
 pub fn param_status(value: f64, std: Option<f64>, range: Option<(f64, f64)>) -> ParamStatus {
+    // A value that is not a number (a coefficient the fit does not have, a
+    // quotient by a vanishing coefficient) is missing, not a finding.
+    if !value.is_finite() {
+        return ParamStatus::NotIdentified;
+    }
     let sd = std.filter(|s| s.is_finite()).unwrap_or(0.0);
     if let Some((lo, hi)) = range {
         if value < lo - sd || value > hi + sd {
@@ -135,8 +140,10 @@ pub fn param_status(value: f64, std: Option<f64>, range: Option<(f64, f64)>) -> 
     ParamStatus::Identified
 }
 
-/// Which test decided an effect's verdict.
-#[derive(Debug, Clone, PartialEq)]
+/// Which test decided an effect's verdict (in `explain.json` as
+/// `decision`, tagged by `kind`, with its numbers).
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+#[serde(tag = "kind", rename_all = "snake_case")]
 pub enum Decision {
     /// Passed both tests (multi-step velocity error at the horizon with
     /// and without it, m/s; `None` when no 0.5 s stretch exists).
@@ -146,11 +153,28 @@ pub enum Decision {
     },
     /// A parameter outside its physical range, or none identified.
     NotIdentified { reason: String },
+    /// Physics a calibration of the robot file explains as well (swapped
+    /// in for it, at least [`SWAP_RECOVERY`] of its held-out gain): with
+    /// those calibrations one finding, which the model carries as the
+    /// calibration (the simpler account) and the report names as both.
+    OneFindingWith { calibrations: Vec<String> },
     /// Lowers the one-step residual but not the 0.5 s prediction;
     /// `reduced` when judged on the model left after other rejections.
+    /// Both errors are over the same starts (those both models replayed).
     RejectedByPrediction {
         with: f64,
         without: f64,
+        reduced: bool,
+    },
+    /// The 0.5 s prediction test could not be made: of `attempted` starts
+    /// the model with the effect failed on `with_failed` and the model
+    /// without it on `without_failed`, leaving no start both replayed, or
+    /// the model with the effect failed on more starts than without it.
+    /// Not claimed: a missing prediction is not a zero error.
+    PredictionFailed {
+        attempted: usize,
+        with_failed: usize,
+        without_failed: usize,
         reduced: bool,
     },
 }
@@ -165,10 +189,36 @@ impl Decision {
             } => format!(
                 "found: lowers the held-out residual and the 0.5 s velocity error ({wo:.4} -> {w:.4} m/s)"
             ),
+            Decision::PredictionFailed {
+                attempted,
+                with_failed,
+                without_failed,
+                reduced,
+            } => format!(
+                "not claimed: the 0.5 s prediction{} could not be compared (of {attempted} starts, \
+                 {with_failed} could not be replayed with it and {without_failed} without it{})",
+                if *reduced {
+                    " of the model left after the other rejections"
+                } else {
+                    ""
+                },
+                if with_failed > without_failed && with_failed < attempted {
+                    "; it fails where the model without it does not"
+                } else {
+                    ""
+                }
+            ),
             Decision::Found { .. } => {
                 "found by the held-out residual alone (no 0.5 s stretch to predict)".into()
             }
             Decision::NotIdentified { reason } => format!("not identified: {reason}"),
+            Decision::OneFindingWith { calibrations } => format!(
+                "one finding with {}: this data cannot tell it apart from that calibration of the \
+                 robot file (swapped in for it, it explains at least {:.0} % as much); the model \
+                 carries the calibration, and no physics is claimed alone",
+                calibrations.join(", "),
+                100.0 * SWAP_RECOVERY
+            ),
             Decision::RejectedByPrediction {
                 with,
                 without,
@@ -203,7 +253,8 @@ fn fold_configs(fit: &Fit, set: &[Effect], robot: &RobotConfig) -> Vec<PlantConf
         .collect()
 }
 
-/// Held-out multi-step error of the effects `set` from the `starts`.
+/// Held-out multi-step error of the effects `set` from each of the
+/// `starts` (`None` where it could not be replayed).
 fn heldout_multistep(
     rec: &Recording,
     robot: &RobotConfig,
@@ -211,7 +262,7 @@ fn heldout_multistep(
     fit: &Fit,
     set: &[Effect],
     starts: &[(usize, usize)],
-) -> ReplayError {
+) -> Vec<Option<StartError>> {
     let plants: Vec<Option<PlantTemplate>> = fold_configs(fit, set, robot)
         .iter()
         .map(|c| PlantTemplate::new(robot, c).ok())
@@ -221,7 +272,7 @@ fn heldout_multistep(
     } else {
         0.0
     };
-    replay::replay(
+    replay::replay_each(
         rec,
         &res.prep,
         starts,
@@ -246,7 +297,23 @@ pub fn accept_effects(
     // (their columns differ only through the inertia); one combined
     // finding, carried by the thrust scale.
     if fit.chosen.contains(&Effect::ThrustScale) && fit.chosen.contains(&Effect::MassError) {
-        let (ratio, sd) = thrust_to_mass(&fit);
+        let combination = match thrust_to_mass(&fit) {
+            // Either held at a bound: the ratio of two bounds is not a
+            // measurement (both at -0.5 read as "0.0000 +- 0.0000").
+            Some(t) if t.at_bound => format!(
+                "their combination thrust / mass - 1 is not identified either (thrust_scale = \
+                 {:.4} and mass_error = {:.4} are held at bounds of their ranges)",
+                t.scale, t.mass
+            ),
+            Some(t) => format!(
+                "the identified combination is thrust / mass - 1 = {:.4} +- {:.4}, reported as \
+                 thrust_scale",
+                t.ratio, t.sd
+            ),
+            None => "their combination thrust / mass - 1 is not computed (the fit lacks a \
+                     coefficient of the two)"
+                .to_string(),
+        };
         let kept: Vec<Effect> = fit
             .chosen
             .iter()
@@ -257,10 +324,7 @@ pub fn accept_effects(
         decisions.push((
             Effect::MassError,
             Decision::NotIdentified {
-                reason: format!(
-                    "not separable from thrust_scale: the identified combination is \
-                     thrust / mass - 1 = {ratio:.4} +- {sd:.4}, reported as thrust_scale"
-                ),
+                reason: format!("not separable from thrust_scale: {combination}"),
             },
         ));
     }
@@ -275,7 +339,7 @@ pub fn accept_effects(
         }
         match failure(&fit, e, &chosen, &chosen) {
             // (No calibration to swap in yet: the selection's are all in.)
-            Some((reason, _)) => decisions.push((e, Decision::NotIdentified { reason })),
+            Some((d, _)) => decisions.push((e, d)),
             None => tested.push(e),
         }
     }
@@ -305,17 +369,17 @@ pub fn accept_effects(
     let mut settled = kept == chosen;
     while !settled {
         fit.restrict(&kept);
-        if let Some((e, (reason, swap))) = kept
+        if let Some((e, (d, swap))) = kept
             .iter()
             .find_map(|&e| failure(&fit, e, &kept, &chosen).map(|f| (e, f)))
         {
-            let reason = format!("after the refit without the rejected effects, {reason}");
-            reject(
-                &mut decisions,
-                &mut kept,
-                e,
-                &Decision::NotIdentified { reason },
-            );
+            let d = match d {
+                Decision::NotIdentified { reason } => Decision::NotIdentified {
+                    reason: format!("after the refit without the rejected effects, {reason}"),
+                },
+                d => d,
+            };
+            reject(&mut decisions, &mut kept, e, &d);
             if let Some(c) = swap.filter(|c| !kept.contains(c)) {
                 kept.push(c);
             }
@@ -330,7 +394,10 @@ pub fn accept_effects(
         let worst = verdicts
             .iter()
             .filter(|(_, d)| !matches!(d, Decision::Found { .. }))
-            .max_by(|a, b| prediction_ratio(&a.1).total_cmp(&prediction_ratio(&b.1)))
+            .max_by(|a, b| {
+                let (x, y) = (rejection_order(&a.1), rejection_order(&b.1));
+                x.0.cmp(&y.0).then(x.1.total_cmp(&y.1))
+            })
             .cloned();
         if let Some((e, d)) = worst {
             reject(&mut decisions, &mut kept, e, &d);
@@ -351,9 +418,10 @@ pub fn accept_effects(
     Ok((fit, decisions))
 }
 
-/// Why effect `e` of the fit of `model` is not a finding, if it is not:
-/// out of range or not identified, a wind without a drag, or a physics
-/// effect a calibration explains as well (then with the best such
+/// Why effect `e` of the fit of `model` is not a finding alone, if it is
+/// not: out of range or not identified, a wind without a drag (both
+/// [`Decision::NotIdentified`]), or a physics effect a calibration
+/// explains as well ([`Decision::OneFindingWith`], with the best such
 /// calibration the selection `proposed`, to take its place: one rejected
 /// only because the physics did its work beside it).
 fn failure(
@@ -361,14 +429,15 @@ fn failure(
     e: Effect,
     model: &[Effect],
     proposed: &[Effect],
-) -> Option<(String, Option<Effect>)> {
+) -> Option<(Decision, Option<Effect>)> {
     identification_failure(fit, e)
         .or_else(|| wind_failure(fit, e))
-        .map(|r| (r, None))
+        .map(|reason| (Decision::NotIdentified { reason }, None))
         .or_else(|| {
-            calibration_confusion(fit, e, model).map(|(r, alike)| {
-                let swap = alike.into_iter().find(|c| proposed.contains(c));
-                (r, swap)
+            calibration_confusion(fit, e, model).map(|alike| {
+                let swap = alike.iter().copied().find(|c| proposed.contains(c));
+                let calibrations = alike.iter().map(|c| c.name().to_string()).collect();
+                (Decision::OneFindingWith { calibrations }, swap)
             })
         })
 }
@@ -412,12 +481,51 @@ fn reject(
     kept.retain(|k| !gone.contains(k));
 }
 
-/// How much an effect's rejection worsens the prediction (with / without;
-/// a model that could not be replayed is the worst).
-fn prediction_ratio(d: &Decision) -> f64 {
+/// The order in which failed effects leave the model, worst first: one
+/// whose prediction could not be compared (or not identified) before any
+/// measured one, which go by how much the effect worsens the prediction
+/// (with / without, over the same starts). The class is explicit, so no
+/// missing number stands in for a large one.
+fn rejection_order(d: &Decision) -> (u8, f64) {
     match d {
-        Decision::RejectedByPrediction { with, without, .. } => with / without,
-        _ => f64::INFINITY,
+        Decision::RejectedByPrediction { with, without, .. } => (0, with / without),
+        _ => (1, 0.0),
+    }
+}
+
+/// The 0.5 s prediction test of one effect from the per-start errors with
+/// and without it: compared over the starts both models replayed, never
+/// against a missing prediction. A model with the effect that fails on
+/// more starts than the one without it does not earn the effect.
+pub(crate) fn prediction_decision(
+    with: &[Option<StartError>],
+    without: &[Option<StartError>],
+    reduced: bool,
+) -> Decision {
+    let (w, wo) = replay::paired(with, without);
+    let failed = Decision::PredictionFailed {
+        attempted: with.len(),
+        with_failed: w.failed,
+        without_failed: wo.failed,
+        reduced,
+    };
+    let (Some(a), Some(b)) = (w.velocity(), wo.velocity()) else {
+        return failed;
+    };
+    if w.failed > wo.failed {
+        return failed;
+    }
+    if a < (1.0 - PREDICTION_MARGIN) * b {
+        Decision::Found {
+            with: Some(a),
+            without: Some(b),
+        }
+    } else {
+        Decision::RejectedByPrediction {
+            with: a,
+            without: b,
+            reduced,
+        }
     }
 }
 
@@ -436,43 +544,30 @@ fn prediction_verdicts(
     starts: &[(usize, usize)],
     reduced: bool,
 ) -> Vec<(Effect, Decision)> {
-    let with = (!starts.is_empty() && !set.is_empty())
-        .then(|| heldout_multistep(rec, robot, res, fit, set, starts));
+    // No 0.5 s stretch in the recording: the residual test alone decides
+    // (said so in the report). Starts that exist but fail are not this.
+    if starts.is_empty() || set.is_empty() {
+        return tested
+            .iter()
+            .map(|&e| {
+                (
+                    e,
+                    Decision::Found {
+                        with: None,
+                        without: None,
+                    },
+                )
+            })
+            .collect();
+    }
+    let with = heldout_multistep(rec, robot, res, fit, set, starts);
     tested
         .iter()
         .map(|&e| {
-            let decision = match &with {
-                Some(w) if w.starts > 0 => {
-                    let gone = finding_of(e, set);
-                    let rest: Vec<Effect> =
-                        set.iter().copied().filter(|x| !gone.contains(x)).collect();
-                    let wo = heldout_multistep(rec, robot, res, fit, &rest, starts);
-                    let (a, b) = (w.velocity_norm(), wo.velocity_norm());
-                    if wo.starts > 0 && a < (1.0 - PREDICTION_MARGIN) * b {
-                        Decision::Found {
-                            with: Some(a),
-                            without: Some(b),
-                        }
-                    } else {
-                        Decision::RejectedByPrediction {
-                            with: a,
-                            without: b,
-                            reduced,
-                        }
-                    }
-                }
-                Some(w) => Decision::NotIdentified {
-                    reason: format!(
-                        "the fitted plant file could not be replayed from any of the {} starts",
-                        starts.len().max(w.starts)
-                    ),
-                },
-                None => Decision::Found {
-                    with: None,
-                    without: None,
-                },
-            };
-            (e, decision)
+            let gone = finding_of(e, set);
+            let rest: Vec<Effect> = set.iter().copied().filter(|x| !gone.contains(x)).collect();
+            let without = heldout_multistep(rec, robot, res, fit, &rest, starts);
+            (e, prediction_decision(&with, &without, reduced))
         })
         .collect()
 }
@@ -480,18 +575,37 @@ fn prediction_verdicts(
 /// `r = (1 + s) / (1 + m) - 1` of the thrust scale s and mass error m of
 /// the fit, with its deviation from the fit's jackknife covariance (first
 /// order: `g^T C g`, `g = (1 / (1 + m), -(1 + s) / (1 + m)^2)`).
-fn thrust_to_mass(fit: &Fit) -> (f64, f64) {
+fn thrust_to_mass(fit: &Fit) -> Option<ThrustToMass> {
     let s_col = fit.layout.columns(Effect::ThrustScale).start;
     let m_col = fit.layout.columns(Effect::MassError).start;
     let pos = |c: usize| fit.idx.iter().position(|i| *i == c);
-    let (Some(ps), Some(pm)) = (pos(s_col), pos(m_col)) else {
-        return (0.0, f64::NAN);
-    };
+    let (ps, pm) = (pos(s_col)?, pos(m_col)?);
     let (s, m) = (fit.theta[ps], fit.theta[pm]);
     let (gs, gm) = (1.0 / (1.0 + m), -(1.0 + s) / (1.0 + m).powi(2));
     let c = &fit.cov;
     let var = gs * gs * c[(ps, ps)] + 2.0 * gs * gm * c[(ps, pm)] + gm * gm * c[(pm, pm)];
-    ((1.0 + s) / (1.0 + m) - 1.0, var.max(0.0).sqrt())
+    let at_bound = |v: f64, e: Effect| {
+        coefficient_bounds(e)
+            .first()
+            .is_some_and(|&(lo, hi)| v <= lo || v >= hi)
+    };
+    Some(ThrustToMass {
+        ratio: (1.0 + s) / (1.0 + m) - 1.0,
+        sd: var.max(0.0).sqrt(),
+        scale: s,
+        mass: m,
+        at_bound: at_bound(s, Effect::ThrustScale) || at_bound(m, Effect::MassError),
+    })
+}
+
+/// Thrust per mass from the thrust scale and mass error of a fit.
+struct ThrustToMass {
+    ratio: f64,
+    sd: f64,
+    scale: f64,
+    mass: f64,
+    /// Either coefficient held at a bound of its range.
+    at_bound: bool,
 }
 
 /// Wind without an identified drag: the wind speed is only known through
@@ -539,7 +653,7 @@ fn wind_failure(fit: &Fit, e: Effect) -> Option<String> {
 /// are not used, because on the fan flights an inertia or mass error swaps
 /// for the drag of a 4-9 m/s fan (docs/explain.md, "Acceptance"; the
 /// measurements: docs/decisions/2026-12-05-explain-history.md).
-fn calibration_confusion(fit: &Fit, e: Effect, model: &[Effect]) -> Option<(String, Vec<Effect>)> {
+fn calibration_confusion(fit: &Fit, e: Effect, model: &[Effect]) -> Option<Vec<Effect>> {
     if e.is_calibration() || rides_with_wind(e, model) {
         return None;
     }
@@ -548,20 +662,7 @@ fn calibration_confusion(fit: &Fit, e: Effect, model: &[Effect]) -> Option<(Stri
         .into_iter()
         .filter(|f| f.is_calibration())
         .collect();
-    if calibrations.is_empty() {
-        return None;
-    }
-    let names: Vec<&str> = calibrations.iter().map(|c| c.name()).collect();
-    Some((
-        format!(
-            "this data cannot tell it apart from {}, a calibration of the robot file (swapped \
-             in for it, it explains at least {:.0} % as much): the calibration is the simpler \
-             account, no physics is claimed",
-            names.join(", "),
-            100.0 * SWAP_RECOVERY
-        ),
-        calibrations,
-    ))
+    (!calibrations.is_empty()).then_some(calibrations)
 }
 
 /// Why effect `e` of the fit is not identified, if it is not.

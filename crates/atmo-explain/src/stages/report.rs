@@ -39,8 +39,9 @@ pub struct Findings<'a> {
     pub validation: &'a Validation,
 }
 
-/// Candidates' verdicts, sorted (selected first, then by confidence and
-/// held-out gain), and the pairs of effects the data cannot tell apart.
+/// Candidates' verdicts, sorted (claimed first; then by confidence, by
+/// selection frequency and by held-out gain), and the pairs of effects the
+/// data cannot tell apart.
 pub fn effect_reports(
     fit: &Fit,
     confidence: &[(Effect, f64)],
@@ -62,7 +63,11 @@ pub fn effect_reports(
         } else {
             e
         };
-        let conf = confidence.iter().find(|c| c.0 == of).map_or(0.0, |c| c.1);
+        // A confidence is what a claim carries; an effect not claimed
+        // carries its decision instead.
+        let frequency = confidence.iter().find(|c| c.0 == of).map(|c| c.1);
+        let conf = frequency.filter(|_| selected);
+        let decision = decisions.iter().find(|d| d.0 == e).map(|d| d.1.clone());
         let gain = if selected {
             let rest: Vec<Effect> = chosen.iter().copied().filter(|x| *x != e).collect();
             (cv(&rest) - cv_sel) / entries
@@ -93,6 +98,9 @@ pub fn effect_reports(
             calibration: e.is_calibration(),
             selected,
             confidence: conf,
+            // Not computed (no stability run) reads as never proposed.
+            selection_frequency: frequency.unwrap_or(0.0),
+            decision,
             heldout_gain: gain,
             parameters: effect_parameters(fit, e, selected)
                 .into_iter()
@@ -104,17 +112,67 @@ pub fn effect_reports(
                 })
                 .collect(),
             indistinguishable_from: indist,
+            same_finding_as: Vec::new(),
             combined: Vec::new(),
         });
     }
+    link_physics_and_calibration(fit, decisions, &mut reports);
     combine_inseparable(fit, &mut reports);
     reports.sort_by(|a, b| {
         b.selected
             .cmp(&a.selected)
-            .then(b.confidence.total_cmp(&a.confidence))
+            .then(
+                b.confidence
+                    .unwrap_or(-1.0)
+                    .total_cmp(&a.confidence.unwrap_or(-1.0)),
+            )
+            .then(b.selection_frequency.total_cmp(&a.selection_frequency))
             .then(b.heldout_gain.total_cmp(&a.heldout_gain))
     });
     (reports, pairs)
+}
+
+/// Physics and a claimed calibration that explain the same thing are one
+/// finding (the selection's swap test either way, or the acceptance's
+/// [`Decision::OneFindingWith`]): each names the other in
+/// `same_finding_as`, so neither is silently preferred.
+fn link_physics_and_calibration(
+    fit: &Fit,
+    decisions: &[(Effect, Decision)],
+    reports: &mut [EffectReport],
+) {
+    let mut pairs: Vec<(Effect, Effect)> = Vec::new();
+    for &c in fit.chosen.iter().filter(|c| c.is_calibration()) {
+        for p in fit.swaps_for(c).into_iter().filter(|p| !p.is_calibration()) {
+            pairs.push((p, c));
+        }
+        for (p, d) in decisions {
+            if let Decision::OneFindingWith { calibrations } = d
+                && calibrations.iter().any(|n| n == c.name())
+                && !pairs.contains(&(*p, c))
+            {
+                pairs.push((*p, c));
+            }
+        }
+    }
+    for r in reports.iter_mut() {
+        for (p, c) in &pairs {
+            let other = if r.name == p.name() {
+                c
+            } else if r.name == c.name() {
+                p
+            } else {
+                continue;
+            };
+            r.same_finding_as.push(other.name().to_string());
+        }
+        if matches!(r.decision, Some(Decision::OneFindingWith { .. }))
+            && r.same_finding_as.is_empty()
+        {
+            r.decided_by
+                .push_str("; that calibration was not claimed either (see its decision)");
+        }
+    }
 }
 
 /// The selected effects' parameters that are their linear coefficients
@@ -211,10 +269,12 @@ pub(crate) fn effect_parameters(fit: &Fit, e: Effect, selected: bool) -> Vec<Par
         let (idx, theta, cov) = select::fit_with_uncertainty(&fit.stats, layout, &more);
         (idx, theta, select::deviations(&cov))
     };
+    // A coefficient the fit does not have is missing (NaN, not
+    // identified), not a zero.
     let coef = |c: usize| -> (f64, f64) {
         pidx.iter()
             .position(|i| *i == c)
-            .map_or((0.0, 0.0), |p| (ptheta[p], psd[p]))
+            .map_or((f64::NAN, f64::NAN), |p| (ptheta[p], psd[p]))
     };
     let param = |name: String, (value, std): (f64, f64), unit: &str| Parameter {
         identified: true,
@@ -268,7 +328,9 @@ pub(crate) fn effect_parameters(fit: &Fit, e: Effect, selected: bool) -> Vec<Par
                             cs / kr.abs(),
                         )
                     } else {
-                        (0.0, f64::NAN)
+                        // No rotor drag to divide by: the wind is not
+                        // measured, and not a zero wind either.
+                        (f64::NAN, f64::NAN)
                     };
                     Parameter {
                         identified: true,
@@ -374,7 +436,7 @@ pub fn gain_grid(res: &Residuals, fit: &Fit) -> Vec<GridPoint> {
 pub fn verdict(reports: &[EffectReport], chosen: &[Effect], mismatch: &Mismatch) -> (bool, String) {
     let high = reports
         .iter()
-        .any(|r| r.selected && r.confidence >= HIGH_CONFIDENCE);
+        .any(|r| r.selected && r.confidence.is_some_and(|c| c >= HIGH_CONFIDENCE));
     let mismatch_found = !chosen.is_empty() || !mismatch.location.located.is_empty();
     let verdict = if !mismatch_found {
         "no significant mismatch: the nominal model explains the recording to its noise floor"
@@ -384,34 +446,60 @@ pub fn verdict(reports: &[EffectReport], chosen: &[Effect], mismatch: &Mismatch)
             .to_string()
     } else {
         let describe = |r: &EffectReport| {
+            let conf = r.confidence.map_or_else(
+                || "confidence not computed".into(),
+                |c| format!("confidence {c:.2}"),
+            );
             if r.indistinguishable_from.is_empty() {
-                format!(
-                    "{} (confidence {:.2}; {})",
-                    r.name, r.confidence, r.decided_by
-                )
+                format!("{} ({conf}; {})", r.name, r.decided_by)
             } else {
                 format!(
-                    "{} (confidence {:.2}; this data cannot tell it apart from {})",
+                    "{} ({conf}; this data cannot tell it apart from {})",
                     r.name,
-                    r.confidence,
                     r.indistinguishable_from.join(", ")
                 )
             }
         };
-        let is_cal = |r: &EffectReport| r.calibration;
-        let list = |cal: bool| {
+        // Physics, then what physics or a calibration explains alike (one
+        // finding, carried by the calibration), then calibration alone.
+        let group = |r: &EffectReport| match (r.calibration, r.same_finding_as.is_empty()) {
+            (false, _) => 0,
+            (true, false) => 1,
+            (true, true) => 2,
+        };
+        let list = |g: u8| {
             reports
                 .iter()
-                .filter(|r| r.selected && is_cal(r) == cal)
-                .map(describe)
+                .filter(|r| r.selected && group(r) == g)
+                .map(|r| {
+                    if g == 1 {
+                        format!(
+                            "{} or {} (one finding, carried by the calibration {}; {})",
+                            r.name,
+                            r.same_finding_as.join(" or "),
+                            r.name,
+                            describe(r)
+                        )
+                    } else {
+                        describe(r)
+                    }
+                })
                 .collect::<Vec<_>>()
                 .join(", ")
         };
-        let (physics, calibration) = (list(false), list(true));
-        let explained = match (physics.is_empty(), calibration.is_empty()) {
-            (false, true) => physics,
-            (true, false) => format!("the nominal calibration alone: {calibration}"),
-            _ => format!("{physics}; nominal calibration: {calibration}"),
+        let parts: Vec<String> = [
+            (list(0), ""),
+            (list(1), "physics or calibration: "),
+            (list(2), "nominal calibration: "),
+        ]
+        .into_iter()
+        .filter(|(l, _)| !l.is_empty())
+        .map(|(l, head)| format!("{head}{l}"))
+        .collect();
+        let explained = if parts.len() == 1 && list(0).is_empty() && list(1).is_empty() {
+            format!("the nominal calibration alone: {}", list(2))
+        } else {
+            parts.join("; ")
         };
         format!(
             "mismatch found; explained by {explained}{}",
@@ -422,9 +510,16 @@ pub fn verdict(reports: &[EffectReport], chosen: &[Effect], mismatch: &Mismatch)
             }
         )
     };
+    // Physics the acceptance made one finding with a claimed calibration
+    // is listed with it above, not as rejected; physics refused for its
+    // own reasons stays listed with them.
     let rejected: Vec<String> = reports
         .iter()
         .filter(|r| !r.selected && !r.decided_by.starts_with("not selected"))
+        .filter(|r| {
+            !matches!(r.decision, Some(Decision::OneFindingWith { .. }))
+                || r.same_finding_as.is_empty()
+        })
         .map(|r| format!("{} ({})", r.name, r.decided_by))
         .collect();
     let verdict = if rejected.is_empty() {
@@ -493,8 +588,21 @@ pub fn plot_series(res: &Residuals, mismatch: &Mismatch, after: &[f64]) -> Serie
 }
 
 /// Warnings about how far the results can be trusted.
-pub fn notes(res: &Residuals, fit: &Fit) -> Vec<String> {
+pub fn notes(res: &Residuals, fit: &Fit, decisions: &[(Effect, Decision)]) -> Vec<String> {
     let mut notes = Vec::new();
+    let unjudged: Vec<&str> = decisions
+        .iter()
+        .filter(|(_, d)| matches!(d, Decision::PredictionFailed { .. }))
+        .map(|(e, _)| e.name())
+        .collect();
+    if !unjudged.is_empty() {
+        notes.push(format!(
+            "{} selected effect(s) not claimed because a 0.5 s prediction they were judged by \
+             could not be replayed ({}): a missing prediction is not compared",
+            unjudged.len(),
+            unjudged.join(", ")
+        ));
+    }
     let used_segments = (0..res.nseg).filter(|&s| fit.stats.entries[s] > 0).count();
     if used_segments < 10 {
         notes.push(format!(
@@ -564,6 +672,6 @@ pub fn report(f: &Findings) -> Explanation {
         location_after: Some(val.location.clone()),
         series: Some(plot_series(res, f.mismatch, &val.after)),
         timings_s: Vec::new(),
-        notes: notes(res, fit),
+        notes: notes(res, fit, f.decisions),
     }
 }

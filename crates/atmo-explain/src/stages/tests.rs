@@ -299,3 +299,121 @@ fn report_states_the_verdict_and_ranks_selected_effects_first() {
     assert_eq!(ex.effects.len(), Effect::ALL.len());
     assert_eq!(ex.ground_effect_gain_grid.len(), 20);
 }
+
+#[test]
+fn only_a_claimed_effect_carries_a_confidence() {
+    for run in [heavy(), nominal()] {
+        let json = crate::output::json(&run.explanation);
+        for (e, j) in run
+            .explanation
+            .effects
+            .iter()
+            .zip(json["effects"].as_array().unwrap())
+        {
+            assert_eq!(e.confidence.is_some(), e.selected, "{}", e.name);
+            assert_eq!(j["confidence"].is_null(), !e.selected, "{j}");
+            // What the acceptance judged carries its decision, claimed or not.
+            assert_eq!(j["decision"].is_null(), e.decision.is_none(), "{j}");
+            if e.selected {
+                assert_eq!(j["decision"]["kind"], "found", "{j}");
+            }
+        }
+    }
+}
+
+#[test]
+fn acceptance_never_compares_against_a_prediction_that_failed() {
+    use crate::replay::{self, ReplayError};
+    let (robot, rec) = hover(MASS_SCALE);
+    let res = &heavy().res;
+    let starts = replay::start_rows(&res.prep, crate::HORIZON, crate::HORIZON);
+    assert!(starts.len() >= 4, "{} starts", starts.len());
+    let mut cfg = PlantConfig::ideal();
+    cfg.arm_inertia_convention = robot.arm.inertia_convention;
+    let nominal = atmo_plant::PlantTemplate::new(&robot, &cfg).unwrap();
+    let replayed = replay::replay_each(&rec, &res.prep, &starts, &|_| Some(&nominal), &|_| 0.0);
+    assert!(replayed.iter().all(Option::is_some));
+    // A model whose plant file the plant refuses: no start replays.
+    let failed = replay::replay_each(&rec, &res.prep, &starts, &|_| None, &|_| 0.0);
+    assert!(failed.iter().all(Option::is_none));
+    let e = ReplayError::from_each(&failed, &|_| true);
+    assert_eq!(
+        (e.starts, e.failed, e.attempted),
+        (0, starts.len(), starts.len())
+    );
+    assert_eq!(e.velocity(), None);
+    assert!(e.velocity_norm().is_nan(), "a missing error read as {e:?}");
+
+    // Without the effect, nothing replays: no verdict reads that as 0 m/s.
+    for (with, without) in [(&replayed, &failed), (&failed, &replayed)] {
+        let d = super::accept::prediction_decision(with, without, false);
+        assert!(
+            matches!(d, Decision::PredictionFailed { attempted, .. } if attempted == starts.len()),
+            "{d:?}"
+        );
+        assert!(!d.describe().contains("0.0000"), "{}", d.describe());
+    }
+
+    // Half the starts fail without the effect: both errors are over the
+    // starts both replayed, not the one over all and the other over half.
+    let half: Vec<_> = (0..starts.len())
+        .map(|i| replayed[i].filter(|_| i % 2 == 0))
+        .collect();
+    let on_half = ReplayError::from_each(&replayed, &|i| i % 2 == 0);
+    let (w, wo) = replay::paired(&replayed, &half);
+    assert_eq!(
+        (w.starts, w.unpaired, wo.failed),
+        (on_half.starts, starts.len() / 2, starts.len() / 2)
+    );
+    assert_eq!(w.velocity(), on_half.velocity());
+    match super::accept::prediction_decision(&replayed, &half, false) {
+        Decision::RejectedByPrediction { with, without, .. } => {
+            assert_eq!(Some(with), on_half.velocity());
+            assert_eq!(with, without, "the same model over the same starts");
+        }
+        d => panic!("{d:?}"),
+    }
+    // More failures with the effect than without it: not claimed.
+    let d = super::accept::prediction_decision(&half, &replayed, false);
+    assert!(matches!(d, Decision::PredictionFailed { .. }), "{d:?}");
+}
+
+#[test]
+fn physics_a_claimed_calibration_explains_alike_is_one_finding_not_a_rejection() {
+    let run = heavy();
+    let report = |name: &str, calibration: bool, selected: bool, other: &str, d: Decision| {
+        crate::EffectReport {
+            name: name.into(),
+            physics: String::new(),
+            selected,
+            confidence: selected.then_some(1.0),
+            selection_frequency: 1.0,
+            decided_by: d.describe(),
+            decision: Some(d),
+            heldout_gain: 0.1,
+            parameters: Vec::new(),
+            indistinguishable_from: Vec::new(),
+            same_finding_as: vec![other.into()],
+            combined: Vec::new(),
+            calibration,
+        }
+    };
+    let found = Decision::Found {
+        with: Some(0.5),
+        without: Some(0.6),
+    };
+    let alike = Decision::OneFindingWith {
+        calibrations: vec!["thrust_axis".into()],
+    };
+    let reports = [
+        report("thrust_axis", true, true, "wind", found),
+        report("wind", false, false, "thrust_axis", alike),
+    ];
+    let (_, v) = verdict(&reports, &[Effect::ThrustAxis], &run.mismatch);
+    assert!(
+        v.contains("physics or calibration: thrust_axis or wind (one finding"),
+        "{v}"
+    );
+    assert!(!v.contains("rejected"), "{v}");
+    assert!(!v.contains("nominal calibration alone"), "{v}");
+}

@@ -61,7 +61,7 @@ pub fn validate(
     let mut nominal_cfg = PlantConfig::ideal();
     nominal_cfg.arm_inertia_convention = robot.arm.inertia_convention;
     let nominal = PlantTemplate::new(robot, &nominal_cfg).ok();
-    let multistep_before = replay::replay(rec, prep, &starts, &|_| nominal.as_ref(), &|_| 0.0);
+    let before_each = replay::replay_each(rec, prep, &starts, &|_| nominal.as_ref(), &|_| 0.0);
     let lag_on = fit.chosen.contains(&Effect::MotorLag);
     let tau = fit.knobs.tau;
     let fitted = PlantTemplate::new(robot, &fitted_cfg).ok();
@@ -69,13 +69,15 @@ pub fn validate(
         .iter()
         .map(|c| PlantTemplate::new(robot, c).ok())
         .collect();
-    let multistep_after = replay::replay(
+    let after_each = replay::replay_each(
         rec,
         prep,
         &starts,
         &|k| res.seg_of[k].map_or(fitted.as_ref(), |s| folds[fold_of(s)].as_ref()),
         &|_| if lag_on { tau } else { 0.0 },
     );
+    // Before and after over the same starts; the failures of each counted.
+    let (multistep_before, multistep_after) = replay::paired(&before_each, &after_each);
     Ok(Validation {
         after,
         location,

@@ -52,8 +52,8 @@ fn summary(ex: &Explanation) -> String {
     for e in &ex.effects {
         let _ = writeln!(
             s,
-            "  {} selected={} confidence={:.2} gain={:.4}",
-            e.name, e.selected, e.confidence, e.heldout_gain
+            "  {} selected={} confidence={:?} frequency={:.2} gain={:.4}",
+            e.name, e.selected, e.confidence, e.selection_frequency, e.heldout_gain
         );
     }
     s

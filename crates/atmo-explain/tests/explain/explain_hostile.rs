@@ -45,7 +45,14 @@ fn explain_poisoned(name: &str, poison: impl FnOnce(&mut Sample)) -> Option<Expl
     match explain(&rec, &robot, &Options::default()) {
         Ok(ex) => {
             for e in &ex.effects {
-                assert!(e.confidence.is_finite(), "{}: {}", e.name, e.confidence);
+                assert!(
+                    e.confidence.is_none_or(f64::is_finite) && e.selection_frequency.is_finite(),
+                    "{}: {:?} {}",
+                    e.name,
+                    e.confidence,
+                    e.selection_frequency
+                );
+                assert_eq!(e.confidence.is_some(), e.selected, "{}", e.name);
             }
             eprintln!("{name}: verdict: {}", ex.verdict);
             let dir = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join(name);

@@ -177,7 +177,11 @@ fn the_fan_wind_is_named_along_the_fan_and_no_sideways_wind_is_claimed() {
     // along x alone.
     let ex = fan_flight_explained();
     let wind = selected(ex, "wind");
-    assert!(wind.confidence >= 0.5, "{}", wind.confidence);
+    assert!(
+        wind.confidence.is_some_and(|c| c >= 0.5),
+        "{:?}",
+        wind.confidence
+    );
     let param = |n: &str| parameter(wind, n);
     let (x, y) = (param("steady_x"), param("steady_y"));
     assert!(x.identified && (-15.0..-8.0).contains(&x.value), "{x:?}");
@@ -290,9 +294,12 @@ fn no_physics_claimed_and_prediction_no_worse(name: &str) {
         .effects
         .iter()
         .filter(|e| {
-            e.selected && !e.calibration && e.confidence >= 0.5 && e.decided_by.starts_with("found")
+            e.selected
+                && !e.calibration
+                && e.confidence.is_some_and(|c| c >= 0.5)
+                && e.decided_by.starts_with("found")
         })
-        .map(|e| format!("{} ({:.2}): {}", e.name, e.confidence, e.decided_by))
+        .map(|e| format!("{} ({:?}): {}", e.name, e.confidence, e.decided_by))
         .collect();
     assert!(claimed.is_empty(), "physics claimed: {claimed:?}");
     let (before, after) = (

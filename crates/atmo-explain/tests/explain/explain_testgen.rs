@@ -71,7 +71,7 @@ fn summary(ex: &Explanation) -> String {
     for e in ex
         .effects
         .iter()
-        .filter(|e| e.confidence > 0.0 || e.selected)
+        .filter(|e| e.selection_frequency > 0.0 || e.selected)
     {
         let p: Vec<String> = e
             .parameters
@@ -88,10 +88,11 @@ fn summary(ex: &Explanation) -> String {
             .collect();
         let _ = writeln!(
             s,
-            "  {} sel={} conf={:.2} {} [{}]",
+            "  {} sel={} conf={:?} freq={:.2} {} [{}]",
             e.name,
             e.selected,
             e.confidence,
+            e.selection_frequency,
             p.join(" "),
             e.decided_by
         );
@@ -135,7 +136,7 @@ fn assert_named(ex: &Explanation, concealed: &[&str]) {
     }
     let others: Vec<&str> = ex.effects[n..]
         .iter()
-        .filter(|e| e.selected || e.confidence >= 0.5)
+        .filter(|e| e.selected || e.selection_frequency >= 0.5)
         .map(|e| e.name.as_str())
         .collect();
     assert!(others.is_empty(), "{others:?} claimed: {}", summary(ex));

@@ -52,7 +52,7 @@ fn fitted_ground_effect_in_the_mpc_lands_steeper_than_the_nominal_mpc() {
         .find(|e| e.name == "ground_effect")
         .unwrap();
     eprintln!(
-        "explain: ground_effect selected={} confidence={:.2}",
+        "explain: ground_effect selected={} confidence={:?}",
         found.selected, found.confidence
     );
     assert!(found.selected, "the ground effect was not identified");
