@@ -18,6 +18,7 @@ use atmo_core::{GroundPlane, Linkage, Model, RobotConfig};
 use atmo_mpc::{AlphaSchedule, Mpc, MpcSettings, Outcome, SolverCuts, TiltPlan, wheel_clearance};
 use nalgebra::Vector3;
 
+use crate::actuator_monitor::{ActuatorMonitor, Detected, MonitorInputs};
 use crate::arming::ArmingCheck;
 use crate::error::{DaemonError, Result};
 use crate::flare::{
@@ -110,6 +111,13 @@ pub struct FlightStack {
     aloft_force: Option<f64>,
     /// The robot file's motor time constant, s.
     motor_time_constant: f64,
+    /// What the actuators are seen to do (`actuator_monitor`).
+    monitor: ActuatorMonitor,
+    /// The encoder's last good tilt, rad (`last_tilt` is the tilt flown on:
+    /// the encoder's, or dead-reckoned while it is stuck).
+    encoder_tilt: f64,
+    /// The tilt velocity the last tick commanded, rad/s.
+    tilt_sent: f64,
 }
 
 impl FlightStack {
@@ -214,6 +222,9 @@ impl FlightStack {
             limit_body: model.at_tilt(lim.tilt_transition_max()),
             aloft_force: None,
             motor_time_constant: robot.rotor.time_constant,
+            monitor: ActuatorMonitor::new(settings.monitor, settings.observer.max_torque),
+            encoder_tilt: 0.0,
+            tilt_sent: 0.0,
             model,
             settings,
         })
@@ -259,7 +270,7 @@ impl FlightStack {
         }
         if let Some(counts) = inputs.tilt_counts {
             match self.linkage.tilt_from_counts(counts) {
-                Ok(tilt) => self.last_tilt = tilt,
+                Ok(tilt) => self.encoder_tilt = tilt,
                 Err(_) => self.rejected.tilt += 1,
             }
         }
@@ -352,18 +363,21 @@ impl FlightStack {
         self.ingest(inputs);
         let now = inputs.now_ns;
         let pilot = self.last_pilot;
-        let tilt = self.last_tilt;
         let estimate_age = self.last_estimate.map_or(f64::INFINITY, |e| {
             now.saturating_sub(e.stamp_ns) as f64 * 1e-9
         });
         let estimate_fresh = estimate_age <= self.settings.failsafe.estimate_timeout;
         let state = self.last_estimate.map_or(State::zeros(), |e| e.state);
         let height = self.last_ground_z - state[idx::Z];
+        let detected =
+            self.monitor_actuators(now, pilot.arm && pilot.offboard, estimate_fresh, &state, height);
+        self.last_tilt = self.monitor.tilt(self.encoder_tilt, self.tilt_max);
+        let tilt = self.last_tilt;
         let mpc_failed_ticks = self.mpc.failed_ticks();
         let conditions = Conditions {
             armed: pilot.arm && pilot.offboard,
             arming_ok: inputs.arming_failures == 0,
-            grounded: inputs.ground_contact,
+            grounded: inputs.ground_contact || detected.has(Detected::CONTACT_INFERRED),
             height,
             throttle: pilot.throttle,
             descent_commanded: pilot.velocity[2] > self.settings.pilot.descent_threshold,
@@ -372,11 +386,13 @@ impl FlightStack {
                 || (self.mode.is_airborne_mode() && !pilot.mpc_enabled),
             driver_lost: inputs.driver_lost,
             pilot_lost: inputs.pilot_lost,
+            tilt_unknown: detected.tilt_unknown(),
+            rotor_failed: detected.rotor_failed(),
             tilt,
             time_in_mode: now.saturating_sub(self.mode_since_ns) as f64 * 1e-9,
         };
         let (mode, mut transition) = next_mode(self.mode, &conditions, &self.thresholds);
-        if mode == Mode::Disarmed && conditions.armed {
+        if mode == Mode::Disarmed && conditions.armed && !conditions.rotor_failed {
             // Why the switches did not arm it.
             transition =
                 ArmingCheck::first_failed(inputs.arming_failures).map(ArmingCheck::refusal);
@@ -425,6 +441,7 @@ impl FlightStack {
             disturbance: [0.0; 6],
             rejected: self.rejected,
             solver_cuts: SolverCuts::default(),
+            actuator_faults: detected.bits(),
         };
         self.observe(mode, tilt);
         status.disturbance = self.observer.wrench().into();
@@ -447,6 +464,7 @@ impl FlightStack {
         };
         let wheel_rates = self.wheels(mode, &state, height, pilot, &mut status);
         self.last_thrust = thrust;
+        self.tilt_sent = tilt_velocity;
         status.rejected = self.rejected;
         status.solver_cuts = self.mpc.solver_cuts();
         StepOutputs {
@@ -455,6 +473,47 @@ impl FlightStack {
             wheel_rates,
             status,
         }
+    }
+
+    /// Runs the actuator monitor on this tick's signals (the mode is the
+    /// previous tick's: what the commands it checks were made in).
+    fn monitor_actuators(
+        &mut self,
+        now: u64,
+        armed: bool,
+        estimate_fresh: bool,
+        state: &State,
+        height: f64,
+    ) -> Detected {
+        // The wheels' clearance matters only near the ground; the body at a
+        // tilt costs a model evaluation.
+        let clearance = if height <= self.thresholds.takeoff_height {
+            wheel_clearance(
+                &self.model.at_tilt(self.last_tilt),
+                &self.ground_plane(state),
+                state,
+                self.wheel_radius,
+            )
+        } else {
+            f64::INFINITY
+        };
+        self.monitor.update(&MonitorInputs {
+            now_ns: now,
+            armed,
+            mode: self.mode,
+            encoder_tilt: self.encoder_tilt,
+            last_tilt_command: self.tilt_sent,
+            disturbance: self.observer.wrench().into(),
+            estimate_fresh,
+            wheel_clearance: clearance,
+            vertical_speed: state[idx::VZ],
+        })
+    }
+
+    /// Largest commanded tilt travel the encoder has not followed so far
+    /// in this flight, rad (the stuck-encoder detector's margin).
+    pub fn encoder_lag_peak(&self) -> f64 {
+        self.monitor.peak_travel()
     }
 
     /// Learns the disturbance in free flight, holds it near the ground

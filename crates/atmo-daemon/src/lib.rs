@@ -1,5 +1,7 @@
 //! atmo-daemon: the flight stack and the onboard control loop.
 //!
+//! - [`actuator_monitor`]: what the stack detects of actuators that do not
+//!   do what it commands (rotor, tilt encoder and motor, ground contact).
 //! - [`arming`]: the arming checks (estimate rate, radio, drivers, tilt
 //!   encoder against the command, configuration) and their verdict.
 //! - [`modes`]: the paper's mode state machine as an explicit transition table.
@@ -35,6 +37,7 @@
 //! default `cli` feature.
 //! - `cli` (feature `cli-args`): the command-line argument groups the binaries share.
 
+pub mod actuator_monitor;
 pub mod arming;
 #[cfg(feature = "cli-args")]
 pub mod cli;
