@@ -143,9 +143,6 @@ pub struct ActuatorMonitor {
     anchor: f64,
     /// Commanded travel since then (signed), rad.
     travel: f64,
-    /// Largest |travel| seen without a stuck detection, rad (measured on
-    /// fault-free flights: the margin of `encoder_stuck_travel_deg`).
-    peak_travel: f64,
     tilt_force_since: Option<u64>,
     rotor_since: Option<u64>,
     contact_since: Option<u64>,
@@ -171,7 +168,6 @@ impl ActuatorMonitor {
             last_ns: None,
             anchor: 0.0,
             travel: 0.0,
-            peak_travel: 0.0,
             tilt_force_since: None,
             rotor_since: None,
             contact_since: None,
@@ -180,11 +176,6 @@ impl ActuatorMonitor {
 
     pub fn detected(&self) -> Detected {
         self.detected
-    }
-
-    /// Largest commanded travel without encoder movement so far, rad.
-    pub fn peak_travel(&self) -> f64 {
-        self.peak_travel
     }
 
     /// The tilt to fly on, rad: the encoder's, or while it is stuck its
@@ -220,8 +211,6 @@ impl ActuatorMonitor {
                 self.travel = 0.0;
             } else if self.travel.abs() >= s.encoder_stuck_travel_deg.to_radians() {
                 self.detected.0 |= Detected::ENCODER_STUCK;
-            } else {
-                self.peak_travel = self.peak_travel.max(self.travel.abs());
             }
         }
         // The observer's wrench is an actuator's only while it learns and
@@ -304,7 +293,9 @@ mod tests {
         let mut first = None;
         for k in 0..100 {
             let tilt = (k as f64 * 0.01 * rate).min(0.3);
-            if m.update(&inputs(k, tilt, rate)).has(Detected::ENCODER_STUCK) {
+            if m.update(&inputs(k, tilt, rate))
+                .has(Detected::ENCODER_STUCK)
+            {
                 first.get_or_insert(k);
             }
         }

@@ -369,8 +369,13 @@ impl FlightStack {
         let estimate_fresh = estimate_age <= self.settings.failsafe.estimate_timeout;
         let state = self.last_estimate.map_or(State::zeros(), |e| e.state);
         let height = self.last_ground_z - state[idx::Z];
-        let detected =
-            self.monitor_actuators(now, pilot.arm && pilot.offboard, estimate_fresh, &state, height);
+        let detected = self.monitor_actuators(
+            now,
+            pilot.arm && pilot.offboard,
+            estimate_fresh,
+            &state,
+            height,
+        );
         self.last_tilt = self.monitor.tilt(self.encoder_tilt, self.tilt_max);
         let tilt = self.last_tilt;
         let mpc_failed_ticks = self.mpc.failed_ticks();
@@ -508,12 +513,6 @@ impl FlightStack {
             wheel_clearance: clearance,
             vertical_speed: state[idx::VZ],
         })
-    }
-
-    /// Largest commanded tilt travel the encoder has not followed so far
-    /// in this flight, rad (the stuck-encoder detector's margin).
-    pub fn encoder_lag_peak(&self) -> f64 {
-        self.monitor.peak_travel()
     }
 
     /// Learns the disturbance in free flight, holds it near the ground

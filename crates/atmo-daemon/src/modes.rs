@@ -199,12 +199,7 @@ pub const TRANSITIONS: &[Transition] = &[
         // Above z* nothing flies three rotors: the robot would flip with
         // its rotors running. Cut, it falls level; a transition under way
         // is already landing and lands.
-        from: &[
-            Mode::Takeoff,
-            Mode::Flight,
-            Mode::Morphing,
-            Mode::Failsafe,
-        ],
+        from: &[Mode::Takeoff, Mode::Flight, Mode::Morphing, Mode::Failsafe],
         to: Mode::Disarmed,
         guard: |c, _| c.rotor_failed,
         reason: "a rotor failed before the transition: thrust cut",

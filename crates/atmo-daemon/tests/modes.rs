@@ -574,7 +574,12 @@ fn a_failed_arming_check_keeps_it_disarmed_on_the_ground_and_in_the_air() {
 
 #[test]
 fn a_tilt_not_where_believed_fails_safe_and_holds_until_disarmed() {
-    for mode in [Mode::Takeoff, Mode::Flight, Mode::Morphing, Mode::Transition] {
+    for mode in [
+        Mode::Takeoff,
+        Mode::Flight,
+        Mode::Morphing,
+        Mode::Transition,
+    ] {
         let c = Conditions {
             tilt_unknown: true,
             ..flying()
@@ -604,7 +609,11 @@ fn a_failed_rotor_cuts_the_thrust_above_the_transition_and_lets_a_transition_lan
         assert_eq!(step(mode, c), Mode::Disarmed, "{mode:?}");
     }
     assert_eq!(step(Mode::Transition, c), Mode::Transition);
-    assert_eq!(step(Mode::Disarmed, c), Mode::Disarmed, "not armed in the air again");
+    assert_eq!(
+        step(Mode::Disarmed, c),
+        Mode::Disarmed,
+        "not armed in the air again"
+    );
     let c = Conditions {
         rotor_failed: true,
         throttle: 1.0,

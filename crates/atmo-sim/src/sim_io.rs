@@ -292,9 +292,7 @@ impl TickIo for SimIo {
                 rotors: self
                     .actuators
                     .rotors(self.now_ns, Input::from(outputs.thrust)),
-                tilt_rate: self
-                    .actuators
-                    .tilt_rate(self.now_ns, outputs.tilt_velocity),
+                tilt_rate: self.actuators.tilt_rate(self.now_ns, outputs.tilt_velocity),
                 wheel_rates: outputs.wheel_rates,
             }
         };

@@ -54,10 +54,17 @@ fn a_rotor_failed_in_flight_is_detected_and_the_thrust_cut_before_a_flip() {
             .map(|t| t.outputs.status.mode)
             .collect();
         assert!(
-            after.iter().all(|m| matches!(m, Mode::Disarmed | Mode::Drive)),
+            after
+                .iter()
+                .all(|m| matches!(m, Mode::Disarmed | Mode::Drive)),
             "{what}: {after:?}"
         );
-        assert!(f.ticks.iter().filter(|t| t.time >= seen.time).all(|t| t.outputs.thrust == [0.0; 4]));
+        assert!(
+            f.ticks
+                .iter()
+                .filter(|t| t.time >= seen.time)
+                .all(|t| t.outputs.thrust == [0.0; 4])
+        );
         // Cut, it falls; it does not turn over (until it is down).
         let tipped = f
             .ticks
@@ -65,7 +72,9 @@ fn a_rotor_failed_in_flight_is_detected_and_the_thrust_cut_before_a_flip() {
             .filter(|t| t.time >= seen.time && t.truth_height > 0.3)
             .map(|t| {
                 let s = &t.truth;
-                (s[idx::ROLL].cos() * s[idx::PITCH].cos()).acos().to_degrees()
+                (s[idx::ROLL].cos() * s[idx::PITCH].cos())
+                    .acos()
+                    .to_degrees()
             })
             .fold(0.0, f64::max);
         assert!(tipped < 90.0, "{what}: tipped {tipped} deg");
@@ -86,7 +95,8 @@ fn a_rotor_failed_in_the_transition_is_detected_and_landed_on_the_wheels() {
         assert!(impact < 1.5, "{what}: {impact}");
         assert!(f.summary.touchdown_tilt_deg.unwrap() > 45.0, "{what}");
         assert!(
-            f.modes().ends_with(&[Mode::Transition, Mode::Touchdown, Mode::Drive]),
+            f.modes()
+                .ends_with(&[Mode::Transition, Mode::Touchdown, Mode::Drive]),
             "{what}: {:?}",
             f.modes()
         );
@@ -114,7 +124,11 @@ fn a_stuck_tilt_encoder_is_detected_and_the_tilt_dead_reckoned_to_the_landing() 
             .filter(|t| t.time >= seen.time)
             .map(|t| (t.outputs.status.tilt - t.truth_tilt).abs())
             .fold(0.0, f64::max);
-        let step = ControllerConfig::atmo().unwrap().flight.monitor.encoder_step_deg;
+        let step = ControllerConfig::atmo()
+            .unwrap()
+            .flight
+            .monitor
+            .encoder_step_deg;
         assert!(worst <= step.to_radians() + 1e-9, "{onset}: {worst}");
     }
 }
@@ -139,7 +153,10 @@ fn a_slipping_tilt_motor_is_detected_by_the_lift_and_fails_safe() {
     assert_eq!(seen.outputs.status.mode, Mode::Failsafe);
     assert!(f.summary.crash_reason.is_none(), "{:?}", f.summary);
     assert!(f.summary.impact_speed_mps.unwrap() < 1.0, "{:?}", f.summary);
-    assert!(f.modes().ends_with(&[Mode::Failsafe, Mode::Touchdown, Mode::Drive]));
+    assert!(
+        f.modes()
+            .ends_with(&[Mode::Failsafe, Mode::Touchdown, Mode::Drive])
+    );
 }
 
 #[test]
@@ -179,12 +196,20 @@ fn a_missed_ground_contact_is_inferred_from_the_estimate_and_landed() {
     );
     let entry = f.first_in(Mode::Transition, 0.0).unwrap().time;
     let touchdown = f.first_in(Mode::Touchdown, 0.0).unwrap();
-    assert!(touchdown.time < entry + 3.0, "transition {entry}, touchdown {}", touchdown.time);
+    assert!(
+        touchdown.time < entry + 3.0,
+        "transition {entry}, touchdown {}",
+        touchdown.time
+    );
     assert!(!touchdown.inputs.ground_contact);
     assert!(touchdown.outputs.status.actuator_faults & Detected::CONTACT_INFERRED != 0);
     // The wheels settle, then the estimate must rest for `contact_time`.
     let clean_touchdown = clean().first_in(Mode::Touchdown, 0.0).unwrap().time;
-    let settle = ControllerConfig::atmo().unwrap().flight.monitor.contact_time;
+    let settle = ControllerConfig::atmo()
+        .unwrap()
+        .flight
+        .monitor
+        .contact_time;
     assert!(
         touchdown.time - clean_touchdown >= settle && touchdown.time - clean_touchdown < 0.5,
         "{} s after the clean touchdown",
@@ -219,7 +244,10 @@ fn a_lost_radio_fails_safe_and_the_landing_follows_its_return() {
             "{onset}"
         );
         assert!(f.landed(), "{onset}: {:?}", f.summary);
-        assert!(f.modes().ends_with(&[Mode::Transition, Mode::Touchdown, Mode::Drive]));
+        assert!(
+            f.modes()
+                .ends_with(&[Mode::Transition, Mode::Touchdown, Mode::Drive])
+        );
     }
 }
 
