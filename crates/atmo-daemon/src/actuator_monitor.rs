@@ -5,7 +5,7 @@
 //! | detector | signal | rule |
 //! | --- | --- | --- |
 //! | tilt encoder stuck | commanded tilt velocity, encoder | the commanded travel since the encoder last moved by `encoder_step` reaches `encoder_stuck_travel` |
-//! | tilt not where believed (motor slipping, linkage jammed) | the observer's body-z force | its magnitude at or above `tilt_force` for `tilt_force_time`, the wheels clear of the ground |
+//! | tilt not where believed (motor slipping, linkage jammed) | the observer's body-z force | upward (more lift than predicted) at or above `tilt_force` for `tilt_force_time`, the wheels clear of the ground |
 //! | rotor fault | the observer's roll and pitch torque | either at the observer's limit (`observer.max_torque`: what is left it cannot take up) for `rotor_time`, the wheels clear of the ground |
 //! | ground contact missed | the estimate | fresh, the wheels (at the tilt in use) within `contact_clearance` of the ground and the vertical speed within `contact_speed`, for `contact_time` |
 //!
@@ -222,7 +222,10 @@ impl ActuatorMonitor {
         if held(
             &mut self.tilt_force_since,
             i.now_ns,
-            learning && d[2].abs() >= s.tilt_force,
+            // Lift the model did not predict (upward: body z points down):
+            // the arms are less tilted than believed. A robot short of
+            // thrust (a weak motor, a heavy robot) reads the other way.
+            learning && -d[2] >= s.tilt_force,
             s.tilt_force_time,
         ) {
             self.detected.0 |= Detected::TILT_MISMATCH;
