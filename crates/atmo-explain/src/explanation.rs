@@ -78,7 +78,7 @@ pub struct EffectReport {
     pub selection_frequency: f64,
     /// The acceptance's decision with its numbers; `None` when the
     /// selection did not propose the effect.
-    pub decision: Option<crate::stages::Decision>,
+    pub decision: Option<Decision>,
     /// Held-out improvement (noise-floor variances per residual entry) from
     /// adding it to the selected model (or lost by removing it).
     pub heldout_gain: f64,
@@ -218,4 +218,43 @@ impl Explanation {
             .filter(|n| !expected.contains(n))
             .collect()
     }
+}
+
+/// Which test decided an effect's verdict (in `explain.json` as
+/// `decision`, tagged by `kind`, with its numbers).
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+#[serde(tag = "kind", rename_all = "snake_case")]
+pub enum Decision {
+    /// Passed both tests (multi-step velocity error at the horizon with
+    /// and without it, m/s; `None` when no 0.5 s stretch exists).
+    Found {
+        with: Option<f64>,
+        without: Option<f64>,
+    },
+    /// A parameter outside its physical range, or none identified.
+    NotIdentified { reason: String },
+    /// Physics a calibration of the robot file explains as well (swapped
+    /// in for it, at least the acceptance's `SWAP_RECOVERY` of its held-out gain): with
+    /// those calibrations one finding, which the model carries as the
+    /// calibration (the simpler account) and the report names as both.
+    OneFindingWith { calibrations: Vec<String> },
+    /// Lowers the one-step residual but not the 0.5 s prediction;
+    /// `reduced` when judged on the model left after other rejections.
+    /// Both errors are over the same starts (those both models replayed).
+    RejectedByPrediction {
+        with: f64,
+        without: f64,
+        reduced: bool,
+    },
+    /// The 0.5 s prediction test could not be made: of `attempted` starts
+    /// the model with the effect failed on `with_failed` and the model
+    /// without it on `without_failed`, leaving no start both replayed, or
+    /// the model with the effect failed on more starts than without it.
+    /// Not claimed: a missing prediction is not a zero error.
+    PredictionFailed {
+        attempted: usize,
+        with_failed: usize,
+        without_failed: usize,
+        reduced: bool,
+    },
 }

@@ -10,13 +10,14 @@
 //! the next tick (reference, tilt sequence, alpha, linearization) and belongs
 //! after the outputs have been sent.
 
-use atmo_core::control::{DiffDrive, WheelRates, blending_alpha};
+use atmo_core::control::{DiffDrive, blending_alpha};
 use atmo_core::ground_plane::{LEVEL_NORMAL, unit_ground_normal};
 use atmo_core::model::{Input, State, TiltedBody, idx};
 use atmo_core::{GroundPlane, Linkage, Model, RobotConfig};
 use atmo_mpc::{AlphaSchedule, Mpc, MpcSettings, Outcome, SolverCuts, TiltPlan};
 use nalgebra::Vector3;
 
+use crate::actuator_monitor::{ActuatorMonitor, Detected};
 use crate::arming::ArmingCheck;
 use crate::error::{FlightError, Result};
 use crate::flare::{Flare, FlareSettings, Touchdown};
@@ -25,7 +26,9 @@ use crate::modes::{Conditions, Mode, Thresholds, next_mode};
 use crate::observer::{DisturbanceObserver, ObserverSettings};
 use crate::settings::FlightSettings;
 
+mod drive;
 mod landing;
+mod monitoring;
 
 pub use crate::step_io::{
     Estimate, PilotInput, RejectCounters, SolverStatus, Status, StepInputs, StepOutputs,
@@ -100,6 +103,13 @@ pub struct FlightStack {
     aloft_force: Option<f64>,
     /// The robot file's motor time constant, s.
     motor_time_constant: f64,
+    /// What the actuators are seen to do (`actuator_monitor`).
+    monitor: ActuatorMonitor,
+    /// The encoder's last good tilt, rad (`last_tilt` is the tilt flown on:
+    /// the encoder's, or dead-reckoned while it is stuck).
+    encoder_tilt: f64,
+    /// The tilt velocity the last tick commanded, rad/s.
+    tilt_sent: f64,
 }
 
 impl FlightStack {
@@ -204,6 +214,9 @@ impl FlightStack {
             limit_body: model.at_tilt(lim.tilt_transition_max()),
             aloft_force: None,
             motor_time_constant: robot.rotor.time_constant,
+            monitor: ActuatorMonitor::new(settings.monitor, settings.observer.max_torque),
+            encoder_tilt: 0.0,
+            tilt_sent: 0.0,
             model,
             settings,
         })
@@ -249,7 +262,7 @@ impl FlightStack {
         }
         if let Some(counts) = inputs.tilt_counts {
             match self.linkage.tilt_from_counts(counts) {
-                Ok(tilt) => self.last_tilt = tilt,
+                Ok(tilt) => self.encoder_tilt = tilt,
                 Err(_) => self.rejected.tilt += 1,
             }
         }
@@ -342,18 +355,26 @@ impl FlightStack {
         self.ingest(inputs);
         let now = inputs.now_ns;
         let pilot = self.last_pilot;
-        let tilt = self.last_tilt;
         let estimate_age = self.last_estimate.map_or(f64::INFINITY, |e| {
             now.saturating_sub(e.stamp_ns) as f64 * 1e-9
         });
         let estimate_fresh = estimate_age <= self.settings.failsafe.estimate_timeout;
         let state = self.last_estimate.map_or(State::zeros(), |e| e.state);
         let height = self.last_ground_z - state[idx::Z];
+        let detected = self.monitor_actuators(
+            now,
+            pilot.arm && pilot.offboard,
+            estimate_fresh,
+            &state,
+            height,
+        );
+        self.last_tilt = self.monitor.tilt(self.encoder_tilt, self.tilt_max);
+        let tilt = self.last_tilt;
         let mpc_failed_ticks = self.mpc.failed_ticks();
         let conditions = Conditions {
             armed: pilot.arm && pilot.offboard,
             arming_ok: inputs.arming_failures == 0,
-            grounded: inputs.ground_contact,
+            grounded: inputs.ground_contact || detected.has(Detected::CONTACT_INFERRED),
             height,
             throttle: pilot.throttle,
             descent_commanded: pilot.velocity[2] > self.settings.pilot.descent_threshold,
@@ -362,11 +383,13 @@ impl FlightStack {
                 || (self.mode.is_airborne_mode() && !pilot.mpc_enabled),
             driver_lost: inputs.driver_lost,
             pilot_lost: inputs.pilot_lost,
+            tilt_unknown: detected.tilt_unknown(),
+            rotor_failed: detected.rotor_failed(),
             tilt,
             time_in_mode: now.saturating_sub(self.mode_since_ns) as f64 * 1e-9,
         };
         let (mode, mut transition) = next_mode(self.mode, &conditions, &self.thresholds);
-        if mode == Mode::Disarmed && conditions.armed {
+        if mode == Mode::Disarmed && conditions.armed && !conditions.rotor_failed {
             // Why the switches did not arm it.
             transition =
                 ArmingCheck::first_failed(inputs.arming_failures).map(ArmingCheck::refusal);
@@ -415,6 +438,7 @@ impl FlightStack {
             disturbance: [0.0; 6],
             rejected: self.rejected,
             solver_cuts: SolverCuts::default(),
+            actuator_faults: detected.bits(),
         };
         self.observe(mode, tilt);
         status.disturbance = self.observer.wrench().into();
@@ -437,6 +461,7 @@ impl FlightStack {
         };
         let wheel_rates = self.wheels(mode, &state, height, pilot, &mut status);
         self.last_thrust = thrust;
+        self.tilt_sent = tilt_velocity;
         status.rejected = self.rejected;
         status.solver_cuts = self.mpc.solver_cuts();
         StepOutputs {
@@ -591,38 +616,6 @@ impl FlightStack {
                 0.0
             }
         })
-    }
-
-    fn wheels(
-        &self,
-        mode: Mode,
-        state: &State,
-        height: f64,
-        pilot: PilotInput,
-        status: &mut Status,
-    ) -> WheelRates {
-        let yaw = state[idx::YAW];
-        let (sy, cy) = yaw.sin_cos();
-        let forward = |v: [f64; 3]| cy * v[0] + sy * v[1];
-        match mode {
-            Mode::Drive => {
-                let v = forward(pilot.velocity);
-                status.drive_velocity = [v, pilot.yaw_rate];
-                self.drive.wheel_rates(v, pilot.yaw_rate)
-            }
-            Mode::Transition | Mode::Touchdown
-                if mode == Mode::Touchdown || height < self.settings.modes.wheel_spinup_height =>
-            {
-                // Spin up to the ground speed so that the wheels land rolling.
-                let v = forward([state[idx::VX], state[idx::VY], 0.0]);
-                status.drive_velocity = [v, 0.0];
-                self.drive.wheel_rates(v, 0.0)
-            }
-            _ => WheelRates {
-                left: 0.0,
-                right: 0.0,
-            },
-        }
     }
 
     /// Fills the per-stage MPC reference for the current mode.

@@ -5,6 +5,8 @@
 //! tree has no ROS 2, iceoryx2, plotting or simulator plant (checked by
 //! `tests/dependencies.rs`).
 //!
+//! - [`actuator_monitor`]: what the stack detects of actuators that do not
+//!   do what it commands (rotor, tilt encoder and motor, ground contact).
 //! - [`arming`]: the arming checks (estimate rate, radio, drivers, tilt
 //!   encoder against the command, configuration) and their verdict.
 //! - [`modes`]: the paper's mode state machine as an explicit transition table.
@@ -33,6 +35,7 @@
 //! - [`telemetry`]: the tick's status as the `atmo_msgs/MpcStatus` message.
 //! - [`settings`], read from `config/flight.toml`.
 
+pub mod actuator_monitor;
 pub mod arming;
 pub mod control_loop;
 pub mod error;

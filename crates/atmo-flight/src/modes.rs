@@ -13,8 +13,10 @@
 //!                                                              (h < z* once tilted near the flight limit)
 //!
 //! Failsafe: from Takeoff/Flight/Morphing/Transition on a stale estimate, an
-//! MPC failure past its grace, a lost driver or a lost radio; back to Flight once healthy and tilted back;
-//! to Touchdown when grounded. Any mode -> Disarmed when the arm switch drops.
+//! MPC failure past its grace, a lost driver or a lost radio, or a tilt not
+//! where it is believed; back to Flight once healthy and tilted back;
+//! to Touchdown when grounded. Any mode -> Disarmed when the arm switch
+//! drops, and any flying mode but Transition when a rotor has failed.
 //! ```
 //!
 //! Rows are checked in order; the first whose `from` contains the current
@@ -48,6 +50,11 @@ pub struct Conditions {
     pub driver_lost: bool,
     /// The pilot's radio is lost (only with the radio as the pilot source).
     pub pilot_lost: bool,
+    /// The tilt is not where it is believed (the actuator monitor: a
+    /// slipping tilt motor, a jammed linkage): no wheel landing to plan.
+    pub tilt_unknown: bool,
+    /// A rotor does not deliver its command (the actuator monitor).
+    pub rotor_failed: bool,
     /// Measured tilt, rad.
     pub tilt: f64,
     /// Seconds since the current mode was entered.
@@ -114,6 +121,15 @@ pub const TRANSITIONS: &[Transition] = &[
         reason: "arm switch off",
     },
     Transition {
+        // Above z* nothing flies three rotors: the robot would flip with
+        // its rotors running. Cut, it falls level; a transition under way
+        // is already landing and lands.
+        from: &[Mode::Takeoff, Mode::Flight, Mode::Morphing, Mode::Failsafe],
+        to: Mode::Disarmed,
+        guard: |c, _| c.rotor_failed,
+        reason: "a rotor failed before the transition: thrust cut",
+    },
+    Transition {
         from: &[Mode::Disarmed],
         to: Mode::Drive,
         // The height says "ground" only from a fresh estimate: armed before
@@ -131,15 +147,22 @@ pub const TRANSITIONS: &[Transition] = &[
         from: &[Mode::Disarmed],
         to: Mode::Flight,
         guard: |c, t| {
-            c.armed && c.arming_ok && !c.grounded && c.height > t.takeoff_height && c.estimate_fresh
+            c.armed
+                && c.arming_ok
+                && !c.grounded
+                && c.height > t.takeoff_height
+                && c.estimate_fresh
+                && !c.rotor_failed
         },
         reason: "armed in the air",
     },
     Transition {
         from: FLYING,
         to: Mode::Failsafe,
-        guard: |c, _| !c.estimate_fresh || c.mpc_failed || c.driver_lost || c.pilot_lost,
-        reason: "stale estimate, MPC failed past its grace, a driver or the radio lost",
+        guard: |c, _| {
+            !c.estimate_fresh || c.mpc_failed || c.driver_lost || c.pilot_lost || c.tilt_unknown
+        },
+        reason: "stale estimate, MPC failed past its grace, a driver, the radio or an actuator lost",
     },
     Transition {
         from: &[Mode::Failsafe],
@@ -155,6 +178,7 @@ pub const TRANSITIONS: &[Transition] = &[
                 && !c.mpc_failed
                 && !c.driver_lost
                 && !c.pilot_lost
+                && !c.tilt_unknown
                 && c.time_in_mode >= t.failsafe_recovery_time
                 && c.tilt <= t.failsafe_recovery_tilt
         },
@@ -169,7 +193,13 @@ pub const TRANSITIONS: &[Transition] = &[
     Transition {
         from: &[Mode::Drive],
         to: Mode::Takeoff,
-        guard: |c, t| c.throttle >= t.takeoff_throttle && !c.driver_lost && !c.pilot_lost,
+        guard: |c, t| {
+            c.throttle >= t.takeoff_throttle
+                && !c.driver_lost
+                && !c.pilot_lost
+                && !c.tilt_unknown
+                && !c.rotor_failed
+        },
         reason: "throttle up on the ground, every driver and the radio alive",
     },
     Transition {

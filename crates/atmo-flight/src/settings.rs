@@ -6,6 +6,7 @@ use atmo_core::CoreError;
 use atmo_core::config_file::{Checker, ConfigFile};
 use serde::Deserialize;
 
+pub use crate::actuator_monitor::MonitorSettings;
 pub use crate::flare::FlareSettings;
 
 #[derive(Debug, Clone, Deserialize, PartialEq)]
@@ -18,6 +19,10 @@ pub struct FlightSettings {
     pub failsafe: FailsafeSettings,
     pub observer: ObserverConfig,
     pub flare: FlareSettings,
+    /// The actuator monitor's thresholds; a file without the table (a
+    /// flight log written before the monitor) flies without it.
+    #[serde(default)]
+    pub monitor: MonitorSettings,
     #[serde(rename = "loop")]
     pub control_loop: LoopSettings,
 }
@@ -176,8 +181,36 @@ impl ConfigFile for FlightSettings {
             1.0..=2000.0,
             "Hz",
         )?;
-        validate_flare(&c, &self.flare)
+        validate_flare(&c, &self.flare)?;
+        validate_monitor(&c, &self.monitor)
     }
+}
+
+fn validate_monitor(c: &Checker, m: &MonitorSettings) -> Result<(), CoreError> {
+    c.range(
+        "monitor.encoder_step_deg",
+        m.encoder_step_deg,
+        0.0..=10.0,
+        "deg",
+    )?;
+    c.range(
+        "monitor.encoder_stuck_travel_deg",
+        m.encoder_stuck_travel_deg,
+        m.encoder_step_deg..=45.0,
+        "deg",
+    )?;
+    c.range("monitor.tilt_force", m.tilt_force, 0.0..=200.0, "N")?;
+    c.range("monitor.tilt_force_time", m.tilt_force_time, 0.0..=5.0, "s")?;
+    c.range("monitor.rotor_time", m.rotor_time, 0.0..=5.0, "s")?;
+    c.range(
+        "monitor.contact_clearance",
+        m.contact_clearance,
+        -0.1..=0.5,
+        "m",
+    )?;
+    c.range("monitor.contact_speed", m.contact_speed, 0.0..=2.0, "m/s")?;
+    c.range("monitor.contact_time", m.contact_time, 0.0..=5.0, "s")?;
+    Ok(())
 }
 
 fn validate_flare(c: &Checker, f: &FlareSettings) -> Result<(), CoreError> {

@@ -106,6 +106,9 @@ pub struct Status {
     /// [`crate::FlightStack::open_cut_window`] (the preparation before this tick
     /// and this tick's feedback): logged so that a replay cuts them again.
     pub solver_cuts: SolverCuts,
+    /// What the actuator monitor has detected (bits of
+    /// [`crate::actuator_monitor::Detected`]; 0: nothing).
+    pub actuator_faults: u8,
 }
 
 /// What one tick commands.

@@ -30,6 +30,8 @@ fn flying() -> Conditions {
         mpc_failed: false,
         driver_lost: false,
         pilot_lost: false,
+        tilt_unknown: false,
+        rotor_failed: false,
         tilt: 0.0,
         time_in_mode: 10.0,
     }
@@ -525,6 +527,7 @@ fn every_row_of_the_table_is_exercised_above() {
     // of the pairs the tests above cover.
     let covered = [
         (Mode::Drive, Mode::Disarmed),
+        (Mode::Flight, Mode::Disarmed),
         (Mode::Disarmed, Mode::Drive),
         (Mode::Disarmed, Mode::Flight),
         (Mode::Flight, Mode::Failsafe),
@@ -567,4 +570,55 @@ fn a_failed_arming_check_keeps_it_disarmed_on_the_ground_and_in_the_air() {
         ..flying()
     };
     assert_eq!(step(Mode::Flight, flying_refused), Mode::Flight);
+}
+
+#[test]
+fn a_tilt_not_where_believed_fails_safe_and_holds_until_disarmed() {
+    for mode in [
+        Mode::Takeoff,
+        Mode::Flight,
+        Mode::Morphing,
+        Mode::Transition,
+    ] {
+        let c = Conditions {
+            tilt_unknown: true,
+            ..flying()
+        };
+        assert_eq!(step(mode, c), Mode::Failsafe, "{mode:?}");
+    }
+    let c = Conditions {
+        tilt_unknown: true,
+        ..flying()
+    };
+    assert_eq!(step(Mode::Failsafe, c), Mode::Failsafe, "no recovery");
+    let c = Conditions {
+        tilt_unknown: true,
+        throttle: 1.0,
+        ..on_ground()
+    };
+    assert_eq!(step(Mode::Drive, c), Mode::Drive, "no take-off");
+}
+
+#[test]
+fn a_failed_rotor_cuts_the_thrust_above_the_transition_and_lets_a_transition_land() {
+    let c = Conditions {
+        rotor_failed: true,
+        ..flying()
+    };
+    for mode in [Mode::Takeoff, Mode::Flight, Mode::Morphing, Mode::Failsafe] {
+        assert_eq!(step(mode, c), Mode::Disarmed, "{mode:?}");
+    }
+    assert_eq!(step(Mode::Transition, c), Mode::Transition);
+    assert_eq!(
+        step(Mode::Disarmed, c),
+        Mode::Disarmed,
+        "not armed in the air again"
+    );
+    let c = Conditions {
+        rotor_failed: true,
+        throttle: 1.0,
+        ..on_ground()
+    };
+    assert_eq!(step(Mode::Disarmed, c), Mode::Drive);
+    assert_eq!(step(Mode::Drive, c), Mode::Drive, "no take-off");
 }

@@ -22,7 +22,16 @@
 //! t = 1.0                           # (`missed`: none reported though there is)
 //! duration = 0.5
 //! kind = "false"
+//! [[faults.actuators.tilt_slip]]    # the tilt motor turns, the arms stay: the
+//! mode = "morphing"                 # encoder follows the command, the linkage holds
+//! [[faults.actuators.radio]]        # no radio frame for `duration`
+//! t = 1.0
+//! duration = 1.0
 //! ```
+//!
+//! With a `radio` fault the scenario's pilot reaches the flight stack as
+//! the radio does onboard (PX4's `InputRc`, lost after the daemon's
+//! `[rc] timeout_ms` of silence) instead of as a `PilotInput` stream.
 //!
 //! An onset is `t` (plant s) or the first tick in `mode` (a `Mode` name),
 //! each plus `delay`. The faults act on the simulated I/O only, between the
@@ -102,6 +111,28 @@ pub struct ContactFault {
     pub kind: String,
 }
 
+/// `[[faults.actuators.tilt_slip]]`: from its onset the tilt motor turns
+/// as commanded (the encoder, on the motor, counts it) but the arms stay.
+#[derive(Debug, Clone, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct SlipFault {
+    pub t: Option<f64>,
+    pub mode: Option<String>,
+    #[serde(default)]
+    pub delay: f64,
+}
+
+/// `[[faults.actuators.radio]]`: no radio frame for `duration`.
+#[derive(Debug, Clone, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct RadioFault {
+    pub t: Option<f64>,
+    pub mode: Option<String>,
+    #[serde(default)]
+    pub delay: f64,
+    pub duration: f64,
+}
+
 /// `[faults.actuators]`.
 #[derive(Debug, Clone, Default, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
@@ -112,6 +143,10 @@ pub struct ActuatorFaults {
     pub tilt_encoder: Vec<EncoderFault>,
     #[serde(default)]
     pub contact: Vec<ContactFault>,
+    #[serde(default)]
+    pub tilt_slip: Vec<SlipFault>,
+    #[serde(default)]
+    pub radio: Vec<RadioFault>,
 }
 
 fn check_onset(
@@ -168,6 +203,15 @@ impl ActuatorFaults {
             c.range(&format!("{key}.duration"), f.duration, 1e-3..=duration, "s")?;
             c.one_of(&format!("{key}.kind"), &f.kind, &["false", "missed"])?;
         }
+        for (i, f) in self.tilt_slip.iter().enumerate() {
+            let key = format!("faults.actuators.tilt_slip[{i}]");
+            check_onset(&c, &key, f.t, f.mode.as_ref(), f.delay, duration)?;
+        }
+        for (i, f) in self.radio.iter().enumerate() {
+            let key = format!("faults.actuators.radio[{i}]");
+            check_onset(&c, &key, f.t, f.mode.as_ref(), f.delay, duration)?;
+            c.range(&format!("{key}.duration"), f.duration, 1e-3..=duration, "s")?;
+        }
         Ok(())
     }
 }
@@ -203,6 +247,13 @@ pub struct ActuatorInjector {
     rotor: Vec<(Start, Option<f64>)>,
     encoder: Vec<(Start, Option<f64>)>,
     contact: Vec<Start>,
+    slip: Vec<Start>,
+    radio: Vec<Start>,
+    /// While slipping: the tilt the encoder counts (the arms' at the onset
+    /// plus every commanded rate since), rad.
+    slipped_tilt: Option<f64>,
+    slip_rate: f64,
+    slip_sensed_ns: Option<u64>,
 }
 
 impl ActuatorInjector {
@@ -224,7 +275,64 @@ impl ActuatorInjector {
                 .iter()
                 .map(|f| Start::of(f.t, f.delay))
                 .collect(),
+            slip: config
+                .tilt_slip
+                .iter()
+                .map(|f| Start::of(f.t, f.delay))
+                .collect(),
+            radio: config
+                .radio
+                .iter()
+                .map(|f| Start::of(f.t, f.delay))
+                .collect(),
+            slipped_tilt: None,
+            slip_rate: 0.0,
+            slip_sensed_ns: None,
         }
+    }
+
+    /// Whether the scenario's pilot comes as the radio (a radio fault).
+    pub fn has_radio(&self) -> bool {
+        !self.config.radio.is_empty()
+    }
+
+    /// Whether the radio is silent at `now_ns`.
+    pub fn radio_silent(&self, now_ns: u64) -> bool {
+        self.config.radio.iter().zip(&self.radio).any(|(f, start)| {
+            start
+                .at_ns
+                .is_some_and(|at| (at..at + ns(f.duration)).contains(&now_ns))
+        })
+    }
+
+    fn slipping(&self, now_ns: u64) -> bool {
+        self.slip.iter().any(|s| s.active(now_ns))
+    }
+
+    /// What the tilt motor does of the commanded `rate`: slipping, the
+    /// arms hold (rate 0) and the rate is counted by [`Self::sense_slip`].
+    pub fn tilt_rate(&mut self, now_ns: u64, rate: f64) -> f64 {
+        if !self.slipping(now_ns) {
+            return rate;
+        }
+        self.slip_rate = rate;
+        0.0
+    }
+
+    /// The tilt the encoder counts at `now_ns` for arms at `tilt` (rad,
+    /// within `[0, tilt_max]`): slipping, the arms' tilt at the onset plus
+    /// the commanded rate integrated since; `None` while not slipping.
+    pub fn sense_slip(&mut self, now_ns: u64, tilt: f64, tilt_max: f64) -> Option<f64> {
+        if !self.slipping(now_ns) {
+            return None;
+        }
+        let dt = self
+            .slip_sensed_ns
+            .map_or(0.0, |t| now_ns.saturating_sub(t) as f64 * 1e-9);
+        self.slip_sensed_ns = Some(now_ns);
+        let counted = self.slipped_tilt.get_or_insert(tilt);
+        *counted = (*counted + self.slip_rate * dt).clamp(0.0, tilt_max);
+        Some(*counted)
     }
 
     /// The flight stack's mode at a tick (onsets by mode).
@@ -237,6 +345,12 @@ impl ActuatorInjector {
             s.0.on_mode(f.mode.as_ref(), f.delay, mode, now_ns);
         }
         for (f, s) in c.contact.iter().zip(&mut self.contact) {
+            s.on_mode(f.mode.as_ref(), f.delay, mode, now_ns);
+        }
+        for (f, s) in c.tilt_slip.iter().zip(&mut self.slip) {
+            s.on_mode(f.mode.as_ref(), f.delay, mode, now_ns);
+        }
+        for (f, s) in c.radio.iter().zip(&mut self.radio) {
             s.on_mode(f.mode.as_ref(), f.delay, mode, now_ns);
         }
     }

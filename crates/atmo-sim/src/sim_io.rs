@@ -36,6 +36,7 @@ use std::time::Duration;
 use atmo_core::model::{Input, idx};
 use atmo_flight::control_loop::{Clock, ControlLoop, TickIo, TickTiming};
 use atmo_flight::inputs::{InputLatch, InputSettings};
+use atmo_flight::rc::{RcConfig, RcReading};
 use atmo_flight::{Estimate, FlightStack, PilotInput, StepInputs, StepOutputs};
 use atmo_plant::contact::Plane;
 use atmo_plant::plant::{Command, Plant};
@@ -169,6 +170,12 @@ impl SimIo {
     pub fn with_faults(mut self, faults: &FaultsConfig) -> Self {
         self.faults = FaultInjector::new(faults);
         self.actuators = ActuatorInjector::new(&faults.actuators);
+        if self.actuators.has_radio() {
+            // The pilot comes as the radio, lost after the daemon's timeout.
+            let mut settings = *self.latch.settings();
+            settings.rc_timeout = Some(Duration::from_millis(RcConfig::default().timeout_ms));
+            self.latch = InputLatch::new(settings);
+        }
         self
     }
 
@@ -201,10 +208,12 @@ impl SimIo {
             }
         }
         if self.now_ns >= self.next_pilot_ns {
-            self.pilot = Some(Arrived {
-                value: pilot_input(scenario, plant.time()),
-                at_ns: self.now_ns,
-            });
+            if !self.actuators.radio_silent(self.now_ns) {
+                self.pilot = Some(Arrived {
+                    value: pilot_input(scenario, plant.time()),
+                    at_ns: self.now_ns,
+                });
+            }
             self.next_pilot_ns += self.pilot_period_ns;
         }
         if self.faults.drivers_dead(self.now_ns) {
@@ -213,7 +222,14 @@ impl SimIo {
             self.command = Command::idle();
             return;
         }
-        if let Ok(counts) = plant.encoder_counts() {
+        let counts = match self
+            .actuators
+            .sense_slip(self.now_ns, plant.tilt(), plant.tilt_max())
+        {
+            Some(counted) => plant.encoder_counts_at(counted),
+            None => plant.encoder_counts(),
+        };
+        if let Ok(counts) = counts {
             self.latch
                 .tilt_counts(self.actuators.encoder(self.now_ns, counts));
         }
@@ -252,7 +268,16 @@ impl TickIo for SimIo {
             self.latch.ground_plane(z, self.plane.normal.into(), stamp);
         }
         if let Some(p) = self.pilot.take() {
-            self.latch.pilot(p.value, self.stamp(deadline_ns, p.at_ns));
+            let at = self.stamp(deadline_ns, p.at_ns);
+            if self.actuators.has_radio() {
+                let reading = RcReading {
+                    pilot: p.value,
+                    lost: false,
+                };
+                self.latch.radio(reading, at);
+            } else {
+                self.latch.pilot(p.value, at);
+            }
         }
         Some(self.latch.assemble(deadline_ns).inputs)
     }
@@ -267,7 +292,7 @@ impl TickIo for SimIo {
                 rotors: self
                     .actuators
                     .rotors(self.now_ns, Input::from(outputs.thrust)),
-                tilt_rate: outputs.tilt_velocity,
+                tilt_rate: self.actuators.tilt_rate(self.now_ns, outputs.tilt_velocity),
                 wheel_rates: outputs.wheel_rates,
             }
         };

@@ -29,6 +29,7 @@ use atmo_plant::PlantTemplate;
 use atmo_plant::config::PlantConfig;
 
 use crate::effects::Effect;
+use crate::explanation::Decision;
 use crate::physical::Physical;
 use crate::recording::Recording;
 use crate::replay::{self, StartError};
@@ -138,102 +139,6 @@ pub fn param_status(value: f64, std: Option<f64>, range: Option<(f64, f64)>) -> 
         return ParamStatus::NotIdentified;
     }
     ParamStatus::Identified
-}
-
-/// Which test decided an effect's verdict (in `explain.json` as
-/// `decision`, tagged by `kind`, with its numbers).
-#[derive(Debug, Clone, PartialEq, serde::Serialize)]
-#[serde(tag = "kind", rename_all = "snake_case")]
-pub enum Decision {
-    /// Passed both tests (multi-step velocity error at the horizon with
-    /// and without it, m/s; `None` when no 0.5 s stretch exists).
-    Found {
-        with: Option<f64>,
-        without: Option<f64>,
-    },
-    /// A parameter outside its physical range, or none identified.
-    NotIdentified { reason: String },
-    /// Physics a calibration of the robot file explains as well (swapped
-    /// in for it, at least [`SWAP_RECOVERY`] of its held-out gain): with
-    /// those calibrations one finding, which the model carries as the
-    /// calibration (the simpler account) and the report names as both.
-    OneFindingWith { calibrations: Vec<String> },
-    /// Lowers the one-step residual but not the 0.5 s prediction;
-    /// `reduced` when judged on the model left after other rejections.
-    /// Both errors are over the same starts (those both models replayed).
-    RejectedByPrediction {
-        with: f64,
-        without: f64,
-        reduced: bool,
-    },
-    /// The 0.5 s prediction test could not be made: of `attempted` starts
-    /// the model with the effect failed on `with_failed` and the model
-    /// without it on `without_failed`, leaving no start both replayed, or
-    /// the model with the effect failed on more starts than without it.
-    /// Not claimed: a missing prediction is not a zero error.
-    PredictionFailed {
-        attempted: usize,
-        with_failed: usize,
-        without_failed: usize,
-        reduced: bool,
-    },
-}
-
-impl Decision {
-    /// One line for the report: which test decided, with the numbers.
-    pub fn describe(&self) -> String {
-        match self {
-            Decision::Found {
-                with: Some(w),
-                without: Some(wo),
-            } => format!(
-                "found: lowers the held-out residual and the 0.5 s velocity error ({wo:.4} -> {w:.4} m/s)"
-            ),
-            Decision::PredictionFailed {
-                attempted,
-                with_failed,
-                without_failed,
-                reduced,
-            } => format!(
-                "not claimed: the 0.5 s prediction{} could not be compared (of {attempted} starts, \
-                 {with_failed} could not be replayed with it and {without_failed} without it{})",
-                if *reduced {
-                    " of the model left after the other rejections"
-                } else {
-                    ""
-                },
-                if with_failed > without_failed && with_failed < attempted {
-                    "; it fails where the model without it does not"
-                } else {
-                    ""
-                }
-            ),
-            Decision::Found { .. } => {
-                "found by the held-out residual alone (no 0.5 s stretch to predict)".into()
-            }
-            Decision::NotIdentified { reason } => format!("not identified: {reason}"),
-            Decision::OneFindingWith { calibrations } => format!(
-                "one finding with {}: this data cannot tell it apart from that calibration of the \
-                 robot file (swapped in for it, it explains at least {:.0} % as much); the model \
-                 carries the calibration, and no physics is claimed alone",
-                calibrations.join(", "),
-                100.0 * SWAP_RECOVERY
-            ),
-            Decision::RejectedByPrediction {
-                with,
-                without,
-                reduced,
-            } => format!(
-                "rejected by the 0.5 s prediction{}: lowers the held-out residual, but the \
-                 velocity error is {with:.4} m/s with it against {without:.4} m/s without",
-                if *reduced {
-                    " of the model left after the other rejections"
-                } else {
-                    ""
-                }
-            ),
-        }
-    }
 }
 
 /// The per-fold plant files of the fit restricted to `set` (refitted on
@@ -606,6 +511,63 @@ struct ThrustToMass {
     mass: f64,
     /// Either coefficient held at a bound of its range.
     at_bound: bool,
+}
+
+impl Decision {
+    /// One line for the report: which test decided, with the numbers.
+    pub fn describe(&self) -> String {
+        match self {
+            Decision::Found {
+                with: Some(w),
+                without: Some(wo),
+            } => format!(
+                "found: lowers the held-out residual and the 0.5 s velocity error ({wo:.4} -> {w:.4} m/s)"
+            ),
+            Decision::PredictionFailed {
+                attempted,
+                with_failed,
+                without_failed,
+                reduced,
+            } => format!(
+                "not claimed: the 0.5 s prediction{} could not be compared (of {attempted} starts, \
+                 {with_failed} could not be replayed with it and {without_failed} without it{})",
+                if *reduced {
+                    " of the model left after the other rejections"
+                } else {
+                    ""
+                },
+                if with_failed > without_failed && with_failed < attempted {
+                    "; it fails where the model without it does not"
+                } else {
+                    ""
+                }
+            ),
+            Decision::Found { .. } => {
+                "found by the held-out residual alone (no 0.5 s stretch to predict)".into()
+            }
+            Decision::NotIdentified { reason } => format!("not identified: {reason}"),
+            Decision::OneFindingWith { calibrations } => format!(
+                "one finding with {}: this data cannot tell it apart from that calibration of the \
+                 robot file (swapped in for it, it explains at least {:.0} % as much); the model \
+                 carries the calibration, and no physics is claimed alone",
+                calibrations.join(", "),
+                100.0 * SWAP_RECOVERY
+            ),
+            Decision::RejectedByPrediction {
+                with,
+                without,
+                reduced,
+            } => format!(
+                "rejected by the 0.5 s prediction{}: lowers the held-out residual, but the \
+                 velocity error is {with:.4} m/s with it against {without:.4} m/s without",
+                if *reduced {
+                    " of the model left after the other rejections"
+                } else {
+                    ""
+                }
+            ),
+        }
+    }
 }
 
 /// Wind without an identified drag: the wind speed is only known through

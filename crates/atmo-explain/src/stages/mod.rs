@@ -23,9 +23,8 @@ pub(crate) mod wind;
 #[cfg(test)]
 mod tests;
 
-pub use accept::{
-    Decision, ParamStatus, RANGES, accept_effects, coefficient_bounds, param_status, range_of,
-};
+pub use crate::explanation::Decision;
+pub use accept::{ParamStatus, RANGES, accept_effects, coefficient_bounds, param_status, range_of};
 pub use fit::{Fit, fit_effects};
 pub use locate::{Mismatch, locate_mismatch, rms_table};
 pub use report::{

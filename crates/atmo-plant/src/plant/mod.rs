@@ -482,6 +482,11 @@ impl Plant {
         self.steps
     }
 
+    /// The mechanical end stop, rad.
+    pub fn tilt_max(&self) -> f64 {
+        self.tilt_max
+    }
+
     /// rad, the true tilt.
     pub fn tilt(&self) -> f64 {
         self.tilt
@@ -503,7 +508,13 @@ impl Plant {
     /// The tilt encoder: counts via the linkage, whole counts when the tilt
     /// mechanism effect is on.
     pub fn encoder_counts(&self) -> Result<f64> {
-        let counts = self.linkage.counts_from_tilt(self.tilt)?;
+        self.encoder_counts_at(self.tilt)
+    }
+
+    /// What the encoder reads at `tilt` (rad): a motor that slips turns
+    /// its encoder while the arms stay.
+    pub fn encoder_counts_at(&self, tilt: f64) -> Result<f64> {
+        let counts = self.linkage.counts_from_tilt(tilt)?;
         Ok(if self.quantize_encoder {
             counts.round()
         } else {

@@ -9,6 +9,7 @@ mod closed_loop_identification;
 mod config_errors;
 mod faults;
 mod hostile;
+mod monitor_margins;
 mod replay;
 mod scenarios;
 mod sitl;

@@ -1,0 +1,338 @@
+//! Actuator monitoring: what the flight stack can tell, from the signals it
+//! has, about actuators that do not do what it commands (docs/faults.md,
+//! the actuator table).
+//!
+//! | detector | signal | rule |
+//! | --- | --- | --- |
+//! | tilt encoder stuck | commanded tilt velocity, encoder | the commanded travel since the encoder last moved by `encoder_step` reaches `encoder_stuck_travel` |
+//! | tilt not where believed (motor slipping, linkage jammed) | the observer's body-z force | upward (more lift than predicted) at or above `tilt_force` for `tilt_force_time`, the wheels clear of the ground |
+//! | rotor fault | the observer's roll and pitch torque | either at the observer's limit (`observer.max_torque`: what is left it cannot take up) for `rotor_time`, the wheels clear of the ground |
+//! | ground contact missed | the estimate | fresh, the wheels (at the tilt in use) within `contact_clearance` of the ground and the vertical speed within `contact_speed`, for `contact_time` |
+//!
+//! What each detection makes the stack do is `FlightStack::step`'s (and
+//! the mode table's): a stuck encoder's tilt is dead-reckoned from the
+//! commands (the tilt motor is velocity-commanded: the linkage goes where
+//! it is told while its encoder is silent); a tilt that is not where it is
+//! believed is a failsafe held until disarmed; a failed rotor cuts the
+//! thrust above z* (no controller here flies three rotors, and the robot
+//! would flip with its rotors running) and leaves a transition under way to
+//! land; an inferred contact is a contact.
+//!
+//! Detections latch until the arm switches are off: none of these faults
+//! heals in flight, and a detector that let go would hand a flight back to
+//! the mode that met the fault (the rotor's thrust cut disarms the stack
+//! without the switches: it must stay cut). Every update is a few comparisons on fixed
+//! state: no allocation, no blocking.
+
+use crate::modes::Mode;
+
+/// `[monitor]` of `config/flight.toml`: the detectors' thresholds.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MonitorSettings {
+    pub enabled: bool,
+    /// Encoder change that counts as movement, deg.
+    pub encoder_step_deg: f64,
+    /// Commanded tilt travel without encoder movement that makes the
+    /// encoder stuck, deg.
+    pub encoder_stuck_travel_deg: f64,
+    /// Observer body-z force that says the tilt is not where it is
+    /// believed, N.
+    pub tilt_force: f64,
+    /// ... held this long, s.
+    pub tilt_force_time: f64,
+    /// The observer's roll or pitch torque held at its limit this long
+    /// says a rotor has failed, s.
+    pub rotor_time: f64,
+    /// Wheel clearance at or below which the estimate says the wheels
+    /// touch, m.
+    pub contact_clearance: f64,
+    /// Vertical speed within which the estimate says the robot rests, m/s.
+    pub contact_speed: f64,
+    /// ... both held this long, s.
+    pub contact_time: f64,
+}
+
+impl MonitorSettings {
+    /// No detector (a flight log written before the monitor existed).
+    pub fn disabled() -> Self {
+        Self {
+            enabled: false,
+            encoder_step_deg: 0.0,
+            encoder_stuck_travel_deg: 0.0,
+            tilt_force: 0.0,
+            tilt_force_time: 0.0,
+            rotor_time: 0.0,
+            contact_clearance: 0.0,
+            contact_speed: 0.0,
+            contact_time: 0.0,
+        }
+    }
+}
+
+impl Default for MonitorSettings {
+    fn default() -> Self {
+        Self::disabled()
+    }
+}
+
+/// What the monitor has detected, as bits (`Status::actuator_faults`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct Detected(u8);
+
+impl Detected {
+    pub const ENCODER_STUCK: u8 = 1;
+    pub const TILT_MISMATCH: u8 = 2;
+    pub const ROTOR: u8 = 4;
+    pub const CONTACT_INFERRED: u8 = 8;
+
+    pub fn bits(self) -> u8 {
+        self.0
+    }
+
+    pub fn from_bits(bits: u8) -> Self {
+        Self(bits)
+    }
+
+    pub fn has(self, bit: u8) -> bool {
+        self.0 & bit != 0
+    }
+
+    /// The tilt is not where it is believed (a slipping motor, a jammed
+    /// linkage): no landing on the wheels can be planned.
+    pub fn tilt_unknown(self) -> bool {
+        self.has(Self::TILT_MISMATCH)
+    }
+
+    /// A rotor does not deliver what it is commanded.
+    pub fn rotor_failed(self) -> bool {
+        self.has(Self::ROTOR)
+    }
+}
+
+/// What the monitor looks at each tick.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MonitorInputs {
+    pub now_ns: u64,
+    /// The arm switches are on: with them off every detection is forgotten.
+    pub armed: bool,
+    pub mode: Mode,
+    /// The encoder's tilt, rad.
+    pub encoder_tilt: f64,
+    /// The tilt velocity commanded by the previous tick, rad/s.
+    pub last_tilt_command: f64,
+    /// The observer's wrench (body force N, torque N m).
+    pub disturbance: [f64; 6],
+    /// The estimate is fresh.
+    pub estimate_fresh: bool,
+    /// The wheels' clearance above the ground at the tilt in use, m.
+    pub wheel_clearance: f64,
+    /// Vertical speed of the estimate (NED), m/s.
+    pub vertical_speed: f64,
+}
+
+/// The detectors' state.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ActuatorMonitor {
+    settings: MonitorSettings,
+    /// The observer's torque limit (`observer.max_torque`), N m.
+    torque_limit: f64,
+    detected: Detected,
+    last_ns: Option<u64>,
+    /// Encoder tilt at its last movement, rad.
+    anchor: f64,
+    /// Commanded travel since then (signed), rad.
+    travel: f64,
+    tilt_force_since: Option<u64>,
+    rotor_since: Option<u64>,
+    contact_since: Option<u64>,
+}
+
+fn held(since: &mut Option<u64>, now: u64, holds: bool, time: f64) -> bool {
+    if !holds {
+        *since = None;
+        return false;
+    }
+    let start = *since.get_or_insert(now);
+    now.saturating_sub(start) as f64 * 1e-9 >= time
+}
+
+impl ActuatorMonitor {
+    /// `torque_limit`: the observer's (`observer.max_torque`): a torque held
+    /// there is one the observer cannot take up.
+    pub fn new(settings: MonitorSettings, torque_limit: f64) -> Self {
+        Self {
+            settings,
+            torque_limit,
+            detected: Detected::default(),
+            last_ns: None,
+            anchor: 0.0,
+            travel: 0.0,
+            tilt_force_since: None,
+            rotor_since: None,
+            contact_since: None,
+        }
+    }
+
+    pub fn detected(&self) -> Detected {
+        self.detected
+    }
+
+    /// The tilt to fly on, rad: the encoder's, or while it is stuck its
+    /// last movement plus the commanded travel since.
+    pub fn tilt(&self, encoder_tilt: f64, tilt_max: f64) -> f64 {
+        if self.detected.has(Detected::ENCODER_STUCK) {
+            (self.anchor + self.travel).clamp(0.0, tilt_max)
+        } else {
+            encoder_tilt
+        }
+    }
+
+    /// One tick: updates every detector and returns what is detected.
+    pub fn update(&mut self, i: &MonitorInputs) -> Detected {
+        let s = self.settings;
+        if !s.enabled {
+            return self.detected;
+        }
+        if !i.armed {
+            *self = Self::new(s, self.torque_limit);
+            self.anchor = i.encoder_tilt;
+            self.last_ns = Some(i.now_ns);
+            return self.detected;
+        }
+        let dt = self
+            .last_ns
+            .map_or(0.0, |t| i.now_ns.saturating_sub(t) as f64 * 1e-9);
+        self.last_ns = Some(i.now_ns);
+        self.travel += i.last_tilt_command * dt;
+        if !self.detected.has(Detected::ENCODER_STUCK) {
+            if (i.encoder_tilt - self.anchor).abs() >= s.encoder_step_deg.to_radians() {
+                self.anchor = i.encoder_tilt;
+                self.travel = 0.0;
+            } else if self.travel.abs() >= s.encoder_stuck_travel_deg.to_radians() {
+                self.detected.0 |= Detected::ENCODER_STUCK;
+            }
+        }
+        // The observer's wrench is an actuator's only while it learns and
+        // the ground does not push on the wheels (wheels down, it learns
+        // the ground's reaction: seen with a missed contact).
+        let learning = matches!(i.mode, Mode::Flight | Mode::Morphing | Mode::Transition)
+            && i.wheel_clearance > s.contact_clearance;
+        let d = i.disturbance;
+        if held(
+            &mut self.tilt_force_since,
+            i.now_ns,
+            // Lift the model did not predict (upward: body z points down):
+            // the arms are less tilted than believed. A robot short of
+            // thrust (a weak motor, a heavy robot) reads the other way.
+            learning && -d[2] >= s.tilt_force,
+            s.tilt_force_time,
+        ) {
+            self.detected.0 |= Detected::TILT_MISMATCH;
+        }
+        if held(
+            &mut self.rotor_since,
+            i.now_ns,
+            learning && d[3].abs().max(d[4].abs()) >= self.torque_limit,
+            s.rotor_time,
+        ) {
+            self.detected.0 |= Detected::ROTOR;
+        }
+        let rests = i.mode.is_airborne_mode()
+            && i.estimate_fresh
+            && i.wheel_clearance <= s.contact_clearance
+            && i.vertical_speed.abs() <= s.contact_speed;
+        if held(&mut self.contact_since, i.now_ns, rests, s.contact_time) {
+            self.detected.0 |= Detected::CONTACT_INFERRED;
+        } else {
+            self.detected.0 &= !Detected::CONTACT_INFERRED;
+        }
+        self.detected
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn settings() -> MonitorSettings {
+        MonitorSettings {
+            enabled: true,
+            encoder_step_deg: 0.5,
+            encoder_stuck_travel_deg: 3.0,
+            tilt_force: 10.0,
+            tilt_force_time: 0.2,
+            rotor_time: 0.1,
+            contact_clearance: 0.01,
+            contact_speed: 0.05,
+            contact_time: 0.2,
+        }
+    }
+
+    fn inputs(k: u64, encoder_tilt: f64, command: f64) -> MonitorInputs {
+        MonitorInputs {
+            now_ns: k * 10_000_000,
+            armed: true,
+            mode: Mode::Morphing,
+            encoder_tilt,
+            last_tilt_command: command,
+            disturbance: [0.0; 6],
+            estimate_fresh: true,
+            wheel_clearance: 1.0,
+            vertical_speed: 0.3,
+        }
+    }
+
+    #[test]
+    fn an_encoder_that_follows_the_command_is_not_stuck_and_a_silent_one_is_dead_reckoned() {
+        let rate = 0.39;
+        let mut m = ActuatorMonitor::new(settings(), 1.0);
+        for k in 0..200 {
+            let tilt = (k as f64 * 0.01 * rate).min(0.87);
+            m.update(&inputs(k, tilt, rate));
+        }
+        assert_eq!(m.detected(), Detected::default());
+        let mut m = ActuatorMonitor::new(settings(), 1.0);
+        let mut first = None;
+        for k in 0..100 {
+            let tilt = (k as f64 * 0.01 * rate).min(0.3);
+            if m.update(&inputs(k, tilt, rate))
+                .has(Detected::ENCODER_STUCK)
+            {
+                first.get_or_insert(k);
+            }
+        }
+        // Stuck at 0.3 rad from about k = 77; 3 deg of travel at 0.39 rad/s
+        // is 13-14 ticks.
+        let first = first.unwrap();
+        assert!((89..=93).contains(&first), "{first}");
+        let expected = 99.0 * 0.01 * rate;
+        assert!((m.tilt(0.3, 1.57) - expected).abs() < 0.01);
+    }
+
+    #[test]
+    fn a_torque_must_hold_its_time_and_a_detection_latches_until_disarmed() {
+        let mut m = ActuatorMonitor::new(settings(), 1.0);
+        let mut i = inputs(0, 0.0, 0.0);
+        i.disturbance[3] = 1.0;
+        for k in 0..5 {
+            i.now_ns = k * 10_000_000;
+            m.update(&i);
+        }
+        assert!(!m.detected().has(Detected::ROTOR));
+        for k in 5..20 {
+            i.now_ns = k * 10_000_000;
+            m.update(&i);
+        }
+        assert!(m.detected().has(Detected::ROTOR));
+        i.disturbance[3] = 0.0;
+        m.update(&i);
+        assert!(m.detected().rotor_failed());
+        i.mode = Mode::Disarmed;
+        m.update(&i);
+        assert!(m.detected().rotor_failed(), "the thrust cut holds");
+        i.armed = false;
+        m.update(&i);
+        assert_eq!(m.detected(), Detected::default());
+    }
+}
