@@ -299,6 +299,12 @@ impl<T: Transport> Board<T> {
         let bytes = &self.rx[..self.rx_len];
         let mut pos = 0;
         let mut owed_used = 0;
+        // The owed answers settled: read, or known never sent (other bytes
+        // stand where they would be). On the last look an incomplete one is
+        // skipped to see whether this attempt's answer follows, but stays
+        // owed if it does not: it may still come.
+        let mut settled = (0, 0);
+        let mut undecided = false;
         // The newest owed answer to the same command, if one was read:
         // if nothing follows it, it is this attempt's own (the owed request
         // was the one the board dropped; both ask the same).
@@ -310,14 +316,21 @@ impl<T: Transport> Board<T> {
                     owed_used += 1;
                     same = (owed == command).then_some((reply, pos));
                 }
-                Err(e) if e.is_incomplete() && !last_look && self.rx_len < RX_LEN => {
-                    return Parse::Wait {
-                        end: pos,
-                        owed_used,
-                    };
+                Err(e) if e.is_incomplete() && self.rx_len < RX_LEN => {
+                    if !last_look {
+                        return Parse::Wait {
+                            end: settled.0,
+                            owed_used: settled.1,
+                        };
+                    }
+                    owed_used += 1;
+                    undecided = true;
                 }
                 // Never sent: what is here belongs to a later request.
                 Err(_) => owed_used += 1,
+            }
+            if !undecided {
+                settled = (pos, owed_used);
             }
         }
         let own = decode_reply(address, command, &bytes[pos..]);
@@ -339,8 +352,8 @@ impl<T: Transport> Board<T> {
                 owed_used,
             },
             Err(e) if e.is_incomplete() && self.rx_len < RX_LEN => Parse::Wait {
-                end: pos,
-                owed_used,
+                end: settled.0,
+                owed_used: settled.1,
             },
             Err(e) => Parse::Bad(e),
         }
@@ -743,6 +756,28 @@ mod tests {
         };
         let mut b = board(line, 1);
         assert_eq!(b.read_encoder(Motor::M2), Ok((42, 0)));
+    }
+
+    #[test]
+    fn an_owed_answer_still_missing_at_the_deadline_stays_owed() {
+        // The line stalls over two transactions; then everything arrives.
+        let mut burst = encoder(5);
+        burst.push(0xff);
+        burst.extend(answer(Command::ReadStatus, Reply::Status(9)));
+        let line = Scripted {
+            deliveries: vec![(3, burst)],
+            ..Scripted::default()
+        };
+        let mut b = board(line, 0);
+        assert!(b.read_encoder(Motor::M2).is_err());
+        assert!(b.set_speed(Motor::M2, 1).is_err());
+        assert_eq!(b.read_status(), Ok(9));
+        let h = b.health();
+        assert_eq!(
+            (h.late_answers, h.crc_errors, h.bad_answers),
+            (2, 0, 0),
+            "{h}"
+        );
     }
 
     #[test]
