@@ -370,6 +370,7 @@ impl RoboclawConfig {
     pub fn link(&self) -> crate::link::LinkSettings {
         crate::link::LinkSettings {
             address: self.serial.address as u8,
+            baud: self.serial.baud,
             answer_timeout: std::time::Duration::from_millis(self.serial.answer_timeout_ms),
             retries: self.serial.retries,
         }

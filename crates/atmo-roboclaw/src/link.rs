@@ -3,6 +3,26 @@
 //! runs one request-answer transaction at a time with a deadline and
 //! retries, and counts every way one can fail in [`BoardHealth`].
 //!
+//! Framing. Packet serial has no sequence numbers: an answer is known only
+//! by its length and, for reads, by its CRC (which covers the address and
+//! the command byte of the request). A board that answers after the
+//! attempt gave up (a scheduler that held the simulated board back, a
+//! driver preempted past its deadline) still answers, in order, once per
+//! request. So an attempt that gives up leaves its answer *owed*: the next
+//! attempt does not flush the input but reads the owed answers off the
+//! front of the stream first (each matched by its command: length, CRC or
+//! acknowledgement), then its own. An owed answer that does not match
+//! where it should was never sent (the board dropped the request) and is
+//! skipped. With nothing owed, bytes waiting before a request are noise
+//! and are flushed. A late answer is thus never read as the answer to a
+//! later request.
+//!
+//! Deadline. An attempt waits for the request and its longest answer on
+//! the wire at the configured baud rate plus the board's turnaround
+//! (`answer_timeout`), and takes one last look at the input before it
+//! calls the answer missing: a driver preempted past its deadline finds
+//! the answer that arrived meanwhile instead of flushing it.
+//!
 //! Nothing here panics or allocates per transaction: requests and answers
 //! live in fixed buffers, errors are `Copy` values.
 
@@ -20,8 +40,9 @@ pub trait Transport {
     /// Waits at most `timeout` for input, then reads what is there into
     /// `buf`; `Ok(0)` when nothing arrived in time.
     fn read_timeout(&mut self, buf: &mut [u8], timeout: Duration) -> io::Result<usize>;
-    /// Drops input nobody read (a late answer to an earlier request).
-    fn clear_input(&mut self) -> io::Result<()>;
+    /// Drops input nobody read; returns how many bytes it dropped (as far
+    /// as the transport can tell).
+    fn clear_input(&mut self) -> io::Result<usize>;
 }
 
 /// A serial port that could not be opened.
@@ -95,9 +116,13 @@ impl Transport for SerialTransport {
         }
     }
 
-    fn clear_input(&mut self) -> io::Result<()> {
+    fn clear_input(&mut self) -> io::Result<usize> {
+        // The count is for the health counters only: a byte arriving
+        // between the two calls is flushed uncounted.
+        let waiting = rustix::io::ioctl_fionread(self.fd()).unwrap_or(0);
         rustix::termios::tcflush(self.fd(), rustix::termios::QueueSelector::IFlush)
-            .map_err(io::Error::from)
+            .map_err(io::Error::from)?;
+        Ok(usize::try_from(waiting).unwrap_or(usize::MAX))
     }
 }
 
@@ -142,8 +167,17 @@ pub struct BoardHealth {
     pub failed: u64,
     /// Failed transactions in a row (0 after any success).
     pub consecutive_failures: u32,
-    /// Bytes after a complete answer (line noise or a late answer).
+    /// Bytes nobody asked for: after a complete answer, or waiting before
+    /// a request with no answer owed (line noise).
     pub stray_bytes: u64,
+    /// Answers that came after their attempt had given up, read off the
+    /// stream by the next attempt (see the module doc).
+    pub late_answers: u64,
+    /// Owed answers that never came (the board dropped the request).
+    pub owed_skipped: u64,
+    /// Answer times, from the request written to the answer complete:
+    /// counts below 1, 2, 5, 10, 20, 50, 100 ms and above.
+    pub answer_ms: [u64; 8],
     /// Board resets detected by the driver (serial timeout or encoder
     /// back at its power-up value).
     pub resets: u64,
@@ -157,7 +191,7 @@ impl std::fmt::Display for BoardHealth {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         write!(
             f,
-            "transactions {} retries {} no_answer {} crc {} bad {} serial {} failed {} resets {} status_errors {}",
+            "transactions {} retries {} no_answer {} crc {} bad {} serial {} failed {} resets {} status_errors {} late {} stray {} answer ms <1/2/5/10/20/50/100/more {:?}",
             self.transactions,
             self.retries,
             self.no_answer,
@@ -166,7 +200,10 @@ impl std::fmt::Display for BoardHealth {
             self.serial_errors,
             self.failed,
             self.resets,
-            self.status_errors
+            self.status_errors,
+            self.late_answers,
+            self.stray_bytes,
+            self.answer_ms
         )
     }
 }
@@ -175,20 +212,39 @@ impl std::fmt::Display for BoardHealth {
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct LinkSettings {
     pub address: u8,
-    /// How long one attempt waits for its complete answer. Basicmicro's
-    /// manual: the board discards a packet after a 10 ms gap, so a 10 ms
-    /// timeout also resynchronises the board.
+    /// The line's baud rate (8N1: 10 bits a byte on the wire).
+    pub baud: u32,
+    /// The board's turnaround: how much longer than the request and its
+    /// answer take on the wire one attempt waits. Basicmicro's manual: the
+    /// board discards a packet after a 10 ms gap, so a 10 ms turnaround
+    /// also resynchronises the board's receiver.
     pub answer_timeout: Duration,
     /// Attempts after the first.
     pub retries: u32,
 }
+
+/// Answers owed at most (attempts that gave up before their answer came);
+/// more are forgotten, oldest first (a board that late is resynchronised
+/// by the flush after the mismatch it causes).
+const MAX_OWED: usize = 8;
+
+/// Received bytes kept: the owed answers and the own one, with room.
+const RX_LEN: usize = MAX_REPLY * (MAX_OWED + 1) + 16;
+
+/// Upper bounds (ms) of [`BoardHealth::answer_ms`]'s buckets.
+const ANSWER_BUCKETS_MS: [u128; 7] = [1, 2, 5, 10, 20, 50, 100];
 
 /// One board on a transport.
 pub struct Board<T: Transport> {
     transport: T,
     settings: LinkSettings,
     health: BoardHealth,
-    rx: [u8; MAX_REPLY + 16],
+    /// Bytes received and not yet matched to an answer.
+    rx: [u8; RX_LEN],
+    rx_len: usize,
+    /// Commands whose answers are owed, oldest first.
+    owed: [Command; MAX_OWED],
+    owed_len: usize,
 }
 
 enum AttemptError {
@@ -197,14 +253,139 @@ enum AttemptError {
     Serial(io::ErrorKind),
 }
 
+/// What the received bytes say about the current attempt.
+enum Parse {
+    /// Its answer, ending at byte `end`; `owed_used` owed answers (read or
+    /// skipped) in the bytes before `owed_end`.
+    Done {
+        reply: Reply,
+        end: usize,
+        owed_end: usize,
+        owed_used: usize,
+    },
+    /// Not complete yet; `owed_used` owed answers (ending at byte `end`) read.
+    Wait { end: usize, owed_used: usize },
+    /// Bytes that are neither an owed answer nor its own.
+    Bad(DecodeError),
+}
+
 impl<T: Transport> Board<T> {
     pub fn new(transport: T, settings: LinkSettings) -> Self {
         Self {
             transport,
             settings,
             health: BoardHealth::default(),
-            rx: [0; MAX_REPLY + 16],
+            rx: [0; RX_LEN],
+            rx_len: 0,
+            owed: [Command::ReadStatus; MAX_OWED],
+            owed_len: 0,
         }
+    }
+
+    /// How long one attempt at `command` (a request of `request_len`
+    /// bytes) waits: both frames on the wire, then the board's turnaround.
+    fn attempt_time(&self, command: Command, request_len: usize) -> Duration {
+        let bits = 10 * (request_len + command.reply_len()) as u64;
+        let wire = Duration::from_micros(bits * 1_000_000 / u64::from(self.settings.baud.max(1)));
+        wire + self.settings.answer_timeout
+    }
+
+    /// Matches the received bytes: the owed answers in order (one that
+    /// does not match was never sent and is skipped), then `command`'s.
+    /// `last_look`: no more bytes will come in this attempt, so an owed
+    /// answer still incomplete is taken as never sent.
+    fn parse(&self, command: Command, last_look: bool) -> Parse {
+        let address = self.settings.address;
+        let bytes = &self.rx[..self.rx_len];
+        let mut pos = 0;
+        let mut owed_used = 0;
+        // The owed answers settled: read, or known never sent (other bytes
+        // stand where they would be). On the last look an incomplete one is
+        // skipped to see whether this attempt's answer follows, but stays
+        // owed if it does not: it may still come.
+        let mut settled = (0, 0);
+        let mut undecided = false;
+        // The newest owed answer to the same command, if one was read:
+        // if nothing follows it, it is this attempt's own (the owed request
+        // was the one the board dropped; both ask the same).
+        let mut same: Option<(Reply, usize)> = None;
+        for &owed in &self.owed[..self.owed_len] {
+            match decode_reply(address, owed, &bytes[pos..]) {
+                Ok((reply, used)) => {
+                    pos += used;
+                    owed_used += 1;
+                    same = (owed == command).then_some((reply, pos));
+                }
+                Err(e) if e.is_incomplete() && self.rx_len < RX_LEN => {
+                    if !last_look {
+                        return Parse::Wait {
+                            end: settled.0,
+                            owed_used: settled.1,
+                        };
+                    }
+                    owed_used += 1;
+                    undecided = true;
+                }
+                // Never sent: what is here belongs to a later request.
+                Err(_) => owed_used += 1,
+            }
+            if !undecided {
+                settled = (pos, owed_used);
+            }
+        }
+        let own = decode_reply(address, command, &bytes[pos..]);
+        if let (Err(_), true, true, Some((reply, end))) =
+            (&own, last_look, pos == bytes.len(), same)
+        {
+            return Parse::Done {
+                reply,
+                end,
+                owed_end: end,
+                owed_used,
+            };
+        }
+        match own {
+            Ok((reply, used)) => Parse::Done {
+                reply,
+                end: pos + used,
+                owed_end: pos,
+                owed_used,
+            },
+            Err(e) if e.is_incomplete() && self.rx_len < RX_LEN => Parse::Wait {
+                end: settled.0,
+                owed_used: settled.1,
+            },
+            Err(e) => Parse::Bad(e),
+        }
+    }
+
+    /// Drops the first `end` received bytes and the first `owed_used`
+    /// owed answers (read, or found never sent).
+    fn consume(&mut self, end: usize, owed_used: usize) {
+        let end = end.min(self.rx_len);
+        self.rx.copy_within(end..self.rx_len, 0);
+        self.rx_len -= end;
+        let used = owed_used.min(self.owed_len);
+        self.owed.copy_within(used..self.owed_len, 0);
+        self.owed_len -= used;
+    }
+
+    /// `command`'s answer is owed from now on (its attempt gave up).
+    fn owe(&mut self, command: Command) {
+        if self.owed_len == MAX_OWED {
+            self.consume(0, 1);
+        }
+        self.owed[self.owed_len] = command;
+        self.owed_len += 1;
+    }
+
+    /// Forgets everything received and owed, and flushes the input.
+    fn resynchronise(&mut self) -> io::Result<()> {
+        self.rx_len = 0;
+        self.owed_len = 0;
+        let dropped = self.transport.clear_input()?;
+        self.health.stray_bytes += dropped as u64;
+        Ok(())
     }
 
     pub fn health(&self) -> &BoardHealth {
@@ -270,28 +451,83 @@ impl<T: Transport> Board<T> {
 
     fn attempt(&mut self, command: Command, request: &[u8]) -> Result<Reply, AttemptError> {
         let serial = |e: io::Error| AttemptError::Serial(e.kind());
-        self.transport.clear_input().map_err(serial)?;
+        if self.owed_len == 0 {
+            // Nothing owed: whatever is waiting is not an answer.
+            self.resynchronise().map_err(serial)?;
+        }
         self.transport.write_all(request).map_err(serial)?;
-        let deadline = Instant::now() + self.settings.answer_timeout;
-        let mut have = 0;
+        let sent = Instant::now();
+        let deadline = sent + self.attempt_time(command, request.len());
+        let mut last_look = false;
         loop {
-            match decode_reply(self.settings.address, command, &self.rx[..have]) {
-                Ok((reply, used)) => {
-                    self.health.stray_bytes += (have - used) as u64;
+            match self.parse(command, last_look) {
+                Parse::Done {
+                    reply,
+                    end,
+                    owed_end,
+                    owed_used,
+                } => {
+                    self.count_late(owed_end, owed_used);
+                    // Everything owed came before this answer, or never.
+                    self.health.stray_bytes += (self.rx_len - end) as u64;
+                    self.rx_len = 0;
+                    self.owed_len = 0;
+                    let ms = sent.elapsed().as_millis();
+                    let bucket = ANSWER_BUCKETS_MS
+                        .iter()
+                        .position(|&b| ms < b)
+                        .unwrap_or(ANSWER_BUCKETS_MS.len());
+                    self.health.answer_ms[bucket] += 1;
                     return Ok(reply);
                 }
-                Err(e) if e.is_incomplete() && have < self.rx.len() => {}
-                Err(e) => return Err(AttemptError::Decode(e)),
+                Parse::Bad(e) => {
+                    // Neither owed nor its own: noise, or an answer to a
+                    // request forgotten. Start afresh (the retry flushes).
+                    self.resynchronise().map_err(serial)?;
+                    return Err(AttemptError::Decode(e));
+                }
+                Parse::Wait { end, owed_used } => {
+                    if last_look {
+                        // The owed answers read are settled; this one is
+                        // owed now, after the rest.
+                        self.count_late(end, owed_used);
+                        self.consume(end, owed_used);
+                        self.owe(command);
+                        return Err(AttemptError::NoAnswer);
+                    }
+                }
             }
             let now = Instant::now();
-            if now >= deadline {
-                return Err(AttemptError::NoAnswer);
-            }
+            // Past the deadline: one look without waiting (what arrived
+            // while this process was not running), then the last parse.
+            let wait = deadline.saturating_duration_since(now);
+            let have = self.rx_len;
             let n = self
                 .transport
-                .read_timeout(&mut self.rx[have..], deadline - now)
+                .read_timeout(&mut self.rx[have..], wait)
                 .map_err(serial)?;
-            have += n;
+            self.rx_len += n;
+            if n == 0 && now >= deadline {
+                last_look = true;
+            }
+        }
+    }
+
+    /// Counts the owed answers among the first `owed_used` that were read
+    /// (before byte `end`) as late, the rest as never sent.
+    fn count_late(&mut self, end: usize, owed_used: usize) {
+        if owed_used == 0 {
+            return;
+        }
+        let mut pos = 0;
+        for &owed in &self.owed[..owed_used.min(self.owed_len)] {
+            match decode_reply(self.settings.address, owed, &self.rx[pos..end]) {
+                Ok((_, used)) => {
+                    pos += used;
+                    self.health.late_answers += 1;
+                }
+                Err(_) => self.health.owed_skipped += 1,
+            }
         }
     }
 
@@ -387,5 +623,181 @@ impl<T: Transport> Board<T> {
 
     pub fn set_encoder(&mut self, motor: Motor, count: i32) -> Result<(), LinkError> {
         self.write(Request::SetEncoder(motor, count))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::protocol::encode_reply;
+
+    const ADDRESS: u8 = 0x80;
+
+    /// A line whose board answers when the test says: `deliveries[k]` is
+    /// what arrives as the `k`-th request (from 1) is written. With
+    /// `hold`, bytes are seen only by a read that does not wait (the
+    /// driver was not running while they arrived).
+    #[derive(Default)]
+    struct Scripted {
+        pending: Vec<u8>,
+        deliveries: Vec<(usize, Vec<u8>)>,
+        writes: usize,
+        hold: bool,
+    }
+
+    impl Transport for Scripted {
+        fn write_all(&mut self, _bytes: &[u8]) -> io::Result<()> {
+            self.writes += 1;
+            for (k, bytes) in &self.deliveries {
+                if *k == self.writes {
+                    self.pending.extend_from_slice(bytes);
+                }
+            }
+            Ok(())
+        }
+
+        fn read_timeout(&mut self, buf: &mut [u8], timeout: Duration) -> io::Result<usize> {
+            if self.pending.is_empty() || (self.hold && !timeout.is_zero()) {
+                std::thread::sleep(timeout);
+                return Ok(0);
+            }
+            let n = self.pending.len().min(buf.len());
+            buf[..n].copy_from_slice(&self.pending[..n]);
+            self.pending.drain(..n);
+            Ok(n)
+        }
+
+        fn clear_input(&mut self) -> io::Result<usize> {
+            let n = self.pending.len();
+            self.pending.clear();
+            Ok(n)
+        }
+    }
+
+    fn answer(command: Command, reply: Reply) -> Vec<u8> {
+        encode_reply(ADDRESS, command, &reply).as_bytes().to_vec()
+    }
+
+    fn encoder(count: i32) -> Vec<u8> {
+        answer(Command::ReadEncoderM2, Reply::Encoder { count, status: 0 })
+    }
+
+    fn board(line: Scripted, retries: u32) -> Board<Scripted> {
+        Board::new(
+            line,
+            LinkSettings {
+                address: ADDRESS,
+                baud: 115_200,
+                answer_timeout: Duration::from_millis(2),
+                retries,
+            },
+        )
+    }
+
+    #[test]
+    fn a_late_answer_is_not_read_as_the_next_requests_answer() {
+        // Request 1 (an encoder read) is answered only as request 2 (a
+        // speed) goes out: its answer, beginning with 0xff like an
+        // acknowledgement, and then the acknowledgement.
+        let mut late = encoder(-5);
+        late.push(0xff);
+        let line = Scripted {
+            deliveries: vec![(2, late), (3, encoder(1234))],
+            ..Scripted::default()
+        };
+        let mut b = board(line, 0);
+        assert!(matches!(
+            b.read_encoder(Motor::M2),
+            Err(LinkError::NoAnswer { .. })
+        ));
+        assert_eq!(b.set_speed(Motor::M2, 100), Ok(()));
+        assert_eq!(b.read_encoder(Motor::M2), Ok((1234, 0)));
+        let h = b.health();
+        assert_eq!(
+            (h.late_answers, h.crc_errors, h.bad_answers, h.stray_bytes),
+            (1, 0, 0, 0),
+            "{h}"
+        );
+    }
+
+    #[test]
+    fn a_retry_reads_the_late_answer_then_its_own_and_the_next_read_is_fresh() {
+        // The first attempt's answer (100) comes during the retry, the
+        // retry's own (200) right after; the next transaction's is 300.
+        let mut both = encoder(100);
+        both.extend(encoder(200));
+        let line = Scripted {
+            deliveries: vec![(2, both), (3, encoder(300))],
+            ..Scripted::default()
+        };
+        let mut b = board(line, 1);
+        assert_eq!(b.read_encoder(Motor::M2), Ok((200, 0)));
+        assert_eq!(b.read_encoder(Motor::M2), Ok((300, 0)));
+        assert_eq!(b.health().late_answers, 1);
+        assert_eq!(b.health().crc_errors, 0);
+    }
+
+    #[test]
+    fn an_owed_answer_never_sent_is_skipped() {
+        // Request 1 is dropped by the board; request 2's answer is the only one.
+        let line = Scripted {
+            deliveries: vec![(2, answer(Command::ReadStatus, Reply::Status(7)))],
+            ..Scripted::default()
+        };
+        let mut b = board(line, 0);
+        assert!(b.read_encoder(Motor::M2).is_err());
+        assert_eq!(b.read_status(), Ok(7));
+        assert_eq!(b.health().owed_skipped, 1);
+        assert_eq!(b.health().late_answers, 0);
+        // The same command dropped, then answered: its one answer is the retry's.
+        let line = Scripted {
+            deliveries: vec![(2, encoder(42))],
+            ..Scripted::default()
+        };
+        let mut b = board(line, 1);
+        assert_eq!(b.read_encoder(Motor::M2), Ok((42, 0)));
+    }
+
+    #[test]
+    fn an_owed_answer_still_missing_at_the_deadline_stays_owed() {
+        // The line stalls over two transactions; then everything arrives.
+        let mut burst = encoder(5);
+        burst.push(0xff);
+        burst.extend(answer(Command::ReadStatus, Reply::Status(9)));
+        let line = Scripted {
+            deliveries: vec![(3, burst)],
+            ..Scripted::default()
+        };
+        let mut b = board(line, 0);
+        assert!(b.read_encoder(Motor::M2).is_err());
+        assert!(b.set_speed(Motor::M2, 1).is_err());
+        assert_eq!(b.read_status(), Ok(9));
+        let h = b.health();
+        assert_eq!(
+            (h.late_answers, h.crc_errors, h.bad_answers),
+            (2, 0, 0),
+            "{h}"
+        );
+    }
+
+    #[test]
+    fn an_answer_that_arrived_while_the_driver_was_not_running_is_found() {
+        let line = Scripted {
+            deliveries: vec![(1, encoder(77))],
+            hold: true,
+            ..Scripted::default()
+        };
+        let mut b = board(line, 0);
+        assert_eq!(b.read_encoder(Motor::M2), Ok((77, 0)));
+        assert_eq!(b.health().no_answer, 0);
+    }
+
+    #[test]
+    fn the_attempt_time_is_both_frames_on_the_wire_plus_the_turnaround() {
+        let b = board(Scripted::default(), 0);
+        // A speed request (7 bytes) and its acknowledgement: 80 bits at
+        // 115200 baud is 694 us.
+        let t = b.attempt_time(Command::SpeedM2, 7);
+        assert_eq!(t, Duration::from_micros(694) + Duration::from_millis(2));
     }
 }

@@ -51,6 +51,11 @@ enum Command {
         /// (isolates a simulation's ports).
         #[arg(long)]
         iceoryx_prefix: Option<String>,
+        /// The board's turnaround instead of the file's
+        /// `serial.answer_timeout_ms` (1..=1000): a simulated board on a
+        /// shared host answers when the scheduler runs it.
+        #[arg(long)]
+        answer_timeout_ms: Option<u64>,
     },
     /// A simulated board on a pseudo-terminal in real time; prints the
     /// pty's path on the first line, then a status line every second.
@@ -78,7 +83,14 @@ fn main() -> Result<()> {
             port,
             ports_prefix,
             iceoryx_prefix,
-        } => run(&config, port, ports_prefix, iceoryx_prefix),
+            answer_timeout_ms,
+        } => run(
+            &config,
+            port,
+            ports_prefix,
+            iceoryx_prefix,
+            answer_timeout_ms,
+        ),
         Command::Sim {
             mode,
             start_counts,
@@ -181,8 +193,16 @@ fn run(
     port: Option<String>,
     ports_prefix: Option<String>,
     iceoryx_prefix: Option<String>,
+    answer_timeout_ms: Option<u64>,
 ) -> Result<()> {
     let (mut config, settings) = load(path)?;
+    if let Some(ms) = answer_timeout_ms {
+        anyhow::ensure!(
+            (1..=1000).contains(&ms),
+            "--answer-timeout-ms {ms}: expected 1..=1000 ms (the file's serial.answer_timeout_ms range)"
+        );
+        config.serial.answer_timeout_ms = ms;
+    }
     if let Some(port) = port {
         config.serial.port = port;
     }

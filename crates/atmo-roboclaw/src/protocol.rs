@@ -154,6 +154,26 @@ impl Command {
         }
     }
 
+    /// Bytes of the longest answer the board sends to this command (a
+    /// write's acknowledgement is one byte; the version text is at most
+    /// [`VERSION_MAX`] with its 0, then the CRC).
+    pub fn reply_len(self) -> usize {
+        match self {
+            Self::ReadEncoderM1 | Self::ReadEncoderM2 | Self::ReadSpeedM1 | Self::ReadSpeedM2 => 7,
+            Self::ReadStatus => 6,
+            Self::ReadSerialTimeout => 3,
+            Self::ReadFirmwareVersion => MAX_REPLY,
+            Self::SetSerialTimeout
+            | Self::ResetEncoders
+            | Self::SetEncoderM1
+            | Self::SetEncoderM2
+            | Self::SpeedM1
+            | Self::SpeedM2
+            | Self::DutyM1
+            | Self::DutyM2 => 1,
+        }
+    }
+
     /// Data bytes of a write request (`None`: a read, sent without data or CRC).
     pub fn write_data_len(self) -> Option<usize> {
         match self {

@@ -542,9 +542,10 @@ impl<C: Clock> crate::link::Transport for Loopback<'_, C> {
         Ok(n)
     }
 
-    fn clear_input(&mut self) -> std::io::Result<()> {
+    fn clear_input(&mut self) -> std::io::Result<usize> {
+        let dropped = self.pending_len;
         self.pending_len = 0;
-        Ok(())
+        Ok(dropped)
     }
 }
 
@@ -567,6 +568,7 @@ mod tests {
             Loopback::new(board, clock),
             LinkSettings {
                 address: 0x80,
+                baud: 115_200,
                 answer_timeout: std::time::Duration::from_millis(1),
                 retries: 1,
             },

@@ -49,7 +49,7 @@ fn busy_loop() -> ! {
 }
 
 /// The shipped daemon config with loopback-only DDS, a private iceoryx2
-/// prefix and absolute config paths (as tests/sim/sitl.rs writes it).
+/// prefix and absolute config paths (as tests/sitl/sitl.rs writes it).
 fn daemon_config(dir: &Path, tag: &str) -> PathBuf {
     let shipped = std::fs::read_to_string(repo().join("config/daemon.toml")).unwrap();
     let config = repo().join("config").canonicalize().unwrap();

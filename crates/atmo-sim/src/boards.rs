@@ -46,6 +46,16 @@ pub const PLACE_AFTER: Duration = Duration::from_millis(500);
 /// Counts between the tilt board's power-up position and its home switch.
 const HOMING_TRAVEL_COUNTS: f64 = 2000.0;
 
+/// The simulated boards' turnaround given to the drivers (their
+/// `--answer-timeout-ms`), instead of the driver file's 10 ms for a real
+/// board. A real Roboclaw answers within a millisecond of the request's
+/// last byte; a simulated one answers when the host's scheduler runs its
+/// thread, and on a shared 2-core host that takes 20-100 ms for one answer
+/// in a few hundred (the drivers' `answer ms` histogram in their logs,
+/// measured beside CPU-bound jobs). Late answers are matched, not misread
+/// (`atmo_roboclaw::link`), but each one costs a retry.
+pub const SIM_TURNAROUND_MS: u64 = 100;
+
 /// What to fly the boards with.
 #[derive(Debug, Clone)]
 pub struct BoardFiles {
@@ -142,6 +152,7 @@ impl SimBoards {
                 .arg(&pty)
                 .args(["--ports-prefix", &ports.prefix])
                 .args(["--iceoryx-prefix", &ports.iceoryx_prefix])
+                .args(["--answer-timeout-ms", &SIM_TURNAROUND_MS.to_string()])
                 .stdout(Stdio::null())
                 .stderr(stderr)
                 .spawn()

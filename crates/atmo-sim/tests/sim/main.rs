@@ -1,7 +1,8 @@
 //! atmo-sim's integration tests, linked as one binary: each file is a
 //! module (`cargo test -p atmo-sim --test sim -- faults::`). As six
 //! binaries each re-instantiated and linked the whole flight stack, 21-32 s
-//! of build apiece (cargo `--timings`, 2026-12-03).
+//! of build apiece (cargo `--timings`, 2026-12-03). The real-time SITL
+//! flights are the one exception: `tests/sitl`, a binary of their own.
 
 mod actuator_faults;
 mod campaign;
@@ -12,6 +13,3 @@ mod hostile;
 mod monitor_margins;
 mod replay;
 mod scenarios;
-mod sitl;
-mod sitl_boards;
-mod sitl_preflight;
