@@ -4,9 +4,9 @@
 use serde::Serialize;
 
 use crate::HIGH_CONFIDENCE;
-use crate::locate::{self, Location};
+use crate::regions::{self, Location};
 use crate::replay::ReplayError;
-use crate::select;
+use crate::selection;
 
 /// One parameter with its uncertainty.
 #[derive(Debug, Clone, Serialize)]
@@ -159,10 +159,10 @@ pub struct Explanation {
     pub velocity_from_positions: crate::velocity::VelocityCorrection,
     pub mismatch_found: bool,
     pub verdict: String,
-    pub located: Vec<locate::Located>,
+    pub located: Vec<regions::Located>,
     pub located_channels: Vec<String>,
     pub effects: Vec<EffectReport>,
-    pub selection_steps: Vec<select::Step>,
+    pub selection_steps: Vec<selection::Step>,
     pub indistinguishable: Vec<(String, String)>,
     pub heldout_rms_before: RmsTable,
     pub heldout_rms_after: RmsTable,

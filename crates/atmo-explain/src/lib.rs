@@ -12,10 +12,10 @@
 //!    so the residual of a right model is noise. Multi-step prediction:
 //!    atmo-plant's plant started from the recorded state and driven by the
 //!    recorded commands for 0.5 s ([`replay`]).
-//! 2. **Locate** ([`locate`]): channels x bins of hub height, tilt, speed,
+//! 2. **Locate** ([`regions`]): channels x bins of hub height, tilt, speed,
 //!    thrust, time, command rate and the (height, tilt) map, each tested
 //!    against the noise floor (batch-means z tests, Bonferroni).
-//! 3. **Name the physics** ([`effects`], [`select`]): eleven candidate
+//! 3. **Name the physics** ([`effects`], [`selection`]): eleven candidate
 //!    effects with physical parameters, linear in their coefficients, each
 //!    held inside its physical range by an active set (motor lag: time
 //!    constant profiled by held-out error; steady wind: profiled before the
@@ -44,14 +44,14 @@ pub mod cli;
 pub mod data;
 pub mod effects;
 mod explanation;
-pub mod locate;
 mod noise;
+pub mod regions;
 
 pub mod output;
 mod physical;
 pub mod recording;
 pub mod replay;
-pub mod select;
+pub mod selection;
 pub mod stages;
 pub mod synth;
 pub mod velocity;

@@ -9,7 +9,7 @@ use plotters::prelude::*;
 use serde_json::json;
 
 use crate::data::{CHANNEL_UNITS, CHANNELS};
-use crate::locate::{HEIGHT_EDGES, Location, VARPHI_EDGES};
+use crate::regions::{HEIGHT_EDGES, Location, VARPHI_EDGES};
 use crate::{ExplainError, Explanation, HIGH_CONFIDENCE};
 
 fn out_err(e: impl std::fmt::Display) -> ExplainError {
@@ -310,7 +310,7 @@ fn report_physics(s: &mut String, ex: &Explanation) {
     let _ = writeln!(
         s,
         "Forward-backward selection on held-out segments; confidence (of found effects only) = inclusion frequency over {} random halves of the segments; high confidence >= {HIGH_CONFIDENCE}.\n",
-        crate::select::STABILITY_RUNS
+        crate::selection::STABILITY_RUNS
     );
     let _ = writeln!(
         s,

@@ -33,7 +33,7 @@ use crate::explanation::Decision;
 use crate::physical::Physical;
 use crate::recording::Recording;
 use crate::replay::{self, StartError};
-use crate::select::{FOLDS, fold_of};
+use crate::selection::{FOLDS, fold_of};
 use crate::stages::fit::SWAP_RECOVERY;
 use crate::stages::report::effect_parameters;
 use crate::stages::{Fit, Residuals};

@@ -8,7 +8,7 @@ use nalgebra::{DMatrix, DVector};
 use crate::effects::{Columns, Effect, Knobs, Layout, build_columns};
 use crate::physical::Physical;
 use crate::recording::Recording;
-use crate::select::{self, Stats, fold_of};
+use crate::selection::{self, Stats, fold_of};
 use crate::stages::select::stats_of;
 use crate::stages::wind::WindProfile;
 use crate::stages::{Residuals, Selection};
@@ -40,7 +40,7 @@ pub struct Fit {
     pub idx: Vec<usize>,
     pub theta: DVector<f64>,
     pub cov: DMatrix<f64>,
-    /// Coefficients fitted without each fold (`select::FOLDS` of them).
+    /// Coefficients fitted without each fold (`selection::FOLDS` of them).
     pub fold_theta: Vec<DVector<f64>>,
     /// Physical parameters of the fit on all data (wind included).
     pub(crate) physical: Physical,
@@ -66,7 +66,7 @@ impl Fit {
 
     /// Jackknife standard deviations of `theta`.
     pub fn sd(&self) -> DVector<f64> {
-        select::deviations(&self.cov)
+        selection::deviations(&self.cov)
     }
 
     /// The fit redone with the effects `kept` only (same regressors and
@@ -78,14 +78,14 @@ impl Fit {
             self.wind = None;
         }
         let (idx, theta, cov) =
-            select::fit_with_uncertainty_of(&self.stats, self.columns_of(&chosen));
+            selection::fit_with_uncertainty_of(&self.stats, self.columns_of(&chosen));
         let mut physical =
             Physical::from_theta(&self.layout, &chosen, &idx, &theta, self.knobs.tau);
         if let Some(w) = physical.wind.as_mut() {
             w[0] += self.knobs.wind[0];
             w[1] += self.knobs.wind[1];
         }
-        self.fold_theta = (0..select::FOLDS)
+        self.fold_theta = (0..selection::FOLDS)
             .map(|f| self.stats.solve(&idx, &|s| fold_of(s) != f))
             .collect();
         self.chosen = chosen;
@@ -209,7 +209,7 @@ pub fn fit_effects(res: &Residuals, rec: &Recording, sel: Selection) -> Fit {
     let wind = if chosen.contains(&Effect::Wind) {
         if wind_profile.is_none() {
             for _ in 0..WIND_REFINEMENTS {
-                let idx = select::columns_for(&layout, &chosen);
+                let idx = selection::columns_for(&layout, &chosen);
                 let theta = stats.solve(&idx, &|_| true);
                 let phys = Physical::from_theta(&layout, &chosen, &idx, &theta, knobs.tau);
                 let w = phys.wind.unwrap_or([0.0; 2]);
@@ -228,13 +228,13 @@ pub fn fit_effects(res: &Residuals, rec: &Recording, sel: Selection) -> Fit {
         None
     };
     let idx = model_columns(&layout, &chosen, wind.is_some());
-    let (idx, theta, cov) = select::fit_with_uncertainty_of(&stats, idx);
+    let (idx, theta, cov) = selection::fit_with_uncertainty_of(&stats, idx);
     let mut physical = Physical::from_theta(&layout, &chosen, &idx, &theta, knobs.tau);
     if let Some(w) = physical.wind.as_mut() {
         w[0] += knobs.wind[0];
         w[1] += knobs.wind[1];
     }
-    let fold_theta = (0..select::FOLDS)
+    let fold_theta = (0..selection::FOLDS)
         .map(|f| stats.solve(&idx, &|s| fold_of(s) != f))
         .collect();
     Fit {
@@ -259,5 +259,5 @@ fn model_columns(layout: &Layout, set: &[Effect], wind_profiled: bool) -> Vec<us
         .copied()
         .filter(|e| !(wind_profiled && *e == Effect::Wind))
         .collect();
-    select::columns_for(layout, &set)
+    selection::columns_for(layout, &set)
 }

@@ -1,9 +1,9 @@
 //! Stage 2, locate: where the nominal model's residual is beyond the noise
-//! floor (see [`crate::locate`]), and its RMS there.
+//! floor (see [`crate::regions`]), and its RMS there.
 
 use crate::data::Prepared;
 use crate::explanation::RmsTable;
-use crate::locate::{self, Location};
+use crate::regions::{self, Location};
 use crate::stages::Residuals;
 
 /// Where the nominal model disagrees with the recording.
@@ -20,7 +20,7 @@ pub struct Mismatch {
 /// Locates the nominal model's residual.
 pub fn locate_mismatch(res: &Residuals) -> Mismatch {
     let prep = &res.prep;
-    let location = locate::locate(prep, &prep.resid, &res.fit_rows);
+    let location = regions::locate(prep, &prep.resid, &res.fit_rows);
     let region = location.region_mask(prep);
     let rms = rms_table(
         prep,

@@ -13,7 +13,7 @@ use crate::explanation::{
 };
 use crate::physical::{BATTERY_CAPACITY_WH, BATTERY_FULL_POWER_W};
 use crate::recording::Recording;
-use crate::select::{self, Step};
+use crate::selection::{self, Step};
 use crate::stages::{Decision, Fit, LagProfile, Mismatch, Residuals, Validation};
 use crate::{GRID_HEIGHTS, GRID_TILTS_DEG, HIGH_CONFIDENCE};
 
@@ -266,8 +266,8 @@ pub(crate) fn effect_parameters(fit: &Fit, e: Effect, selected: bool) -> Vec<Par
     } else {
         let mut more = fit.chosen.clone();
         more.push(e);
-        let (idx, theta, cov) = select::fit_with_uncertainty(&fit.stats, layout, &more);
-        (idx, theta, select::deviations(&cov))
+        let (idx, theta, cov) = selection::fit_with_uncertainty(&fit.stats, layout, &more);
+        (idx, theta, selection::deviations(&cov))
     };
     // A coefficient the fit does not have is missing (NaN, not
     // identified), not a zero.
@@ -390,7 +390,7 @@ pub(crate) fn effect_parameters(fit: &Fit, e: Effect, selected: bool) -> Vec<Par
 /// point (at least 0.5 s within +-0.05 m and +-3 deg).
 pub fn gain_grid(res: &Residuals, fit: &Fit) -> Vec<GridPoint> {
     let prep = &res.prep;
-    let ge_fold: Vec<Option<GroundEffect>> = (0..select::FOLDS)
+    let ge_fold: Vec<Option<GroundEffect>> = (0..selection::FOLDS)
         .map(|f| {
             fit.fold_physical(f)
                 .ge_config()

@@ -6,7 +6,7 @@ use atmo_core::RobotConfig;
 use crate::Result;
 use crate::data::Prepared;
 use crate::recording::Recording;
-use crate::select;
+use crate::selection;
 
 /// The recording prepared for fitting, with its segments.
 #[derive(Debug, Clone)]
@@ -26,7 +26,7 @@ impl Residuals {
     pub fn new(rec: &Recording, robot: &RobotConfig) -> Result<Self> {
         let prep = Prepared::new(rec, robot)?;
         let channel_weights = prep.floor.map(|f| 1.0 / f);
-        let (seg_of, nseg) = select::segments(&prep);
+        let (seg_of, nseg) = selection::segments(&prep);
         let fit_rows = prep.fit_rows().collect();
         Ok(Self {
             prep,

@@ -2,15 +2,15 @@
 //! error, then forward-backward selection of the candidate effects in two
 //! passes (the second with the fitted model's accelerations in the
 //! mass-property columns and feasible-GLS weights), and the stability of
-//! the choice over random halves of the segments (see [`crate::select`]).
+//! the choice over random halves of the segments (see [`crate::selection`]).
 
 use nalgebra::DVector;
 
 use crate::data::Prepared;
 use crate::effects::{self, Columns, Effect, Knobs, Layout, build_columns, lag_column};
-use crate::locate;
 use crate::recording::Recording;
-use crate::select::{self, Stats, Step};
+use crate::regions;
+use crate::selection::{self, Stats, Step};
 use crate::stages::Residuals;
 use crate::stages::wind::WindProfile;
 
@@ -196,9 +196,9 @@ pub fn select_effects(res: &Residuals, rec: &Recording, tau: f64) -> Selection {
         stats = stats_of(&columns, &weights, &res.seg_of, res.nseg);
         pre
     });
-    let (mut chosen, mut steps) = select::select(&stats, &layout, &Effect::ALL, &active);
+    let (mut chosen, mut steps) = selection::select(&stats, &layout, &Effect::ALL, &active);
     if !chosen.is_empty() {
-        let idx = select::columns_for(&layout, &chosen);
+        let idx = selection::columns_for(&layout, &chosen);
         let theta = stats.solve(&idx, &|_| true);
         for k in 0..prep.n {
             if !prep.fit[k] {
@@ -224,7 +224,7 @@ pub fn select_effects(res: &Residuals, rec: &Recording, tau: f64) -> Selection {
         drop(columns);
         columns = build_columns(prep, rec, &knobs, &accel);
         stats = stats_of(&columns, &weights, &res.seg_of, res.nseg);
-        (chosen, steps) = select::select(&stats, &layout, &Effect::ALL, &active);
+        (chosen, steps) = selection::select(&stats, &layout, &Effect::ALL, &active);
     }
     Selection {
         layout,
@@ -243,7 +243,7 @@ impl Selection {
     /// Inclusion frequency of every candidate over random halves of the
     /// segments (`seed` picks the halves).
     pub fn stability(&self, seed: u64) -> Vec<(Effect, f64)> {
-        select::stability(&self.stats, &self.layout, &Effect::ALL, seed)
+        selection::stability(&self.stats, &self.layout, &Effect::ALL, seed)
     }
 }
 
@@ -304,16 +304,16 @@ fn entry_weights(
 ) -> Vec<f64> {
     let cell = |k: usize| {
         let e = &prep.env[k];
-        let h = locate::HEIGHT_EDGES
+        let h = regions::HEIGHT_EDGES
             .windows(2)
             .position(|w| e.height >= w[0] && e.height < w[1]);
-        let v = locate::VARPHI_EDGES
+        let v = regions::VARPHI_EDGES
             .windows(2)
             .position(|w| e.varphi.to_degrees() >= w[0] && e.varphi.to_degrees() < w[1]);
         h.zip(v)
-            .map(|(h, v)| h * (locate::VARPHI_EDGES.len() - 1) + v)
+            .map(|(h, v)| h * (regions::VARPHI_EDGES.len() - 1) + v)
     };
-    let cells = (locate::HEIGHT_EDGES.len() - 1) * (locate::VARPHI_EDGES.len() - 1);
+    let cells = (regions::HEIGHT_EDGES.len() - 1) * (regions::VARPHI_EDGES.len() - 1);
     let mut sq = vec![[0.0; 6]; cells];
     let mut rows = vec![0usize; cells];
     for &k in fit_rows {

@@ -22,8 +22,8 @@ use super::*;
 use crate::Explanation;
 use crate::effects::Effect;
 use crate::recording::{Recording, Sample};
-use crate::select;
-use crate::select::Step;
+use crate::selection;
+use crate::selection::Step;
 
 const MASS_SCALE: f64 = 1.05;
 const SECONDS: f64 = 20.0;
@@ -252,7 +252,7 @@ fn select_finds_a_mass_property_or_thrust_effect_only_when_there_is_one() {
 #[test]
 fn fit_recovers_the_thrust_per_unit_mass() {
     let fit = &heavy().fit;
-    assert_eq!(fit.fold_theta.len(), select::FOLDS);
+    assert_eq!(fit.fold_theta.len(), selection::FOLDS);
     assert!(fit.sd().iter().all(|s| s.is_finite()));
     // However it is written, thrust per unit mass is 1 / 1.05 of the model's.
     let p = &fit.physical;

@@ -11,10 +11,10 @@ use atmo_plant::config::PlantConfig;
 
 use crate::effects::Effect;
 use crate::explanation::RmsTable;
-use crate::locate::{self, Location};
 use crate::recording::Recording;
+use crate::regions::{self, Location};
 use crate::replay::{self, ReplayError};
-use crate::select::fold_of;
+use crate::selection::fold_of;
 use crate::stages::locate::rms_table;
 use crate::stages::{Fit, Mismatch, Residuals};
 use crate::{ExplainError, HORIZON, Result};
@@ -45,7 +45,7 @@ pub fn validate(
 ) -> Result<Validation> {
     let prep = &res.prep;
     let after = fit.heldout_residual(res);
-    let location = locate::locate(prep, &after, &res.fit_rows);
+    let location = regions::locate(prep, &after, &res.fit_rows);
     let rms = rms_table(
         prep,
         &after,

@@ -51,7 +51,7 @@ use crate::effects::{
     DRAG_WIDTH, DragColumns, Effect, Layout, WIND_AFFINE_DRAG, drag_columns_into,
 };
 use crate::recording::Recording;
-use crate::select::{self, FOLDS, Stats, fold_of};
+use crate::selection::{self, FOLDS, Stats, fold_of};
 use crate::stages::Residuals;
 
 /// Most rows the profile uses (a long recording is profiled on evenly
@@ -85,7 +85,7 @@ const PATTERN_DIRECTIONS: [[f64; 2]; 8] = [
 const LOCAL_SPACING: f64 = 0.1;
 /// Least relative residual reduction for a wind component to count as
 /// identified ([`WindProfile::axis_gain`]). The selection's own least gain
-/// ([`select::MIN_GAIN`], in noise-floor variances) cannot judge this:
+/// ([`selection::MIN_GAIN`], in noise-floor variances) cannot judge this:
 /// on a real flight the residual stays tens of noise floors, the model's
 /// own errors, and a sideways wind trims them by a few percent whatever
 /// the truth. A flight flown at one heading cannot tell a sideways wind
@@ -370,7 +370,7 @@ pub fn profile_wind(
 ) -> WindProfile {
     let (prep, seg_of) = (&res.prep, res.seg_of.as_slice());
     let rest = PROFILE_COMPANIONS;
-    let fixed_idx = select::columns_for(layout, &rest);
+    let fixed_idx = selection::columns_for(layout, &rest);
     let weights: Vec<f64> = weights
         .iter()
         .enumerate()
