@@ -81,9 +81,13 @@ pub fn rot_x(a: f64) -> Matrix3<f64> {
 
 /// Body-to-world rotation for Euler ZYX angles: `R = Rz(yaw) Ry(pitch) Rx(roll)`.
 pub fn rotation(yaw: f64, pitch: f64, roll: f64) -> Matrix3<f64> {
-    let (sy, cy) = sin_cos(yaw);
-    let (sp, cp) = sin_cos(pitch);
-    let (sr, cr) = sin_cos(roll);
+    rotation_of(sin_cos(yaw), sin_cos(pitch), sin_cos(roll))
+}
+
+/// [`rotation`] from the (sine, cosine) of yaw, pitch and roll.
+#[allow(clippy::inline_always)] // the plant's AVX2 step inlines it (atmo-plant `avx2_rule`)
+#[inline(always)]
+fn rotation_of((sy, cy): (f64, f64), (sp, cp): (f64, f64), (sr, cr): (f64, f64)) -> Matrix3<f64> {
     Matrix3::new(
         cy * cp,
         cy * sp * sr - sy * cr,
@@ -114,20 +118,10 @@ impl Attitude {
     #[allow(clippy::inline_always)] // the plant's AVX2 step inlines it (atmo-plant `avx2_rule`)
     #[inline(always)]
     pub fn of(x: &State) -> Self {
-        let (sy, cy) = sin_cos(x[idx::YAW]);
+        let yaw = sin_cos(x[idx::YAW]);
         let (sp, cp) = sin_cos(x[idx::PITCH]);
         let (sr, cr) = sin_cos(x[idx::ROLL]);
-        let r = Matrix3::new(
-            cy * cp,
-            cy * sp * sr - sy * cr,
-            cy * sp * cr + sy * sr,
-            sy * cp,
-            sy * sp * sr + cy * cr,
-            sy * sp * cr - cy * sr,
-            -sp,
-            cp * sr,
-            cp * cr,
-        );
+        let r = rotation_of(yaw, (sp, cp), (sr, cr));
         Self { sp, cp, sr, cr, r }
     }
 

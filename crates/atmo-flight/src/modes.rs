@@ -96,15 +96,8 @@ pub struct Transition {
     pub reason: &'static str,
 }
 
-const ARMED_MODES: &[Mode] = &[
-    Mode::Drive,
-    Mode::Takeoff,
-    Mode::Flight,
-    Mode::Morphing,
-    Mode::Transition,
-    Mode::Touchdown,
-    Mode::Failsafe,
-];
+/// Every mode but `Disarmed` (the first of `Mode::ALL`).
+const ARMED_MODES: &[Mode] = Mode::ALL.split_at(1).1;
 const FLYING: &[Mode] = &[
     Mode::Takeoff,
     Mode::Flight,
@@ -256,4 +249,16 @@ pub fn next_mode(mode: Mode, c: &Conditions, t: &Thresholds) -> (Mode, Option<&'
         }
     }
     (mode, None)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{ARMED_MODES, Mode};
+
+    #[test]
+    fn the_armed_modes_are_every_mode_but_disarmed() {
+        assert_eq!(ARMED_MODES.len(), Mode::ALL.len() - 1);
+        assert!(!ARMED_MODES.contains(&Mode::Disarmed));
+        assert!(Mode::ALL.iter().all(|m| *m == Mode::Disarmed || ARMED_MODES.contains(m)));
+    }
 }
