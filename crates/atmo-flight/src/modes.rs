@@ -259,6 +259,10 @@ mod tests {
     fn the_armed_modes_are_every_mode_but_disarmed() {
         assert_eq!(ARMED_MODES.len(), Mode::ALL.len() - 1);
         assert!(!ARMED_MODES.contains(&Mode::Disarmed));
-        assert!(Mode::ALL.iter().all(|m| *m == Mode::Disarmed || ARMED_MODES.contains(m)));
+        assert!(
+            Mode::ALL
+                .iter()
+                .all(|m| *m == Mode::Disarmed || ARMED_MODES.contains(m))
+        );
     }
 }

@@ -37,19 +37,27 @@ fn add_keys_after(text: &mut String, anchor: &str, keys: &str) {
     *text = text.replacen(anchor, &format!("{anchor}\n{keys}"), 1);
 }
 
-/// The shipped config/flight.toml's text from `start` up to `end`.
-fn shipped_section(start: &str, end: &str) -> String {
-    let shipped = include_str!("../../../config/flight.toml");
-    let a = shipped.find(start).expect("shipped section");
-    let b = shipped[a..].find(end).expect("shipped section end") + a;
-    shipped[a..b].to_string()
+/// The byte range of the table `header` in a TOML `text`: from its header
+/// line up to the next table's (or the end).
+fn section_range(text: &str, header: &str) -> Option<std::ops::Range<usize>> {
+    let a = text.find(&format!("\n{header}\n"))? + 1;
+    let b = text[a + 1..]
+        .find("\n[")
+        .map_or(text.len(), |i| a + 1 + i + 1);
+    Some(a..b)
 }
 
-/// Replaces the logged `text` from `start` up to `end` with `section`.
-fn replace_section(text: &mut String, start: &str, end: &str, section: &str) {
-    let a = text.find(start).expect("the logged flight.toml changed");
-    let b = text[a..].find(end).expect("the logged flight.toml changed") + a;
-    text.replace_range(a..b, section);
+/// The shipped config/flight.toml's table `header`, alone.
+fn shipped_section(header: &str) -> String {
+    let shipped = include_str!("../../../config/flight.toml");
+    let range = section_range(shipped, header).expect("shipped section");
+    shipped[range].to_string()
+}
+
+/// Replaces the logged `text`'s table `header` with `section`.
+fn replace_section(text: &mut String, header: &str, section: &str) {
+    let range = section_range(text, header).expect("the logged flight.toml changed");
+    text.replace_range(range, section);
 }
 
 /// Mean rotor command of the five ticks after the burst (their estimates
@@ -65,12 +73,9 @@ fn thrust_after_the_burst(min_interval: &str) -> (f64, f64, bool) {
         "max_torque = 1.0",
         &format!("min_interval = {min_interval}"),
     );
-    replace_section(
-        text,
-        "[flare]",
-        "[loop]",
-        &shipped_section("[flare]", "[loop]"),
-    );
+    // The shipped [flare] table alone: the tables after it in today's file
+    // (the actuator monitor's) are not this log's.
+    replace_section(text, "[flare]", &shipped_section("[flare]"));
     let config = RecordedFlight::config(&files).unwrap();
     let (mut logged, mut replayed, mut n) = (0.0, 0.0, 0.0);
     let report = replay(&flight, &config, CutReplay::AsLogged, |pair| {
