@@ -155,7 +155,7 @@ pub const TRANSITIONS: &[Transition] = &[
         guard: |c, _| {
             !c.estimate_fresh || c.mpc_failed || c.driver_lost || c.pilot_lost || c.tilt_unknown
         },
-        reason: "stale estimate, MPC failed past its grace, a driver, the radio or an actuator lost",
+        reason: "estimate stale, MPC failed, or a driver, radio or actuator lost",
     },
     Transition {
         from: &[Mode::Failsafe],
@@ -254,6 +254,20 @@ pub fn next_mode(mode: Mode, c: &Conditions, t: &Thresholds) -> (Mode, Option<&'
 #[cfg(test)]
 mod tests {
     use super::{ARMED_MODES, Mode};
+
+    /// The status carries a transition's reason in a `Label`: a longer one
+    /// would be cut there (it was: "...the radio " lost its "or an actuator").
+    #[test]
+    fn every_reason_fits_the_status_label_whole() {
+        for row in super::TRANSITIONS {
+            assert!(
+                row.reason.len() <= atmo_io::msg::Label::CAPACITY,
+                "{} bytes: {}",
+                row.reason.len(),
+                row.reason
+            );
+        }
+    }
 
     #[test]
     fn the_armed_modes_are_every_mode_but_disarmed() {
