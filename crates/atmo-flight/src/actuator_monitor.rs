@@ -137,11 +137,16 @@ pub struct ActuatorMonitor {
     settings: MonitorSettings,
     /// The observer's torque limit (`observer.max_torque`), N m.
     torque_limit: f64,
+    /// The mechanism's range is [0, tilt_max], rad.
+    tilt_max: f64,
     detected: Detected,
     last_ns: Option<u64>,
     /// Encoder tilt at its last movement, rad.
     anchor: f64,
-    /// Commanded travel since then (signed), rad.
+    /// Commanded travel since then (signed), rad, within the mechanism's
+    /// range: a command against an end stop moves nothing, so an encoder
+    /// that stands still there is not stuck (a calibration whose range ends
+    /// short of 0, as the authors' table at 0.8 deg, stops the motor there).
     travel: f64,
     tilt_force_since: Option<u64>,
     rotor_since: Option<u64>,
@@ -160,10 +165,12 @@ fn held(since: &mut Option<u64>, now: u64, holds: bool, time: f64) -> bool {
 impl ActuatorMonitor {
     /// `torque_limit`: the observer's (`observer.max_torque`): a torque held
     /// there is one the observer cannot take up.
-    pub fn new(settings: MonitorSettings, torque_limit: f64) -> Self {
+    /// `tilt_max`: the mechanism's range is [0, tilt_max], rad.
+    pub fn new(settings: MonitorSettings, torque_limit: f64, tilt_max: f64) -> Self {
         Self {
             settings,
             torque_limit,
+            tilt_max,
             detected: Detected::default(),
             last_ns: None,
             anchor: 0.0,
@@ -180,9 +187,9 @@ impl ActuatorMonitor {
 
     /// The tilt to fly on, rad: the encoder's, or while it is stuck its
     /// last movement plus the commanded travel since.
-    pub fn tilt(&self, encoder_tilt: f64, tilt_max: f64) -> f64 {
+    pub fn tilt(&self, encoder_tilt: f64) -> f64 {
         if self.detected.has(Detected::ENCODER_STUCK) {
-            (self.anchor + self.travel).clamp(0.0, tilt_max)
+            self.anchor + self.travel
         } else {
             encoder_tilt
         }
@@ -195,7 +202,7 @@ impl ActuatorMonitor {
             return self.detected;
         }
         if !i.armed {
-            *self = Self::new(s, self.torque_limit);
+            *self = Self::new(s, self.torque_limit, self.tilt_max);
             self.anchor = i.encoder_tilt;
             self.last_ns = Some(i.now_ns);
             return self.detected;
@@ -204,7 +211,9 @@ impl ActuatorMonitor {
             .last_ns
             .map_or(0.0, |t| i.now_ns.saturating_sub(t) as f64 * 1e-9);
         self.last_ns = Some(i.now_ns);
-        self.travel += i.last_tilt_command * dt;
+        self.travel = (self.anchor + self.travel + i.last_tilt_command * dt)
+            .clamp(0.0, self.tilt_max)
+            - self.anchor;
         if !self.detected.has(Detected::ENCODER_STUCK) {
             if (i.encoder_tilt - self.anchor).abs() >= s.encoder_step_deg.to_radians() {
                 self.anchor = i.encoder_tilt;
@@ -269,6 +278,8 @@ mod tests {
         }
     }
 
+    const TILT_MAX: f64 = std::f64::consts::FRAC_PI_2;
+
     fn inputs(k: u64, encoder_tilt: f64, command: f64) -> MonitorInputs {
         MonitorInputs {
             now_ns: k * 10_000_000,
@@ -286,13 +297,13 @@ mod tests {
     #[test]
     fn an_encoder_that_follows_the_command_is_not_stuck_and_a_silent_one_is_dead_reckoned() {
         let rate = 0.39;
-        let mut m = ActuatorMonitor::new(settings(), 1.0);
+        let mut m = ActuatorMonitor::new(settings(), 1.0, TILT_MAX);
         for k in 0..200 {
             let tilt = (k as f64 * 0.01 * rate).min(0.87);
             m.update(&inputs(k, tilt, rate));
         }
         assert_eq!(m.detected(), Detected::default());
-        let mut m = ActuatorMonitor::new(settings(), 1.0);
+        let mut m = ActuatorMonitor::new(settings(), 1.0, TILT_MAX);
         let mut first = None;
         for k in 0..100 {
             let tilt = (k as f64 * 0.01 * rate).min(0.3);
@@ -307,12 +318,31 @@ mod tests {
         let first = first.unwrap();
         assert!((89..=93).contains(&first), "{first}");
         let expected = 99.0 * 0.01 * rate;
-        assert!((m.tilt(0.3, 1.57) - expected).abs() < 0.01);
+        assert!((m.tilt(0.3) - expected).abs() < 0.01);
+    }
+
+    #[test]
+    fn an_encoder_at_an_end_stop_is_not_stuck() {
+        // The authors' table ends at 0.8 deg: commanded towards 0 for a
+        // second, the encoder stands still there, and the tilt flown is
+        // the encoder's.
+        let end = 0.8f64.to_radians();
+        let mut m = ActuatorMonitor::new(settings(), 1.0, TILT_MAX);
+        for k in 0..100 {
+            m.update(&inputs(k, end, -0.39));
+        }
+        assert_eq!(m.detected(), Detected::default());
+        assert_eq!(m.tilt(end), end);
+        // The same still encoder commanded away from the stop is stuck.
+        for k in 100..120 {
+            m.update(&inputs(k, end, 0.39));
+        }
+        assert!(m.detected().has(Detected::ENCODER_STUCK));
     }
 
     #[test]
     fn a_torque_must_hold_its_time_and_a_detection_latches_until_disarmed() {
-        let mut m = ActuatorMonitor::new(settings(), 1.0);
+        let mut m = ActuatorMonitor::new(settings(), 1.0, TILT_MAX);
         let mut i = inputs(0, 0.0, 0.0);
         i.disturbance[3] = 1.0;
         for k in 0..5 {

@@ -214,7 +214,11 @@ impl FlightStack {
             limit_body: model.at_tilt(lim.tilt_transition_max()),
             aloft_force: None,
             motor_time_constant: robot.rotor.time_constant,
-            monitor: ActuatorMonitor::new(settings.monitor, settings.observer.max_torque),
+            monitor: ActuatorMonitor::new(
+                settings.monitor,
+                settings.observer.max_torque,
+                lim.tilt_max(),
+            ),
             encoder_tilt: 0.0,
             tilt_sent: 0.0,
             model,
@@ -368,7 +372,7 @@ impl FlightStack {
             &state,
             height,
         );
-        self.last_tilt = self.monitor.tilt(self.encoder_tilt, self.tilt_max);
+        self.last_tilt = self.monitor.tilt(self.encoder_tilt);
         let tilt = self.last_tilt;
         let mpc_failed_ticks = self.mpc.failed_ticks();
         let conditions = Conditions {
