@@ -51,6 +51,7 @@ MIN_US, CENTER_US, MAX_US, DEADBAND_US = 1094, 1514, 1934, 10
 MAX_H, MAX_V, MAX_YAW = 0.75, 0.75, 45.0 * 3.141592653589793 / 180.0
 CH_ROLL, CH_PITCH, CH_THROTTLE, CH_YAW = 1, 2, 3, 4
 CH_KILL, CH_MPC, CH_OFFBOARD = 5, 8, 9
+CH_TILT_LEVER, CH_ENCODER_RESET = 10, 12  # auxiliary: the encoder reset stays off (low)
 
 LOSS_S = 0.8        # how long the radio is lost each time
 FAILSAFE_WITHIN_S = 0.6   # rc.timeout_ms (300) + ticks + DDS
@@ -142,6 +143,7 @@ def main():
         values[CH_OFFBOARD - 1] = MAX_US if (p.arm and p.offboard) else MIN_US
         values[CH_MPC - 1] = MAX_US if p.mpc_enabled else MIN_US
         values[CH_KILL - 1] = MAX_US if state["kill"] else MIN_US
+        values[CH_TILT_LEVER - 1] = CENTER_US  # the manual tilt lever at rest
         rc.values = values
         rc.link_quality = -1
         rc.rssi_dbm = float("nan")

@@ -480,7 +480,9 @@ impl TickIo for OnboardIo {
 
     fn emit(&mut self, inputs: &StepInputs, outputs: &StepOutputs, timing: &TickTiming) {
         let mut sent = self.ports.send_thrust(outputs.thrust);
-        sent &= self.ports.send_tilt_velocity(outputs.tilt_velocity);
+        sent &= self
+            .ports
+            .send_tilt_velocity(outputs.tilt_velocity, outputs.rehome_tilt);
         sent &= self
             .ports
             .send_wheel_rates([outputs.wheel_rates.left, outputs.wheel_rates.right]);

@@ -138,7 +138,7 @@ impl Preflight {
     /// wait for the next deadline, gather the inputs, run the checks.
     fn tick(&mut self, tilt_velocity: f64) -> u8 {
         self.ports.send_thrust([0.0; 4]);
-        self.ports.send_tilt_velocity(tilt_velocity);
+        self.ports.send_tilt_velocity(tilt_velocity, false);
         self.ports.send_wheel_rates([0.0; 2]);
         self.ports.notify_drivers();
         self.command = tilt_velocity;

@@ -122,6 +122,8 @@ fn onboard_tick_io_allocates_nothing_of_its_own() {
         driver_lost: false,
         pilot_lost: false,
         arming_failures: 0,
+        tilt_lever: 0.0,
+        rehome_tilt: false,
     });
 
     let pilot = PilotInput {

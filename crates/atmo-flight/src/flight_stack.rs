@@ -66,6 +66,8 @@ pub struct FlightStack {
     last_estimate: Option<Estimate>,
     last_tilt: f64,
     last_pilot: PilotInput,
+    /// The pilot's manual tilt lever, -1..1 (0 if the last one was bad).
+    tilt_lever: f64,
     last_ground_z: f64,
     /// Unit normal of the last good ground plane (NED, out of the ground).
     last_ground_normal: Vector3<f64>,
@@ -192,6 +194,7 @@ impl FlightStack {
             last_estimate: None,
             last_tilt: 0.0,
             last_pilot: PilotInput::default(),
+            tilt_lever: 0.0,
             last_ground_z: 0.0,
             last_ground_normal: Vector3::from(LEVEL_NORMAL),
             last_thrust: Input::zeros(),
@@ -287,6 +290,12 @@ impl FlightStack {
         } else {
             self.rejected.pilot += 1;
         }
+        self.tilt_lever = if (-1.0..=1.0).contains(&inputs.tilt_lever) {
+            inputs.tilt_lever
+        } else {
+            self.rejected.pilot += 1;
+            0.0
+        };
         // The ground plane is taken or rejected whole: a finite height and,
         // if there is one, a normal that `unit_ground_normal` accepts.
         let normal = inputs
@@ -333,7 +342,10 @@ impl FlightStack {
         let v = self.tilt_rate_max;
         let takeoff_tilt = self.settings.modes.takeoff_max_tilt_deg.to_radians();
         match mode {
-            Mode::Disarmed | Mode::Drive | Mode::Touchdown => 0.0,
+            // Disarmed, the pilot's lever moves the arms (on the bench or
+            // on the ground: the rotors are off).
+            Mode::Disarmed => self.tilt_lever * v,
+            Mode::Drive | Mode::Touchdown => 0.0,
             Mode::Takeoff if grounded && tilt <= takeoff_tilt => 0.0,
             Mode::Takeoff | Mode::Flight | Mode::Failsafe => -v,
             // Held until the MPC's plan says otherwise (see `step`).
@@ -471,6 +483,7 @@ impl FlightStack {
         StepOutputs {
             thrust: [thrust[0], thrust[1], thrust[2], thrust[3]],
             tilt_velocity,
+            rehome_tilt: inputs.rehome_tilt && mode == Mode::Disarmed,
             wheel_rates,
             status,
         }

@@ -98,6 +98,9 @@ struct RadioLatch {
     /// When the newest frame arrived (tick clock), and whether PX4 flagged
     /// it lost.
     last: Option<(u64, bool)>,
+    /// The newest usable frame's manual tilt lever and encoder reset switch.
+    tilt_lever: f64,
+    rehome_tilt: bool,
 }
 
 /// The newest value of every source, and the rules that make a tick's
@@ -150,7 +153,11 @@ impl InputLatch {
             estimate: None,
             pilot: PilotInput::default(),
             pilot_received_ns: None,
-            radio: RadioLatch { last: None },
+            radio: RadioLatch {
+                last: None,
+                tilt_lever: 0.0,
+                rehome_tilt: false,
+            },
             drive: None,
             tilt_counts: None,
             contact: false,
@@ -183,6 +190,8 @@ impl InputLatch {
         if !reading.lost {
             self.pilot = reading.pilot;
             self.pilot_received_ns = Some(received_ns);
+            self.radio.tilt_lever = reading.tilt_lever;
+            self.radio.rehome_tilt = reading.rehome_tilt;
         }
         self.radio.last = Some((received_ns, reading.lost));
     }
@@ -277,6 +286,13 @@ impl InputLatch {
                 driver_lost: !self.drivers_alive,
                 pilot_lost,
                 arming_failures: 0,
+                // A silent radio's lever is at rest: the arms stop.
+                tilt_lever: if pilot_stale {
+                    0.0
+                } else {
+                    self.radio.tilt_lever
+                },
+                rehome_tilt: !pilot_stale && self.radio.rehome_tilt,
             },
             pilot_stale,
             estimate_stale,
@@ -340,6 +356,8 @@ mod tests {
                 offboard: true,
                 mpc_enabled: true,
             },
+            tilt_lever: 0.5,
+            rehome_tilt: true,
             lost,
         }
     }
@@ -353,8 +371,17 @@ mod tests {
         let fresh = l.assemble(400 * MS);
         assert!(!fresh.inputs.pilot_lost && !fresh.pilot_stale);
         assert_eq!(fresh.inputs.pilot, reading(false).pilot);
+        assert_eq!(
+            (fresh.inputs.tilt_lever, fresh.inputs.rehome_tilt),
+            (0.5, true)
+        );
         let silent = l.assemble(401 * MS);
         assert!(silent.inputs.pilot_lost, "300 ms of silence");
+        assert_eq!(
+            (silent.inputs.tilt_lever, silent.inputs.rehome_tilt),
+            (0.0, false),
+            "a silent radio's lever rests"
+        );
         let p = silent.inputs.pilot;
         assert_eq!((p.velocity, p.yaw_rate, p.throttle), ([0.0; 3], 0.0, 0.0));
         assert!(p.arm && p.offboard && p.mpc_enabled, "switches held");

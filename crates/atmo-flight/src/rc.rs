@@ -6,6 +6,7 @@
 //! (mandralis/ATMO, `atmo_ws/src/atmo/atmo/mpc/parameters.py`; their
 //! 0-based indices into `values` are the channel numbers here minus one):
 //! roll 1, pitch 2, throttle 3, yaw 4, MPC switch 8, offboard switch 9,
+//! manual tilt lever 10, encoder reset switch 12,
 //! pulses 1094..1934 us centred at 1514 us, 0.75 m/s and 45 deg/s at full
 //! stick, with their signs (pitch forward is north negative, and so on:
 //! each stick `reversed`). The kill switch is not in the authors' code
@@ -18,6 +19,14 @@
 //! upper half only (0 at centre, 1 at full up): a spring-less throttle
 //! stick left at centre must not read as "take off" (the flight stack
 //! takes off at throttle 0.5).
+//!
+//! The manual tilt lever (a stick, -1..1, positive towards the drive
+//! configuration) moves the arms while the stack is disarmed, as the
+//! authors' manual mode drove the tilt motor from it; the encoder reset
+//! switch asks the tilt driver to home again (the authors zeroed the
+//! counter with it in the drive configuration; this driver finds home on
+//! its switch). Both are auxiliary: a receiver that does not deliver their
+//! channels leaves them at rest instead of losing the frame.
 //!
 //! Switches: on when the normalized pulse is above `switch_threshold`
 //! (`on = "high"`) or below minus it (`on = "low"`); a three-position
@@ -84,6 +93,8 @@ pub struct Sticks {
     /// Up (negative NED z); its upper half is also the throttle.
     pub up: Stick,
     pub yaw: Stick,
+    /// The manual tilt lever (auxiliary).
+    pub tilt: Stick,
 }
 
 /// `[rc.switches]`.
@@ -96,6 +107,8 @@ pub struct Switches {
     pub mpc: Switch,
     /// Kill: disarmed at once, latched until the offboard switch is off.
     pub kill: Switch,
+    /// Home the tilt driver again, while disarmed (auxiliary).
+    pub encoder_reset: Switch,
 }
 
 /// `[rc]` of `config/daemon.toml`: how `px4_msgs/InputRc` becomes the
@@ -136,6 +149,7 @@ impl Default for Sticks {
             east: stick(1, true),
             up: stick(3, false),
             yaw: stick(4, true),
+            tilt: stick(10, false),
         }
     }
 }
@@ -153,6 +167,10 @@ impl Default for Switches {
             },
             kill: Switch {
                 channel: 5,
+                on: SwitchOn::High,
+            },
+            encoder_reset: Switch {
+                channel: 12,
                 on: SwitchOn::High,
             },
         }
@@ -179,16 +197,18 @@ impl Default for RcConfig {
 
 impl RcConfig {
     /// Every mapped channel with its key, sticks first.
-    fn channels(&self) -> [(&'static str, u32); 7] {
+    fn channels(&self) -> [(&'static str, u32); 9] {
         let (s, w) = (&self.sticks, &self.switches);
         [
             ("rc.sticks.north.channel", s.north.channel),
             ("rc.sticks.east.channel", s.east.channel),
             ("rc.sticks.up.channel", s.up.channel),
             ("rc.sticks.yaw.channel", s.yaw.channel),
+            ("rc.sticks.tilt.channel", s.tilt.channel),
             ("rc.switches.offboard.channel", w.offboard.channel),
             ("rc.switches.mpc.channel", w.mpc.channel),
             ("rc.switches.kill.channel", w.kill.channel),
+            ("rc.switches.encoder_reset.channel", w.encoder_reset.channel),
         ]
     }
 
@@ -282,6 +302,10 @@ impl std::fmt::Display for RcReject {
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct RcReading {
     pub pilot: PilotInput,
+    /// The manual tilt lever, -1..1 (0 if its channel is not delivered).
+    pub tilt_lever: f64,
+    /// The encoder reset switch (off if its channel is not delivered).
+    pub rehome_tilt: bool,
     /// PX4 says the radio is lost (`rc_lost` or `rc_failsafe`): the values
     /// are the receiver's failsafe values or stale, not the pilot's.
     pub lost: bool,
@@ -350,6 +374,16 @@ impl RcPilot {
         Ok(if stick.reversed { -v } else { v })
     }
 
+    /// An auxiliary channel: one the receiver does not deliver is at rest.
+    fn auxiliary<T: Default>(
+        read: std::result::Result<T, RcReject>,
+    ) -> std::result::Result<T, RcReject> {
+        match read {
+            Err(RcReject::MissingChannel { .. }) => Ok(T::default()),
+            other => other,
+        }
+    }
+
     fn switch(&self, rc: &InputRc, switch: Switch) -> std::result::Result<bool, RcReject> {
         let v = self.normalized(Self::pulse(rc, switch.channel)?);
         let t = self.config.switch_threshold;
@@ -371,6 +405,8 @@ impl RcPilot {
         let offboard = self.switch(rc, w.offboard)?;
         let mpc_enabled = self.switch(rc, w.mpc)?;
         let kill = self.switch(rc, w.kill)?;
+        let tilt_lever = Self::auxiliary(self.stick(rc, s.tilt))?;
+        let rehome_tilt = Self::auxiliary(self.switch(rc, w.encoder_reset))?;
         let lost = rc.rc_lost || rc.rc_failsafe;
         if !lost {
             if kill {
@@ -393,6 +429,8 @@ impl RcPilot {
                 offboard,
                 mpc_enabled,
             },
+            tilt_lever,
+            rehome_tilt,
             lost,
         })
     }

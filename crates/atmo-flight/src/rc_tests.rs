@@ -291,3 +291,42 @@ fn mapping_never_panics_on_any_pulse() {
         }
     }
 }
+
+#[test]
+fn the_tilt_lever_and_the_encoder_reset_read_the_authors_channels() {
+    let mut p = pilot();
+    let mut rc = frame();
+    set(&mut rc, 10, CENTRE);
+    let r = p.map(&rc).unwrap();
+    assert_eq!((r.tilt_lever, r.rehome_tilt), (0.0, false), "lever centred");
+    set(&mut rc, 10, MAX);
+    set(&mut rc, 12, MAX);
+    let r = p.map(&rc).unwrap();
+    assert!((r.tilt_lever - 1.0).abs() < 1e-12, "towards drive");
+    assert!(r.rehome_tilt);
+    set(&mut rc, 10, MIN);
+    assert!((p.map(&rc).unwrap().tilt_lever + 1.0).abs() < 1e-12);
+}
+
+#[test]
+fn a_receiver_without_the_auxiliary_channels_leaves_them_at_rest() {
+    let mut p = pilot();
+    let mut rc = flying_frame();
+    rc.channel_count = 9;
+    set(&mut rc, 10, MAX);
+    set(&mut rc, 12, MAX);
+    let r = p.map(&rc).expect("the frame is used");
+    assert_eq!((r.tilt_lever, r.rehome_tilt), (0.0, false));
+    assert!(r.pilot.offboard);
+    // A delivered auxiliary channel that is no servo pulse loses the frame,
+    // as any mapped channel does.
+    rc.channel_count = 16;
+    set(&mut rc, 10, 3000);
+    assert_eq!(
+        p.map(&rc),
+        Err(RcReject::ImplausiblePulse {
+            channel: 10,
+            pulse_us: 3000
+        })
+    );
+}

@@ -19,6 +19,7 @@ pub use atmo_io::msg::{PilotInput, SolverStatus};
 
 /// Everything one tick sees.
 #[derive(Debug, Clone, Copy, PartialEq)]
+#[allow(clippy::struct_excessive_bools)] // independent signals, as on the wire (TickInputs)
 pub struct StepInputs {
     /// The flight stack's clock, ns.
     pub now_ns: u64,
@@ -47,6 +48,13 @@ pub struct StepInputs {
     /// Arming checks that fail (bits of [`crate::arming::ArmingCheck`];
     /// 0: all pass): the stack does not arm while any is set.
     pub arming_failures: u8,
+    /// The pilot's manual tilt lever, -1..1 (positive towards the drive
+    /// configuration): while disarmed, the tilt velocity as a fraction of
+    /// the mechanism's speed (the authors' manual mode). 0 without a radio.
+    pub tilt_lever: f64,
+    /// The pilot's encoder reset switch: home the tilt driver again
+    /// (passed on only while disarmed).
+    pub rehome_tilt: bool,
 }
 
 /// Inputs rejected so far, by kind.
@@ -118,6 +126,8 @@ pub struct StepOutputs {
     pub thrust: [f64; 4],
     /// Tilt velocity, rad/s, positive towards drive.
     pub tilt_velocity: f64,
+    /// Home the tilt driver again (only ever set while disarmed).
+    pub rehome_tilt: bool,
     pub wheel_rates: WheelRates,
     pub status: Status,
 }

@@ -33,6 +33,8 @@ pub fn inputs_message(tick: u64, inputs: &StepInputs, cuts: &SolverCuts) -> Tick
         ground_normal: inputs.ground_normal.unwrap_or([0.0; 3]),
         pilot_lost: inputs.pilot_lost,
         arming_failures: inputs.arming_failures,
+        tilt_lever: inputs.tilt_lever,
+        rehome_tilt: inputs.rehome_tilt,
     }
 }
 
@@ -63,6 +65,8 @@ pub fn inputs_from_message(m: &TickInputs) -> StepInputs {
         driver_lost: m.driver_lost,
         pilot_lost: m.pilot_lost,
         arming_failures: m.arming_failures,
+        tilt_lever: m.tilt_lever,
+        rehome_tilt: m.rehome_tilt,
     }
 }
 

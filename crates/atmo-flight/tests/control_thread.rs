@@ -42,6 +42,8 @@ fn ticks_on_its_own_thread_and_drops_instead_of_blocking() {
             driver_lost: false,
             pilot_lost: false,
             arming_failures: 0,
+            tilt_lever: 0.0,
+            rehome_tilt: false,
         })
         .unwrap();
     // Let it run without reading: the channel fills and reports are dropped.

@@ -32,6 +32,9 @@ struct Loop {
     pilot_lost: bool,
     /// Arming checks failing (the onboard monitor's verdict).
     arming_failures: u8,
+    /// The radio's manual tilt lever and encoder reset switch.
+    tilt_lever: f64,
+    rehome_tilt: bool,
 }
 
 impl Loop {
@@ -66,6 +69,8 @@ impl Loop {
             disturbance: nalgebra::Vector6::zeros(),
             pilot_lost: false,
             arming_failures: 0,
+            tilt_lever: 0.0,
+            rehome_tilt: false,
         }
     }
 
@@ -87,6 +92,8 @@ impl Loop {
             driver_lost: false,
             pilot_lost: self.pilot_lost,
             arming_failures: self.arming_failures,
+            tilt_lever: self.tilt_lever,
+            rehome_tilt: self.rehome_tilt,
         }
     }
 
@@ -396,4 +403,46 @@ fn the_observer_removes_the_offset_of_an_unmodelled_torque_and_weight() {
 fn deterministic(mut settings: MpcSettings) -> MpcSettings {
     settings.solver.time_limit = 10.0;
     settings
+}
+
+#[test]
+fn disarmed_the_tilt_lever_moves_the_arms_and_armed_it_does_nothing() {
+    let mut lp = Loop::new(0.0);
+    lp.pilot.arm = false;
+    lp.tilt_lever = 0.5;
+    lp.rehome_tilt = true;
+    let outs = lp.run(1.0);
+    let rate = RobotConfig::atmo().limits.tilt_rate_max;
+    for o in &outs {
+        assert_eq!(o.status.mode, Mode::Disarmed);
+        assert!(
+            o.rehome_tilt,
+            "the reset switch is passed on while disarmed"
+        );
+    }
+    assert!((outs[10].tilt_velocity - 0.5 * rate).abs() < 1e-12);
+    assert!(
+        (lp.tilt - 0.5 * rate).abs() < 0.05 * rate,
+        "one second at half speed: {} rad",
+        lp.tilt
+    );
+    // Lever back to rest: the arms stop where they are.
+    lp.tilt_lever = 0.0;
+    assert_eq!(lp.tick().tilt_velocity, 0.0);
+    // Out of range: rejected and counted, the arms stop.
+    lp.tilt_lever = 1.5;
+    let o = lp.tick();
+    assert_eq!(o.tilt_velocity, 0.0);
+    assert!(o.status.rejected.pilot >= 1);
+
+    // Armed in the air, the lever and the reset switch are not the pilot's
+    // to use: the flight modes own the tilt.
+    let mut lp = Loop::new(1.5);
+    lp.tilt_lever = 1.0;
+    lp.rehome_tilt = true;
+    for o in lp.run(0.5) {
+        assert_eq!(o.status.mode, Mode::Flight);
+        assert!(o.tilt_velocity <= 0.0, "no lever in flight");
+        assert!(!o.rehome_tilt);
+    }
 }

@@ -108,6 +108,8 @@ fn flight_stack_allocations(ground_effect: GroundEffectSource, ground_normal: Op
             driver_lost: false,
             pilot_lost: false,
             arming_failures: 0,
+            tilt_lever: 0.0,
+            rehome_tilt: false,
         };
         // The first ticks warm the MPC up (start-up); count from tick 20 on.
         let before = thread_allocations();
@@ -337,6 +339,8 @@ fn logging_a_tick_does_not_allocate() {
         driver_lost: false,
         pilot_lost: false,
         arming_failures: 0,
+        tilt_lever: 0.0,
+        rehome_tilt: false,
     };
     let outputs = stack.step(&inputs);
     let timing = TickTiming::default();

@@ -215,7 +215,7 @@ fn driver_process_round_trip_death_and_restart() {
     let mut last_heard = 0;
     while monotonic_ns() - start < 8_000_000_000 {
         assert!(ports.send_thrust([0.1, 0.2, 0.3, 0.4]));
-        assert!(ports.send_tilt_velocity(0.1));
+        assert!(ports.send_tilt_velocity(0.1, false));
         assert!(ports.send_wheel_rates([1.0, -1.0]));
         sent += 1;
         std::thread::sleep(period);

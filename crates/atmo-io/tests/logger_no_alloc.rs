@@ -112,7 +112,7 @@ fn ros2_and_driver_port_calls_do_not_allocate() {
         ros_allocations += n;
         let ((), n) = count(|| {
             assert!(ports.send_thrust([0.1, 0.2, 0.3, 0.4]));
-            assert!(ports.send_tilt_velocity(0.1));
+            assert!(ports.send_tilt_velocity(0.1, false));
             assert!(ports.send_wheel_rates([1.0, 1.0]));
         });
         send_allocations += n;

@@ -12,6 +12,9 @@
 //! sends the driver back to `Starting` (tilt: and homing again: the
 //! counter's zero is lost).
 //!
+//! The pilot's encoder reset (`rehome` on the tilt velocity port) sends a
+//! running or failed tilt driver back to `Homing`.
+//!
 //! Watchdog: while running, a command older than `command_timeout_ms` (or
 //! none yet) commands zero speed; each fall into that state is counted.
 //!
@@ -168,6 +171,9 @@ pub struct DriverCounters {
     pub outside_table: u64,
     /// Completed start sequences.
     pub starts: u64,
+    /// Homings the pilot asked for (the encoder reset switch's rising edges
+    /// that started one).
+    pub rehome_requests: u64,
 }
 
 /// Failed transactions in a row after which the driver stops sending
@@ -181,6 +187,8 @@ pub struct Driver {
     phase: Phase,
     last_command: Option<(DriverCommand, u64)>,
     stale: bool,
+    /// The pilot's rehome request as last received (edges start a homing).
+    rehome_held: bool,
     last_encoder: [Option<(i32, u64)>; 2],
     last_health_check_ns: u64,
     firmware: Option<Version>,
@@ -195,6 +203,7 @@ impl Driver {
             phase: Phase::Starting,
             last_command: None,
             stale: true,
+            rehome_held: false,
             last_encoder: [None; 2],
             last_health_check_ns: 0,
             firmware: None,
@@ -234,6 +243,23 @@ impl Driver {
             self.last_command = Some((command, now_ns));
         } else {
             self.counters.bad_commands += 1;
+        }
+    }
+
+    /// The pilot's request to home again, as received with each command:
+    /// its rising edge starts a homing of a running tilt driver, or retries
+    /// a failed one (the counter's zero is found again on the switch). A
+    /// request held on does not repeat it.
+    pub fn rehome_request(&mut self, requested: bool, now_ns: u64) {
+        let rising = requested && !self.rehome_held;
+        self.rehome_held = requested;
+        if rising
+            && matches!(self.settings.role, Role::Tilt(_))
+            && matches!(self.phase, Phase::Running | Phase::Failed)
+        {
+            self.counters.rehome_requests += 1;
+            self.last_encoder = [None; 2];
+            self.phase = Phase::Homing { since_ns: now_ns };
         }
     }
 

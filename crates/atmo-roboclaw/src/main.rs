@@ -252,6 +252,7 @@ fn run(
             Mode::Tilt => {
                 if let Some(c) = commands.tilt_velocity {
                     driver.command(DriverCommand::TiltVelocity(c.velocity), now);
+                    driver.rehome_request(c.rehome, now);
                 }
             }
             Mode::Wheels => {
@@ -307,10 +308,11 @@ fn report(driver: &Driver, board: &Board<SerialTransport>, port_errors: u64, rat
     let mut err = std::io::stderr().lock();
     let _ = write!(
         err,
-        "atmo-roboclaw: {phase}, {rate_hz:.0} ticks/s, status {:#010x}, watchdog stops {}, homings {}, port errors {port_errors}, board: {}",
+        "atmo-roboclaw: {phase}, {rate_hz:.0} ticks/s, status {:#010x}, watchdog stops {}, homings {}, rehome requests {}, port errors {port_errors}, board: {}",
         driver.last_status(),
         c.watchdog_stops,
         c.homings,
+        c.rehome_requests,
         board.health()
     );
     if let Some(e) = board.health().last_error {

@@ -97,7 +97,7 @@ fn sim_and_run_processes_on_the_driver_ports() {
     let t0 = Instant::now();
     let mut first_counts = None;
     while t0.elapsed() < Duration::from_secs(5) {
-        daemon.send_tilt_velocity(0.0);
+        daemon.send_tilt_velocity(0.0, false);
         daemon.notify_drivers();
         std::thread::sleep(Duration::from_millis(10));
         let inputs = daemon.poll(monotonic_ns());
@@ -115,7 +115,7 @@ fn sim_and_run_processes_on_the_driver_ports() {
     let mut last = home;
     let t1 = Instant::now();
     while t1.elapsed() < Duration::from_secs(1) {
-        daemon.send_tilt_velocity(-0.1);
+        daemon.send_tilt_velocity(-0.1, false);
         daemon.notify_drivers();
         std::thread::sleep(Duration::from_millis(7));
         let inputs = daemon.poll(monotonic_ns());
@@ -149,6 +149,22 @@ fn sim_and_run_processes_on_the_driver_ports() {
     assert!(settled < last, "moved on after the last command");
     assert!(daemon.poll(monotonic_ns()).health.is_alive(DriverId::Tilt));
 
+    // The pilot's encoder reset, held on: one homing, back at the switch.
+    let t2 = Instant::now();
+    let mut rehomed = None;
+    while t2.elapsed() < Duration::from_secs(8) {
+        daemon.send_tilt_velocity(0.0, true);
+        daemon.notify_drivers();
+        std::thread::sleep(Duration::from_millis(10));
+        if let Some(e) = daemon.poll(monotonic_ns()).tilt_encoder
+            && (e.counts - home).abs() <= 1
+        {
+            rehomed = Some(e.counts);
+            break;
+        }
+    }
+    assert!(rehomed.is_some(), "not back home after the encoder reset");
+
     // SIGTERM: the driver stops the motors and exits cleanly.
     let status = Command::new("kill")
         .args(["-TERM", &run.0.id().to_string()])
@@ -161,6 +177,7 @@ fn sim_and_run_processes_on_the_driver_ports() {
     let stderr = String::from_utf8_lossy(&output.stderr);
     assert!(output.status.success(), "{stderr}");
     assert!(stderr.contains("stopped (motors at 0)"), "{stderr}");
+    assert!(stderr.contains("homings 2, rehome requests 1,"), "{stderr}");
     drop(daemon);
     drop(sim);
     remove_prefix_files(&prefix);

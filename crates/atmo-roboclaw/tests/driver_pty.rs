@@ -339,3 +339,32 @@ fn a_wheel_board_reset_is_detected_and_the_wheels_run_on() {
     assert!(rig.sim(|b| b.speed(Motor::M2)) > 1400.0);
     assert_eq!(rig.sim(|b| b.serial_timeout()), 5);
 }
+
+#[test]
+fn the_pilots_encoder_reset_homes_again_once_per_flip() {
+    let mut rig = homed_tilt();
+    // To about 60 deg, then the switch flipped (and held).
+    assert!(
+        rig.run_until(3.0, Some(DriverCommand::TiltVelocity(-0.3)), |r| {
+            r.last.tilt.is_some_and(|t| t.to_degrees() < 60.0)
+        })
+    );
+    let now = rig.now();
+    rig.driver.rehome_request(true, now);
+    assert!(matches!(rig.driver.phase(), Phase::Homing { .. }));
+    assert!(rig.run_until(10.0, None, |r| r.driver.phase() == Phase::Running));
+    assert_eq!(rig.driver.counters().homings, 2);
+    assert_eq!(rig.driver.counters().rehome_requests, 1);
+    let out = rig.tick(None);
+    assert!((out.tilt.unwrap().to_degrees() - 90.0).abs() < 1e-9);
+    assert_eq!(rig.sim(|b| b.encoder(Motor::M2)), 0);
+    // Held on: no second homing; off and on again: one more.
+    let now = rig.now();
+    rig.driver.rehome_request(true, now);
+    assert_eq!(rig.driver.phase(), Phase::Running);
+    rig.driver.rehome_request(false, now);
+    rig.driver.rehome_request(true, now);
+    assert!(matches!(rig.driver.phase(), Phase::Homing { .. }));
+    assert_eq!(rig.driver.counters().rehome_requests, 2);
+    assert_eq!(rig.board.health().failed, 0);
+}

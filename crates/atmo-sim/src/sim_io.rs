@@ -272,6 +272,8 @@ impl TickIo for SimIo {
             if self.actuators.has_radio() {
                 let reading = RcReading {
                     pilot: p.value,
+                    tilt_lever: 0.0,
+                    rehome_tilt: false,
                     lost: false,
                 };
                 self.latch.radio(reading, at);

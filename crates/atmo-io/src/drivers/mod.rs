@@ -498,9 +498,14 @@ impl FlightPorts {
             .send(|header| ThrusterCommand { header, thrust })
     }
 
-    pub fn send_tilt_velocity(&mut self, velocity: f64) -> bool {
-        self.tilt_velocity
-            .send(|header| TiltVelocityCommand { header, velocity })
+    /// Sends the tilt velocity, with `rehome` (the pilot's encoder reset,
+    /// only while disarmed).
+    pub fn send_tilt_velocity(&mut self, velocity: f64, rehome: bool) -> bool {
+        self.tilt_velocity.send(|header| TiltVelocityCommand {
+            header,
+            velocity,
+            rehome,
+        })
     }
 
     pub fn send_wheel_rates(&mut self, rates: [f64; 2]) -> bool {

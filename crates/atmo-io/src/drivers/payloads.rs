@@ -29,13 +29,16 @@ pub struct ThrusterCommand {
     pub thrust: [f64; 4],
 }
 
-/// Daemon -> tilt driver: tilt velocity, rad/s, positive towards drive.
+/// Daemon -> tilt driver: tilt velocity, rad/s, positive towards drive,
+/// and the pilot's request to home again (the encoder reset switch; the
+/// daemon sets it only while disarmed, the driver acts on its rising edge).
 #[repr(C)]
 #[derive(Debug, Clone, Copy, PartialEq, Default, ZeroCopySend)]
 #[type_name("atmo::drivers::TiltVelocityCommand")]
 pub struct TiltVelocityCommand {
     pub header: PortHeader,
     pub velocity: f64,
+    pub rehome: bool,
 }
 
 /// Tilt driver -> daemon: encoder counts (continuous, zero at varphi = 0).

@@ -194,6 +194,12 @@ pub struct TickInputs {
     pub pilot_lost: bool,
     /// Arming checks that failed (bit set; 0: all pass).
     pub arming_failures: u8,
+    /// The pilot's manual tilt lever, -1..1 (positive: towards the drive
+    /// configuration; 0 without a radio).
+    pub tilt_lever: f64,
+    /// The pilot asks the tilt driver to home again (the encoder reset
+    /// switch).
+    pub rehome_tilt: bool,
 }
 
 /// The fields of `TickInputs` in wire order (its .msg definition's, checked
@@ -218,6 +224,8 @@ pub(super) const TICK_INPUTS_FIELDS: &[&str] = &[
     "ground_normal",
     "pilot_lost",
     "arming_failures",
+    "tilt_lever",
+    "rehome_tilt",
 ];
 
 impl<'de> Deserialize<'de> for TickInputs {
@@ -265,6 +273,8 @@ impl<'de> serde::de::Visitor<'de> for TickInputsVisitor {
             ground_normal: [0.0; 3],
             pilot_lost: false,
             arming_failures: 0,
+            tilt_lever: 0.0,
+            rehome_tilt: false,
         };
         // A log before the ground normal ends here: the payload is used up,
         // reading on fails, and the message is the old one (level ground).
@@ -276,6 +286,11 @@ impl<'de> serde::de::Visitor<'de> for TickInputsVisitor {
             if let Ok(Some(lost)) = seq.next_element::<bool>() {
                 m.pilot_lost = lost;
                 m.arming_failures = next(&mut seq, "arming_failures")?;
+                // And a log before the manual tilt lever after the checks.
+                if let Ok(Some(lever)) = seq.next_element::<f64>() {
+                    m.tilt_lever = lever;
+                    m.rehome_tilt = next(&mut seq, "rehome_tilt")?;
+                }
             }
         }
         Ok(m)

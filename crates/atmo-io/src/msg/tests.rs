@@ -605,6 +605,7 @@ fn tick_inputs_and_sim_truth_layouts() {
         body.push(0);
     }
     body.extend(f64s(&[-0.25, 0.0, -0.5]));
+    let normal_end = body.len();
     // A log written before the pilot's radio ends here: the radio present.
     let mut before_radio = CDR_LE_HEADER.to_vec();
     before_radio.extend(&body);
@@ -613,10 +614,22 @@ fn tick_inputs_and_sim_truth_layouts() {
     m.pilot_lost = true;
     m.arming_failures = 0b10100;
     body.extend([1, 0b10100]);
+    // A log written before the manual tilt lever ends here: the lever at rest.
+    let mut before_lever = CDR_LE_HEADER.to_vec();
+    before_lever.extend(&body);
+    let decoded: TickInputs = decode("/before-lever", &before_lever).unwrap();
+    assert_eq!(decoded, m);
+    m.tilt_lever = -0.5;
+    m.rehome_tilt = true;
+    while body.len() % 8 != 0 {
+        body.push(0);
+    }
+    body.extend(f64s(&[-0.5]));
+    body.push(1);
     round_trip(&m, &body);
     // A payload cut inside the normal is refused, not read as an old one.
     let mut cut = CDR_LE_HEADER.to_vec();
-    cut.extend(&body[..body.len() - 10]);
+    cut.extend(&body[..normal_end - 8]);
     assert!(decode::<TickInputs>("/cut", &cut).is_err());
     assert_eq!(
         super::definitions::fields("atmo_msgs", definition(TickInputs::TYPE_NAME).unwrap())
