@@ -3,8 +3,18 @@
 //! and simulated Roboclaw boards on pseudo-terminals (`atmo-sim serve
 //! --roboclaw-tilt --roboclaw-wheels`), against the same scenario with the
 //! server playing those drivers on the ports. Both run in real time, so
-//! each is one sample; the touchdowns must agree within 1 deg and
-//! 0.05 m/s.
+//! each landing is one sample of a scatter: the mean touchdowns of
+//! [`PAIRS`] landings each way must agree within 1 deg and 0.05 m/s.
+//!
+//! Ignored in `cargo test` and run alone by `.ci/run` (one retry, said
+//! aloud): through the boards the landing touches down softer by 0.03 to
+//! 0.05 m/s on average (means of three measured on a loaded 2-core
+//! machine: 0.031, 0.031, 0.039, 0.050 m/s), with three times the scatter
+//! of the ports' (standard deviation about 0.017 against 0.006 m/s); the
+//! serial links stay clean (no retries, answers under 20 ms). Why the
+//! softer landing is not known: a 50 ms speed lag added to the ports'
+//! tilt did not move their landing, and a board without its lag did not
+//! close the gap.
 // Test, bench and example code: an unwrap that fails is the failure report.
 #![allow(clippy::unwrap_used)]
 
@@ -61,17 +71,22 @@ fn touchdown(summary: &serde_json::Value) -> (f64, f64) {
     )
 }
 
-// Two real-time flights compared within 1 deg and 0.05 m/s: the reference
-// flight through the driver ports itself scatters by about 0.08 m/s in
-// impact speed from run to run (0.244-0.324 m/s over ten runs), so one
-// pair can fall outside the bound with nothing wrong on the serial path.
-// `.ci/run` runs it alone (`-- --ignored`), with one retry said aloud.
+/// Landings flown each way, alternating. A real-time landing is one
+/// sample: when the landing decision commits the tilt-up moves with the
+/// sub-tick timing of the estimate, the encoder and the serial answers,
+/// so one pair of landings can differ by more than the bound with nothing
+/// wrong on the serial path; the means of three each way are compared.
+const PAIRS: usize = 3;
+
+fn mean(values: &[f64]) -> f64 {
+    values.iter().sum::<f64>() / values.len() as f64
+}
+
 #[test]
-#[ignore = "real time, scatters: `cargo test -p atmo-sim --test sitl sitl_boards -- --ignored`"]
+#[ignore = "real time, softer by 0.03-0.05 m/s: `cargo test -p atmo-sim --test sitl sitl_boards -- --ignored`"]
 fn the_wheel_landing_through_the_roboclaw_drivers_matches_the_driver_ports() {
     let _serial = serial();
     let roboclaw = sibling_binary("atmo-roboclaw");
-    let (ports, _) = land("ports", &[]);
     let drivers = repo().join("config/drivers");
     let args: Vec<OsString> = vec![
         "--roboclaw-tilt".into(),
@@ -81,14 +96,36 @@ fn the_wheel_landing_through_the_roboclaw_drivers_matches_the_driver_ports() {
         "--roboclaw-bin".into(),
         roboclaw.into(),
     ];
-    let (boards, status) = land("boards", &args);
-    let (tilt_p, speed_p) = touchdown(&ports);
-    let (tilt_b, speed_b) = touchdown(&boards);
+    let (mut through_ports, mut through_boards) = (Vec::new(), Vec::new());
+    let mut last = None;
+    for pair in 0..PAIRS {
+        let (ports, _) = land(&format!("ports{pair}"), &[]);
+        let (boards, status) = land(&format!("boards{pair}"), &args);
+        let (tilt_p, speed_p) = touchdown(&ports);
+        let (tilt_b, speed_b) = touchdown(&boards);
+        println!(
+            "pair {pair}: driver ports {tilt_p:.2} deg {speed_p:.3} m/s; roboclaw boards {tilt_b:.2} deg {speed_b:.3} m/s"
+        );
+        through_ports.push((tilt_p, speed_p));
+        through_boards.push((tilt_b, speed_b));
+        last = Some((pair, boards, status));
+    }
+    let tilts = |v: &[(f64, f64)]| mean(&v.iter().map(|t| t.0).collect::<Vec<_>>());
+    let speeds = |v: &[(f64, f64)]| mean(&v.iter().map(|t| t.1).collect::<Vec<_>>());
+    let (tilt_p, speed_p) = (tilts(&through_ports), speeds(&through_ports));
+    let (tilt_b, speed_b) = (tilts(&through_boards), speeds(&through_boards));
     println!(
-        "touchdown: driver ports {tilt_p:.2} deg {speed_p:.3} m/s; roboclaw boards {tilt_b:.2} deg {speed_b:.3} m/s"
+        "mean of {PAIRS}: driver ports {tilt_p:.2} deg {speed_p:.3} m/s; roboclaw boards {tilt_b:.2} deg {speed_b:.3} m/s"
     );
-    assert!((tilt_b - tilt_p).abs() <= 1.0, "{boards:#}\n{ports:#}");
-    assert!((speed_b - speed_p).abs() <= 0.05, "{boards:#}\n{ports:#}");
+    assert!(
+        (tilt_b - tilt_p).abs() <= 1.0,
+        "{through_boards:?}\n{through_ports:?}"
+    );
+    assert!(
+        (speed_b - speed_p).abs() <= 0.05,
+        "{through_boards:?}\n{through_ports:?}"
+    );
+    let (pair, boards, status) = last.unwrap();
     assert_eq!(boards["summary"]["crashed"], false);
     assert!(boards["summary"]["drive_distance_m"].as_f64().unwrap() >= 1.0);
 
@@ -106,7 +143,7 @@ fn the_wheel_landing_through_the_roboclaw_drivers_matches_the_driver_ports() {
     // The tilt driver homed once and its serial link stayed clean.
     let log = std::fs::read_to_string(
         Path::new(env!("CARGO_TARGET_TMPDIR"))
-            .join(format!("boards-{}", std::process::id()))
+            .join(format!("boards{pair}-{}", std::process::id()))
             .join("sitl/roboclaw-tilt.log"),
     )
     .unwrap();
