@@ -164,3 +164,4 @@ class MpcStatus(IdlStruct, typename="atmo_msgs::msg::dds_::MpcStatus_"):
     rejected_pilot: uint64 = 0
     rejected_ground: uint64 = 0
     io: IoHealth = field(default_factory=IoHealth)
+    actuator_faults: uint8 = 0

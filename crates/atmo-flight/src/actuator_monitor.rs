@@ -13,15 +13,15 @@
 //! the mode table's): a stuck encoder's tilt is dead-reckoned from the
 //! commands (the tilt motor is velocity-commanded: the linkage goes where
 //! it is told while its encoder is silent); a tilt that is not where it is
-//! believed is a failsafe held until disarmed; a failed rotor cuts the
-//! thrust above z* (no controller here flies three rotors, and the robot
-//! would flip with its rotors running) and leaves a transition under way to
-//! land; an inferred contact is a contact.
+//! believed is a failsafe held until disarmed (and with the encoder also
+//! stuck, a jammed linkage: the encoder was right and is flown on again);
+//! a failed rotor is named and its effectiveness learned into the MPC
+//! (`crate::rotor_estimate`), and one out is a failsafe descent above z*
+//! while a transition under way lands; an inferred contact is a contact.
 //!
 //! Detections latch until the arm switches are off: none of these faults
 //! heals in flight, and a detector that let go would hand a flight back to
-//! the mode that met the fault (the rotor's thrust cut disarms the stack
-//! without the switches: it must stay cut). Every update is a few comparisons on fixed
+//! the mode that met the fault. Every update is a few comparisons on fixed
 //! state: no allocation, no blocking.
 
 use crate::modes::Mode;
@@ -51,6 +51,15 @@ pub struct MonitorSettings {
     pub contact_speed: f64,
     /// ... both held this long, s.
     pub contact_time: f64,
+    /// A failed rotor that delivers less than this of its command is out:
+    /// below half, two full rotors and two at this fraction (roll and pitch
+    /// balanced) cannot hold the robot at the flight tilt limit (50 deg),
+    /// so no wheel landing can be flown; the robot descends folded.
+    #[serde(default = "MonitorSettings::default_rotor_out_effectiveness")]
+    pub rotor_out_effectiveness: f64,
+    /// With a rotor out: the descent speed to the ground, m/s.
+    #[serde(default = "MonitorSettings::default_rotor_out_descent_speed")]
+    pub rotor_out_descent_speed: f64,
 }
 
 impl MonitorSettings {
@@ -66,7 +75,17 @@ impl MonitorSettings {
             contact_clearance: 0.0,
             contact_speed: 0.0,
             contact_time: 0.0,
+            rotor_out_effectiveness: Self::default_rotor_out_effectiveness(),
+            rotor_out_descent_speed: Self::default_rotor_out_descent_speed(),
         }
+    }
+
+    fn default_rotor_out_effectiveness() -> f64 {
+        0.5
+    }
+
+    fn default_rotor_out_descent_speed() -> f64 {
+        0.3
     }
 }
 
@@ -186,9 +205,12 @@ impl ActuatorMonitor {
     }
 
     /// The tilt to fly on, rad: the encoder's, or while it is stuck its
-    /// last movement plus the commanded travel since.
+    /// last movement plus the commanded travel since. A stuck encoder
+    /// whose dead-reckoned tilt then lifts as the believed one cannot
+    /// (the tilt detector) was right: the linkage is jammed, the motor and
+    /// its encoder stalled with the arms; its reading is flown again.
     pub fn tilt(&self, encoder_tilt: f64) -> f64 {
-        if self.detected.has(Detected::ENCODER_STUCK) {
+        if self.detected.has(Detected::ENCODER_STUCK) && !self.detected.tilt_unknown() {
             self.anchor + self.travel
         } else {
             encoder_tilt
@@ -275,6 +297,7 @@ mod tests {
             contact_clearance: 0.01,
             contact_speed: 0.05,
             contact_time: 0.2,
+            ..MonitorSettings::disabled()
         }
     }
 
@@ -360,7 +383,7 @@ mod tests {
         assert!(m.detected().rotor_failed());
         i.mode = Mode::Disarmed;
         m.update(&i);
-        assert!(m.detected().rotor_failed(), "the thrust cut holds");
+        assert!(m.detected().rotor_failed(), "held while armed");
         i.armed = false;
         m.update(&i);
         assert_eq!(m.detected(), Detected::default());

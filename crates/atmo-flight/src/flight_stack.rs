@@ -24,6 +24,7 @@ use crate::flare::{Flare, FlareSettings, Touchdown};
 use crate::ground_model::{Surface, ground_surface};
 use crate::modes::{Conditions, Mode, Thresholds, next_mode};
 use crate::observer::{DisturbanceObserver, ObserverSettings};
+use crate::rotor_estimate::RotorEstimate;
 use crate::settings::FlightSettings;
 
 mod drive;
@@ -112,6 +113,9 @@ pub struct FlightStack {
     encoder_tilt: f64,
     /// The tilt velocity the last tick commanded, rad/s.
     tilt_sent: f64,
+    /// The failed rotor and what it delivers (`last_thrust` and the MPC's
+    /// plan are in delivered thrust; the commands sent are over it).
+    rotor: RotorEstimate,
 }
 
 impl FlightStack {
@@ -224,6 +228,7 @@ impl FlightStack {
             ),
             encoder_tilt: 0.0,
             tilt_sent: 0.0,
+            rotor: RotorEstimate::default(),
             model,
             settings,
         })
@@ -317,7 +322,7 @@ impl FlightStack {
         match mode {
             Mode::Transition if self.plans_tilt => self.transition_tilt_max,
             Mode::Transition => self.transition_limit,
-            Mode::Takeoff | Mode::Flight | Mode::Morphing | Mode::Failsafe => self.flight_tilt_max,
+            Mode::Takeoff | Mode::Flight | Mode::Morphing | Mode::Failsafe => self.flight_limit(),
             Mode::Disarmed | Mode::Drive | Mode::Touchdown => self.tilt_max,
         }
     }
@@ -331,7 +336,8 @@ impl FlightStack {
         let top = self.thresholds.transition_height;
         let bottom = self.settings.modes.transition_full_tilt_height;
         let progress = ((top - height) / (top - bottom)).clamp(0.0, 1.0);
-        self.flight_tilt_max + (self.transition_tilt_max - self.flight_tilt_max) * progress
+        let flight = self.flight_limit();
+        flight + (self.transition_tilt_max - flight) * progress
     }
 
     /// The tilt velocity the mode asks for, before limits.
@@ -384,6 +390,7 @@ impl FlightStack {
             &state,
             height,
         );
+        self.track_rotor(detected);
         self.last_tilt = self.monitor.tilt(self.encoder_tilt);
         let tilt = self.last_tilt;
         let mpc_failed_ticks = self.mpc.failed_ticks();
@@ -401,10 +408,11 @@ impl FlightStack {
             pilot_lost: inputs.pilot_lost,
             tilt_unknown: detected.tilt_unknown(),
             rotor_failed: detected.rotor_failed(),
+            rotor_out: self.rotor_out(),
             tilt,
             time_in_mode: now.saturating_sub(self.mode_since_ns) as f64 * 1e-9,
         };
-        let (mode, mut transition) = next_mode(self.mode, &conditions, &self.thresholds);
+        let (mode, mut transition) = next_mode(self.mode, &conditions, &self.thresholds_now());
         if mode == Mode::Disarmed && conditions.armed && !conditions.rotor_failed {
             // Why the switches did not arm it.
             transition =
@@ -457,6 +465,7 @@ impl FlightStack {
             actuator_faults: detected.bits(),
         };
         self.observe(mode, tilt);
+        self.learn_rotor(tilt);
         status.disturbance = self.observer.wrench().into();
 
         let thrust = self.thrust(mode, &state, estimate_fresh, pilot, tilt, &mut status);
@@ -481,7 +490,7 @@ impl FlightStack {
         status.rejected = self.rejected;
         status.solver_cuts = self.mpc.solver_cuts();
         StepOutputs {
-            thrust: [thrust[0], thrust[1], thrust[2], thrust[3]],
+            thrust: self.rotor_commands(&thrust),
             tilt_velocity,
             rehome_tilt: inputs.rehome_tilt && mode == Mode::Disarmed,
             wheel_rates,
@@ -528,7 +537,7 @@ impl FlightStack {
         if mode == Mode::Touchdown {
             self.touchdown_thrust = self.last_thrust;
         }
-        self.transition_limit = self.flight_tilt_max;
+        self.transition_limit = self.flight_limit();
         self.flare.reset();
         if !mode.is_airborne_mode() {
             self.mpc_warm = false;
@@ -644,6 +653,10 @@ impl FlightStack {
         let height = self.last_ground_z - state[idx::Z];
         match self.mode {
             Mode::Transition => v.z = self.settings.modes.transition_descent_speed,
+            // A rotor out: down at a set speed, folded (`modes`).
+            Mode::Failsafe if self.rotor_out() => {
+                v = Vector3::new(0.0, 0.0, self.settings.monitor.rotor_out_descent_speed);
+            }
             Mode::Failsafe => v = Vector3::zeros(),
             // Below z* still folded (see `Thresholds::transition_min_tilt`):
             // hold the height until tilted, then the transition descends.
@@ -736,6 +749,7 @@ impl FlightStack {
                 .mpc
                 .set_tilt_ramp(tilt, self.tilt_command, 0.0, limit.max(tilt));
         }
+        self.configure_rotors();
         let _ = self.mpc.set_alpha(alpha);
         let _ = self.mpc.set_disturbance(&self.observer.wrench());
         let _ = self.mpc.set_ground_plane(&self.ground_plane(state));

@@ -14,9 +14,9 @@
 //!
 //! Failsafe: from Takeoff/Flight/Morphing/Transition on a stale estimate, an
 //! MPC failure past its grace, a lost driver or a lost radio, or a tilt not
-//! where it is believed; back to Flight once healthy and tilted back;
-//! to Touchdown when grounded. Any mode -> Disarmed when the arm switch
-//! drops, and any flying mode but Transition when a rotor has failed.
+//! where it is believed, or (but from Transition) a rotor out; back to
+//! Flight once healthy and tilted back (never with a rotor out); to
+//! Touchdown when grounded. Any mode -> Disarmed when the arm switch drops.
 //! ```
 //!
 //! Rows are checked in order; the first whose `from` contains the current
@@ -55,6 +55,9 @@ pub struct Conditions {
     pub tilt_unknown: bool,
     /// A rotor does not deliver its command (the actuator monitor).
     pub rotor_failed: bool,
+    /// ... and delivers too little to fly the wheel landing on
+    /// (`monitor.rotor_out_effectiveness`): descend folded.
+    pub rotor_out: bool,
     /// Measured tilt, rad.
     pub tilt: f64,
     /// Seconds since the current mode was entered.
@@ -114,13 +117,13 @@ pub const TRANSITIONS: &[Transition] = &[
         reason: "arm switch off",
     },
     Transition {
-        // Above z* nothing flies three rotors: the robot would flip with
-        // its rotors running. Cut, it falls level; a transition under way
-        // is already landing and lands.
-        from: &[Mode::Takeoff, Mode::Flight, Mode::Morphing, Mode::Failsafe],
-        to: Mode::Disarmed,
-        guard: |c, _| c.rotor_failed,
-        reason: "a rotor failed before the transition: thrust cut",
+        // Out (too little thrust left for the wheel landing's tilts) above
+        // z*: down folded at a set speed, the heading let go. A
+        // transition under way is already landing and lands.
+        from: &[Mode::Takeoff, Mode::Flight, Mode::Morphing],
+        to: Mode::Failsafe,
+        guard: |c, _| c.rotor_out,
+        reason: "a rotor out: descend folded",
     },
     Transition {
         from: &[Mode::Disarmed],
@@ -172,6 +175,7 @@ pub const TRANSITIONS: &[Transition] = &[
                 && !c.driver_lost
                 && !c.pilot_lost
                 && !c.tilt_unknown
+                && !c.rotor_out
                 && c.time_in_mode >= t.failsafe_recovery_time
                 && c.tilt <= t.failsafe_recovery_tilt
         },

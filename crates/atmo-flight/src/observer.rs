@@ -100,6 +100,12 @@ impl DisturbanceObserver {
         self.wrench
     }
 
+    /// Takes `explained` out of the estimate: a part of it now in the
+    /// model (a failed rotor's effectiveness, `rotor_estimate`).
+    pub fn take(&mut self, explained: &Vector6<f64>) {
+        self.wrench -= explained;
+    }
+
     /// Forgets everything (on the ground).
     pub fn reset(&mut self) {
         self.wrench = Vector6::zeros();

@@ -273,6 +273,7 @@ pub fn compared_fields(s: &MpcStatus) -> Vec<(String, Value)> {
         ("rejected_pilot", s.rejected_pilot),
         ("rejected_ground", s.rejected_ground),
         ("ground_contact", u64::from(s.ground_contact)),
+        ("actuator_faults", u64::from(s.actuator_faults)),
         (
             "pilot.switches",
             u64::from(p.arm) | u64::from(p.offboard) << 1 | u64::from(p.mpc_enabled) << 2,

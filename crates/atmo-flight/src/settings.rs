@@ -210,6 +210,18 @@ fn validate_monitor(c: &Checker, m: &MonitorSettings) -> Result<(), CoreError> {
     )?;
     c.range("monitor.contact_speed", m.contact_speed, 0.0..=2.0, "m/s")?;
     c.range("monitor.contact_time", m.contact_time, 0.0..=5.0, "s")?;
+    c.range(
+        "monitor.rotor_out_effectiveness",
+        m.rotor_out_effectiveness,
+        0.0..=1.0,
+        "",
+    )?;
+    c.range(
+        "monitor.rotor_out_descent_speed",
+        m.rotor_out_descent_speed,
+        0.05..=2.0,
+        "m/s",
+    )?;
     Ok(())
 }
 

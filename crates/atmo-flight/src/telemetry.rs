@@ -119,5 +119,6 @@ pub fn status_message(
         rejected_ground: s.rejected.ground,
         // Filled in by the I/O layer that owns the transports (zero in simulation).
         io: IoHealth::default(),
+        actuator_faults: s.actuator_faults,
     }
 }

@@ -32,6 +32,7 @@ fn flying() -> Conditions {
         pilot_lost: false,
         tilt_unknown: false,
         rotor_failed: false,
+        rotor_out: false,
         tilt: 0.0,
         time_in_mode: 10.0,
     }
@@ -600,15 +601,32 @@ fn a_tilt_not_where_believed_fails_safe_and_holds_until_disarmed() {
 }
 
 #[test]
-fn a_failed_rotor_cuts_the_thrust_above_the_transition_and_lets_a_transition_land() {
+fn a_reduced_rotor_flies_on_and_a_rotor_out_descends_in_failsafe_until_grounded() {
+    // Reduced (its effectiveness is in the MPC): the flight goes on.
     let c = Conditions {
         rotor_failed: true,
         ..flying()
     };
-    for mode in [Mode::Takeoff, Mode::Flight, Mode::Morphing, Mode::Failsafe] {
-        assert_eq!(step(mode, c), Mode::Disarmed, "{mode:?}");
+    for mode in [Mode::Flight, Mode::Transition] {
+        assert_eq!(step(mode, c), mode, "{mode:?}");
     }
-    assert_eq!(step(Mode::Transition, c), Mode::Transition);
+    let low = Conditions { height: 0.8, ..c };
+    assert_eq!(step(Mode::Morphing, low), Mode::Morphing);
+    let out = Conditions {
+        rotor_out: true,
+        ..c
+    };
+    for mode in [Mode::Takeoff, Mode::Flight, Mode::Morphing] {
+        assert_eq!(step(mode, out), Mode::Failsafe, "{mode:?}");
+    }
+    assert_eq!(step(Mode::Transition, out), Mode::Transition, "it lands");
+    assert_eq!(step(Mode::Failsafe, out), Mode::Failsafe, "no recovery");
+    let down = Conditions {
+        grounded: true,
+        height: 0.2,
+        ..out
+    };
+    assert_eq!(step(Mode::Failsafe, down), Mode::Touchdown);
     assert_eq!(
         step(Mode::Disarmed, c),
         Mode::Disarmed,

@@ -24,6 +24,8 @@
 //! kind = "false"
 //! [[faults.actuators.tilt_slip]]    # the tilt motor turns, the arms stay: the
 //! mode = "morphing"                 # encoder follows the command, the linkage holds
+//! [[faults.actuators.tilt_jam]]     # the linkage jams: neither the arms nor the
+//! mode = "morphing"                 # motor (nor its encoder) move from the onset
 //! [[faults.actuators.radio]]        # no radio frame for `duration`
 //! t = 1.0
 //! duration = 1.0
@@ -122,6 +124,11 @@ pub struct SlipFault {
     pub delay: f64,
 }
 
+/// `[[faults.actuators.tilt_jam]]`: from its onset the linkage does not
+/// move whatever is commanded; the encoder, on the stalled motor, reads
+/// the arms' true (unmoving) tilt.
+pub type JamFault = SlipFault;
+
 /// `[[faults.actuators.radio]]`: no radio frame for `duration`.
 #[derive(Debug, Clone, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
@@ -145,6 +152,8 @@ pub struct ActuatorFaults {
     pub contact: Vec<ContactFault>,
     #[serde(default)]
     pub tilt_slip: Vec<SlipFault>,
+    #[serde(default)]
+    pub tilt_jam: Vec<JamFault>,
     #[serde(default)]
     pub radio: Vec<RadioFault>,
 }
@@ -207,6 +216,10 @@ impl ActuatorFaults {
             let key = format!("faults.actuators.tilt_slip[{i}]");
             check_onset(&c, &key, f.t, f.mode.as_ref(), f.delay, duration)?;
         }
+        for (i, f) in self.tilt_jam.iter().enumerate() {
+            let key = format!("faults.actuators.tilt_jam[{i}]");
+            check_onset(&c, &key, f.t, f.mode.as_ref(), f.delay, duration)?;
+        }
         for (i, f) in self.radio.iter().enumerate() {
             let key = format!("faults.actuators.radio[{i}]");
             check_onset(&c, &key, f.t, f.mode.as_ref(), f.delay, duration)?;
@@ -248,6 +261,7 @@ pub struct ActuatorInjector {
     encoder: Vec<(Start, Option<f64>)>,
     contact: Vec<Start>,
     slip: Vec<Start>,
+    jam: Vec<Start>,
     radio: Vec<Start>,
     /// While slipping: the tilt the encoder counts (the arms' at the onset
     /// plus every commanded rate since), rad.
@@ -280,6 +294,11 @@ impl ActuatorInjector {
                 .iter()
                 .map(|f| Start::of(f.t, f.delay))
                 .collect(),
+            jam: config
+                .tilt_jam
+                .iter()
+                .map(|f| Start::of(f.t, f.delay))
+                .collect(),
             radio: config
                 .radio
                 .iter()
@@ -309,9 +328,13 @@ impl ActuatorInjector {
         self.slip.iter().any(|s| s.active(now_ns))
     }
 
-    /// What the tilt motor does of the commanded `rate`: slipping, the
-    /// arms hold (rate 0) and the rate is counted by [`Self::sense_slip`].
+    /// What the tilt motor does of the commanded `rate`: jammed, nothing;
+    /// slipping, the arms hold (rate 0) and the rate is counted by
+    /// [`Self::sense_slip`].
     pub fn tilt_rate(&mut self, now_ns: u64, rate: f64) -> f64 {
+        if self.jam.iter().any(|s| s.active(now_ns)) {
+            return 0.0;
+        }
         if !self.slipping(now_ns) {
             return rate;
         }
@@ -348,6 +371,9 @@ impl ActuatorInjector {
             s.on_mode(f.mode.as_ref(), f.delay, mode, now_ns);
         }
         for (f, s) in c.tilt_slip.iter().zip(&mut self.slip) {
+            s.on_mode(f.mode.as_ref(), f.delay, mode, now_ns);
+        }
+        for (f, s) in c.tilt_jam.iter().zip(&mut self.jam) {
             s.on_mode(f.mode.as_ref(), f.delay, mode, now_ns);
         }
         for (f, s) in c.radio.iter().zip(&mut self.radio) {

@@ -84,7 +84,12 @@ impl FlightStack {
             wheel_radius: self.wheel_radius,
             tilt_rate: self.tilt_rate_max,
             tilt_max: self.transition_tilt_max,
-            thrust: (COMMITTED_THRUST_MAX - attitude_share).max(0.0),
+            // A failed rotor: the balanced collective left (its asymmetry
+            // is the plan's, not attitude control's share).
+            thrust: match self.thrust_left() {
+                Some(left) => COMMITTED_THRUST_MAX * left,
+                None => (COMMITTED_THRUST_MAX - attitude_share).max(0.0),
+            },
             thrust_now: u,
             motor_time_constant: self.motor_time_constant,
         };

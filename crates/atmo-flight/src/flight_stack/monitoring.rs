@@ -1,11 +1,13 @@
 //! The actuator monitor's inputs, gathered from the flight stack each tick
 //! (`crate::actuator_monitor` decides what they show).
 
-use atmo_core::model::{State, idx};
+use atmo_core::model::{Input, State, idx};
 use atmo_mpc::wheel_clearance;
 
 use super::FlightStack;
 use crate::actuator_monitor::{Detected, MonitorInputs};
+use crate::modes::{Mode, Thresholds};
+use crate::rotor_estimate::RotorEstimate;
 
 impl FlightStack {
     /// Runs the actuator monitor on this tick's signals (the mode is the
@@ -41,5 +43,110 @@ impl FlightStack {
             wheel_clearance: clearance,
             vertical_speed: state[idx::VZ],
         })
+    }
+}
+
+impl FlightStack {
+    /// Names the failed rotor at the monitor's detection (from the
+    /// observer's torque at the tilt flown) and forgets it once the
+    /// detection is (disarmed).
+    pub(super) fn track_rotor(&mut self, detected: Detected) {
+        if !detected.rotor_failed() {
+            self.rotor.reset();
+        } else if self.rotor.rotor().is_none() {
+            let body = self.model.at_tilt(self.last_tilt);
+            self.rotor
+                .start(RotorEstimate::name_rotor(&body, &self.observer.wrench()));
+        }
+    }
+
+    /// After the observer's update: what the failed rotor explains of its
+    /// wrench becomes the rotor's effectiveness (`rotor_estimate`).
+    pub(super) fn learn_rotor(&mut self, tilt: f64) {
+        if self.rotor.rotor().is_none() {
+            return;
+        }
+        let body = self.model.at_tilt(tilt);
+        let explained = self.rotor.learn(
+            &body,
+            &self.observer.wrench(),
+            &self.last_thrust,
+            self.settings.monitor.rotor_out_effectiveness,
+        );
+        self.observer.take(&explained);
+    }
+
+    /// A failed rotor delivers too little to fly the wheel landing on.
+    pub(super) fn rotor_out(&self) -> bool {
+        self.rotor
+            .out(self.settings.monitor.rotor_out_effectiveness)
+    }
+
+    /// The MPC's rotor bounds and yaw cost for what the rotors can do: a
+    /// failed rotor bounded by its effectiveness (zero once out), the yaw
+    /// angle free (three rotors cannot hold the heading and the thrust
+    /// direction both: Mueller and D'Andrea's relaxed hover) in the
+    /// rotor-out descent. A reduced rotor is allocated around with the
+    /// heading kept, and so is one out in the transition: there the wheels
+    /// meet the ground, and a free heading spun the robot onto them at
+    /// 8 rad/s.
+    pub(super) fn configure_rotors(&mut self) {
+        let out_below = self.settings.monitor.rotor_out_effectiveness;
+        // In [0, 1] by construction: refused only if not, keeping the old.
+        let (min, max) = self.rotor.rotor_bounds(out_below);
+        let _ = self.mpc.set_rotor_bounds(&min, &max);
+        self.mpc
+            .set_yaw_free(self.rotor_out() && self.mode == Mode::Failsafe);
+    }
+
+    /// The commands sent for the delivered thrust `planned`.
+    pub(super) fn rotor_commands(&self, planned: &Input) -> [f64; 4] {
+        let u = self
+            .rotor
+            .command(planned, self.settings.monitor.rotor_out_effectiveness);
+        [u[0], u[1], u[2], u[3]]
+    }
+}
+
+impl FlightStack {
+    /// The balanced collective thrust left with a failed rotor, as a
+    /// fraction of four full rotors: rotor i at e and its diagonal
+    /// partner matched to it (roll and pitch balance), the other diagonal
+    /// full: (2 + 2 e) / 4. `None` without a rotor fault.
+    pub(super) fn thrust_left(&self) -> Option<f64> {
+        self.rotor.rotor()?;
+        let e = if self.rotor_out() {
+            0.0
+        } else {
+            self.rotor.effectiveness()
+        };
+        Some(0.5 * (1.0 + e))
+    }
+
+    /// The flight tilt limit for the thrust left, rad: the robot file's
+    /// keeps its thrust reserve with four full rotors (4 kT cos phi_max
+    /// over m g); the same reserve with a fraction `left` of them holds at
+    /// cos phi = cos phi_max / left. Zero when even folded it cannot.
+    pub(super) fn flight_limit(&self) -> f64 {
+        let Some(left) = self.thrust_left() else {
+            return self.flight_tilt_max;
+        };
+        let c = self.flight_tilt_max.cos() / left;
+        if c >= 1.0 {
+            0.0
+        } else {
+            c.acos().min(self.flight_tilt_max)
+        }
+    }
+
+    /// The mode machine's thresholds with morphing's hand-over tilt
+    /// following the flight limit in force.
+    pub(super) fn thresholds_now(&self) -> Thresholds {
+        let mut t = self.thresholds;
+        if self.thrust_left().is_some() {
+            t.transition_min_tilt =
+                self.flight_limit() - super::TRANSITION_TILT_MARGIN_DEG.to_radians();
+        }
+        t
     }
 }

@@ -372,6 +372,11 @@ pub struct MpcStatus {
     pub rejected_ground: u64,
     /// ROS 2, log and driver health (filled by the daemon from atmo-io's counters).
     pub io: IoHealth,
+    /// What the flight stack's actuator monitor has detected, bits (1:
+    /// tilt encoder stuck, 2: tilt not where believed, 4: a rotor failed,
+    /// 8: contact inferred; 0: nothing). Logs written before it decode
+    /// with 0.
+    pub actuator_faults: u8,
 }
 
 impl MpcStatus {
@@ -427,6 +432,20 @@ struct Wire<S> {
     rejected_pilot: u64,
     rejected_ground: u64,
     io: IoHealth,
+    actuator_faults: Trailing,
+}
+
+/// The message's last field, which logs written before it lack: read as
+/// 0 when the payload ends before it (the reader fails at the end of the
+/// payload; nothing follows it to misread).
+#[derive(Serialize)]
+#[serde(transparent)]
+struct Trailing(u8);
+
+impl<'de> Deserialize<'de> for Trailing {
+    fn deserialize<D: Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
+        Ok(Self(u8::deserialize(deserializer).unwrap_or(0)))
+    }
 }
 
 impl Serialize for MpcStatus {
@@ -469,6 +488,7 @@ impl Serialize for MpcStatus {
             rejected_pilot: self.rejected_pilot,
             rejected_ground: self.rejected_ground,
             io: self.io,
+            actuator_faults: Trailing(self.actuator_faults),
         }
         .serialize(serializer)
     }
@@ -524,6 +544,7 @@ impl<'de> Deserialize<'de> for MpcStatus {
             rejected_pilot: w.rejected_pilot,
             rejected_ground: w.rejected_ground,
             io: w.io,
+            actuator_faults: w.actuator_faults.0,
         })
     }
 }

@@ -263,6 +263,7 @@ pub(crate) fn sample_status() -> MpcStatus {
             drivers_alive: [true, false, true, true],
             driver_deaths: [0, 1, 0, 2],
         },
+        actuator_faults: 6,
         ..MpcStatus::default()
     };
     for i in 0..12 {
@@ -328,7 +329,18 @@ fn mpc_status_layout() {
     for v in [0u64, 1, 0, 2] {
         body.extend(v.to_le_bytes());
     }
+    body.push(6); // actuator_faults
     round_trip(&status, &body);
+    // A log written before `actuator_faults` ends at `io`: it decodes, 0.
+    let bytes = encode_to_vec(&status).unwrap();
+    let old = decode::<MpcStatus>("/atmo/status", &bytes[..bytes.len() - 1]).unwrap();
+    assert_eq!(
+        old,
+        MpcStatus {
+            actuator_faults: 0,
+            ..status
+        }
+    );
 }
 
 #[test]

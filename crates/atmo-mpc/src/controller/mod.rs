@@ -90,6 +90,15 @@ pub struct Mpc {
     ground: atmo_core::GroundPlane,
     /// The tilt-planning QP (when `[tilt_plan]` is configured).
     tilt: Option<Box<TiltPlanner>>,
+    /// Each rotor's upper bound, as a fraction of the model's full thrust
+    /// (1: healthy; a rotor seen to deliver less is bounded by what it can
+    /// deliver, so that the optimizer redistributes).
+    rotor_max: Input,
+    rotor_min: Input,
+    /// Scale of the yaw angle's and rate's weights: 1, or 0 when the
+    /// heading is let go (a robot that cannot hold it flies its thrust
+    /// direction).
+    yaw_weight: f64,
 }
 
 impl Mpc {
@@ -142,6 +151,9 @@ impl Mpc {
             ground_effect: None,
             ground_z: 0.0,
             ground: atmo_core::GroundPlane::level(0.0),
+            rotor_max: Input::from_element(1.0),
+            rotor_min: Input::zeros(),
+            yaw_weight: 1.0,
             settings,
         })
     }
@@ -372,6 +384,73 @@ impl Mpc {
         Ok(())
     }
 
+    /// Bounds each rotor's delivered thrust, as a fraction of the model's
+    /// full thrust (`0 <= min <= max <= 1`), from the next preparation: a
+    /// weak rotor's bound is what it can deliver, a stuck one's both
+    /// bounds are what it delivers. The plan is in delivered thrust: the
+    /// caller turns it into commands.
+    pub fn set_rotor_bounds(&mut self, min: &Input, max: &Input) -> Result<()> {
+        for (lo, hi) in min.iter().zip(max.iter()) {
+            if !(lo.is_finite() && hi.is_finite() && 0.0 <= *lo && lo <= hi && *hi <= 1.0) {
+                return Err(MpcError::OutOfRange {
+                    what: "rotor bounds",
+                    value: if (0.0..=1.0).contains(lo) { *hi } else { *lo },
+                    min: 0.0,
+                    max: 1.0,
+                });
+            }
+        }
+        self.rotor_min = *min;
+        self.rotor_max = *max;
+        Ok(())
+    }
+
+    /// Each rotor's bounds in use (min, max).
+    pub fn rotor_bounds(&self) -> (Input, Input) {
+        (self.rotor_min, self.rotor_max)
+    }
+
+    /// Leaves the yaw angle and rate out of the cost from the next
+    /// preparation: three rotors hold the thrust direction only if the
+    /// heading turns freely (Mueller and D'Andrea's relaxed hover).
+    pub fn set_yaw_free(&mut self, free: bool) {
+        self.yaw_weight = if free { 0.0 } else { 1.0 };
+    }
+
+    /// The state weights at `alpha` with the yaw left out when it is free.
+    pub(crate) fn state_weight_now(&self) -> State {
+        let mut q = self.settings.weights.state_weight(self.alpha);
+        if self.yaw_weight != 1.0 {
+            q[idx::YAW] *= self.yaw_weight;
+            q[idx::WZ] *= self.yaw_weight;
+        }
+        q
+    }
+
+    /// The hover input reference `hover` (equal rotors) within the rotor
+    /// bounds: a bounded rotor and its diagonal partner (1-2, 3-4) share
+    /// the level the bounded one can give, the other diagonal makes up the
+    /// rest, so that roll and pitch stay balanced (the reference is an
+    /// equilibrium the plan can hold, not one the bounds forbid).
+    pub(crate) fn rotor_reference(&self, hover: Input) -> Input {
+        if self.rotor_max.iter().all(|m| *m >= 1.0) && self.rotor_min.iter().all(|m| *m <= 0.0) {
+            return hover;
+        }
+        let (lo, hi) = (self.rotor_min, self.rotor_max);
+        let mut u = hover;
+        for (a, b, c, d) in [(0, 1, 2, 3), (2, 3, 0, 1)] {
+            let level = hover[a].clamp(lo[a].max(lo[b]), hi[a].min(hi[b]).max(lo[a].max(lo[b])));
+            if level != hover[a] {
+                let rest = 0.5 * (hover.sum() - 2.0 * level);
+                u[a] = level;
+                u[b] = level;
+                u[c] = rest.clamp(lo[c], hi[c]);
+                u[d] = rest.clamp(lo[d], hi[d]);
+            }
+        }
+        u
+    }
+
     /// The disturbance wrench in use.
     pub fn disturbance(&self) -> nalgebra::Vector6<f64> {
         self.disturbance
@@ -380,7 +459,7 @@ impl Mpc {
     fn refresh_input_reference(&mut self) {
         for k in 0..self.steps {
             let body = self.stage_body(self.varphi[k]);
-            self.u_ref[k] = hover_reference(&body);
+            self.u_ref[k] = self.rotor_reference(hover_reference(&body));
         }
     }
 

@@ -85,13 +85,12 @@ impl Mpc {
     /// The preparation's linearization with the tilt as a parameter, loaded
     /// into the 12/4 QP.
     fn linearize_nominal(&mut self) -> Result<()> {
-        let weights = &self.settings.weights;
-        let q = weights.state_weight(self.alpha);
-        let r = weights.input_weight(self.alpha);
+        let q = self.state_weight_now();
+        let r = self.settings.weights.input_weight(self.alpha);
         let dt = self.stage_dt;
         for k in 0..self.steps {
             let body = self.stage_body(self.varphi[k]);
-            self.u_ref[k] = hover_reference(&body);
+            self.u_ref[k] = self.rotor_reference(hover_reference(&body));
             let s = self.step_sensitivity(&body, &self.plan_x[k], &self.plan_u[k], dt);
             let defect = s.next - self.plan_x[k + 1];
             if !(s.a.iter().all(|v| v.is_finite())
@@ -107,6 +106,8 @@ impl Mpc {
             self.lin.q_diag[k] = q;
             self.lin.u_err[k] = self.plan_u[k] - self.u_ref[k];
             self.lin.u_bar[k] = self.plan_u[k];
+            self.lin.u_lo[k] = self.rotor_min;
+            self.lin.u_hi[k] = self.rotor_max;
         }
         self.lin.q_diag[self.steps] = q * self.settings.cost.terminal_scale;
         self.lin.r_diag = r;
@@ -279,7 +280,11 @@ impl Mpc {
         }
         for k in 0..self.steps {
             // The solver meets the box to its tolerance; the actuators need it exactly.
-            self.plan_u[k] = (self.plan_u[k] + self.du[k]).map(|u| u.clamp(0.0, 1.0));
+            self.plan_u[k] = (self.plan_u[k] + self.du[k]).zip_zip_map(
+                &self.rotor_min,
+                &self.rotor_max,
+                f64::clamp,
+            );
         }
         let tilt_rate = self.apply_tilt_solution();
         self.failed_ticks = 0;
@@ -365,7 +370,7 @@ impl Mpc {
             .filter(|t| t.plan.is_some())
             .map(|t| t.rate[0]);
         TickOutput {
-            u: u.map(|v| v.clamp(0.0, 1.0)),
+            u: u.zip_zip_map(&self.rotor_min, &self.rotor_max, f64::clamp),
             outcome,
             timings,
             path: FeedbackPath::NoSolve,

@@ -51,9 +51,7 @@ use std::f64::consts::FRAC_PI_2;
 
 use atmo_core::GroundPlane;
 use atmo_core::ground_effect::ThrustGainSurface;
-use atmo_core::model::{
-    Input, Model, State, TiltedBody, idx, rk4_step_sensitivity, rotation, sin_cos,
-};
+use atmo_core::model::{Model, State, TiltedBody, idx, rk4_step_sensitivity, rotation, sin_cos};
 use nalgebra::Vector3;
 
 use super::{Mpc, check_finite, hover_reference, wrap_angle};
@@ -400,10 +398,10 @@ impl Mpc {
         let n = self.steps;
         let dt = self.stage_dt;
         let w = tilt.weights;
-        let q = self.settings.weights.state_weight(self.alpha);
+        let q = self.state_weight_now();
         let r = self.settings.weights.input_weight(self.alpha);
         for k in 0..n {
-            self.u_ref[k] = hover_reference(&self.stage_body(self.varphi[k]));
+            self.u_ref[k] = self.rotor_reference(hover_reference(&self.stage_body(self.varphi[k])));
         }
         let failed = {
             let f = self.tilting_body();
@@ -429,9 +427,12 @@ impl Mpc {
                 lin.u_bar[k] = v;
                 let lo = plan.rate_min.max((plan.tilt_min - self.varphi[k]) / dt);
                 let hi = plan.rate_max.min((plan.tilt_max - self.varphi[k]) / dt);
-                lin.u_lo[k] = tilt_input(&Input::zeros(), lo.min(hi));
+                lin.u_lo[k] = tilt_input(&self.rotor_min, lo.min(hi));
                 let rotor_max = plan.thrust_max.unwrap_or(w.thrust_max);
-                lin.u_hi[k] = tilt_input(&Input::from_element(rotor_max), hi);
+                let top = self
+                    .rotor_max
+                    .zip_map(&self.rotor_min, |m, lo| m.min(rotor_max).max(lo));
+                lin.u_hi[k] = tilt_input(&top, hi);
             }
             failed
         };

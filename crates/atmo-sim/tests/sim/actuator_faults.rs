@@ -33,73 +33,154 @@ fn detected(f: &Flight, bit: u8) -> Option<&TickRecord> {
         .find(|t| t.outputs.status.actuator_faults & bit != 0)
 }
 
-/// No controller here flies three rotors: above z* a failed rotor is
-/// detected by the observer's torque at its limit and the thrust is cut
-/// (Disarmed, the rotors stopped and the linkage held) before the robot
-/// turns over. It falls: not a landing, and the test says so.
+/// The wheel landing with `faults`, randomized as the Monte Carlo does
+/// with `seed` (0: the scenario as it is). The seeds the rotor tests fly
+/// (7_000_001 on) were named before any of them was flown and chose
+/// nothing: no rule or threshold was set on them.
+fn fly_seeded(faults: &str, seed: u64) -> Flight {
+    let base = super::faults::scenario(faults);
+    let flown = if seed == 0 {
+        base
+    } else {
+        atmo_sim::monte_carlo::randomized_with_draws(&base, seed).0
+    };
+    let controller = ControllerConfig::atmo().unwrap().deterministic();
+    let mut ticks = Vec::new();
+    let summary = atmo_sim::closed_loop::fly(&flown, &controller, |r| ticks.push(*r)).unwrap();
+    Flight { summary, ticks }
+}
+
+const SEEDS: [u64; 3] = [0, 7_000_001, 7_000_002];
+
+/// The largest tilt of the body from level while `above` m up, deg.
+fn tipped(f: &Flight, from: f64, above: f64) -> f64 {
+    f.ticks
+        .iter()
+        .filter(|t| t.time >= from && t.truth_height > above)
+        .map(|t| {
+            let s = &t.truth;
+            (s[idx::ROLL].cos() * s[idx::PITCH].cos())
+                .acos()
+                .to_degrees()
+        })
+        .fold(0.0, f64::max)
+}
+
+/// A rotor stopped in flight (1.2 m up, the morph begun): detected from
+/// the observer's torque, named, its effectiveness learned to nothing;
+/// the rotor-out descent (Failsafe: that rotor commanded nothing, the
+/// heading let go, down at `rotor_out_descent_speed` folded). Two rotors
+/// on a diagonal carry the robot (2 x 28.15 N against 54 N: no margin to
+/// brake), and the rotation about that diagonal built up before the
+/// detection cannot be taken back: it hits the ground tipped, but at about
+/// 3 m/s where the thrust cut it had let fall at 4.6 m/s.
 #[test]
-fn a_rotor_failed_in_flight_is_detected_and_the_thrust_cut_before_a_flip() {
-    for (n, what) in [(2, "scale = 0.6"), (2, "scale = 0.0"), (1, "stuck = true")] {
-        let f = rotor("t = 1.0", n, what);
-        let seen = detected(&f, Detected::ROTOR).unwrap_or_else(|| panic!("{what}"));
-        assert!(seen.time > 1.0 && seen.time < 2.0, "{what}: {}", seen.time);
-        assert_eq!(seen.outputs.status.mode, Mode::Disarmed, "{what}");
-        assert_eq!(seen.outputs.thrust, [0.0; 4], "{what}");
-        assert_eq!(seen.outputs.tilt_velocity, 0.0, "{what}");
-        // Never armed again, never a take-off while the fault holds.
-        let after: Vec<Mode> = f
-            .ticks
-            .iter()
-            .filter(|t| t.time >= seen.time)
-            .map(|t| t.outputs.status.mode)
-            .collect();
-        assert!(
-            after
-                .iter()
-                .all(|m| matches!(m, Mode::Disarmed | Mode::Drive)),
-            "{what}: {after:?}"
+fn a_rotor_stopped_in_flight_descends_with_it_out_and_hits_slower_than_a_cut() {
+    for seed in SEEDS {
+        let f = fly_seeded(
+            "[[faults.actuators.rotor]]\nt = 1.0\nrotor = 2\nscale = 0.0",
+            seed,
         );
+        let seen = detected(&f, Detected::ROTOR).unwrap_or_else(|| panic!("{seed}"));
+        assert!(seen.time > 1.0 && seen.time < 1.4, "{seed}: {}", seen.time);
+        let out = f.first_in(Mode::Failsafe, seen.time).unwrap();
+        assert!(out.time - seen.time < 0.2, "{seed}: {}", out.time);
+        // Out: the rotor is commanded nothing from then on.
         assert!(
             f.ticks
                 .iter()
-                .filter(|t| t.time >= seen.time)
-                .all(|t| t.outputs.thrust == [0.0; 4])
+                .filter(|t| t.time >= out.time)
+                .all(|t| t.outputs.thrust[1] == 0.0),
+            "{seed}"
         );
-        // Cut, it falls; it does not turn over (until it is down).
-        let tipped = f
-            .ticks
-            .iter()
-            .filter(|t| t.time >= seen.time && t.truth_height > 0.3)
-            .map(|t| {
-                let s = &t.truth;
-                (s[idx::ROLL].cos() * s[idx::PITCH].cos())
-                    .acos()
-                    .to_degrees()
-            })
-            .fold(0.0, f64::max);
-        assert!(tipped < 90.0, "{what}: tipped {tipped} deg");
-        assert!(!f.landed(), "{what}");
+        assert!(
+            f.modes().iter().all(|m| *m != Mode::Disarmed),
+            "{seed}: no thrust cut"
+        );
+        let impact = f.summary.impact_speed_mps.unwrap();
+        println!(
+            "seed {seed}: rotor out at {:.3} s, impact {impact:.2} m/s, tipped {:.0} deg",
+            out.time,
+            tipped(&f, 1.0, 0.0)
+        );
+        assert!(impact < 3.6, "{seed}: {impact} (the cut: 4.6 m/s)");
+        assert!(!f.landed(), "{seed}");
     }
 }
 
+/// A rotor at 60 % in flight: detected 0.5 s after the onset (1.1 N m, just
+/// over the observer's 1 N m), by when the MPC, correcting a torque it does
+/// not know, has traded lift for attitude (0.6 m lost, falling at
+/// 1.6 m/s). Then the rotor's effectiveness is learned and the MPC
+/// allocates around it (the flight goes on, its flight tilt limit lowered
+/// to keep the reserve with the thrust left) and brakes, but not in the
+/// height left: body contact at about 1.7 m/s. Not landed, not turned over.
+#[test]
+fn a_rotor_at_60_percent_in_flight_is_allocated_around_too_late_to_land() {
+    let f = fly_seeded(
+        "[[faults.actuators.rotor]]\nt = 1.0\nrotor = 2\nscale = 0.6",
+        0,
+    );
+    let seen = detected(&f, Detected::ROTOR).unwrap();
+    assert!(seen.time > 1.3 && seen.time < 1.8, "{}", seen.time);
+    assert!(!f.modes().contains(&Mode::Disarmed));
+    // Named and learned: its command is its plan over 0.6, the largest.
+    let after: Vec<_> = f
+        .ticks
+        .iter()
+        .filter(|t| t.time > seen.time + 0.1)
+        .collect();
+    assert!(after.iter().any(|t| t.outputs.thrust[1] == 1.0));
+    assert!(tipped(&f, 1.0, 0.3) < 30.0);
+    assert!(!f.landed(), "{:?}", f.summary);
+}
+
+/// A rotor stuck at its command in flight is detected when the MPC asks
+/// for what it no longer follows; here (rotor 1) it goes on flying and
+/// touches down on the body, not turned over.
+#[test]
+fn a_rotor_stuck_in_flight_is_detected_and_flown_around() {
+    let f = fly_seeded(
+        "[[faults.actuators.rotor]]\nt = 1.0\nrotor = 1\nstuck = true",
+        0,
+    );
+    let seen = detected(&f, Detected::ROTOR).unwrap();
+    assert!(seen.time > 1.0 && seen.time < 2.5, "{}", seen.time);
+    assert!(tipped(&f, 1.0, 0.3) < 30.0);
+    assert!(f.summary.impact_speed_mps.unwrap() < 2.0, "{:?}", f.summary);
+}
+
 /// In the transition the robot is already landing: the failed rotor is
-/// detected and the landing goes on, onto the wheels below the crash speed.
+/// detected, its effectiveness learned and allocated around (the flare's
+/// prediction with the thrust left), and the landing goes on onto the
+/// wheels. The detection takes 0.2-0.3 s, by when the robot, 0.35 m up,
+/// sinks at 0.5 m/s with 0.2 s left: the criteria's 0.5 m/s are missed.
 #[test]
 fn a_rotor_failed_in_the_transition_is_detected_and_landed_on_the_wheels() {
-    for what in ["scale = 0.0", "scale = 0.6"] {
-        let f = rotor("mode = \"transition\"", 2, what);
-        let seen = detected(&f, Detected::ROTOR).unwrap_or_else(|| panic!("{what}"));
-        assert_eq!(seen.outputs.status.mode, Mode::Transition, "{what}");
-        assert!(f.summary.crash_reason.is_none(), "{what}: {:?}", f.summary);
-        let impact = f.summary.impact_speed_mps.unwrap();
-        assert!(impact < 1.5, "{what}: {impact}");
-        assert!(f.summary.touchdown_tilt_deg.unwrap() > 45.0, "{what}");
-        assert!(
-            f.modes()
-                .ends_with(&[Mode::Transition, Mode::Touchdown, Mode::Drive]),
-            "{what}: {:?}",
-            f.modes()
-        );
+    for seed in SEEDS {
+        for what in ["scale = 0.0", "scale = 0.6"] {
+            let f = fly_seeded(
+                &format!("[[faults.actuators.rotor]]\nmode = \"transition\"\nrotor = 2\n{what}"),
+                seed,
+            );
+            let seen = detected(&f, Detected::ROTOR).unwrap_or_else(|| panic!("{what}"));
+            assert_eq!(seen.outputs.status.mode, Mode::Transition, "{seed} {what}");
+            let s = &f.summary;
+            println!(
+                "seed {seed} {what}: {:?} deg, {:?} m/s, {:?}",
+                s.touchdown_tilt_deg, s.impact_speed_mps, s.crash_reason
+            );
+            let impact = s.impact_speed_mps.unwrap();
+            assert!(impact < 1.2, "{seed} {what}: {impact}");
+            assert!(s.touchdown_tilt_deg.unwrap() > 45.0, "{seed} {what}");
+            assert!(
+                f.modes()
+                    .ends_with(&[Mode::Transition, Mode::Touchdown, Mode::Drive])
+                    || f.modes().ends_with(&[Mode::Transition, Mode::Touchdown]),
+                "{seed} {what}: {:?}",
+                f.modes()
+            );
+        }
     }
     let f = rotor("mode = \"transition\"", 1, "stuck = true");
     assert_clean_landing(&f, "stuck in the transition");
@@ -278,4 +359,158 @@ fn a_bad_actuator_fault_is_refused_naming_the_key() {
             .to_string();
         assert!(err.contains(&format!("`{key}")), "{faults}: {err}");
     }
+}
+
+/// Prints what each rotor fault does (a measurement, not a check):
+/// `cargo test -p atmo-sim --test sim -- --ignored rotor_fault_outcomes --nocapture`.
+#[test]
+#[ignore = "a measurement"]
+fn rotor_fault_outcomes() {
+    for onset in ["t = 1.0", "mode = \"transition\""] {
+        for n in 1..=4 {
+            for what in ["scale = 0.6", "scale = 0.0", "stuck = true", "scale = 0.8"] {
+                let f = rotor(onset, n, what);
+                let seen = detected(&f, Detected::ROTOR).map(|t| t.time);
+                let tipped = f
+                    .ticks
+                    .iter()
+                    .filter(|t| t.truth_height > 0.3)
+                    .map(|t| {
+                        let s = &t.truth;
+                        (s[idx::ROLL].cos() * s[idx::PITCH].cos())
+                            .acos()
+                            .to_degrees()
+                    })
+                    .fold(0.0, f64::max);
+                let spin = f
+                    .ticks
+                    .iter()
+                    .map(|t| t.truth[idx::WZ].abs())
+                    .fold(0.0, f64::max);
+                let s = &f.summary;
+                println!(
+                    "{onset:>22} rotor {n} {what:>12}: seen {seen:?} modes {:?} tilt {:?} impact {:?} crash {:?} tipped {tipped:.0} deg spin {spin:.1} rad/s landed {}",
+                    f.modes(),
+                    s.touchdown_tilt_deg.map(|v| (v * 10.0).round() / 10.0),
+                    s.impact_speed_mps.map(|v| (v * 100.0).round() / 100.0),
+                    s.crash_reason,
+                    f.landed()
+                );
+            }
+        }
+    }
+}
+
+/// Prints one rotor fault's flight tick by tick (a measurement):
+/// `ROTOR_TRACE='t = 1.0|2|scale = 0.0' cargo test -p atmo-sim --test sim -- --ignored rotor_fault_trace --nocapture`.
+#[test]
+#[ignore = "a measurement"]
+fn rotor_fault_trace() {
+    let spec = std::env::var("ROTOR_TRACE").unwrap_or_else(|_| "t = 1.0|2|scale = 0.0".into());
+    let parts: Vec<&str> = spec.split('|').collect();
+    let f = rotor(parts[0], parts[1].parse().unwrap(), parts[2]);
+    for t in f.ticks.iter().filter(|t| t.time > 0.9).step_by(5) {
+        let s = &t.truth;
+        let o = &t.outputs;
+        println!(
+            "{:.3} {:?} h {:.2} vz {:.2} roll {:.0} pitch {:.0} wz {:.1} tilt {:.0} u [{:.2} {:.2} {:.2} {:.2}] {:?} d [{:.1} {:.2} {:.2}]",
+            t.time,
+            o.status.mode,
+            t.truth_height,
+            s[idx::VZ],
+            s[idx::ROLL].to_degrees(),
+            s[idx::PITCH].to_degrees(),
+            s[idx::WZ],
+            t.truth_tilt.to_degrees(),
+            o.thrust[0],
+            o.thrust[1],
+            o.thrust[2],
+            o.thrust[3],
+            o.status.solver,
+            o.status.disturbance[2],
+            o.status.disturbance[3],
+            o.status.disturbance[4],
+        );
+    }
+    println!("{:?}", f.summary);
+}
+
+/// The linkage jams: the arms do not move and the tilt motor, stalled with
+/// them, does not turn its encoder. The stuck-encoder detector sees the
+/// commanded travel unanswered and dead-reckons the tilt; the tilt then
+/// believed is not where the arms are, the lift it did not predict trips
+/// the tilt detector: failsafe, held until disarmed, and with both
+/// detections the encoder (which was right) is flown on again.
+#[test]
+fn a_jammed_linkage_is_detected_and_fails_safe_on_the_encoders_tilt() {
+    for onset in ["mode = \"morphing\"\ndelay = 0.2", "mode = \"transition\""] {
+        let f = fly_with(&format!("[[faults.actuators.tilt_jam]]\n{onset}"));
+        let stuck = detected(&f, Detected::ENCODER_STUCK).unwrap_or_else(|| panic!("{onset}"));
+        let mismatch = detected(&f, Detected::TILT_MISMATCH).unwrap_or_else(|| panic!("{onset}"));
+        assert!(mismatch.time >= stuck.time, "{onset}");
+        assert_eq!(mismatch.outputs.status.mode, Mode::Failsafe, "{onset}");
+        assert!(f.summary.crash_reason.is_none(), "{onset}: {:?}", f.summary);
+        // From the second detection the tilt flown is the arms'.
+        let worst = f
+            .ticks
+            .iter()
+            .filter(|t| t.time > mismatch.time)
+            .map(|t| (t.outputs.status.tilt - t.truth_tilt).abs())
+            .fold(0.0, f64::max);
+        assert!(worst < 1e-3, "{onset}: {worst}");
+        // Failsafe until the end or the ground, never flight again.
+        assert!(
+            f.ticks
+                .iter()
+                .filter(|t| t.time >= mismatch.time)
+                .all(|t| matches!(
+                    t.outputs.status.mode,
+                    Mode::Failsafe | Mode::Touchdown | Mode::Drive
+                )),
+            "{onset}: {:?}",
+            f.modes()
+        );
+        let s = &f.summary;
+        println!(
+            "{onset}: stuck {:.3} mismatch {:.3} modes {:?} tilt {:?} impact {:?} end h {:.2}",
+            stuck.time,
+            mismatch.time,
+            f.modes(),
+            s.touchdown_tilt_deg,
+            s.impact_speed_mps,
+            f.ticks.last().unwrap().truth_height
+        );
+    }
+}
+
+/// The monitor's detections are in the status the log records: a replayed
+/// log shows the tick each detector fired at, and repeats it bit for bit.
+#[test]
+fn the_monitors_detections_are_logged_and_a_replay_repeats_them() {
+    use atmo_flight::replay::{CutReplay, RecordedFlight, replay};
+    use atmo_sim::closed_loop::{STATUS_TOPIC, fly_logged};
+    let dir = std::path::Path::new(env!("CARGO_TARGET_TMPDIR")).join("actuator-faults");
+    std::fs::create_dir_all(&dir).unwrap();
+    let controller = ControllerConfig::atmo().unwrap().deterministic();
+    let log = dir.join("rotor_in_transition.mcap");
+    let scenario = super::faults::scenario(
+        "[[faults.actuators.rotor]]\nmode = \"transition\"\nrotor = 2\nscale = 0.6",
+    );
+    let mut ticks = Vec::new();
+    fly_logged(&scenario, &controller, &log, |t| ticks.push(*t)).unwrap();
+    let flown = ticks
+        .iter()
+        .position(|t| t.outputs.status.actuator_faults & Detected::ROTOR != 0)
+        .unwrap();
+    let flight = RecordedFlight::read(&log, STATUS_TOPIC).unwrap();
+    let logged = flight
+        .status
+        .iter()
+        .position(|s| s.actuator_faults & Detected::ROTOR != 0)
+        .unwrap();
+    assert_eq!(logged, flown);
+    assert_eq!(flight.status[logged].tick, flown as u64);
+    let config = RecordedFlight::config(&flight.files).unwrap();
+    let report = replay(&flight, &config, CutReplay::AsLogged, |_| {}).unwrap();
+    assert_eq!(report.first_difference, None, "{report:?}");
 }
