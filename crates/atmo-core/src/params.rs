@@ -38,10 +38,11 @@
 //!   file that was written without it must default to the behaviour before
 //!   it, so that every older flight log still replays.
 //! - `key "loop"`: the key's name in the file when it is not the field's.
-//! - `range a..=b` (and `unit "N"`): checked by [`CheckRange`]; an array
+//! - `range a..=b`: checked by [`CheckRange`]; an array
 //!   or `Vec` checks each element, an `Option` its value when present. The
 //!   bounds may name other fields of the table (bound by reference:
 //!   `range 0.0..=*max_speed`).
+//! - `unit "N"`: named in listings and in the range's error.
 //!
 //! A field whose type is itself a `params!` table (or an `Option` of one)
 //! is a nested table: checked and listed under its key, with no marker.
@@ -130,8 +131,13 @@ pub fn key(prefix: &str, name: &str) -> String {
 pub trait CheckRange<B> {
     /// # Errors
     /// A value (or element) outside `range`, naming `key` (and its index).
-    fn check_range(&self, c: &Checker, key: &str, range: RangeInclusive<B>, unit: &str)
-    -> Result<()>;
+    fn check_range(
+        &self,
+        c: &Checker,
+        key: &str,
+        range: RangeInclusive<B>,
+        unit: &str,
+    ) -> Result<()>;
 }
 
 impl<B: Bounded> CheckRange<B> for B {
@@ -294,7 +300,8 @@ macro_rules! params {
                 $vis:vis $field:ident : $ty:ty
                 $(= $default:expr)?
                 $(, key $key:literal)?
-                $(, range $range:expr $(, unit $unit:literal)?)?
+                $(, range $range:expr)?
+                $(, unit $unit:literal)?
                 ;
             )*
         }
@@ -364,8 +371,9 @@ macro_rules! params {
                     $crate::__param_check!(
                         checker,
                         $crate::params::key(prefix, $crate::__param_key!($field $($key)?)),
-                        $field
-                        $(, range $range $(, $unit)?)?
+                        $field,
+                        [$($range)?],
+                        [$($unit)?]
                     );
                 )*
                 $(
@@ -385,7 +393,8 @@ macro_rules! params {
                         $ty,
                         concat!("" $(, $doc, "\n")*),
                         [$(stringify!($default))?],
-                        [$(stringify!($range) $(, $unit)?)?]
+                        [$(stringify!($range))?],
+                        [$($unit)?]
                     );
                 )*
             }
@@ -421,23 +430,20 @@ macro_rules! __param_default {
 #[doc(hidden)]
 #[macro_export]
 macro_rules! __param_check {
-    ($c:ident, $key:expr, $field:ident) => {{
+    ($c:ident, $key:expr, $field:ident, [], [$($unit:literal)?]) => {{
         #[allow(unused_imports, reason = "one of the two is chosen")]
         use $crate::params::{LeafField as _, NestedField as _};
         (&$crate::params::Field($field)).check_nested($c, &$key)?
     }};
-    ($c:ident, $key:expr, $field:ident, range $range:expr) => {
-        $crate::params::CheckRange::check_range($field, $c, &$key, $range, "")?
-    };
-    ($c:ident, $key:expr, $field:ident, range $range:expr, $unit:literal) => {
-        $crate::params::CheckRange::check_range($field, $c, &$key, $range, $unit)?
+    ($c:ident, $key:expr, $field:ident, [$range:expr], [$($unit:literal)?]) => {
+        $crate::params::CheckRange::check_range($field, $c, &$key, $range, concat!("" $(, $unit)?))?
     };
 }
 
 #[doc(hidden)]
 #[macro_export]
 macro_rules! __param_list {
-    ($out:ident, $key:expr, $ty:ty, $doc:expr, [$($default:expr)?], [$($range:expr $(, $unit:literal)?)?]) => {{
+    ($out:ident, $key:expr, $ty:ty, $doc:expr, [$($default:expr)?], [$($range:expr)?], [$($unit:literal)?]) => {{
         #[allow(unused_imports, reason = "one of the two is chosen")]
         use $crate::params::{LeafField as _, NestedField as _};
         let info = $crate::params::ParamInfo {
@@ -445,7 +451,7 @@ macro_rules! __param_list {
             ty: stringify!($ty),
             default: $crate::__param_opt!($($default)?),
             range: $crate::__param_opt!($($range)?),
-            unit: concat!("" $($(, $unit)?)?),
+            unit: concat!("" $(, $unit)?),
             doc: $doc,
         };
         (&$crate::params::Kind::<$ty>(::std::marker::PhantomData)).list_nested(info, $out)

@@ -79,7 +79,12 @@ fn an_old_file_reads_the_added_key_as_its_default() {
     assert_eq!(after.min_interval, 0.0);
     assert_eq!(
         (after.max_speed, after.threshold, after.rate, &after.gains),
-        (before.max_speed, before.threshold, before.rate, &before.gains)
+        (
+            before.max_speed,
+            before.threshold,
+            before.rate,
+            &before.gains
+        )
     );
     assert_eq!(after.gains.limits, [1.0; 3]);
     assert_eq!(check(&after), "ok");
@@ -103,7 +108,10 @@ fn unknown_repeated_and_missing_keys_are_refused_with_their_path() {
     let e = parse::<Before>(&OLD_FILE.replace("kp = 2.0\n", ""))
         .unwrap_err()
         .to_string();
-    assert!(e.contains("gains") && e.contains("missing field `kp`"), "{e}");
+    assert!(
+        e.contains("gains") && e.contains("missing field `kp`"),
+        "{e}"
+    );
     let e = parse::<Before>(&OLD_FILE.replace("[gains]", "[gains]\nkp = 1.0"))
         .unwrap_err()
         .to_string();
@@ -166,4 +174,3 @@ fn the_parameter_table_lists_every_key_once() {
     assert_eq!(params[0].default, None);
     assert_eq!(params[5].range, None);
 }
-

@@ -151,6 +151,15 @@ fn replay_command(
 ) -> Result<bool> {
     use atmo_flight::replay::{CutReplay, RecordedFlight, replay};
     let flight = RecordedFlight::read(log, status_topic)?;
+    println!(
+        "{}: configuration schema version {} (this build's: {})",
+        log.display(),
+        flight.files.schema_version,
+        atmo_flight::schema::CONFIG_SCHEMA_VERSION
+    );
+    for change in &flight.files.migrated {
+        println!("  migrated: {change}");
+    }
     let mut files = flight.files.clone();
     if let Some(path) = what_if {
         for replaced in files.override_with(path)? {

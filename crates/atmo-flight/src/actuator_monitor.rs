@@ -26,31 +26,32 @@
 
 use crate::modes::Mode;
 
-/// `[monitor]` of `config/flight.toml`: the detectors' thresholds.
-#[derive(Debug, Clone, Copy, PartialEq, serde::Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct MonitorSettings {
-    pub enabled: bool,
-    /// Encoder change that counts as movement, deg.
-    pub encoder_step_deg: f64,
-    /// Commanded tilt travel without encoder movement that makes the
-    /// encoder stuck, deg.
-    pub encoder_stuck_travel_deg: f64,
-    /// Observer body-z force that says the tilt is not where it is
-    /// believed, N.
-    pub tilt_force: f64,
-    /// ... held this long, s.
-    pub tilt_force_time: f64,
-    /// The observer's roll or pitch torque held at its limit this long
-    /// says a rotor has failed, s.
-    pub rotor_time: f64,
-    /// Wheel clearance at or below which the estimate says the wheels
-    /// touch, m.
-    pub contact_clearance: f64,
-    /// Vertical speed within which the estimate says the robot rests, m/s.
-    pub contact_speed: f64,
-    /// ... both held this long, s.
-    pub contact_time: f64,
+atmo_core::params! {
+    /// `[monitor]` of `config/flight.toml`: the detectors' thresholds.
+    #[derive(Debug, Clone, Copy, PartialEq)]
+    pub struct MonitorSettings {
+        pub enabled: bool;
+        /// Encoder change that counts as movement.
+        pub encoder_step_deg: f64, range 0.0..=10.0, unit "deg";
+        /// Commanded tilt travel without encoder movement that makes the
+        /// encoder stuck.
+        pub encoder_stuck_travel_deg: f64, range *encoder_step_deg..=45.0, unit "deg";
+        /// Observer body-z force that says the tilt is not where it is
+        /// believed.
+        pub tilt_force: f64, range 0.0..=200.0, unit "N";
+        /// ... held this long.
+        pub tilt_force_time: f64, range 0.0..=5.0, unit "s";
+        /// The observer's roll or pitch torque held at its limit this long
+        /// says a rotor has failed.
+        pub rotor_time: f64, range 0.0..=5.0, unit "s";
+        /// Wheel clearance at or below which the estimate says the wheels
+        /// touch.
+        pub contact_clearance: f64, range -0.1..=0.5, unit "m";
+        /// Vertical speed within which the estimate says the robot rests.
+        pub contact_speed: f64, range 0.0..=2.0, unit "m/s";
+        /// ... both held this long.
+        pub contact_time: f64, range 0.0..=5.0, unit "s";
+    }
 }
 
 impl MonitorSettings {

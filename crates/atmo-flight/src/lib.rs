@@ -48,6 +48,7 @@ pub mod modes;
 pub mod observer;
 pub mod rc;
 pub mod replay;
+pub mod schema;
 pub mod settings;
 pub mod step_io;
 pub mod telemetry;
