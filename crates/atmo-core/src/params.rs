@@ -38,7 +38,8 @@
 //!   file that was written without it must default to the behaviour before
 //!   it, so that every older flight log still replays.
 //! - `key "loop"`: the key's name in the file when it is not the field's.
-//! - `range a..=b`: checked by [`CheckRange`]; an array
+//! - `range a..=b`, `range Positive` or `range Finite`: checked by
+//!   [`CheckRange`]; an array
 //!   or `Vec` checks each element, an `Option` its value when present. The
 //!   bounds may name other fields of the table (bound by reference:
 //!   `range 0.0..=*max_speed`).
@@ -47,9 +48,10 @@
 //! A field whose type is itself a `params!` table (or an `Option` of one)
 //! is a nested table: checked and listed under its key, with no marker.
 //!
-//! Checks a range cannot say (one key against another, a value that
-//! must be positive) go in a trailing `check |c, prefix| { ... }` block,
-//! which sees the fields by reference and returns `Result<(), CoreError>`.
+//! Checks a range cannot say (one key against another, a physical
+//! property of several) go in a trailing `check |table, c, prefix| expr`,
+//! which sees the table, the [`Checker`], the key prefix and each field by
+//! reference, and returns `Result<(), CoreError>`.
 
 use std::ops::RangeInclusive;
 
@@ -118,6 +120,19 @@ pub fn check_file<T: Params>(config: &T, file: &std::path::Path) -> Result<()> {
     config.check(&Checker::new(file), "")
 }
 
+/// A table of named tables (`[presets.fig5]`, `[presets.default]`): each
+/// checked under its name, listed once under `<name>`.
+impl<T: Params> Params for std::collections::BTreeMap<String, T> {
+    fn check(&self, c: &Checker, prefix: &str) -> Result<()> {
+        self.iter()
+            .try_for_each(|(name, t)| t.check(c, &key(prefix, name)))
+    }
+
+    fn list(prefix: &str, out: &mut Vec<ParamInfo>) {
+        T::list(&key(prefix, "<name>"), out);
+    }
+}
+
 /// The full key of `name` under `prefix`.
 pub fn key(prefix: &str, name: &str) -> String {
     if prefix.is_empty() {
@@ -127,28 +142,66 @@ pub fn key(prefix: &str, name: &str) -> String {
     }
 }
 
+/// What a declared `range` allows: `a..=b`, [`Positive`] or [`Finite`].
+#[derive(Debug, Clone, PartialEq)]
+pub enum Span<B> {
+    Within(RangeInclusive<B>),
+    /// Finite and above zero.
+    Positive,
+    /// Any finite number.
+    Finite,
+}
+
+/// `range Positive`: finite and above zero.
+#[derive(Debug, Clone, Copy)]
+pub struct Positive;
+
+/// `range Finite`: any finite number.
+#[derive(Debug, Clone, Copy)]
+pub struct Finite;
+
+impl<B> From<RangeInclusive<B>> for Span<B> {
+    fn from(range: RangeInclusive<B>) -> Self {
+        Self::Within(range)
+    }
+}
+
+impl<B> From<Positive> for Span<B> {
+    fn from(_: Positive) -> Self {
+        Self::Positive
+    }
+}
+
+impl<B> From<Finite> for Span<B> {
+    fn from(_: Finite) -> Self {
+        Self::Finite
+    }
+}
+
+impl<B: Bounded> Span<B> {
+    /// # Errors
+    /// `value` outside the span, naming `key`.
+    pub fn check(&self, c: &Checker, key: &str, value: B, unit: &str) -> Result<()> {
+        match self {
+            Self::Within(range) => c.range(key, value, range.clone(), unit),
+            Self::Positive if value.is_positive() => Ok(()),
+            Self::Positive => Err(c.fail(key, B::POSITIVE, value)),
+            Self::Finite if value.is_number() => Ok(()),
+            Self::Finite => Err(c.fail(key, "a finite number", value)),
+        }
+    }
+}
+
 /// A value a declared `range` bounds.
 pub trait CheckRange<B> {
     /// # Errors
-    /// A value (or element) outside `range`, naming `key` (and its index).
-    fn check_range(
-        &self,
-        c: &Checker,
-        key: &str,
-        range: RangeInclusive<B>,
-        unit: &str,
-    ) -> Result<()>;
+    /// A value (or element) outside `span`, naming `key` (and its index).
+    fn check_range(&self, c: &Checker, key: &str, span: Span<B>, unit: &str) -> Result<()>;
 }
 
 impl<B: Bounded> CheckRange<B> for B {
-    fn check_range(
-        &self,
-        c: &Checker,
-        key: &str,
-        range: RangeInclusive<B>,
-        unit: &str,
-    ) -> Result<()> {
-        c.range(key, *self, range, unit)
+    fn check_range(&self, c: &Checker, key: &str, span: Span<B>, unit: &str) -> Result<()> {
+        span.check(c, key, *self, unit)
     }
 }
 
@@ -156,49 +209,31 @@ fn check_each<B: Bounded>(
     values: &[B],
     c: &Checker,
     key: &str,
-    range: &RangeInclusive<B>,
+    span: &Span<B>,
     unit: &str,
 ) -> Result<()> {
     for (i, v) in values.iter().enumerate() {
-        c.range(&format!("{key}[{i}]"), *v, range.clone(), unit)?;
+        span.check(c, &format!("{key}[{i}]"), *v, unit)?;
     }
     Ok(())
 }
 
 impl<B: Bounded, const N: usize> CheckRange<B> for [B; N] {
-    fn check_range(
-        &self,
-        c: &Checker,
-        key: &str,
-        range: RangeInclusive<B>,
-        unit: &str,
-    ) -> Result<()> {
-        check_each(self, c, key, &range, unit)
+    fn check_range(&self, c: &Checker, key: &str, span: Span<B>, unit: &str) -> Result<()> {
+        check_each(self, c, key, &span, unit)
     }
 }
 
 impl<B: Bounded> CheckRange<B> for Vec<B> {
-    fn check_range(
-        &self,
-        c: &Checker,
-        key: &str,
-        range: RangeInclusive<B>,
-        unit: &str,
-    ) -> Result<()> {
-        check_each(self, c, key, &range, unit)
+    fn check_range(&self, c: &Checker, key: &str, span: Span<B>, unit: &str) -> Result<()> {
+        check_each(self, c, key, &span, unit)
     }
 }
 
 impl<B, T: CheckRange<B>> CheckRange<B> for Option<T> {
-    fn check_range(
-        &self,
-        c: &Checker,
-        key: &str,
-        range: RangeInclusive<B>,
-        unit: &str,
-    ) -> Result<()> {
+    fn check_range(&self, c: &Checker, key: &str, span: Span<B>, unit: &str) -> Result<()> {
         self.as_ref()
-            .map_or(Ok(()), |v| v.check_range(c, key, range, unit))
+            .map_or(Ok(()), |v| v.check_range(c, key, span, unit))
     }
 }
 
@@ -305,7 +340,7 @@ macro_rules! params {
                 ;
             )*
         }
-        $(check |$c:ident, $p:ident| $body:block)?
+        $(check |$s:ident, $c:ident, $p:ident| $body:expr)?
     ) => {
         $(#[$meta])*
         $svis struct $name {
@@ -377,6 +412,7 @@ macro_rules! params {
                     );
                 )*
                 $(
+                    let $s = self;
                     let $c = checker;
                     let $p = prefix;
                     let extra: $crate::Result<()> = $body;
@@ -436,7 +472,17 @@ macro_rules! __param_check {
         (&$crate::params::Field($field)).check_nested($c, &$key)?
     }};
     ($c:ident, $key:expr, $field:ident, [$range:expr], [$($unit:literal)?]) => {
-        $crate::params::CheckRange::check_range($field, $c, &$key, $range, concat!("" $(, $unit)?))?
+        {
+            #[allow(unused_imports, reason = "for ranges that name them")]
+            use $crate::params::{Finite, Positive};
+            $crate::params::CheckRange::check_range(
+                $field,
+                $c,
+                &$key,
+                ($range).into(),
+                concat!("" $(, $unit)?),
+            )?
+        }
     };
 }
 

@@ -29,7 +29,7 @@ crate::params! {
         /// Optional name.
         pub name: Option<String> = None;
     }
-    check |c, prefix| {
+    check |_table, c, prefix| {
         if *rate > 500.0 && *max_speed > 1.0 {
             return Err(c.fail(
                 &crate::params::key(prefix, "loop"),

@@ -68,7 +68,7 @@ atmo_core::params! {
         /// the spread above a thousandth of it).
         pub touchdown_tilt_error_deg: PredictionError, unit "deg";
     }
-    check |c, prefix| {
+    check |_table, c, prefix| {
         let errors = [
             ("impact_speed_error", impact_speed_error, 1.0, "m/s"),
             ("touchdown_tilt_error_deg", touchdown_tilt_error_deg, 20.0, "deg"),

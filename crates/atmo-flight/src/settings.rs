@@ -64,7 +64,7 @@ atmo_core::params! {
         /// Thrust ramp to zero after touchdown.
         pub thrust_cut_time: f64, range 0.0..=5.0, unit "s";
     }
-    check |c, prefix| {
+    check |_table, c, prefix| {
         let key = |name| atmo_core::params::key(prefix, name);
         c.positive(&key("takeoff_height"), *takeoff_height)?;
         if !(takeoff_target_height.is_finite() && takeoff_target_height > takeoff_height) {
