@@ -48,6 +48,10 @@
 //! A field whose type is itself a `params!` table (or an `Option` of one)
 //! is a nested table: checked and listed under its key, with no marker.
 //!
+//! `pub struct Name: Default { ... }` also implements `Default` from the
+//! declared defaults (every field must have one): a table a file may
+//! leave out whole.
+//!
 //! Checks a range cannot say (one key against another, a physical
 //! property of several) go in a trailing `check |table, c, prefix| expr`,
 //! which sees the table, the [`Checker`], the key prefix and each field by
@@ -329,7 +333,7 @@ impl<T> LeafField for &Kind<T> {}
 macro_rules! params {
     (
         $(#[$meta:meta])*
-        $svis:vis struct $name:ident {
+        $svis:vis struct $name:ident $(: $derive_default:ident)? {
             $(
                 $(#[doc = $doc:literal])*
                 $vis:vis $field:ident : $ty:ty
@@ -346,6 +350,10 @@ macro_rules! params {
         $svis struct $name {
             $( $(#[doc = $doc])* $vis $field: $ty, )*
         }
+
+        $crate::__param_default_impl!(
+            [$($derive_default)?] $name [$($field [$($default)?]),*]
+        );
 
         impl<'de> $crate::params::__serde::Deserialize<'de> for $name {
             fn deserialize<D>(deserializer: D) -> ::std::result::Result<Self, D::Error>
@@ -460,6 +468,19 @@ macro_rules! __param_default {
     };
     ($key:expr, $default:expr) => {
         $default
+    };
+}
+
+#[doc(hidden)]
+#[macro_export]
+macro_rules! __param_default_impl {
+    ([] $name:ident [$($field:ident [$($default:expr)?]),*]) => {};
+    ([Default] $name:ident [$($field:ident [$default:expr]),*]) => {
+        impl Default for $name {
+            fn default() -> Self {
+                Self { $($field: $default),* }
+            }
+        }
     };
 }
 
