@@ -29,6 +29,7 @@ crate::params! {
     /// `[environment]`.
     #[derive(Debug, Clone, PartialEq)]
     pub struct Environment {
+        /// Gravitational acceleration.
         pub gravity: f64, range 0.1..=100.0, unit "m/s^2";
     }
 }
@@ -38,11 +39,17 @@ crate::params! {
     /// principal moments that satisfy the triangle inequality).
     #[derive(Debug, Clone, Copy, PartialEq)]
     pub struct Inertia {
+        /// Moment about x.
         pub xx: f64, unit "kg m^2";
+        /// Moment about y.
         pub yy: f64, unit "kg m^2";
+        /// Moment about z.
         pub zz: f64, unit "kg m^2";
+        /// Product of inertia xy.
         pub xy: f64, unit "kg m^2";
+        /// Product of inertia xz.
         pub xz: f64, unit "kg m^2";
+        /// Product of inertia yz.
         pub yz: f64, unit "kg m^2";
     }
     check |inertia, c, prefix| c.inertia(prefix, &inertia.matrix())
@@ -63,7 +70,9 @@ crate::params! {
     /// `[base]`: the central body.
     #[derive(Debug, Clone, PartialEq)]
     pub struct Base {
+        /// Mass; its centre of mass is the base origin B.
         pub mass: f64, range 1e-3..=1e3, unit "kg";
+        /// About B, body frame.
         pub inertia: Inertia;
     }
 }
@@ -72,6 +81,7 @@ crate::params! {
     /// `[arm]`: the right arm (the left one mirrors it).
     #[derive(Debug, Clone, PartialEq)]
     pub struct Arm {
+        /// Mass of one arm (with its two rotors' mounts).
         pub mass: f64, range 1e-4..=1e3, unit "kg";
         pub inertia: Inertia;
         /// How `inertia` is used; see [`ArmInertiaConvention`].
@@ -110,6 +120,7 @@ crate::params! {
     /// `[rotor]`: each of the four rotors.
     #[derive(Debug, Clone, PartialEq)]
     pub struct Rotor {
+        /// Mass of one rotor.
         pub mass: f64, range 1e-5..=1e2, unit "kg";
         /// Principal (xx, yy, zz) in the rotor frame.
         pub inertia: [f64; 3], unit "kg m^2";
@@ -143,9 +154,11 @@ crate::params! {
     /// `[wheels]`.
     #[derive(Debug, Clone, PartialEq)]
     pub struct Wheels {
+        /// Wheel radius.
         pub radius: f64, range Positive, unit "m";
         /// Half the distance between the left and right wheels.
         pub half_track: f64, range Positive, unit "m";
+        /// Wheel motor limit.
         pub max_rate: f64, range Positive, unit "rad/s";
     }
 }
@@ -155,8 +168,11 @@ crate::params! {
     /// tilt up to `limits.tilt_max_deg`).
     #[derive(Debug, Clone, PartialEq)]
     pub struct LinkageConfig {
+        /// Linkage offset h.
         pub h: f64, range Positive, unit "m";
+        /// Link length d1.
         pub d1: f64, range Positive, unit "m";
+        /// Link length d2.
         pub d2: f64, range Positive, unit "m";
         /// The fixed pivot D = (Dx, Dy).
         pub d: [f64; 2], range Finite, unit "m";
@@ -171,8 +187,11 @@ crate::params! {
     /// `[limits]`: the tilt and thrust limits and the mode heights.
     #[derive(Debug, Clone, PartialEq)]
     pub struct Limits {
+        /// The tilt mechanism's speed.
         pub tilt_rate_max: f64, range Positive, unit "rad/s";
+        /// Mechanical end stop (the drive configuration).
         pub tilt_max_deg: f64, range 1.0..=90.0, unit "deg";
+        /// Tilt limit in free flight.
         pub tilt_flight_max_deg: f64, range 0.0..=*tilt_max_deg, unit "deg";
         /// Between `tilt_flight_max_deg` and `tilt_max_deg`.
         pub tilt_transition_max_deg: f64, unit "deg";

@@ -71,6 +71,9 @@ pub struct ParamInfo {
     pub ty: &'static str,
     /// The default as written, `None` for a required key.
     pub default: Option<&'static str>,
+    /// The default of the enclosing table a file may leave out whole
+    /// (the innermost such table), as written.
+    pub table_default: Option<&'static str>,
     /// The range as written, `None` when unchecked.
     pub range: Option<&'static str>,
     pub unit: &'static str,
@@ -82,6 +85,31 @@ impl ParamInfo {
     pub fn doc_line(&self) -> String {
         self.doc.split_whitespace().collect::<Vec<_>>().join(" ")
     }
+}
+
+/// `params` as a Markdown table under the heading `file`: key, default
+/// (`required` when none), range, unit and doc, one line each.
+pub fn markdown_table(file: &str, params: &[ParamInfo]) -> String {
+    use std::fmt::Write as _;
+    let mut out =
+        format!("### {file}\n\n| key | default | range | unit | doc |\n|---|---|---|---|---|\n");
+    let cell = |s: &str| s.replace('|', "\\|");
+    for p in params {
+        let _ = writeln!(
+            out,
+            "| `{}` | {} | {} | {} | {} |",
+            p.key,
+            match (p.default, p.table_default) {
+                (Some(d), _) => format!("`{}`", cell(d)),
+                (None, Some(t)) => format!("required in the table (absent table: `{}`)", cell(t)),
+                (None, None) => "required".to_string(),
+            },
+            p.range.map_or(String::new(), |r| format!("`{}`", cell(r))),
+            p.unit,
+            cell(&p.doc_line()),
+        );
+    }
+    out
 }
 
 /// A config table declared with [`params!`](crate::params!).
@@ -299,7 +327,7 @@ impl<T: Params> NestedField for Field<'_, T> {
         self.0.check(c, key)
     }
     fn list_nested(&self, info: ParamInfo, out: &mut Vec<ParamInfo>) {
-        T::list(&info.key, out);
+        list_table::<T>(&info, out);
     }
 }
 
@@ -308,7 +336,19 @@ impl<T: Params> NestedField for Kind<T> {
         Ok(())
     }
     fn list_nested(&self, info: ParamInfo, out: &mut Vec<ParamInfo>) {
-        T::list(&info.key, out);
+        list_table::<T>(&info, out);
+    }
+}
+
+/// Lists the nested table `table` declares; its default (if any) is the
+/// table default of its keys.
+fn list_table<T: Params>(table: &ParamInfo, out: &mut Vec<ParamInfo>) {
+    let first = out.len();
+    T::list(&table.key, out);
+    if table.default.is_some() {
+        for p in &mut out[first..] {
+            p.table_default = p.table_default.or(table.default);
+        }
     }
 }
 
@@ -517,6 +557,7 @@ macro_rules! __param_list {
             key: $key,
             ty: stringify!($ty),
             default: $crate::__param_opt!($($default)?),
+            table_default: None,
             range: $crate::__param_opt!($($range)?),
             unit: concat!("" $(, $unit)?),
             doc: $doc,

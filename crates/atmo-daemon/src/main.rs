@@ -49,10 +49,15 @@ enum Command {
     },
     /// Validate every config file the daemon would use.
     ///
-    /// Prints what it would run with, and exits (0: valid).
+    /// Prints what it would run with, and exits (0: valid). With --params,
+    /// prints every parameter of the robot, flight and MPC files and of
+    /// [rc] and [arming] (key, default, range, unit, doc) instead.
     Check {
         #[command(flatten)]
         config: DaemonConfigArg,
+        /// Print the parameter reference (Markdown) and exit.
+        #[arg(long)]
+        params: bool,
     },
     /// Run the arming checks and a props-off tilt sweep; print a table.
     ///
@@ -115,7 +120,11 @@ fn main() {
             log,
             duration,
         } => run(&config, log, duration),
-        Command::Check { config } => check(&config),
+        Command::Check { params: true, .. } => {
+            print!("{}", atmo_flight::settings::parameter_reference());
+            Ok(())
+        }
+        Command::Check { config, .. } => check(&config),
         Command::Preflight {
             config,
             sweep_to_deg,

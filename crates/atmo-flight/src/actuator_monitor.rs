@@ -30,6 +30,7 @@ atmo_core::params! {
     /// `[monitor]` of `config/flight.toml`: the detectors' thresholds.
     #[derive(Debug, Clone, Copy, PartialEq)]
     pub struct MonitorSettings {
+        /// Whether the detectors run (detections latch until disarmed).
         pub enabled: bool;
         /// Encoder change that counts as movement.
         pub encoder_step_deg: f64, range 0.0..=10.0, unit "deg";

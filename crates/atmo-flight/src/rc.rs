@@ -57,7 +57,9 @@ atmo_core::params! {
     /// `RC_MAP_*`) and whether its sign is turned.
     #[derive(Debug, Clone, Copy, PartialEq, Eq)]
     pub struct Stick {
+        /// 1-based channel.
         pub channel: u32, range 1..=MAX_CHANNEL;
+        /// Whether the stick's sign is turned.
         pub reversed: bool = false;
     }
 }
@@ -74,7 +76,9 @@ atmo_core::params! {
     /// One switch: its channel (1-based) and the position that is "on".
     #[derive(Debug, Clone, Copy, PartialEq, Eq)]
     pub struct Switch {
+        /// 1-based channel.
         pub channel: u32, range 1..=MAX_CHANNEL;
+        /// `high` or `low`: the end of travel that is on.
         pub on: SwitchOn;
     }
 }

@@ -32,6 +32,7 @@ atmo_core::params! {
     pub struct PilotSettings {
         /// Velocity commands are limited to this norm.
         pub max_speed: f64, range 0.0..=1.0, unit "m/s";
+        /// Yaw rate at full command.
         pub max_yaw_rate: f64, range 0.0..=5.0, unit "rad/s";
         /// A downward command above this below z_varphi starts morphing.
         pub descent_threshold: f64, range 0.0..=*max_speed, unit "m/s";
@@ -98,6 +99,7 @@ atmo_core::params! {
     /// `[observer]`: the disturbance observer of the offset-free MPC.
     #[derive(Debug, Clone, PartialEq)]
     pub struct ObserverConfig {
+        /// Whether the observer learns the body wrench in flight.
         pub enabled: bool;
         /// Gain per estimate.
         pub force_gain: f64, range 0.0..=1.0;
@@ -139,6 +141,35 @@ impl FlightSettings {
         )
         .expect("the shipped config/flight.toml is valid (tested)")
     }
+}
+
+/// The parameter reference (`docs/parameters.md`, `atmo-daemon check
+/// --params`): every key of the robot, flight and MPC files and of the
+/// daemon file's `[rc]` and `[arming]`, as declared.
+pub fn parameter_reference() -> String {
+    use atmo_core::params::{Params, markdown_table};
+    let mut rc = Vec::new();
+    crate::rc::RcConfig::list("rc", &mut rc);
+    let mut arming = Vec::new();
+    crate::arming::ArmingSettings::list("arming", &mut arming);
+    let tables = [
+        markdown_table(
+            "robot (config/atmo.toml)",
+            &atmo_core::RobotConfig::params(),
+        ),
+        markdown_table("flight (config/flight.toml)", &FlightSettings::params()),
+        markdown_table("MPC (config/mpc.toml)", &atmo_mpc::MpcFile::params()),
+        markdown_table("daemon [rc] (config/daemon.toml)", &rc),
+        markdown_table("daemon [arming] (config/daemon.toml)", &arming),
+    ];
+    format!(
+        "# Parameters\n\nGenerated from the declarations (`atmo_core::params!`) by \
+         `cargo run -p atmo-daemon -- check --params > docs/parameters.md`; a test \
+         checks it is current. A key with a default may be left out of a file; \
+         `required` keys may not. Ranges are as declared (they may name other keys \
+         of the table).\n\n{}",
+        tables.join("\n")
+    )
 }
 
 impl ConfigFile for FlightSettings {

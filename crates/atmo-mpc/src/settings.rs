@@ -144,9 +144,13 @@ atmo_core::params! {
     /// strictly convex in the inputs whatever alpha is.
     #[derive(Debug, Clone, Copy, PartialEq)]
     pub struct CostPreset {
+        /// State weight Q_1 (x, y, z, yaw, pitch, roll, velocities, rates).
         pub q1: [f64; NX];
+        /// State weight Q_2, blended with Q_1 by alpha.
         pub q2: [f64; NX];
+        /// Input weight R_1 (the four rotors).
         pub r1: [f64; NU];
+        /// Input weight R_2, blended with R_1 by alpha.
         pub r2: [f64; NU];
     }
     check |_table, c, prefix| {
@@ -191,13 +195,17 @@ atmo_core::params! {
     /// `[solver]`: the interior-point QP solver (Clarabel).
     #[derive(Debug, Clone, Copy, PartialEq)]
     pub struct SolverSettings {
+        /// `condensed` or `sparse` (see [`Formulation`]).
         pub formulation: Formulation;
         /// Clarabel interior-point iteration cap.
         pub max_iter: u32, range 1..=1000, unit "iterations";
         /// Clarabel time limit per solve.
         pub time_limit: f64, range 1e-5..=10.0, unit "s";
+        /// Clarabel's absolute duality-gap tolerance.
         pub tol_gap_abs: f64, range 1e-12..=1e-2;
+        /// Clarabel's relative duality-gap tolerance.
         pub tol_gap_rel: f64, range 1e-12..=1e-2;
+        /// Clarabel's feasibility tolerance.
         pub tol_feas: f64, range 1e-12..=1e-2;
         /// Clarabel's Ruiz equilibration (computed once, from the start-up QP).
         pub equilibrate: bool;
@@ -236,7 +244,9 @@ atmo_core::params! {
     /// `[feedback]`: how the estimate enters the plan each tick.
     #[derive(Debug, Clone, Copy, PartialEq)]
     pub struct FeedbackSettings {
+        /// `homotopy` or `clarabel` (see [`FeedbackMethod`]).
         pub method: FeedbackMethod;
+        /// `plan` or `model` (see [`Predictor`]).
         pub predictor: Predictor;
         /// Working-set changes the feedback's homotopy may make before it falls
         /// back to a full Clarabel solve at the estimate.
