@@ -144,14 +144,17 @@ impl FlightSettings {
 }
 
 /// The parameter reference (`docs/parameters.md`, `atmo-daemon check
-/// --params`): every key of the robot, flight and MPC files and of the
-/// daemon file's `[rc]` and `[arming]`, as declared.
+/// --params`): every key of the robot, flight and MPC files, of the
+/// ground-effect surface the MPC may predict with, and of the daemon
+/// file's `[rc]` and `[arming]`, as declared.
 pub fn parameter_reference() -> String {
     use atmo_core::params::{Params, markdown_table};
     let mut rc = Vec::new();
     crate::rc::RcConfig::list("rc", &mut rc);
     let mut arming = Vec::new();
     crate::arming::ArmingSettings::list("arming", &mut arming);
+    let mut surface = Vec::new();
+    atmo_core::ground_effect::GroundEffectConfig::list("effects.ground_effect", &mut surface);
     let tables = [
         markdown_table(
             "robot (config/atmo.toml)",
@@ -159,6 +162,10 @@ pub fn parameter_reference() -> String {
         ),
         markdown_table("flight (config/flight.toml)", &FlightSettings::params()),
         markdown_table("MPC (config/mpc.toml)", &atmo_mpc::MpcFile::params()),
+        markdown_table(
+            "ground-effect surface (a plant file's, when the MPC's model.ground_effect names one)",
+            &surface,
+        ),
         markdown_table("daemon [rc] (config/daemon.toml)", &rc),
         markdown_table("daemon [arming] (config/daemon.toml)", &arming),
     ];
