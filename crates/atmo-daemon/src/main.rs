@@ -50,8 +50,8 @@ enum Command {
     /// Validate every config file the daemon would use.
     ///
     /// Prints what it would run with, and exits (0: valid). With --params,
-    /// prints every parameter of the robot, flight and MPC files and of
-    /// [rc] and [arming] (key, default, range, unit, doc) instead.
+    /// prints every parameter of the robot, flight, MPC and daemon files
+    /// (key, default, range, unit, doc) instead.
     Check {
         #[command(flatten)]
         config: DaemonConfigArg,
@@ -121,7 +121,7 @@ fn main() {
             duration,
         } => run(&config, log, duration),
         Command::Check { params: true, .. } => {
-            print!("{}", atmo_flight::settings::parameter_reference());
+            print!("{}", atmo_daemon::reference::parameter_reference());
             Ok(())
         }
         Command::Check { config, .. } => check(&config),

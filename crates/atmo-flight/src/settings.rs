@@ -143,42 +143,6 @@ impl FlightSettings {
     }
 }
 
-/// The parameter reference (`docs/parameters.md`, `atmo-daemon check
-/// --params`): every key of the robot, flight and MPC files, of the
-/// ground-effect surface the MPC may predict with, and of the daemon
-/// file's `[rc]` and `[arming]`, as declared.
-pub fn parameter_reference() -> String {
-    use atmo_core::params::{Params, markdown_table};
-    let mut rc = Vec::new();
-    crate::rc::RcConfig::list("rc", &mut rc);
-    let mut arming = Vec::new();
-    crate::arming::ArmingSettings::list("arming", &mut arming);
-    let mut surface = Vec::new();
-    atmo_core::ground_effect::GroundEffectConfig::list("effects.ground_effect", &mut surface);
-    let tables = [
-        markdown_table(
-            "robot (config/atmo.toml)",
-            &atmo_core::RobotConfig::params(),
-        ),
-        markdown_table("flight (config/flight.toml)", &FlightSettings::params()),
-        markdown_table("MPC (config/mpc.toml)", &atmo_mpc::MpcFile::params()),
-        markdown_table(
-            "ground-effect surface (a plant file's, when the MPC's model.ground_effect names one)",
-            &surface,
-        ),
-        markdown_table("daemon [rc] (config/daemon.toml)", &rc),
-        markdown_table("daemon [arming] (config/daemon.toml)", &arming),
-    ];
-    format!(
-        "# Parameters\n\nGenerated from the declarations (`atmo_core::params!`) by \
-         `cargo run -p atmo-daemon -- check --params > docs/parameters.md`; a test \
-         checks it is current. A key with a default may be left out of a file; \
-         `required` keys may not. Ranges are as declared (they may name other keys \
-         of the table).\n\n{}",
-        tables.join("\n")
-    )
-}
-
 impl ConfigFile for FlightSettings {
     type Error = CoreError;
 

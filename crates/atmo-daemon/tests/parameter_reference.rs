@@ -3,7 +3,8 @@
 //! it must be the current one, so that the reference never says what a
 //! declaration no longer does.
 
-use atmo_flight::settings::{FlightSettings, parameter_reference};
+use atmo_daemon::reference::parameter_reference;
+use atmo_flight::settings::FlightSettings;
 
 #[test]
 fn docs_parameters_md_is_generated_from_the_declarations() {
