@@ -333,7 +333,6 @@ impl FlightConfigFiles {
     /// # Errors
     /// The logger has stopped.
     pub fn log_to(&self, log: &LoggerHandle, log_time_ns: u64) -> atmo_io::Result<()> {
-        let mut entries = BTreeMap::new();
         for (role, file) in self.files() {
             log.attach(
                 &format!("config/{role}"),
@@ -341,14 +340,20 @@ impl FlightConfigFiles {
                 log_time_ns,
                 file.text.as_bytes().to_vec(),
             )?;
+        }
+        log.metadata(CONFIG_METADATA, self.metadata_entries())
+    }
+
+    /// The [`CONFIG_METADATA`] record's entries.
+    fn metadata_entries(&self) -> BTreeMap<String, String> {
+        let mut entries = BTreeMap::new();
+        for (role, file) in self.files() {
             entries.insert(format!("{role}.source"), file.source.display().to_string());
             entries.insert(format!("{role}.sha256"), file.sha256());
         }
-        entries.insert(
-            SCHEMA_VERSION_KEY.to_string(),
-            self.schema_version.to_string(),
-        );
-        log.metadata(CONFIG_METADATA, entries)
+        let version = self.schema_version.to_string();
+        entries.insert(SCHEMA_VERSION_KEY.to_string(), version);
+        entries
     }
 
     /// The configuration stored in a log by [`Self::log_to`]; `file` names
@@ -482,6 +487,57 @@ mod tests {
         assert_eq!(
             parsed.mpc,
             MpcSettings::atmo(&parsed.flight.mpc_preset).unwrap()
+        );
+    }
+
+    /// What [`FlightConfigFiles::log_to`] stores, with the schema version
+    /// `version` (`None`: a log written before versions were recorded).
+    fn extras(files: &FlightConfigFiles, version: Option<&str>) -> atmo_io::mcap_log::LogExtras {
+        let mut meta = files.metadata_entries();
+        match version {
+            Some(v) => meta.insert(SCHEMA_VERSION_KEY.to_string(), v.to_string()),
+            None => meta.remove(SCHEMA_VERSION_KEY),
+        };
+        let attachments = files
+            .files()
+            .into_iter()
+            .map(|(role, f)| atmo_io::mcap_log::LogAttachment {
+                name: format!("config/{role}"),
+                media_type: TOML_MEDIA_TYPE.to_string(),
+                log_time_ns: 0,
+                data: f.text.as_bytes().to_vec(),
+            })
+            .collect();
+        atmo_io::mcap_log::LogExtras {
+            attachments,
+            metadata: vec![(CONFIG_METADATA.to_string(), meta)],
+        }
+    }
+
+    #[test]
+    fn a_log_records_its_schema_and_one_of_a_newer_schema_is_refused() {
+        let files = FlightConfigFiles::shipped();
+        let log = Path::new("f.mcap");
+        let current = CONFIG_SCHEMA_VERSION.to_string();
+        assert_eq!(
+            FlightConfigFiles::from_log(&extras(&files, Some(&current)), log).unwrap(),
+            files
+        );
+        // Unrecorded: the shipped flare is of the current schema.
+        assert_eq!(
+            FlightConfigFiles::from_log(&extras(&files, None), log).unwrap(),
+            files
+        );
+        let newer = (CONFIG_SCHEMA_VERSION + 1).to_string();
+        let e = FlightConfigFiles::from_log(&extras(&files, Some(&newer)), log)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("f.mcap")
+                && e.contains(&format!(
+                    "schema version {newer}, newer than this build's {current}"
+                )),
+            "{e}"
         );
     }
 
