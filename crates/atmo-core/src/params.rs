@@ -39,10 +39,10 @@
 //!   it, so that every older flight log still replays.
 //! - `key "loop"`: the key's name in the file when it is not the field's.
 //! - `range a..=b`, `range Positive` or `range Finite`: checked by
-//!   [`CheckRange`]; an array
-//!   or `Vec` checks each element, an `Option` its value when present. The
-//!   bounds may name other fields of the table (bound by reference:
-//!   `range 0.0..=*max_speed`).
+//!   [`CheckRange`]; an array or `Vec` checks each element (its index in
+//!   the key), an `Option` its value when present. The bounds may name
+//!   fields declared before (bound by reference: `range 0.0..=*max_speed`),
+//!   whose own ranges are checked first.
 //! - `unit "N"`: named in listings and in the range's error.
 //!
 //! A field whose type is itself a `params!` table (or an `Option` of one)
