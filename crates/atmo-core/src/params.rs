@@ -36,7 +36,8 @@
 //! Field forms, after `name: Type`:
 //! - `= expr`: the default of a key a file may leave out. A key added to a
 //!   file that was written without it must default to the behaviour before
-//!   it, so that every older flight log still replays.
+//!   it, so that every older flight log still replays. Unlike serde's
+//!   derive, an `Option` field is required unless declared `= None`.
 //! - `key "loop"`: the key's name in the file when it is not the field's.
 //! - `range a..=b`, `range Positive` or `range Finite`: checked by
 //!   [`CheckRange`]; an array or `Vec` checks each element (its index in
