@@ -7,36 +7,52 @@
 use nalgebra::Matrix3;
 use serde::Deserialize;
 
-/// The whole robot file (`config/atmo.toml`).
-#[derive(Debug, Clone, Deserialize, PartialEq)]
-#[serde(deny_unknown_fields)]
-pub struct RobotConfig {
-    pub environment: Environment,
-    pub base: Base,
-    pub arm: Arm,
-    pub rotor: Rotor,
-    pub wheels: Wheels,
-    pub linkage: LinkageConfig,
-    pub limits: Limits,
+crate::params! {
+    /// The whole robot file (`config/atmo.toml`). Besides each value's
+    /// range, the physical checks of [`crate::validate`]: the linkage
+    /// reaches every tilt, the rotors carry the weight with the reserve,
+    /// the composite inertia is physical.
+    #[derive(Debug, Clone, PartialEq)]
+    pub struct RobotConfig {
+        pub environment: Environment;
+        pub base: Base;
+        pub arm: Arm;
+        pub rotor: Rotor;
+        pub wheels: Wheels;
+        pub linkage: LinkageConfig;
+        pub limits: Limits;
+    }
+    check |robot, c, prefix| crate::validate::physical(robot, c, prefix)
 }
 
-#[derive(Debug, Clone, Deserialize, PartialEq)]
-#[serde(deny_unknown_fields)]
-pub struct Environment {
-    /// m/s^2.
-    pub gravity: f64,
+crate::params! {
+    /// `[environment]`.
+    #[derive(Debug, Clone, PartialEq)]
+    pub struct Environment {
+        /// Gravitational acceleration.
+        pub gravity: f64, range 0.1..=100.0, unit "m/s^2";
+    }
 }
 
-/// A symmetric inertia tensor by its six entries (kg m^2).
-#[derive(Debug, Clone, Copy, Deserialize, PartialEq)]
-#[serde(deny_unknown_fields)]
-pub struct Inertia {
-    pub xx: f64,
-    pub yy: f64,
-    pub zz: f64,
-    pub xy: f64,
-    pub xz: f64,
-    pub yz: f64,
+crate::params! {
+    /// A symmetric inertia tensor by its six entries (positive definite,
+    /// principal moments that satisfy the triangle inequality).
+    #[derive(Debug, Clone, Copy, PartialEq)]
+    pub struct Inertia {
+        /// Moment about x.
+        pub xx: f64, unit "kg m^2";
+        /// Moment about y.
+        pub yy: f64, unit "kg m^2";
+        /// Moment about z.
+        pub zz: f64, unit "kg m^2";
+        /// Product of inertia xy.
+        pub xy: f64, unit "kg m^2";
+        /// Product of inertia xz.
+        pub xz: f64, unit "kg m^2";
+        /// Product of inertia yz.
+        pub yz: f64, unit "kg m^2";
+    }
+    check |inertia, c, prefix| c.inertia(prefix, &inertia.matrix())
 }
 
 impl Inertia {
@@ -50,28 +66,33 @@ impl Inertia {
     }
 }
 
-#[derive(Debug, Clone, Deserialize, PartialEq)]
-#[serde(deny_unknown_fields)]
-pub struct Base {
-    /// kg.
-    pub mass: f64,
-    pub inertia: Inertia,
+crate::params! {
+    /// `[base]`: the central body.
+    #[derive(Debug, Clone, PartialEq)]
+    pub struct Base {
+        /// Mass; its centre of mass is the base origin B.
+        pub mass: f64, range 1e-3..=1e3, unit "kg";
+        /// About B, body frame.
+        pub inertia: Inertia;
+    }
 }
 
-#[derive(Debug, Clone, Deserialize, PartialEq)]
-#[serde(deny_unknown_fields)]
-pub struct Arm {
-    /// kg.
-    pub mass: f64,
-    pub inertia: Inertia,
-    /// How `inertia` is used; see [`ArmInertiaConvention`].
-    pub inertia_convention: ArmInertiaConvention,
-    /// m, base origin B to the right hinge A, body frame.
-    pub base_to_hinge: [f64; 3],
-    /// m, hinge A to the right arm's centre of mass, arm frame.
-    pub hinge_to_com: [f64; 3],
-    /// m, hinge A to rotor 1, arm frame.
-    pub hinge_to_rotor1: [f64; 3],
+crate::params! {
+    /// `[arm]`: the right arm (the left one mirrors it).
+    #[derive(Debug, Clone, PartialEq)]
+    pub struct Arm {
+        /// Mass of one arm (with its two rotors' mounts).
+        pub mass: f64, range 1e-4..=1e3, unit "kg";
+        pub inertia: Inertia;
+        /// How `inertia` is used; see [`ArmInertiaConvention`].
+        pub inertia_convention: ArmInertiaConvention;
+        /// Base origin B to the right hinge A, body frame.
+        pub base_to_hinge: [f64; 3], range Finite, unit "m";
+        /// Hinge A to the right arm's centre of mass, arm frame.
+        pub hinge_to_com: [f64; 3], range Finite, unit "m";
+        /// Hinge A to rotor 1, arm frame.
+        pub hinge_to_rotor1: [f64; 3], range Finite, unit "m";
+    }
 }
 
 /// How the listed arm inertia enters the model.
@@ -95,63 +116,112 @@ pub enum ArmInertiaConvention {
     AboutCom,
 }
 
-#[derive(Debug, Clone, Deserialize, PartialEq)]
-#[serde(deny_unknown_fields)]
-pub struct Rotor {
-    /// kg.
-    pub mass: f64,
-    /// kg m^2, principal (xx, yy, zz) in the rotor frame.
-    pub inertia: [f64; 3],
-    /// N, thrust at full command.
-    pub k_thrust: f64,
-    /// m, reaction moment per unit thrust.
-    pub k_moment: f64,
-    /// Reaction-moment sign per rotor, each +1 or -1.
-    pub yaw_sign: [f64; 4],
-    /// s, time constant of the thrust's first-order response to a command
-    /// (0: immediate, the MPC's model; a robot file without it reads 0).
-    #[serde(default)]
-    pub time_constant: f64,
+crate::params! {
+    /// `[rotor]`: each of the four rotors.
+    #[derive(Debug, Clone, PartialEq)]
+    pub struct Rotor {
+        /// Mass of one rotor.
+        pub mass: f64, range 1e-5..=1e2, unit "kg";
+        /// Principal (xx, yy, zz) in the rotor frame.
+        pub inertia: [f64; 3], unit "kg m^2";
+        /// Thrust at full command.
+        pub k_thrust: f64, range 1e-3..=1e5, unit "N";
+        /// Reaction moment per unit thrust.
+        pub k_moment: f64, range 0.0..=1.0, unit "m";
+        /// Reaction-moment sign per rotor, each +1 or -1.
+        pub yaw_sign: [f64; 4];
+        /// Time constant of the thrust's first-order response to a command
+        /// (0: immediate, the MPC's model and what a robot file without it
+        /// flew).
+        pub time_constant: f64 = 0.0, range 0.0..=1.0, unit "s";
+    }
+    check |_table, c, prefix| {
+        let [ixx, iyy, izz] = *inertia;
+        c.inertia(
+            &crate::params::key(prefix, "inertia"),
+            &nalgebra::Matrix3::from_diagonal(&nalgebra::Vector3::new(ixx, iyy, izz)),
+        )?;
+        for (i, s) in yaw_sign.iter().enumerate() {
+            if *s != 1.0 && *s != -1.0 {
+                return Err(c.fail(&format!("{}[{i}]", crate::params::key(prefix, "yaw_sign")), "+1 or -1", s));
+            }
+        }
+        Ok(())
+    }
 }
 
-#[derive(Debug, Clone, Deserialize, PartialEq)]
-#[serde(deny_unknown_fields)]
-pub struct Wheels {
-    /// m.
-    pub radius: f64,
-    /// m, half the distance between the left and right wheels.
-    pub half_track: f64,
-    /// rad/s.
-    pub max_rate: f64,
+crate::params! {
+    /// `[wheels]`.
+    #[derive(Debug, Clone, PartialEq)]
+    pub struct Wheels {
+        /// Wheel radius.
+        pub radius: f64, range Positive, unit "m";
+        /// Half the distance between the left and right wheels.
+        pub half_track: f64, range Positive, unit "m";
+        /// Wheel motor limit.
+        pub max_rate: f64, range Positive, unit "rad/s";
+    }
 }
 
-#[derive(Debug, Clone, Deserialize, PartialEq)]
-#[serde(deny_unknown_fields)]
-pub struct LinkageConfig {
-    pub h: f64,
-    pub d1: f64,
-    pub d2: f64,
-    /// m, the fixed pivot D = (Dx, Dy).
-    pub d: [f64; 2],
-    /// m of screw travel per revolution.
-    pub thread_pitch: f64,
-    /// Encoder counts per output revolution.
-    pub counts_per_rev: f64,
+crate::params! {
+    /// `[linkage]`: the tilt mechanism's geometry (it must reach every
+    /// tilt up to `limits.tilt_max_deg`).
+    #[derive(Debug, Clone, PartialEq)]
+    pub struct LinkageConfig {
+        /// Linkage offset h.
+        pub h: f64, range Positive, unit "m";
+        /// Link length d1.
+        pub d1: f64, range Positive, unit "m";
+        /// Link length d2.
+        pub d2: f64, range Positive, unit "m";
+        /// The fixed pivot D = (Dx, Dy).
+        pub d: [f64; 2], range Finite, unit "m";
+        /// Screw travel per revolution.
+        pub thread_pitch: f64, range Positive, unit "m";
+        /// Encoder counts per output revolution.
+        pub counts_per_rev: f64, range Positive;
+    }
 }
 
-#[derive(Debug, Clone, Deserialize, PartialEq)]
-#[serde(deny_unknown_fields)]
-pub struct Limits {
-    /// rad/s.
-    pub tilt_rate_max: f64,
-    pub tilt_max_deg: f64,
-    pub tilt_flight_max_deg: f64,
-    pub tilt_transition_max_deg: f64,
-    pub thrust_reserve: f64,
-    /// m, z*.
-    pub transition_height: f64,
-    /// m, z_varphi.
-    pub morph_height: f64,
+crate::params! {
+    /// `[limits]`: the tilt and thrust limits and the mode heights.
+    #[derive(Debug, Clone, PartialEq)]
+    pub struct Limits {
+        /// The tilt mechanism's speed.
+        pub tilt_rate_max: f64, range Positive, unit "rad/s";
+        /// Mechanical end stop (the drive configuration).
+        pub tilt_max_deg: f64, range 1.0..=90.0, unit "deg";
+        /// Tilt limit in free flight.
+        pub tilt_flight_max_deg: f64, range 0.0..=*tilt_max_deg, unit "deg";
+        /// Between `tilt_flight_max_deg` and `tilt_max_deg`.
+        pub tilt_transition_max_deg: f64, unit "deg";
+        /// Full thrust over the weight the robot must keep.
+        pub thrust_reserve: f64, range 1.0..=10.0;
+        /// z* (> 0).
+        pub transition_height: f64, range Positive, unit "m";
+        /// z_varphi, above `transition_height`.
+        pub morph_height: f64, unit "m";
+    }
+    check |_table, c, prefix| {
+        let key = |name| crate::params::key(prefix, name);
+        if tilt_transition_max_deg < tilt_flight_max_deg || tilt_transition_max_deg > tilt_max_deg {
+            return Err(c.fail(
+                &key("tilt_transition_max_deg"),
+                format!(
+                    "tilt limits in order: tilt_flight_max_deg ({tilt_flight_max_deg}) <= tilt_transition_max_deg <= tilt_max_deg ({tilt_max_deg})"
+                ),
+                tilt_transition_max_deg,
+            ));
+        }
+        if !(morph_height.is_finite() && morph_height > transition_height) {
+            return Err(c.fail(
+                &key("morph_height"),
+                format!("a height above {} ({transition_height} m)", key("transition_height")),
+                morph_height,
+            ));
+        }
+        Ok(())
+    }
 }
 
 impl Limits {

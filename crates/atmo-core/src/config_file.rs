@@ -1,15 +1,18 @@
 //! The one loading layer of every config file of the project.
 //!
-//! A config type derives `Deserialize` (with `deny_unknown_fields`) and
-//! implements [`ConfigFile::validate`]; it then gets [`ConfigFile::load`] and
+//! A config type is declared with [`crate::params!`] (each parameter once:
+//! doc, type, default, range, unit; strict `Deserialize` included) and
+//! implements [`ConfigFile::validate`], usually as
+//! [`crate::params::check_file`]; it then gets [`ConfigFile::load`] and
 //! [`ConfigFile::from_toml_str`]. Loading is strict: unknown keys, missing
 //! keys and wrong types are refused by serde with the file, the line and the
 //! full key path; every value is then checked against its range by a
 //! [`Checker`], whose errors name the file, the key, what was expected (with
 //! its unit) and what was found.
 //!
-//! Adding one parameter is one field (with its default, if any) and one
-//! check line, e.g. `c.range("horizon.duration", h.duration, 0.01..=10.0, "s")?`.
+//! Adding one parameter is one line of its table's `params!`, e.g.
+//! `pub duration: f64, range 0.01..=10.0, unit "s";`, with a default when
+//! files written before it exist (the default says what they meant).
 
 use std::fmt::Display;
 use std::ops::RangeInclusive;
@@ -156,12 +159,20 @@ pub trait Bounded: PartialOrd + Display + Copy {
     /// How the expected value is described: "a value" or "an integer".
     const KIND: &'static str;
     fn is_number(self) -> bool;
+    /// How a number above zero is described.
+    const POSITIVE: &'static str;
+    /// A number above zero.
+    fn is_positive(self) -> bool;
 }
 
 impl Bounded for f64 {
     const KIND: &'static str = "a value";
+    const POSITIVE: &'static str = "a finite value > 0";
     fn is_number(self) -> bool {
         self.is_finite()
+    }
+    fn is_positive(self) -> bool {
+        self.is_finite() && self > 0.0
     }
 }
 
@@ -169,8 +180,12 @@ macro_rules! bounded_integer {
     ($($t:ty),*) => {$(
         impl Bounded for $t {
             const KIND: &'static str = "an integer";
+            const POSITIVE: &'static str = "an integer > 0";
             fn is_number(self) -> bool {
                 true
+            }
+            fn is_positive(self) -> bool {
+                self > 0
             }
         }
     )*};

@@ -35,6 +35,7 @@ pub mod ground_plane;
 pub mod limits;
 pub mod linkage;
 pub mod model;
+pub mod params;
 pub mod validate;
 
 pub use config::RobotConfig;

@@ -49,10 +49,15 @@ enum Command {
     },
     /// Validate every config file the daemon would use.
     ///
-    /// Prints what it would run with, and exits (0: valid).
+    /// Prints what it would run with, and exits (0: valid). With --params,
+    /// prints every parameter of the robot, flight, MPC and daemon files
+    /// (key, default, range, unit, doc) instead.
     Check {
         #[command(flatten)]
         config: DaemonConfigArg,
+        /// Print the parameter reference (Markdown) and exit.
+        #[arg(long)]
+        params: bool,
     },
     /// Run the arming checks and a props-off tilt sweep; print a table.
     ///
@@ -115,7 +120,11 @@ fn main() {
             log,
             duration,
         } => run(&config, log, duration),
-        Command::Check { config } => check(&config),
+        Command::Check { params: true, .. } => {
+            print!("{}", atmo_daemon::reference::parameter_reference());
+            Ok(())
+        }
+        Command::Check { config, .. } => check(&config),
         Command::Preflight {
             config,
             sweep_to_deg,
@@ -151,6 +160,15 @@ fn replay_command(
 ) -> Result<bool> {
     use atmo_flight::replay::{CutReplay, RecordedFlight, replay};
     let flight = RecordedFlight::read(log, status_topic)?;
+    println!(
+        "{}: configuration schema version {} (this build's: {})",
+        log.display(),
+        flight.files.schema_version,
+        atmo_flight::schema::CONFIG_SCHEMA_VERSION
+    );
+    for change in &flight.files.migrated {
+        println!("  migrated: {change}");
+    }
     let mut files = flight.files.clone();
     if let Some(path) = what_if {
         for replaced in files.override_with(path)? {

@@ -38,12 +38,11 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU8, AtomicU64, Ordering};
 use std::time::{Duration, Instant};
 
-use atmo_core::config_file::{Checker, ConfigFile};
+use atmo_core::config_file::ConfigFile;
 use atmo_io::drivers::{DriverHealth, DriverPortsConfig, FlightPorts, monotonic_ns};
 use atmo_io::mcap_log::{Compression, LoggerHandle, LoggerOptions};
 use atmo_io::msg::{ActuatorMotors, IoHealth, OffboardControlMode};
 use atmo_io::ros2::{Ros2Config, Ros2Inputs, Ros2Publisher};
-use serde::Deserialize;
 
 use atmo_flight::arming::{ArmingMonitor, ArmingObservation, ArmingSettings};
 use atmo_flight::control_loop::{TickIo, TickTiming};
@@ -53,80 +52,79 @@ use atmo_flight::flight_stack::{Estimate, StepInputs, StepOutputs};
 use atmo_flight::inputs::{DriveCommand, InputLatch, InputSettings};
 use atmo_flight::rc::{RcConfig, RcPilot};
 
-/// `config/daemon.toml`: what the onboard binary loads. Paths are relative
-/// to the folder of the file that names them.
-#[derive(Debug, Clone, PartialEq, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct DaemonConfig {
-    /// Robot parameters (config/atmo.toml).
-    pub robot: PathBuf,
-    /// Flight settings (config/flight.toml).
-    pub flight: PathBuf,
-    /// MPC settings (config/mpc.toml); the preset is the flight settings'.
-    pub mpc: PathBuf,
-    /// NED z of the (flat) ground under the robot, m, when the ground topic
-    /// is silent or stale.
-    #[serde(default)]
-    pub ground_z: f64,
-    /// Age after which a ground height from the topic is replaced by
-    /// `ground_z`, ms.
-    #[serde(default = "default_ground_timeout_ms")]
-    pub ground_timeout_ms: u64,
-    /// Pilot stream silence after which its commands go to zero, ms.
-    #[serde(default = "default_input_timeout_ms")]
-    pub pilot_timeout_ms: u64,
-    /// Age after which a drive command is ignored, ms.
-    #[serde(default = "default_input_timeout_ms")]
-    pub drive_timeout_ms: u64,
-    /// Also send the thruster commands to PX4 (ActuatorMotors +
-    /// OffboardControlMode on ROS 2), as the original ATMO did.
-    #[serde(default)]
-    pub px4_offboard: bool,
-    #[serde(default)]
-    pub log: LogConfig,
-    #[serde(default)]
-    pub ros2: Ros2Config,
-    #[serde(default)]
-    pub drivers: DriverPortsConfig,
-    /// The radio's mapping (used when `ros2.topics.rc` is enabled).
-    #[serde(default)]
-    pub rc: RcConfig,
-    /// The arming checks' rates, windows and tolerances.
-    #[serde(default)]
-    pub arming: ArmingSettings,
-}
-
-fn default_input_timeout_ms() -> u64 {
-    atmo_flight::inputs::DEFAULT_INPUT_TIMEOUT_MS
-}
-
-fn default_ground_timeout_ms() -> u64 {
-    atmo_flight::inputs::DEFAULT_GROUND_TIMEOUT_MS
-}
-
-/// `[log]`: the MCAP flight log.
-#[derive(Debug, Clone, PartialEq, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct LogConfig {
-    /// Log file (relative to the working directory); `--log` overrides it.
-    pub path: PathBuf,
-    /// Records queued before the logger drops (and counts).
-    pub queue_capacity: usize,
-    /// Longest time between two flushes, ms (at most 1000: a killed daemon
-    /// loses at most this much).
-    pub flush_period_ms: u64,
-    /// `zstd`, `lz4` or `none`.
-    pub compression: String,
-}
-
-impl Default for LogConfig {
-    fn default() -> Self {
-        Self {
-            path: PathBuf::from("flight.mcap"),
-            queue_capacity: 4096,
-            flush_period_ms: 500,
-            compression: "zstd".into(),
+atmo_core::params! {
+    /// `config/daemon.toml`: what the onboard binary loads. Paths are relative
+    /// to the folder of the file that names them.
+    #[derive(Debug, Clone, PartialEq)]
+    pub struct DaemonConfig {
+        /// Robot parameters (config/atmo.toml).
+        pub robot: PathBuf;
+        /// Flight settings (config/flight.toml).
+        pub flight: PathBuf;
+        /// MPC settings (config/mpc.toml); the preset is the flight settings'.
+        pub mpc: PathBuf;
+        /// NED z of the (flat) ground under the robot when the ground topic
+        /// is silent or stale: within the 10 km a recording's positions may
+        /// span (a number like 1e300 is a typo, not a place).
+        pub ground_z: f64 = 0.0, range -1e4..=1e4, unit "m";
+        /// Age after which a ground height from the topic is replaced by
+        /// `ground_z`.
+        pub ground_timeout_ms: u64 = atmo_flight::inputs::DEFAULT_GROUND_TIMEOUT_MS,
+            range 10..=60_000, unit "ms";
+        /// Pilot stream silence after which its commands go to zero.
+        pub pilot_timeout_ms: u64 = atmo_flight::inputs::DEFAULT_INPUT_TIMEOUT_MS,
+            range 10..=10_000, unit "ms";
+        /// Age after which a drive command is ignored.
+        pub drive_timeout_ms: u64 = atmo_flight::inputs::DEFAULT_INPUT_TIMEOUT_MS,
+            range 10..=10_000, unit "ms";
+        /// Also send the thruster commands to PX4 (ActuatorMotors +
+        /// OffboardControlMode on ROS 2), as the original ATMO did.
+        pub px4_offboard: bool = false;
+        pub log: LogConfig = LogConfig::default();
+        /// The ROS 2 node's topics (atmo-io; checked by its own rules).
+        pub ros2: Ros2Config = Ros2Config::default();
+        /// The driver ports (atmo-io; checked by its own rules).
+        pub drivers: DriverPortsConfig = DriverPortsConfig::default();
+        /// The radio's mapping (used when `ros2.topics.rc` is enabled).
+        pub rc: RcConfig = RcConfig::default();
+        /// The arming checks' rates, windows and tolerances.
+        pub arming: ArmingSettings = ArmingSettings::default();
+    }
+    check |daemon, c, _prefix| {
+        let topics = &daemon.ros2.topics;
+        if topics.rc.enabled && topics.pilot.enabled {
+            return Err(c.fail(
+                "ros2.topics.pilot.enabled",
+                "false while ros2.topics.rc is enabled (one pilot source)",
+                true,
+            ));
         }
+        Ok(())
+    }
+}
+
+atmo_core::params! {
+    /// `[log]`: the MCAP flight log.
+    #[derive(Debug, Clone, PartialEq)]
+    pub struct LogConfig: Default {
+        /// Log file (relative to the working directory; not empty); `--log`
+        /// overrides it.
+        pub path: PathBuf = PathBuf::from("flight.mcap");
+        /// Records queued before the logger drops (and counts).
+        pub queue_capacity: usize = 4096, range 1..=1 << 20, unit "records";
+        /// Longest time between two flushes (a killed daemon loses at most
+        /// this much).
+        pub flush_period_ms: u64 = 500, range 10..=1000, unit "ms";
+        /// `zstd`, `lz4` or `none`.
+        pub compression: String = "zstd".into();
+    }
+    check |log, c, prefix| {
+        let key = |name| atmo_core::params::key(prefix, name);
+        c.one_of(&key("compression"), &log.compression, &["zstd", "lz4", "none"])?;
+        if log.path.as_os_str().is_empty() {
+            return Err(c.fail(&key("path"), "a file path", "\"\""));
+        }
+        Ok(())
     }
 }
 
@@ -161,53 +159,13 @@ impl ConfigFile for DaemonConfig {
 
     /// Checks the values; errors name `file` and the key.
     fn validate(&self, file: &Path) -> Result<()> {
-        let c = Checker::new(file);
-        // NED z of the ground: within the 10 km a recording's positions
-        // may span (a number like 1e300 is a typo, not a place).
-        c.range("ground_z", self.ground_z, -1e4..=1e4, "m")?;
-        c.range(
-            "ground_timeout_ms",
-            self.ground_timeout_ms,
-            10..=60_000,
-            "ms",
-        )?;
-        c.range("pilot_timeout_ms", self.pilot_timeout_ms, 10..=10_000, "ms")?;
-        c.range("drive_timeout_ms", self.drive_timeout_ms, 10..=10_000, "ms")?;
-        let log = &self.log;
-        c.range(
-            "log.queue_capacity",
-            log.queue_capacity,
-            1..=1 << 20,
-            "records",
-        )?;
-        // A killed daemon loses at most one flush period.
-        c.range("log.flush_period_ms", log.flush_period_ms, 10..=1000, "ms")?;
-        c.one_of(
-            "log.compression",
-            &log.compression,
-            &["zstd", "lz4", "none"],
-        )?;
-        if log.path.as_os_str().is_empty() {
-            return Err(c.fail("log.path", "a file path", "\"\"").into());
-        }
+        atmo_core::params::check_file(self, file)?;
         self.ros2
             .validate(file)
             .map_err(|e| FlightError::Setup(format!("[ros2]: {e}")))?;
         self.drivers
             .validate(file)
             .map_err(|e| FlightError::Setup(format!("[drivers]: {e}")))?;
-        self.rc.validate(file)?;
-        self.arming.validate(file)?;
-        let topics = &self.ros2.topics;
-        if topics.rc.enabled && topics.pilot.enabled {
-            return Err(c
-                .fail(
-                    "ros2.topics.pilot.enabled",
-                    "false while ros2.topics.rc is enabled (one pilot source)",
-                    true,
-                )
-                .into());
-        }
         Ok(())
     }
 }

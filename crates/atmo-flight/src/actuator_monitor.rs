@@ -26,40 +26,46 @@
 
 use crate::modes::Mode;
 
-/// `[monitor]` of `config/flight.toml`: the detectors' thresholds.
-#[derive(Debug, Clone, Copy, PartialEq, serde::Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct MonitorSettings {
-    pub enabled: bool,
-    /// Encoder change that counts as movement, deg.
-    pub encoder_step_deg: f64,
-    /// Commanded tilt travel without encoder movement that makes the
-    /// encoder stuck, deg.
-    pub encoder_stuck_travel_deg: f64,
-    /// Observer body-z force that says the tilt is not where it is
-    /// believed, N.
-    pub tilt_force: f64,
-    /// ... held this long, s.
-    pub tilt_force_time: f64,
-    /// The observer's roll or pitch torque held at its limit this long
-    /// says a rotor has failed, s.
-    pub rotor_time: f64,
-    /// Wheel clearance at or below which the estimate says the wheels
-    /// touch, m.
-    pub contact_clearance: f64,
-    /// Vertical speed within which the estimate says the robot rests, m/s.
-    pub contact_speed: f64,
-    /// ... both held this long, s.
-    pub contact_time: f64,
-    /// A failed rotor that delivers less than this of its command is out:
-    /// below half, two full rotors and two at this fraction (roll and pitch
-    /// balanced) cannot hold the robot at the flight tilt limit (50 deg),
-    /// so no wheel landing can be flown; the robot descends folded.
-    #[serde(default = "MonitorSettings::default_rotor_out_effectiveness")]
-    pub rotor_out_effectiveness: f64,
-    /// With a rotor out: the descent speed to the ground, m/s.
-    #[serde(default = "MonitorSettings::default_rotor_out_descent_speed")]
-    pub rotor_out_descent_speed: f64,
+/// Default of `monitor.rotor_out_effectiveness` (also of a disabled monitor).
+const ROTOR_OUT_EFFECTIVENESS: f64 = 0.5;
+/// Default of `monitor.rotor_out_descent_speed`, m/s.
+const ROTOR_OUT_DESCENT_SPEED: f64 = 0.3;
+
+atmo_core::params! {
+    /// `[monitor]` of `config/flight.toml`: the detectors' thresholds.
+    #[derive(Debug, Clone, Copy, PartialEq)]
+    pub struct MonitorSettings {
+        /// Whether the detectors run (detections latch until disarmed).
+        pub enabled: bool;
+        /// Encoder change that counts as movement.
+        pub encoder_step_deg: f64, range 0.0..=10.0, unit "deg";
+        /// Commanded tilt travel without encoder movement that makes the
+        /// encoder stuck.
+        pub encoder_stuck_travel_deg: f64, range *encoder_step_deg..=45.0, unit "deg";
+        /// Observer body-z force that says the tilt is not where it is
+        /// believed.
+        pub tilt_force: f64, range 0.0..=200.0, unit "N";
+        /// ... held this long.
+        pub tilt_force_time: f64, range 0.0..=5.0, unit "s";
+        /// The observer's roll or pitch torque held at its limit this long
+        /// says a rotor has failed.
+        pub rotor_time: f64, range 0.0..=5.0, unit "s";
+        /// Wheel clearance at or below which the estimate says the wheels
+        /// touch.
+        pub contact_clearance: f64, range -0.1..=0.5, unit "m";
+        /// Vertical speed within which the estimate says the robot rests.
+        pub contact_speed: f64, range 0.0..=2.0, unit "m/s";
+        /// ... both held this long.
+        pub contact_time: f64, range 0.0..=5.0, unit "s";
+        /// A failed rotor that delivers less than this of its command is out:
+        /// below half, two full rotors and two at this fraction (roll and
+        /// pitch balanced) cannot hold the robot at the flight tilt limit
+        /// (50 deg), so no wheel landing can be flown; the robot descends
+        /// folded.
+        pub rotor_out_effectiveness: f64 = ROTOR_OUT_EFFECTIVENESS, range 0.0..=1.0;
+        /// With a rotor out: the descent speed to the ground.
+        pub rotor_out_descent_speed: f64 = ROTOR_OUT_DESCENT_SPEED, range 0.05..=2.0, unit "m/s";
+    }
 }
 
 impl MonitorSettings {
@@ -75,17 +81,9 @@ impl MonitorSettings {
             contact_clearance: 0.0,
             contact_speed: 0.0,
             contact_time: 0.0,
-            rotor_out_effectiveness: Self::default_rotor_out_effectiveness(),
-            rotor_out_descent_speed: Self::default_rotor_out_descent_speed(),
+            rotor_out_effectiveness: ROTOR_OUT_EFFECTIVENESS,
+            rotor_out_descent_speed: ROTOR_OUT_DESCENT_SPEED,
         }
-    }
-
-    fn default_rotor_out_effectiveness() -> f64 {
-        0.5
-    }
-
-    fn default_rotor_out_descent_speed() -> f64 {
-        0.3
     }
 }
 

@@ -24,7 +24,6 @@
 use std::path::Path;
 
 use atmo_core::config_file::Checker;
-use serde::Deserialize;
 
 use crate::error::Result;
 
@@ -78,61 +77,27 @@ impl ArmingCheck {
     }
 }
 
-/// `[arming]` of `config/daemon.toml`.
-#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct ArmingSettings {
-    /// Fewest estimates per second to arm on, Hz.
-    pub min_estimate_rate_hz: f64,
-    /// Window of the estimate rate, ms.
-    pub estimate_window_ms: u64,
-    /// Window of the tilt encoder's agreement with the command, ms.
-    pub tilt_window_ms: u64,
-    /// Largest difference between the measured and the commanded tilt
-    /// motion over the window, deg.
-    pub tilt_tolerance_deg: f64,
-}
-
-impl Default for ArmingSettings {
-    fn default() -> Self {
-        Self {
-            min_estimate_rate_hz: 50.0,
-            estimate_window_ms: 1000,
-            tilt_window_ms: 2000,
-            tilt_tolerance_deg: 3.0,
-        }
+atmo_core::params! {
+    /// `[arming]` of `config/daemon.toml`.
+    #[derive(Debug, Clone, Copy, PartialEq)]
+    pub struct ArmingSettings: Default {
+        /// Fewest estimates per second to arm on.
+        pub min_estimate_rate_hz: f64 = 50.0, range 1.0..=1000.0, unit "Hz";
+        /// Window of the estimate rate.
+        pub estimate_window_ms: u64 = 1000, range 100..=10_000, unit "ms";
+        /// Window of the tilt encoder's agreement with the command.
+        pub tilt_window_ms: u64 = 2000, range 100..=10_000, unit "ms";
+        /// Largest difference between the measured and the commanded tilt
+        /// motion over the window.
+        pub tilt_tolerance_deg: f64 = 3.0, range 0.1..=45.0, unit "deg";
     }
 }
 
 impl ArmingSettings {
-    /// Checks ranges; errors name `file` and the key.
+    /// Checks ranges; errors name `file` and the key (under `arming`).
     pub fn validate(&self, file: &Path) -> Result<()> {
-        let c = Checker::new(file);
-        c.range(
-            "arming.min_estimate_rate_hz",
-            self.min_estimate_rate_hz,
-            1.0..=1000.0,
-            "Hz",
-        )?;
-        c.range(
-            "arming.estimate_window_ms",
-            self.estimate_window_ms,
-            100..=10_000,
-            "ms",
-        )?;
-        c.range(
-            "arming.tilt_window_ms",
-            self.tilt_window_ms,
-            100..=10_000,
-            "ms",
-        )?;
-        c.range(
-            "arming.tilt_tolerance_deg",
-            self.tilt_tolerance_deg,
-            0.1..=45.0,
-            "deg",
-        )?;
-        Ok(())
+        use atmo_core::params::Params as _;
+        Ok(self.check(&Checker::new(file), "arming")?)
     }
 }
 

@@ -46,25 +46,40 @@ use atmo_mpc::wheel_clearance_at_attitude;
 use nalgebra::Vector6;
 use serde::Deserialize;
 
-/// The flare's settings (`[flare]` of `config/flight.toml`).
-#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct FlareSettings {
-    /// Wheels' clearance the descent slows onto, m, measured as if the
-    /// thrusters stood at the transition's tilt limit.
-    pub hold_clearance: f64,
-    /// Time constant of the exponential approach, s.
-    pub time_constant: f64,
-    /// The landing target: impact speed at most this, m/s ...
-    pub impact_speed_max: f64,
-    /// ... at a touchdown tilt of at least this, deg.
-    pub touchdown_tilt_min_deg: f64,
-    /// The flown impact speed less the predicted one at the decision: its
-    /// mean and standard deviation, m/s.
-    pub impact_speed_error: PredictionError,
-    /// The flown touchdown tilt less the predicted one at the decision:
-    /// its mean and standard deviation, deg.
-    pub touchdown_tilt_error_deg: PredictionError,
+atmo_core::params! {
+    /// The flare's settings (`[flare]` of `config/flight.toml`).
+    #[derive(Debug, Clone, Copy, PartialEq)]
+    pub struct FlareSettings {
+        /// Wheels' clearance the descent slows onto, measured as if the
+        /// thrusters stood at the transition's tilt limit.
+        pub hold_clearance: f64, range -0.1..=0.5, unit "m";
+        /// Time constant of the exponential approach.
+        pub time_constant: f64, range 0.01..=5.0, unit "s";
+        /// The landing target: impact speed at most this ...
+        pub impact_speed_max: f64, range 0.01..=2.0, unit "m/s";
+        /// ... at a touchdown tilt of at least this.
+        pub touchdown_tilt_min_deg: f64, range 0.0..=90.0, unit "deg";
+        /// The flown impact speed less the predicted one at the decision:
+        /// its mean and standard deviation (each within 1 m/s, the spread
+        /// above a thousandth of it).
+        pub impact_speed_error: PredictionError, unit "m/s";
+        /// The flown touchdown tilt less the predicted one at the
+        /// decision: its mean and standard deviation (each within 20 deg,
+        /// the spread above a thousandth of it).
+        pub touchdown_tilt_error_deg: PredictionError, unit "deg";
+    }
+    check |_table, c, prefix| {
+        let errors = [
+            ("impact_speed_error", impact_speed_error, 1.0, "m/s"),
+            ("touchdown_tilt_error_deg", touchdown_tilt_error_deg, 20.0, "deg"),
+        ];
+        for (name, e, limit, unit) in errors {
+            let key = atmo_core::params::key(prefix, name);
+            c.range(&format!("{key}.mean"), e.mean, -limit..=limit, unit)?;
+            c.range(&format!("{key}.spread"), e.spread, limit * 1e-3..=limit, unit)?;
+        }
+        Ok(())
+    }
 }
 
 /// How a predicted quantity's flown value scatters about it: the

@@ -11,7 +11,9 @@
 //!   type `application/toml`; `config/ground_effect` too when the MPC
 //!   predicts with a plant file's ground-effect surface) and one metadata record [`CONFIG_METADATA`]
 //!   with each file's source path and SHA-256, so that a replay rebuilds the
-//!   same flight stack and notices an attachment that changed.
+//!   same flight stack and notices an attachment that changed, and the
+//!   configuration's schema version ([`crate::schema`]), so that a replay
+//!   migrates an older text and refuses a newer one.
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -27,6 +29,7 @@ use sha2::{Digest, Sha256};
 use crate::error::{FlightError, Result};
 use crate::flight_stack::{FlightStack, StepInputs, StepOutputs};
 use crate::ground_model::{ground_surface, surface_from_text};
+use crate::schema::{CONFIG_SCHEMA_VERSION, SCHEMA_VERSION_KEY, logged_version, migrate_flight};
 use crate::settings::FlightSettings;
 
 /// Topic of the per-tick inputs.
@@ -113,6 +116,12 @@ pub struct FlightConfigFiles {
     pub flight: ConfigText,
     pub mpc: ConfigText,
     pub ground_effect: Option<ConfigText>,
+    /// The schema version the texts were written with
+    /// ([`CONFIG_SCHEMA_VERSION`] unless read from an older log).
+    pub schema_version: u32,
+    /// What bringing an older log's texts to this build's schema changed
+    /// (empty when nothing was changed).
+    pub migrated: Vec<String>,
 }
 
 /// A flight stack's configuration, parsed and validated.
@@ -169,6 +178,8 @@ impl FlightConfigFiles {
             flight: ConfigText::read(flight)?,
             mpc: ConfigText::read(mpc)?,
             ground_effect: None,
+            schema_version: CONFIG_SCHEMA_VERSION,
+            migrated: Vec::new(),
         };
         files.read_ground_effect()?;
         Ok(files)
@@ -192,6 +203,8 @@ impl FlightConfigFiles {
             ),
             mpc: text("config/mpc.toml", include_str!("../../../config/mpc.toml")),
             ground_effect: None,
+            schema_version: CONFIG_SCHEMA_VERSION,
+            migrated: Vec::new(),
         }
     }
 
@@ -313,13 +326,13 @@ impl FlightConfigFiles {
     }
 
     /// Stores the texts in the log (attachments `config/<role>`) with the
-    /// [`CONFIG_METADATA`] record (`<role>.source`, `<role>.sha256`).
+    /// [`CONFIG_METADATA`] record (`<role>.source`, `<role>.sha256`,
+    /// `schema_version`).
     /// Start-up only: allocates and may block.
     ///
     /// # Errors
     /// The logger has stopped.
     pub fn log_to(&self, log: &LoggerHandle, log_time_ns: u64) -> atmo_io::Result<()> {
-        let mut entries = BTreeMap::new();
         for (role, file) in self.files() {
             log.attach(
                 &format!("config/{role}"),
@@ -327,21 +340,32 @@ impl FlightConfigFiles {
                 log_time_ns,
                 file.text.as_bytes().to_vec(),
             )?;
+        }
+        log.metadata(CONFIG_METADATA, self.metadata_entries())
+    }
+
+    /// The [`CONFIG_METADATA`] record's entries.
+    fn metadata_entries(&self) -> BTreeMap<String, String> {
+        let mut entries = BTreeMap::new();
+        for (role, file) in self.files() {
             entries.insert(format!("{role}.source"), file.source.display().to_string());
             entries.insert(format!("{role}.sha256"), file.sha256());
         }
-        log.metadata(CONFIG_METADATA, entries)
+        let version = self.schema_version.to_string();
+        entries.insert(SCHEMA_VERSION_KEY.to_string(), version);
+        entries
     }
 
     /// The configuration stored in a log by [`Self::log_to`]; `file` names
     /// the log in errors. Each attachment's text must match its recorded hash.
-    /// The texts are not parsed here ([`Self::parse`] does that): a log
-    /// flown before a key the current parser requires is still read, and
-    /// parsing its configuration names the key.
+    /// A log of an older schema version has its flight settings migrated
+    /// ([`crate::schema`]; what changed is in `migrated`). The texts are
+    /// not parsed here ([`Self::parse`] does that).
     ///
     /// # Errors
     /// No [`CONFIG_METADATA`] record, a missing attachment, text that is not
-    /// UTF-8 or whose SHA-256 differs from the recorded one.
+    /// UTF-8 or whose SHA-256 differs from the recorded one, a schema
+    /// version newer than this build's.
     pub fn from_log(extras: &LogExtras, file: &Path) -> Result<Self> {
         let fail = |reason: String| FlightError::Log {
             file: file.to_path_buf(),
@@ -379,14 +403,25 @@ impl FlightConfigFiles {
             }
             Ok(config)
         };
+        let mut flight = role(FLIGHT)?;
+        let schema_version = logged_version(
+            meta.get(SCHEMA_VERSION_KEY).map(String::as_str),
+            &flight.text,
+        )
+        .map_err(|e| fail(e.to_string()))?;
+        let (text, migrated) =
+            migrate_flight(&flight.text, schema_version).map_err(|e| fail(e.to_string()))?;
+        flight.text = text;
         let files = Self {
             robot: role(ROBOT)?,
-            flight: role(FLIGHT)?,
+            flight,
             mpc: role(MPC)?,
             ground_effect: meta
                 .contains_key(&format!("{GROUND_EFFECT}.sha256"))
                 .then(|| role(GROUND_EFFECT))
                 .transpose()?,
+            schema_version,
+            migrated,
         };
         Ok(files)
     }
@@ -452,6 +487,57 @@ mod tests {
         assert_eq!(
             parsed.mpc,
             MpcSettings::atmo(&parsed.flight.mpc_preset).unwrap()
+        );
+    }
+
+    /// What [`FlightConfigFiles::log_to`] stores, with the schema version
+    /// `version` (`None`: a log written before versions were recorded).
+    fn extras(files: &FlightConfigFiles, version: Option<&str>) -> atmo_io::mcap_log::LogExtras {
+        let mut meta = files.metadata_entries();
+        match version {
+            Some(v) => meta.insert(SCHEMA_VERSION_KEY.to_string(), v.to_string()),
+            None => meta.remove(SCHEMA_VERSION_KEY),
+        };
+        let attachments = files
+            .files()
+            .into_iter()
+            .map(|(role, f)| atmo_io::mcap_log::LogAttachment {
+                name: format!("config/{role}"),
+                media_type: TOML_MEDIA_TYPE.to_string(),
+                log_time_ns: 0,
+                data: f.text.as_bytes().to_vec(),
+            })
+            .collect();
+        atmo_io::mcap_log::LogExtras {
+            attachments,
+            metadata: vec![(CONFIG_METADATA.to_string(), meta)],
+        }
+    }
+
+    #[test]
+    fn a_log_records_its_schema_and_one_of_a_newer_schema_is_refused() {
+        let files = FlightConfigFiles::shipped();
+        let log = Path::new("f.mcap");
+        let current = CONFIG_SCHEMA_VERSION.to_string();
+        assert_eq!(
+            FlightConfigFiles::from_log(&extras(&files, Some(&current)), log).unwrap(),
+            files
+        );
+        // Unrecorded: the shipped flare is of the current schema.
+        assert_eq!(
+            FlightConfigFiles::from_log(&extras(&files, None), log).unwrap(),
+            files
+        );
+        let newer = (CONFIG_SCHEMA_VERSION + 1).to_string();
+        let e = FlightConfigFiles::from_log(&extras(&files, Some(&newer)), log)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("f.mcap")
+                && e.contains(&format!(
+                    "schema version {newer}, newer than this build's {current}"
+                )),
+            "{e}"
         );
     }
 

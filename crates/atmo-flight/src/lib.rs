@@ -49,6 +49,7 @@ pub mod observer;
 pub mod rc;
 pub mod replay;
 pub mod rotor_estimate;
+pub mod schema;
 pub mod settings;
 pub mod step_io;
 pub mod telemetry;

@@ -47,24 +47,30 @@
 use std::path::Path;
 
 use atmo_core::config_file::Checker;
+use atmo_core::params::Params as _;
 use atmo_io::msg::InputRc;
 use serde::Deserialize;
 
-use crate::error::{FlightError, Result};
+use crate::error::Result;
 use crate::flight_stack::PilotInput;
 
 /// A pulse outside this range is no servo pulse (a missing or broken
 /// channel), us.
 pub const PLAUSIBLE_PULSE_US: std::ops::RangeInclusive<u16> = 800..=2200;
 
-/// One stick: its channel (1-based, as on the radio and in PX4's
-/// `RC_MAP_*`) and whether its sign is turned.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct Stick {
-    pub channel: u32,
-    #[serde(default)]
-    pub reversed: bool,
+/// The highest channel a mapping may read.
+const MAX_CHANNEL: u32 = InputRc::RC_INPUT_MAX_CHANNELS as u32;
+
+atmo_core::params! {
+    /// One stick: its channel (1-based, as on the radio and in PX4's
+    /// `RC_MAP_*`) and whether its sign is turned.
+    #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+    pub struct Stick {
+        /// 1-based channel.
+        pub channel: u32, range 1..=MAX_CHANNEL;
+        /// Whether the stick's sign is turned.
+        pub reversed: bool = false;
+    }
 }
 
 /// Which end of a switch's travel is "on".
@@ -75,197 +81,129 @@ pub enum SwitchOn {
     Low,
 }
 
-/// One switch: its channel (1-based) and the position that is "on".
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct Switch {
-    pub channel: u32,
-    pub on: SwitchOn,
-}
-
-/// `[rc.sticks]`: the velocity command's axes (NED world frame, as the
-/// flight stack's pilot input) and the yaw rate (FRD, positive right).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct Sticks {
-    pub north: Stick,
-    pub east: Stick,
-    /// Up (negative NED z); its upper half is also the throttle.
-    pub up: Stick,
-    pub yaw: Stick,
-    /// The manual tilt lever (auxiliary).
-    pub tilt: Stick,
-}
-
-/// `[rc.switches]`.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct Switches {
-    /// Offboard: the daemon flies (with the kill switch off, this is arming).
-    pub offboard: Switch,
-    /// MPC on: off in the air is a failsafe (open-loop hover trim).
-    pub mpc: Switch,
-    /// Kill: disarmed at once, latched until the offboard switch is off.
-    pub kill: Switch,
-    /// Home the tilt driver again, while disarmed (auxiliary).
-    pub encoder_reset: Switch,
-}
-
-/// `[rc]` of `config/daemon.toml`: how `px4_msgs/InputRc` becomes the
-/// pilot input (used when `ros2.topics.rc` is enabled).
-#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct RcConfig {
-    /// No usable frame for this long: the radio is lost, ms.
-    pub timeout_ms: u64,
-    /// Pulse at full stick down / left, us.
-    pub min_us: u32,
-    /// Pulse at the stick's centre, us.
-    pub center_us: u32,
-    /// Pulse at full stick up / right, us.
-    pub max_us: u32,
-    /// Half-width of the band around the centre that reads as 0, us.
-    pub deadband_us: u32,
-    /// A switch is on beyond this fraction of its half travel.
-    pub switch_threshold: f64,
-    /// Horizontal speed at full stick (each axis), m/s.
-    pub max_horizontal_speed: f64,
-    /// Vertical speed at full stick, m/s.
-    pub max_vertical_speed: f64,
-    /// Yaw rate at full stick, deg/s.
-    pub max_yaw_rate_deg_s: f64,
-    pub sticks: Sticks,
-    pub switches: Switches,
+atmo_core::params! {
+    /// One switch: its channel (1-based) and the position that is "on".
+    #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+    pub struct Switch {
+        /// 1-based channel.
+        pub channel: u32, range 1..=MAX_CHANNEL;
+        /// `high` or `low`: the end of travel that is on.
+        pub on: SwitchOn;
+    }
 }
 
 const fn stick(channel: u32, reversed: bool) -> Stick {
     Stick { channel, reversed }
 }
 
-impl Default for Sticks {
-    fn default() -> Self {
-        Self {
-            north: stick(2, true),
-            east: stick(1, true),
-            up: stick(3, false),
-            yaw: stick(4, true),
-            tilt: stick(10, false),
-        }
+const fn switch_high(channel: u32) -> Switch {
+    Switch {
+        channel,
+        on: SwitchOn::High,
     }
 }
 
-impl Default for Switches {
-    fn default() -> Self {
-        Self {
-            offboard: Switch {
-                channel: 9,
-                on: SwitchOn::High,
-            },
-            mpc: Switch {
-                channel: 8,
-                on: SwitchOn::High,
-            },
-            kill: Switch {
-                channel: 5,
-                on: SwitchOn::High,
-            },
-            encoder_reset: Switch {
-                channel: 12,
-                on: SwitchOn::High,
-            },
-        }
+atmo_core::params! {
+    /// `[rc.sticks]`: the velocity command's axes (NED world frame, as the
+    /// flight stack's pilot input) and the yaw rate (FRD, positive right).
+    #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+    pub struct Sticks: Default {
+        pub north: Stick = stick(2, true);
+        pub east: Stick = stick(1, true);
+        /// Up (negative NED z); its upper half is also the throttle.
+        pub up: Stick = stick(3, false);
+        pub yaw: Stick = stick(4, true);
+        /// The manual tilt lever (auxiliary).
+        pub tilt: Stick = stick(10, false);
     }
 }
 
-impl Default for RcConfig {
-    fn default() -> Self {
-        Self {
-            timeout_ms: 300,
-            min_us: 1094,
-            center_us: 1514,
-            max_us: 1934,
-            deadband_us: 10,
-            switch_threshold: 0.5,
-            max_horizontal_speed: 0.75,
-            max_vertical_speed: 0.75,
-            max_yaw_rate_deg_s: 45.0,
-            sticks: Sticks::default(),
-            switches: Switches::default(),
+atmo_core::params! {
+    /// `[rc.switches]`.
+    #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+    pub struct Switches: Default {
+        /// Offboard: the daemon flies (with the kill switch off, this is arming).
+        pub offboard: Switch = switch_high(9);
+        /// MPC on: off in the air is a failsafe (open-loop hover trim).
+        pub mpc: Switch = switch_high(8);
+        /// Kill: disarmed at once, latched until the offboard switch is off.
+        pub kill: Switch = switch_high(5);
+        /// Home the tilt driver again, while disarmed (auxiliary).
+        pub encoder_reset: Switch = switch_high(12);
+    }
+}
+
+/// The plausible pulses' bounds, us.
+const PULSE_LO: u32 = *PLAUSIBLE_PULSE_US.start() as u32;
+const PULSE_HI: u32 = *PLAUSIBLE_PULSE_US.end() as u32;
+
+atmo_core::params! {
+    /// `[rc]` of `config/daemon.toml`: how `px4_msgs/InputRc` becomes the
+    /// pilot input (used when `ros2.topics.rc` is enabled).
+    #[derive(Debug, Clone, Copy, PartialEq)]
+    pub struct RcConfig: Default {
+        /// No usable frame for this long: the radio is lost.
+        pub timeout_ms: u64 = 300, range 20..=5000, unit "ms";
+        /// Pulse at full stick down / left.
+        pub min_us: u32 = 1094, range PULSE_LO..=PULSE_HI, unit "us";
+        /// Pulse at the stick's centre.
+        pub center_us: u32 = 1514, range *min_us + 1..=PULSE_HI, unit "us";
+        /// Pulse at full stick up / right.
+        pub max_us: u32 = 1934, range *center_us + 1..=PULSE_HI, unit "us";
+        /// Half-width of the band around the centre that reads as 0 (at
+        /// most half the shorter half travel).
+        pub deadband_us: u32 = 10,
+            range 0..=(*center_us - *min_us).min(*max_us - *center_us) / 2, unit "us";
+        /// A switch is on beyond this fraction of its half travel.
+        pub switch_threshold: f64 = 0.5, range 0.05..=0.95;
+        /// Horizontal speed at full stick (each axis).
+        pub max_horizontal_speed: f64 = 0.75, range 0.0..=5.0, unit "m/s";
+        /// Vertical speed at full stick.
+        pub max_vertical_speed: f64 = 0.75, range 0.0..=3.0, unit "m/s";
+        /// Yaw rate at full stick.
+        pub max_yaw_rate_deg_s: f64 = 45.0, range 0.0..=360.0, unit "deg/s";
+        pub sticks: Sticks = Sticks::default();
+        pub switches: Switches = Switches::default();
+    }
+    check |rc, c, prefix| {
+        let channels = rc.channels();
+        for (i, (name, channel)) in channels.iter().enumerate() {
+            if let Some((other, _)) = channels[..i].iter().find(|(_, ch)| ch == channel) {
+                return Err(c.fail(
+                    &atmo_core::params::key(prefix, name),
+                    format!(
+                        "a channel no other function uses ({} is {channel})",
+                        atmo_core::params::key(prefix, other)
+                    ),
+                    channel,
+                ));
+            }
         }
+        Ok(())
     }
 }
 
 impl RcConfig {
-    /// Every mapped channel with its key, sticks first.
+    /// Every mapped channel with its key in `[rc]`, sticks first.
     fn channels(&self) -> [(&'static str, u32); 9] {
         let (s, w) = (&self.sticks, &self.switches);
         [
-            ("rc.sticks.north.channel", s.north.channel),
-            ("rc.sticks.east.channel", s.east.channel),
-            ("rc.sticks.up.channel", s.up.channel),
-            ("rc.sticks.yaw.channel", s.yaw.channel),
-            ("rc.sticks.tilt.channel", s.tilt.channel),
-            ("rc.switches.offboard.channel", w.offboard.channel),
-            ("rc.switches.mpc.channel", w.mpc.channel),
-            ("rc.switches.kill.channel", w.kill.channel),
-            ("rc.switches.encoder_reset.channel", w.encoder_reset.channel),
+            ("sticks.north.channel", s.north.channel),
+            ("sticks.east.channel", s.east.channel),
+            ("sticks.up.channel", s.up.channel),
+            ("sticks.yaw.channel", s.yaw.channel),
+            ("sticks.tilt.channel", s.tilt.channel),
+            ("switches.offboard.channel", w.offboard.channel),
+            ("switches.mpc.channel", w.mpc.channel),
+            ("switches.kill.channel", w.kill.channel),
+            ("switches.encoder_reset.channel", w.encoder_reset.channel),
         ]
     }
 
-    /// Checks ranges and consistency; errors name `file` and the key.
+    /// Checks ranges and consistency; errors name `file` and the key
+    /// (under `rc`).
     pub fn validate(&self, file: &Path) -> Result<()> {
-        let c = Checker::new(file);
-        c.range("rc.timeout_ms", self.timeout_ms, 20..=5000, "ms")?;
-        let (lo, hi) = (
-            u32::from(*PLAUSIBLE_PULSE_US.start()),
-            u32::from(*PLAUSIBLE_PULSE_US.end()),
-        );
-        c.range("rc.min_us", self.min_us, lo..=hi, "us")?;
-        c.range("rc.center_us", self.center_us, self.min_us + 1..=hi, "us")?;
-        c.range("rc.max_us", self.max_us, self.center_us + 1..=hi, "us")?;
-        let half = (self.center_us - self.min_us).min(self.max_us - self.center_us);
-        c.range("rc.deadband_us", self.deadband_us, 0..=half / 2, "us")?;
-        c.range(
-            "rc.switch_threshold",
-            self.switch_threshold,
-            0.05..=0.95,
-            "",
-        )?;
-        c.range(
-            "rc.max_horizontal_speed",
-            self.max_horizontal_speed,
-            0.0..=5.0,
-            "m/s",
-        )?;
-        c.range(
-            "rc.max_vertical_speed",
-            self.max_vertical_speed,
-            0.0..=3.0,
-            "m/s",
-        )?;
-        c.range(
-            "rc.max_yaw_rate_deg_s",
-            self.max_yaw_rate_deg_s,
-            0.0..=360.0,
-            "deg/s",
-        )?;
-        let channels = self.channels();
-        for (i, (key, channel)) in channels.iter().enumerate() {
-            c.range(
-                key,
-                *channel,
-                1..=u32::from(InputRc::RC_INPUT_MAX_CHANNELS),
-                "",
-            )?;
-            if let Some((other, _)) = channels[..i].iter().find(|(_, ch)| ch == channel) {
-                return Err(FlightError::from(c.fail(
-                    key,
-                    format!("a channel no other function uses ({other} is {channel})"),
-                    channel,
-                )));
-            }
-        }
-        Ok(())
+        Ok(self.check(&Checker::new(file), "rc")?)
     }
 }
 

@@ -6,63 +6,79 @@
 use std::collections::BTreeMap;
 use std::path::Path;
 
-use atmo_core::config_file::{Checker, ConfigFile};
+use atmo_core::config_file::ConfigFile;
 use atmo_core::model::{Input, NU, NX, State};
 use serde::Deserialize;
 
 use crate::error::{MpcError, Result};
 
-/// The whole `config/mpc.toml` file.
-#[derive(Debug, Clone, Deserialize, PartialEq)]
-#[serde(deny_unknown_fields)]
-pub struct MpcFile {
-    pub horizon: HorizonSettings,
-    pub cost: CostSettings,
-    /// Named cost presets (`fig5`, `default`).
-    pub presets: BTreeMap<String, CostPreset>,
-    pub solver: SolverSettings,
-    pub feedback: FeedbackSettings,
-    pub failure: FailureSettings,
-    pub model: ModelSettings,
-    /// The tilt as a decision of the MPC in the transition (absent: the
-    /// paper's tilt law everywhere).
-    pub tilt_plan: Option<TiltPlanSettings>,
+atmo_core::params! {
+    /// The whole `config/mpc.toml` file.
+    #[derive(Debug, Clone, PartialEq)]
+    pub struct MpcFile {
+        pub horizon: HorizonSettings;
+        pub cost: CostSettings;
+        /// Named cost presets (`fig5`, `default`).
+        pub presets: BTreeMap<String, CostPreset>;
+        pub solver: SolverSettings;
+        pub feedback: FeedbackSettings;
+        pub failure: FailureSettings;
+        pub model: ModelSettings;
+        /// The tilt as a decision of the MPC in the transition (absent: the
+        /// paper's tilt law everywhere).
+        pub tilt_plan: Option<TiltPlanSettings> = None;
+    }
+    check |_table, c, prefix| {
+        if presets.is_empty() {
+            return Err(c.fail(&atmo_core::params::key(prefix, "presets"), "at least one cost preset", "none"));
+        }
+        Ok(())
+    }
 }
 
-/// `[tilt_plan]`: the tilt-rate input and the landing objective (crate
-/// docs, docs/landing.md).
-#[derive(Debug, Clone, Copy, Deserialize, PartialEq)]
-#[serde(deny_unknown_fields)]
-pub struct TiltPlanSettings {
-    /// Whether the flight stack lets the MPC plan the tilt in the transition.
-    pub enabled: bool,
-    /// Weight on `(varphi_k - varphi_max)^2` at every stage, 1/rad^2.
-    pub tilt_weight: f64,
-    /// Weight on `(v_z,k - v_z,ref,k)^2` at every stage before the touchdown, s^2/m^2.
-    pub descent_speed_weight: f64,
-    /// Weight on the tilt rate `omega_k^2`, s^2/rad^2.
-    pub rate_weight: f64,
-    /// Weight on `pitch_k^2 + roll_k^2` at every stage before the touchdown,
-    /// 1/rad^2: the wheels touch together (the paper's blended cost weighs
-    /// no attitude angle near the ground, where the ground effect's
-    /// fluctuating thrust rolls the robot).
-    pub level_weight: f64,
-    /// Weight on `(varphi - varphi_max)^2` at the predicted touchdown.
-    pub touchdown_tilt_weight: f64,
-    /// Weight on `(v_z - touchdown_speed)^2` at the predicted touchdown, s^2/m^2.
-    pub touchdown_speed_weight: f64,
-    /// The vertical speed aimed at when the wheels touch, m/s (down positive).
-    pub touchdown_speed: f64,
-    /// Upper bound of every rotor command while the tilt is planned (the
-    /// thrust margin kept for attitude control).
-    pub thrust_max: f64,
-    /// Retired key `rotor_thrust_max` (a bound of each rotor above a bound
-    /// of their mean, removed: docs/decisions/2026-12-05-landing-decision.md).
-    /// Logs written before its removal carry it at `thrust_max`, which is
-    /// what every rotor is bounded by now, so it is accepted at that value
-    /// only and refused otherwise; never read.
-    #[serde(default, rename = "rotor_thrust_max")]
-    pub retired_rotor_thrust_max: Option<f64>,
+atmo_core::params! {
+    /// `[tilt_plan]`: the tilt-rate input and the landing objective (crate
+    /// docs, docs/landing.md).
+    #[derive(Debug, Clone, Copy, PartialEq)]
+    pub struct TiltPlanSettings {
+        /// Whether the flight stack lets the MPC plan the tilt in the transition.
+        pub enabled: bool;
+        /// Weight on `(varphi_k - varphi_max)^2` at every stage.
+        pub tilt_weight: f64, range 0.0..=1e6, unit "1/rad^2";
+        /// Weight on `(v_z,k - v_z,ref,k)^2` at every stage before the touchdown.
+        pub descent_speed_weight: f64, range 0.0..=1e6, unit "s^2/m^2";
+        /// Weight on the tilt rate `omega_k^2` (> 0: the QP stays strictly
+        /// convex in the tilt rate).
+        pub rate_weight: f64, range 1e-9..=1e6, unit "s^2/rad^2";
+        /// Weight on `pitch_k^2 + roll_k^2` at every stage before the
+        /// touchdown: the wheels touch together (the paper's blended cost
+        /// weighs no attitude angle near the ground, where the ground
+        /// effect's fluctuating thrust rolls the robot).
+        pub level_weight: f64, range 0.0..=1e6, unit "1/rad^2";
+        /// Weight on `(varphi - varphi_max)^2` at the predicted touchdown.
+        pub touchdown_tilt_weight: f64, range 0.0..=1e6, unit "1/rad^2";
+        /// Weight on `(v_z - touchdown_speed)^2` at the predicted touchdown.
+        pub touchdown_speed_weight: f64, range 0.0..=1e6, unit "s^2/m^2";
+        /// The vertical speed aimed at when the wheels touch (down positive).
+        pub touchdown_speed: f64, range 0.0..=2.0, unit "m/s";
+        /// Upper bound of every rotor command while the tilt is planned (the
+        /// thrust margin kept for attitude control).
+        pub thrust_max: f64, range 0.1..=1.0;
+        /// Retired key `rotor_thrust_max` (a bound of each rotor above a bound
+        /// of their mean, removed: docs/decisions/2026-12-05-landing-decision.md).
+        /// Logs written before its removal carry it at `thrust_max`, which is
+        /// what every rotor is bounded by now, so it is accepted at that value
+        /// only and refused otherwise; never read.
+        pub retired_rotor_thrust_max: Option<f64> = None, key "rotor_thrust_max";
+    }
+    check |_table, c, prefix| {
+        if let Some(v) = retired_rotor_thrust_max {
+            // Retired: only the value that reproduces today's bound.
+            let key = atmo_core::params::key(prefix, "rotor_thrust_max (retired key: remove it)");
+            c.range(&key, *v, *thrust_max..=*thrust_max, "")?;
+        }
+        Ok(())
+    }
 }
 
 /// Which thrust-gain surface the prediction model carries near the ground.
@@ -88,41 +104,69 @@ impl<'de> Deserialize<'de> for GroundEffectSource {
     }
 }
 
-#[derive(Debug, Clone, Deserialize, PartialEq)]
-#[serde(deny_unknown_fields)]
-pub struct ModelSettings {
-    /// `"none"`, `"default"` or the path of a plant file.
-    pub ground_effect: GroundEffectSource,
+atmo_core::params! {
+    /// `[model]`: what the prediction model carries besides the rigid body.
+    #[derive(Debug, Clone, PartialEq)]
+    pub struct ModelSettings {
+        /// `"none"`, `"default"` or the path of a plant file.
+        pub ground_effect: GroundEffectSource;
+    }
 }
 
-#[derive(Debug, Clone, Copy, Deserialize, PartialEq)]
-#[serde(deny_unknown_fields)]
-pub struct HorizonSettings {
-    /// s, prediction horizon T.
-    pub duration: f64,
-    /// Number of shooting intervals N.
-    pub steps: usize,
-    /// s, controller period; the plan is shifted by this much each tick.
-    pub tick_period: f64,
+atmo_core::params! {
+    /// `[horizon]`: the prediction horizon.
+    #[derive(Debug, Clone, Copy, PartialEq)]
+    pub struct HorizonSettings {
+        /// Prediction horizon T.
+        pub duration: f64, range 0.01..=10.0, unit "s";
+        /// Number of shooting intervals N.
+        pub steps: usize, range 1..=50, unit "intervals";
+        /// Controller period, at most a stage (T / N): the plan is shifted
+        /// by this much each tick.
+        pub tick_period: f64, range 1e-4..=*duration / *steps as f64, unit "s";
+    }
 }
 
-#[derive(Debug, Clone, Copy, Deserialize, PartialEq)]
-#[serde(deny_unknown_fields)]
-pub struct CostSettings {
-    /// Ticks between two recomputations of alpha by the flight stack.
-    pub alpha_refresh_ticks: u32,
-    /// `Q_N = terminal_scale * Q(alpha)`.
-    pub terminal_scale: f64,
+atmo_core::params! {
+    /// `[cost]`: how the flight stack blends the preset's weights.
+    #[derive(Debug, Clone, Copy, PartialEq)]
+    pub struct CostSettings {
+        /// Ticks between two recomputations of alpha by the flight stack.
+        pub alpha_refresh_ticks: u32, range 1..=10_000, unit "ticks";
+        /// `Q_N = terminal_scale * Q(alpha)`.
+        pub terminal_scale: f64, range 0.0..=1e6;
+    }
 }
 
-/// One set of diagonal weights: `Q_1, Q_2` (12) and `R_1, R_2` (4).
-#[derive(Debug, Clone, Copy, Deserialize, PartialEq)]
-#[serde(deny_unknown_fields)]
-pub struct CostPreset {
-    pub q1: [f64; NX],
-    pub q2: [f64; NX],
-    pub r1: [f64; NU],
-    pub r2: [f64; NU],
+atmo_core::params! {
+    /// One set of diagonal weights: `Q_1, Q_2` (12) and `R_1, R_2` (4),
+    /// finite and >= 0; the input weights > 0, so that the QP stays
+    /// strictly convex in the inputs whatever alpha is.
+    #[derive(Debug, Clone, Copy, PartialEq)]
+    pub struct CostPreset {
+        /// State weight Q_1 (x, y, z, yaw, pitch, roll, velocities, rates).
+        pub q1: [f64; NX];
+        /// State weight Q_2, blended with Q_1 by alpha.
+        pub q2: [f64; NX];
+        /// Input weight R_1 (the four rotors).
+        pub r1: [f64; NU];
+        /// Input weight R_2, blended with R_1 by alpha.
+        pub r2: [f64; NU];
+    }
+    check |_table, c, prefix| {
+        let key = |name| atmo_core::params::key(prefix, name);
+        for (name, values) in [("q1", &q1[..]), ("q2", &q2[..]), ("r1", &r1[..]), ("r2", &r2[..])] {
+            if let Some(v) = values.iter().find(|v| !(v.is_finite() && **v >= 0.0)) {
+                return Err(c.fail(&key(name), "finite weights >= 0", v));
+            }
+        }
+        for (name, values) in [("r1", r1), ("r2", r2)] {
+            if let Some(v) = values.iter().find(|v| **v <= 0.0) {
+                return Err(c.fail(&key(name), "input weights > 0", v));
+            }
+        }
+        Ok(())
+    }
 }
 
 impl CostPreset {
@@ -147,24 +191,30 @@ pub enum Formulation {
     Sparse,
 }
 
-#[derive(Debug, Clone, Copy, Deserialize, PartialEq)]
-#[serde(deny_unknown_fields)]
-pub struct SolverSettings {
-    pub formulation: Formulation,
-    /// Clarabel interior-point iteration cap.
-    pub max_iter: u32,
-    /// s, Clarabel time limit per solve.
-    pub time_limit: f64,
-    pub tol_gap_abs: f64,
-    pub tol_gap_rel: f64,
-    pub tol_feas: f64,
-    /// Clarabel's Ruiz equilibration (computed once, from the start-up QP).
-    pub equilibrate: bool,
-    /// Clarabel's iterative refinement of each KKT solve.
-    pub iterative_refinement: bool,
-    /// Fraction of the step to the boundary of the cone an interior-point
-    /// iteration takes (Clarabel's default 0.99).
-    pub max_step_fraction: f64,
+atmo_core::params! {
+    /// `[solver]`: the interior-point QP solver (Clarabel).
+    #[derive(Debug, Clone, Copy, PartialEq)]
+    pub struct SolverSettings {
+        /// `condensed` or `sparse` (see [`Formulation`]).
+        pub formulation: Formulation;
+        /// Clarabel interior-point iteration cap.
+        pub max_iter: u32, range 1..=1000, unit "iterations";
+        /// Clarabel time limit per solve.
+        pub time_limit: f64, range 1e-5..=10.0, unit "s";
+        /// Clarabel's absolute duality-gap tolerance.
+        pub tol_gap_abs: f64, range 1e-12..=1e-2;
+        /// Clarabel's relative duality-gap tolerance.
+        pub tol_gap_rel: f64, range 1e-12..=1e-2;
+        /// Clarabel's feasibility tolerance.
+        pub tol_feas: f64, range 1e-12..=1e-2;
+        /// Clarabel's Ruiz equilibration (computed once, from the start-up QP).
+        pub equilibrate: bool;
+        /// Clarabel's iterative refinement of each KKT solve.
+        pub iterative_refinement: bool;
+        /// Fraction of the step to the boundary of the cone an interior-point
+        /// iteration takes (Clarabel's default 0.99; 1 would leave the interior).
+        pub max_step_fraction: f64, range 0.5..=0.9999;
+    }
 }
 
 /// How the feedback phase turns the estimate into the QP's solution.
@@ -190,24 +240,30 @@ pub enum Predictor {
     Model,
 }
 
-#[derive(Debug, Clone, Copy, Deserialize, PartialEq)]
-#[serde(deny_unknown_fields)]
-pub struct FeedbackSettings {
-    pub method: FeedbackMethod,
-    pub predictor: Predictor,
-    /// Working-set changes the feedback's homotopy may make before it falls
-    /// back to a full Clarabel solve at the estimate.
-    pub max_active_set_changes: u32,
-    /// The same cap for the preparation's walk from Clarabel's active set to
-    /// the exact solution at the predicted state.
-    pub max_preparation_changes: u32,
+atmo_core::params! {
+    /// `[feedback]`: how the estimate enters the plan each tick.
+    #[derive(Debug, Clone, Copy, PartialEq)]
+    pub struct FeedbackSettings {
+        /// `homotopy` or `clarabel` (see [`FeedbackMethod`]).
+        pub method: FeedbackMethod;
+        /// `plan` or `model` (see [`Predictor`]).
+        pub predictor: Predictor;
+        /// Working-set changes the feedback's homotopy may make before it falls
+        /// back to a full Clarabel solve at the estimate.
+        pub max_active_set_changes: u32, range 0..=10_000, unit "changes";
+        /// The same cap for the preparation's walk from Clarabel's active set to
+        /// the exact solution at the predicted state.
+        pub max_preparation_changes: u32, range 0..=10_000, unit "changes";
+    }
 }
 
-#[derive(Debug, Clone, Copy, Deserialize, PartialEq)]
-#[serde(deny_unknown_fields)]
-pub struct FailureSettings {
-    /// Ticks flown on the shifted previous plan before reporting Failed.
-    pub grace_ticks: u32,
+atmo_core::params! {
+    /// `[failure]`: what a failed solve leaves the robot flying.
+    #[derive(Debug, Clone, Copy, PartialEq)]
+    pub struct FailureSettings {
+        /// Ticks flown on the shifted previous plan before reporting Failed.
+        pub grace_ticks: u32, range 0..=10_000, unit "ticks";
+    }
 }
 
 /// Everything one controller needs: the file with one preset chosen.
@@ -240,110 +296,8 @@ impl MpcSettings {
 impl ConfigFile for MpcFile {
     type Error = MpcError;
 
-    /// Checks every value against its range.
     fn validate(&self, file: &Path) -> Result<()> {
-        let c = Checker::new(file);
-        let h = &self.horizon;
-        c.range("horizon.duration", h.duration, 0.01..=10.0, "s")?;
-        c.range("horizon.steps", h.steps, 1..=50, "intervals")?;
-        let stage_dt = h.duration / h.steps as f64;
-        c.range("horizon.tick_period", h.tick_period, 1e-4..=stage_dt, "s")?;
-        if self.cost.alpha_refresh_ticks == 0 {
-            return Err(c
-                .fail("cost.alpha_refresh_ticks", "an integer >= 1", 0)
-                .into());
-        }
-        c.range(
-            "cost.terminal_scale",
-            self.cost.terminal_scale,
-            0.0..=1e6,
-            "",
-        )?;
-        if self.presets.is_empty() {
-            return Err(c.fail("presets", "at least one cost preset", "none").into());
-        }
-        for (name, p) in &self.presets {
-            for (key, values) in [
-                ("q1", &p.q1[..]),
-                ("q2", &p.q2[..]),
-                ("r1", &p.r1[..]),
-                ("r2", &p.r2[..]),
-            ] {
-                if let Some(v) = values.iter().find(|v| !(v.is_finite() && **v >= 0.0)) {
-                    return Err(c
-                        .fail(&format!("presets.{name}.{key}"), "finite weights >= 0", v)
-                        .into());
-                }
-            }
-            // The QP must stay strictly convex in the inputs whatever alpha is.
-            for (key, values) in [("r1", &p.r1), ("r2", &p.r2)] {
-                if let Some(v) = values.iter().find(|v| **v <= 0.0) {
-                    return Err(c
-                        .fail(&format!("presets.{name}.{key}"), "input weights > 0", v)
-                        .into());
-                }
-            }
-        }
-        let s = &self.solver;
-        c.range("solver.max_iter", s.max_iter, 1..=1000, "iterations")?;
-        c.range("solver.time_limit", s.time_limit, 1e-5..=10.0, "s")?;
-        c.range("solver.tol_gap_abs", s.tol_gap_abs, 1e-12..=1e-2, "")?;
-        c.range("solver.tol_gap_rel", s.tol_gap_rel, 1e-12..=1e-2, "")?;
-        c.range("solver.tol_feas", s.tol_feas, 1e-12..=1e-2, "")?;
-        c.range(
-            "solver.max_step_fraction",
-            s.max_step_fraction,
-            0.5..=0.9999,
-            "",
-        )?;
-        c.range(
-            "feedback.max_active_set_changes",
-            self.feedback.max_active_set_changes,
-            0..=10_000,
-            "changes",
-        )?;
-        c.range(
-            "feedback.max_preparation_changes",
-            self.feedback.max_preparation_changes,
-            0..=10_000,
-            "changes",
-        )?;
-        if let Some(t) = &self.tilt_plan {
-            for (key, value) in [
-                ("tilt_plan.tilt_weight", t.tilt_weight),
-                ("tilt_plan.descent_speed_weight", t.descent_speed_weight),
-                ("tilt_plan.level_weight", t.level_weight),
-                ("tilt_plan.touchdown_tilt_weight", t.touchdown_tilt_weight),
-                ("tilt_plan.touchdown_speed_weight", t.touchdown_speed_weight),
-            ] {
-                c.range(key, value, 0.0..=1e6, "")?;
-            }
-            // Strictly convex in the tilt rate too.
-            c.range("tilt_plan.rate_weight", t.rate_weight, 1e-9..=1e6, "")?;
-            c.range("tilt_plan.thrust_max", t.thrust_max, 0.1..=1.0, "")?;
-            if let Some(v) = t.retired_rotor_thrust_max {
-                // Retired: only the value that reproduces today's bound.
-                c.range(
-                    "tilt_plan.rotor_thrust_max (retired key: remove it)",
-                    v,
-                    t.thrust_max..=t.thrust_max,
-                    "",
-                )?;
-            }
-            c.range(
-                "tilt_plan.touchdown_speed",
-                t.touchdown_speed,
-                0.0..=2.0,
-                "m/s",
-            )?;
-        }
-        c.range(
-            "failure.grace_ticks",
-            self.failure.grace_ticks,
-            0..=10_000,
-            "ticks",
-        )?;
-        Ok(())
+        Ok(atmo_core::params::check_file(self, file)?)
     }
 }
 

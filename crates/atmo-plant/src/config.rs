@@ -655,56 +655,7 @@ impl EffectsConfig {
             )?;
         }
         if let Some(e) = &self.ground_contact {
-            let p = format!("{prefix}.ground_contact");
-            // Stiffer than 1e6 N/m a contact is no longer resolved by the
-            // RK4 step (omega dt = sqrt(k / m) dt passes 0.85 for a wheel
-            // carrying a quarter of 5.5 kg at dt = 1 ms; at 1e12 N/m the plant reports
-            // impacts of -1.5e10 m/s).
-            c.range(
-                &format!("{p}.stiffness"),
-                e.stiffness,
-                1.0..=MAX_CONTACT_STIFFNESS,
-                "N/m",
-            )?;
-            c.within(&format!("{p}.damping"), e.damping, 0.0, 1e6)?;
-            c.within(&format!("{p}.friction"), e.friction, 0.0, 3.0)?;
-            c.within(
-                &format!("{p}.lateral_friction"),
-                e.lateral_friction,
-                0.01,
-                3.0,
-            )?;
-            c.range(
-                &format!("{p}.tangential_stiffness"),
-                e.tangential_stiffness,
-                1.0..=MAX_CONTACT_STIFFNESS,
-                "N/m",
-            )?;
-            c.within(
-                &format!("{p}.tangential_damping"),
-                e.tangential_damping,
-                0.0,
-                1e6,
-            )?;
-            c.positive(&format!("{p}.wheel_inertia"), e.wheel_inertia)?;
-            c.within(&format!("{p}.wheel_kp"), e.wheel_kp, 0.0, 1e3)?;
-            c.within(&format!("{p}.wheel_ki"), e.wheel_ki, 0.0, 1e4)?;
-            c.positive(&format!("{p}.wheel_torque_max"), e.wheel_torque_max)?;
-            c.finite(&format!("{p}.base_box_min"), &e.base_box_min)?;
-            c.finite(&format!("{p}.base_box_max"), &e.base_box_max)?;
-            for k in 0..3 {
-                if e.base_box_min[k] >= e.base_box_max[k] {
-                    return Err(c
-                        .fail(
-                            &format!("{p}.base_box_max"),
-                            "each entry above base_box_min",
-                            format!("{:?}", e.base_box_max),
-                        )
-                        .into());
-                }
-            }
-            c.positive(&format!("{p}.crash_speed"), e.crash_speed)?;
-            c.within(&format!("{p}.tip_over_deg"), e.tip_over_deg, 1.0, 180.0)?;
+            atmo_core::params::Params::check(e, c, &format!("{prefix}.ground_contact"))?;
         }
         Ok(())
     }

@@ -29,7 +29,7 @@
 use std::path::Path;
 
 use super::{GainPartials, ThrustGainSurface};
-use crate::config_file::{Checker, default_true};
+use crate::config_file::Checker;
 use serde::Deserialize;
 
 use crate::Result;
@@ -53,71 +53,34 @@ pub const DEFAULT_STD: [[f64; 6]; 4] = [
     [0.080, 0.055, 0.030, 0.015, 0.005, 0.0], // mean - std = -15 % at 0.25 m
 ];
 
-fn default_rotor_radius() -> f64 {
-    0.11
-}
-fn default_classical_below_deg() -> f64 {
-    30.0
-}
-fn default_correlation_time() -> f64 {
-    0.05
-}
-fn default_heights() -> Vec<f64> {
-    DEFAULT_HEIGHTS.to_vec()
-}
-fn default_tilts_deg() -> Vec<f64> {
-    DEFAULT_TILTS_DEG.to_vec()
-}
-fn default_gain() -> Vec<Vec<f64>> {
-    DEFAULT_GAIN.iter().map(|r| r.to_vec()).collect()
-}
-fn default_std() -> Vec<Vec<f64>> {
-    DEFAULT_STD.iter().map(|r| r.to_vec()).collect()
-}
-
-/// `[effects.ground_effect]`.
-#[derive(Debug, Clone, Deserialize, PartialEq)]
-#[serde(deny_unknown_fields)]
-pub struct GroundEffectConfig {
-    #[serde(default = "default_true")]
-    pub enabled: bool,
-    /// m, propeller radius R_p of the classical law.
-    #[serde(default = "default_rotor_radius")]
-    pub rotor_radius: f64,
-    /// deg, at and below this tilt only the classical law applies; between
-    /// it and the first table tilt the two are blended linearly.
-    #[serde(default = "default_classical_below_deg")]
-    pub classical_below_deg: f64,
-    /// s, correlation time of the thrust fluctuation.
-    #[serde(default = "default_correlation_time")]
-    pub correlation_time: f64,
-    /// m, rotor hub heights of the table columns, increasing.
-    #[serde(default = "default_heights")]
-    pub heights: Vec<f64>,
-    /// deg, tilts of the table rows, increasing.
-    #[serde(default = "default_tilts_deg")]
-    pub tilts_deg: Vec<f64>,
-    /// Mean `T / T_inf - 1`, rows by tilt, columns by height.
-    #[serde(default = "default_gain")]
-    pub gain: Vec<Vec<f64>>,
-    /// Standard deviation of `T / T_inf - 1`, same layout.
-    #[serde(default = "default_std")]
-    pub std: Vec<Vec<f64>>,
-}
-
-impl Default for GroundEffectConfig {
-    fn default() -> Self {
-        Self {
-            enabled: true,
-            rotor_radius: default_rotor_radius(),
-            classical_below_deg: default_classical_below_deg(),
-            correlation_time: default_correlation_time(),
-            heights: default_heights(),
-            tilts_deg: default_tilts_deg(),
-            gain: default_gain(),
-            std: default_std(),
-        }
+crate::params! {
+    /// `[effects.ground_effect]`: the thrust-gain surface near the ground.
+    /// A file without a key takes the documented default surface's value
+    /// (docs/ground_effect.md).
+    #[derive(Debug, Clone, PartialEq)]
+    pub struct GroundEffectConfig: Default {
+        /// Whether the plant flies through (and the MPC predicts with) it.
+        pub enabled: bool = true;
+        /// Propeller radius R_p of the classical law.
+        pub rotor_radius: f64 = 0.11, range 0.01..=1.0, unit "m";
+        /// At and below this tilt only the classical law applies; between
+        /// it and the first table tilt the two are blended linearly (at
+        /// most the first table tilt).
+        pub classical_below_deg: f64 = 30.0, unit "deg";
+        /// Correlation time of the thrust fluctuation.
+        pub correlation_time: f64 = 0.05, range Positive, unit "s";
+        /// Rotor hub heights of the table columns, increasing (two or more).
+        pub heights: Vec<f64> = DEFAULT_HEIGHTS.to_vec(), range 0.0..=10.0, unit "m";
+        /// Tilts of the table rows, increasing (two or more).
+        pub tilts_deg: Vec<f64> = DEFAULT_TILTS_DEG.to_vec(), range 0.0..=90.0, unit "deg";
+        /// Mean `T / T_inf - 1`, rows by tilt, columns by height (each in
+        /// [-0.99, 10]).
+        pub gain: Vec<Vec<f64>> = DEFAULT_GAIN.iter().map(|r| r.to_vec()).collect();
+        /// Standard deviation of `T / T_inf - 1`, same layout (each in
+        /// [0, 10]).
+        pub std: Vec<Vec<f64>> = DEFAULT_STD.iter().map(|r| r.to_vec()).collect();
     }
+    check |surface, c, prefix| surface.check_table(c, prefix)
 }
 
 /// A plant file's `[effects.ground_effect]` and nothing else of it: the
@@ -171,39 +134,36 @@ impl GroundEffectConfig {
     }
 
     /// Checks the table's shape and values; `prefix` is the key of the section.
+    ///
+    /// # Errors
+    /// The first value out of range, naming its key.
     pub fn validate(&self, c: &Checker<'_>, prefix: &str) -> Result<()> {
+        crate::params::Params::check(self, c, prefix)
+    }
+
+    /// What the ranges cannot say: the axes increase, the blend ends at
+    /// the first table tilt, the tables have one row per tilt and one
+    /// entry per height.
+    fn check_table(&self, c: &Checker<'_>, prefix: &str) -> Result<()> {
+        let key = |name: &str| crate::params::key(prefix, name);
+        increasing(c, &key("heights"), &self.heights)?;
+        increasing(c, &key("tilts_deg"), &self.tilts_deg)?;
         c.within(
-            &format!("{prefix}.rotor_radius"),
-            self.rotor_radius,
-            0.01,
-            1.0,
-        )?;
-        c.positive(&format!("{prefix}.correlation_time"), self.correlation_time)?;
-        increasing(c, &format!("{prefix}.heights"), &self.heights, 0.0, 10.0)?;
-        increasing(
-            c,
-            &format!("{prefix}.tilts_deg"),
-            &self.tilts_deg,
-            0.0,
-            90.0,
-        )?;
-        let first_tilt = self.tilts_deg[0];
-        c.within(
-            &format!("{prefix}.classical_below_deg"),
+            &key("classical_below_deg"),
             self.classical_below_deg,
             0.0,
-            first_tilt,
+            self.tilts_deg[0],
         )?;
         for (name, table, min) in [("gain", &self.gain, -0.99), ("std", &self.std, 0.0)] {
             if table.len() != self.tilts_deg.len() {
                 return Err(c.fail(
-                    &format!("{prefix}.{name}"),
+                    &key(name),
                     format!("{} rows (one per tilt)", self.tilts_deg.len()),
                     table.len(),
                 ));
             }
             for (r, row) in table.iter().enumerate() {
-                let key = format!("{prefix}.{name}[{r}]");
+                let key = format!("{}[{r}]", key(name));
                 if row.len() != self.heights.len() {
                     return Err(c.fail(
                         &key,
@@ -220,12 +180,9 @@ impl GroundEffectConfig {
     }
 }
 
-fn increasing(c: &Checker<'_>, key: &str, values: &[f64], min: f64, max: f64) -> Result<()> {
+fn increasing(c: &Checker<'_>, key: &str, values: &[f64]) -> Result<()> {
     if values.len() < 2 {
         return Err(c.fail(key, "at least two values", values.len()));
-    }
-    for v in values {
-        c.within(key, *v, min, max)?;
     }
     if values.windows(2).any(|w| w[1] <= w[0]) {
         return Err(c.fail(key, "strictly increasing values", format!("{values:?}")));

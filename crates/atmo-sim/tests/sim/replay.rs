@@ -48,6 +48,12 @@ fn a_simulated_landing_replays_bit_for_bit() {
     let (log, _) = landing();
     let flight = RecordedFlight::read(log, STATUS_TOPIC).unwrap();
     assert_eq!(flight.incomplete_tail, (0, 0));
+    // A log records the schema it was written with: nothing to migrate.
+    assert_eq!(
+        flight.files.schema_version,
+        atmo_flight::schema::CONFIG_SCHEMA_VERSION
+    );
+    assert!(flight.files.migrated.is_empty());
     let config = RecordedFlight::config(&flight.files).unwrap();
     let mut compared = 0;
     let report = replay(&flight, &config, CutReplay::AsLogged, |_| compared += 1).unwrap();
