@@ -22,7 +22,6 @@ crate::params! {
         pub linkage: LinkageConfig;
         pub limits: Limits;
     }
-    check |robot, c, prefix| crate::validate::physical(robot, c, prefix)
 }
 
 crate::params! {
