@@ -1,7 +1,7 @@
 //! The whole product in simulation, timed: the Fig. 5 wheel landing (14 s
 //! simulated: flight, morphing, transition past the critical angle,
 //! touchdown, drive) flown by FlightStack + atmo-mpc against the built-in
-//! plant with its default effects, on one thread. Issue target: a 10 s
+//! plant with its default effects, on one thread. Target: a 10 s
 //! flight at least 10x faster than real time, i.e. under 1 s here for 14 s.
 //!
 //! `cargo bench -p atmo --bench closed_loop`

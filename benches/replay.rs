@@ -1,4 +1,4 @@
-//! Issue 19: the cost of a replayable flight log.
+//! The cost of a replayable flight log.
 //!
 //! - `flight_log/log_tick`: the control thread's cost per tick of logging
 //!   it (`TickChannels::log_tick`: the `TickInputs` and `MpcStatus` records

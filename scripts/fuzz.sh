@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Coverage-guided fuzzing of the input parsers (fuzz/, issue 21) with cargo afl
+# Coverage-guided fuzzing of the input parsers (fuzz/) with cargo afl
 # (AFL++ built from the sources the `afl` crate ships, by cargo-afl).
 #
 #   scripts/fuzz.sh [TARGET...]     every target (fuzz/src/lib.rs) if none named

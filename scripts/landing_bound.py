@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""An optimistic bound on each Monte Carlo run's touchdown tilt (issue 17).
+"""An optimistic bound on each Monte Carlo run's touchdown tilt (the wheel-landing target).
 
 Reads the `per_run` records of `atmo-sim fly --runs N` (monte_carlo.json)
 and, for each run's drawn truth, integrates the vertical motion of an ideal

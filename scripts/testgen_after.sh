@@ -1,5 +1,5 @@
 #!/bin/bash
-# Issue 16 phase B: generate with atmo-testgen and analyse with this explain
+# Generate with atmo-testgen and analyse with this explain
 # (the same recordings as scripts/testgen_before.sh; outputs in $OUT).
 set -e
 cd "$(dirname "$0")/.."

@@ -140,7 +140,7 @@ fn wheel_landing_of_fig5_lands_past_66_deg_softly_and_drives_on() {
 #[test]
 fn landing_with_forward_velocity_of_fig6c() {
     let s = fly_checked("landing_forward_velocity");
-    // Issue 17: Fig. 6C lands past 64 deg (the flare, docs/landing.md).
+    // Fig. 6C lands past 64 deg (the flare, docs/landing.md).
     assert_wheel_landing(&s, 64.0);
     assert_saturated_transition(&s);
     assert!(
@@ -155,7 +155,7 @@ fn drive_takeoff_fly_land_of_fig6ab() {
     let s = fly_checked("drive_takeoff_land");
     let modes: Vec<&str> = s.mode_sequence.iter().map(String::as_str).collect();
     assert_eq!(&modes[..3], ["drive", "takeoff", "flight"], "{modes:?}");
-    // Issue 17: Fig. 6A/B lands past 64 deg (paper: 58 deg for 6B).
+    // Fig. 6A/B lands past 64 deg (paper: 58 deg for 6B).
     assert_wheel_landing(&s, 64.0);
     assert!(
         s.drive_distance_m >= 1.0,
@@ -167,7 +167,7 @@ fn drive_takeoff_fly_land_of_fig6ab() {
 #[test]
 fn landing_on_a_25_deg_slope_of_fig6d() {
     let s = fly_checked("landing_slope_25deg");
-    // Issue 17: at least 60 deg on the slope too. The flight stack measures
+    // At least 60 deg on the slope too. The flight stack measures
     // the wheels' clearance against the ground plane (height and normal
     // from the terrain); measured 64.59 deg at 0.25 m/s (docs/landing.md).
     assert_wheel_landing(&s, 60.0);

@@ -100,7 +100,7 @@ crate::params! {
 /// arm whose CoM is 0.17 m from the hinge) can only be a tensor about the
 /// arm's own centre of mass: about the hinge, Ixx would be at least
 /// m |r_AG|^2 = 0.044. The authors' model nevertheless treats it as the tensor
-/// about the hinge (subtracting m [r_AG]x^T [r_AG]x), with the xz and yz
+/// about the hinge (subtracting `m [r_AG]x^T [r_AG]x`), with the xz and yz
 /// products negated on the right arm. That under-estimates the roll and yaw
 /// inertia by about 0.088 kg m^2 and makes the composite inertia indefinite
 /// above about 86 deg of tilt.

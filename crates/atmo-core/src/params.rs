@@ -57,6 +57,24 @@
 //! property of several) go in a trailing `check |table, c, prefix| expr`,
 //! which sees the table, the [`Checker`], the key prefix and each field by
 //! reference, and returns `Result<(), CoreError>`.
+//!
+//! A `Vec` of tables (`[[effects.wind.gusts]]`) is checked per element
+//! (`gusts[1].duration`) and listed once (`gusts[].duration`).
+//!
+//! What a table cannot say, and how those types stay strict:
+//! - a choice of words (`kind = "missed"`) is an enum with serde's derive
+//!   and `rename_all`: unknown words are refused by serde, with the key
+//!   path and line, and the field holding it is declared here;
+//! - a field that is not read from the file (the plant's `source`, the
+//!   scenario's resolved paths) keeps its struct on serde's derive with
+//!   `deny_unknown_fields`; its tables are `params!` and its `validate`
+//!   calls their [`Params::check`];
+//! - keys shared by several tables (every actuator fault's onset `t`,
+//!   `mode`, `delay`) are one `params!` table read beside the others by a
+//!   small adapter (`atmo_sim::actuator_faults::Timed`), since the macro
+//!   has no `flatten`;
+//! - a bound that depends on another file (a fault's time within the
+//!   scenario's duration) is checked by the owner that knows both.
 
 use std::ops::RangeInclusive;
 
@@ -163,6 +181,20 @@ impl<T: Params> Params for std::collections::BTreeMap<String, T> {
 
     fn list(prefix: &str, out: &mut Vec<ParamInfo>) {
         T::list(&key(prefix, "<name>"), out);
+    }
+}
+
+/// An array of tables (`[[effects.wind.gusts]]`): each checked under
+/// `<key>[i]`, listed once under `<key>[]`.
+impl<T: Params> Params for Vec<T> {
+    fn check(&self, c: &Checker, prefix: &str) -> Result<()> {
+        self.iter()
+            .enumerate()
+            .try_for_each(|(i, t)| t.check(c, &format!("{prefix}[{i}]")))
+    }
+
+    fn list(prefix: &str, out: &mut Vec<ParamInfo>) {
+        T::list(&format!("{prefix}[]"), out);
     }
 }
 
@@ -369,7 +401,7 @@ pub trait LeafField {
 impl<T> LeafField for &Field<'_, T> {}
 impl<T> LeafField for &Kind<T> {}
 
-/// Declares a config table once; see the [module docs](crate::params).
+/// Declares a config table once; see the [module docs](mod@crate::params).
 #[macro_export]
 macro_rules! params {
     (

@@ -29,7 +29,7 @@ impl ConfigFile for RobotConfig {
     type Error = CoreError;
 
     /// Checks every value against its physical range, then the whole
-    /// robot ([`physical`]; here and not in the declaration, which would
+    /// robot (`physical`; here and not in the declaration, which would
     /// make the data module depend on the model built from it).
     fn validate(&self, file: &Path) -> Result<(), CoreError> {
         crate::params::check_file(self, file)?;

@@ -14,7 +14,7 @@ use atmo_flight::error::Result;
 #[derive(Debug, Clone, clap::Args)]
 pub struct DaemonConfigArg {
     /// Daemon config (TOML): robot, flight and MPC files, ground height,
-    /// input timeouts, [log], [ros2] topics, [drivers] ports.
+    /// input timeouts, `[log]`, `[ros2]` topics, `[drivers]` ports.
     #[arg(
         long = "config",
         value_name = "FILE",

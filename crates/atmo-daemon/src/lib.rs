@@ -4,7 +4,7 @@
 //!   MCAP logger thread) around the control thread, and `config/daemon.toml`.
 //! - [`preflight`]: the arming checks and a props-off tilt sweep on the
 //!   robot's transports, as a pass/fail table (`atmo-daemon preflight`).
-//! - [`reference`]: the parameter reference (`atmo-daemon check --params`).
+//! - [`reference`](mod@reference): the parameter reference (`atmo-daemon check --params`).
 //! - `cli` (feature `cli-args`): the command-line argument groups the
 //!   binaries share (`atmo-sim serve` reads the same daemon config).
 //!

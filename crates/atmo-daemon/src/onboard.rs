@@ -81,9 +81,9 @@ atmo_core::params! {
         /// OffboardControlMode on ROS 2), as the original ATMO did.
         pub px4_offboard: bool = false;
         pub log: LogConfig = LogConfig::default();
-        /// The ROS 2 node's topics (atmo-io; checked by its own rules).
+        /// The ROS 2 node: name, namespace, queue and topics (atmo-io).
         pub ros2: Ros2Config = Ros2Config::default();
-        /// The driver ports (atmo-io; checked by its own rules).
+        /// The iceoryx2 driver ports (atmo-io).
         pub drivers: DriverPortsConfig = DriverPortsConfig::default();
         /// The radio's mapping (used when `ros2.topics.rc` is enabled).
         pub rc: RcConfig = RcConfig::default();
@@ -160,12 +160,6 @@ impl ConfigFile for DaemonConfig {
     /// Checks the values; errors name `file` and the key.
     fn validate(&self, file: &Path) -> Result<()> {
         atmo_core::params::check_file(self, file)?;
-        self.ros2
-            .validate(file)
-            .map_err(|e| FlightError::Setup(format!("[ros2]: {e}")))?;
-        self.drivers
-            .validate(file)
-            .map_err(|e| FlightError::Setup(format!("[drivers]: {e}")))?;
         Ok(())
     }
 }
@@ -195,7 +189,7 @@ impl DaemonConfig {
 /// read by the main thread for diagnostics and the exit report).
 #[derive(Debug, Default)]
 pub struct OnboardShared {
-    /// Current mode ([`crate::Mode::code`]).
+    /// Current mode (`Mode::code`).
     pub mode: AtomicU8,
     /// Drivers alive (bit i: [`atmo_io::drivers::DriverId`] i).
     pub drivers_alive: AtomicU8,

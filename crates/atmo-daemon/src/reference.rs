@@ -34,7 +34,7 @@ pub fn parameter_reference() -> String {
          checks it is current. A key with a default may be left out of a file; \
          `required` keys may not. Ranges are as declared (they may name other keys \
          of the table). The daemon file's `[ros2]` and `[drivers]` are atmo-io's \
-         (docs/onboard.md).\n\n{}",
+         tables (docs/onboard.md); a topic's `type` is one its role takes.\n\n{}",
         tables.join("\n")
     )
 }

@@ -7,6 +7,7 @@ use std::path::{Path, PathBuf};
 
 use atmo_core::{ConfigFile, RobotConfig};
 
+use crate::effects::Effect;
 use crate::output::write_all;
 use crate::recording::Recording;
 use crate::synth::{Flight, Profile, record};
@@ -201,7 +202,7 @@ fn summary(ex: &crate::Explanation, out: &Path, elapsed: f64) -> String {
         let params: Vec<String> = e
             .parameters
             .iter()
-            .filter(|_| e.name != "ground_effect")
+            .filter(|_| e.name != Effect::GroundEffect)
             .map(|p| {
                 if p.identified {
                     match p.std {

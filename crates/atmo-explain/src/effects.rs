@@ -41,8 +41,9 @@ pub const WIND_AFFINE_DRAG: usize = 2;
 /// Air density used for body drag (kg/m^3).
 pub const AIR_DENSITY: f64 = 1.225;
 
-/// The candidate effects.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+/// The candidate effects (in reports and `explain.json` by [`Effect::name`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
 pub enum Effect {
     GroundEffect,
     MotorLag,
@@ -170,6 +171,21 @@ impl Effect {
             Effect::MassError => vec!["mass scale - 1".into()],
         }
     }
+}
+
+impl std::fmt::Display for Effect {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// The effects' names joined by `sep` (`a, b, c`).
+pub fn join(effects: &[Effect], sep: &str) -> String {
+    effects
+        .iter()
+        .map(|e| e.name())
+        .collect::<Vec<_>>()
+        .join(sep)
 }
 
 /// Column layout: effect -> first column.

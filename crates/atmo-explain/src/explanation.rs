@@ -4,6 +4,8 @@
 use serde::Serialize;
 
 use crate::HIGH_CONFIDENCE;
+use crate::effects::Effect;
+use crate::parameter::Param;
 use crate::regions::{self, Location};
 use crate::replay::ReplayError;
 use crate::selection;
@@ -11,7 +13,7 @@ use crate::selection;
 /// One parameter with its uncertainty.
 #[derive(Debug, Clone, Serialize)]
 pub struct Parameter {
-    pub name: String,
+    pub name: Param,
     pub value: f64,
     /// One standard deviation (delete-a-segment jackknife; null if unknown).
     pub std: Option<f64>,
@@ -28,9 +30,11 @@ pub struct Parameter {
 /// the smallest variance, is.
 #[derive(Debug, Clone, Serialize)]
 pub struct CombinedFinding {
-    /// `effect.parameter` of the two.
-    pub first: String,
-    pub second: String,
+    /// The two (`effect.parameter` in `explain.json`).
+    #[serde(serialize_with = "crate::parameter::serialize_qualified")]
+    pub first: Param,
+    #[serde(serialize_with = "crate::parameter::serialize_qualified")]
+    pub second: Param,
     /// Correlation of their estimates.
     pub correlation: f64,
     /// `-cov / var(second)`, in first's units per second's.
@@ -47,10 +51,10 @@ impl CombinedFinding {
     pub fn describe(&self) -> String {
         format!(
             "{} {} {:.4} {} = {:.4} +- {:.4} {} (correlation {:.2})",
-            self.first,
+            self.first.qualified(),
             if self.weight < 0.0 { "-" } else { "+" },
             self.weight.abs(),
-            self.second,
+            self.second.qualified(),
             self.value,
             self.std,
             self.unit,
@@ -62,7 +66,7 @@ impl CombinedFinding {
 /// A candidate effect's verdict.
 #[derive(Debug, Clone, Serialize)]
 pub struct EffectReport {
-    pub name: String,
+    pub name: Effect,
     pub physics: String,
     /// Claimed: selected and passed the acceptance.
     pub selected: bool,
@@ -84,11 +88,11 @@ pub struct EffectReport {
     pub heldout_gain: f64,
     pub parameters: Vec<Parameter>,
     /// Effects this one cannot be told apart from with this data.
-    pub indistinguishable_from: Vec<String>,
+    pub indistinguishable_from: Vec<Effect>,
     /// Physics and calibration this data cannot tell apart, reported as
     /// one finding: on a claimed calibration, the physics it stands for as
     /// well; on that physics, the claimed calibration that carries it.
-    pub same_finding_as: Vec<String>,
+    pub same_finding_as: Vec<Effect>,
     /// Pairs of parameters (one of them this effect's) the data determine
     /// only in combination.
     pub combined: Vec<CombinedFinding>,
@@ -98,6 +102,13 @@ pub struct EffectReport {
     /// Part of the nominal calibration stage (thrust scale, thrust curve,
     /// inertia, mass, centre of mass), not physics.
     pub calibration: bool,
+}
+
+impl EffectReport {
+    /// One of its parameters.
+    pub fn parameter(&self, param: Param) -> Option<&Parameter> {
+        self.parameters.iter().find(|p| p.name == param)
+    }
 }
 
 /// One point of the ground-effect gain grid.
@@ -163,7 +174,7 @@ pub struct Explanation {
     pub located_channels: Vec<String>,
     pub effects: Vec<EffectReport>,
     pub selection_steps: Vec<selection::Step>,
-    pub indistinguishable: Vec<(String, String)>,
+    pub indistinguishable: Vec<(Effect, Effect)>,
     pub heldout_rms_before: RmsTable,
     pub heldout_rms_after: RmsTable,
     pub multistep_before: ReplayError,
@@ -185,36 +196,34 @@ pub struct Explanation {
 }
 
 impl Explanation {
-    /// The report of an effect by name.
-    pub fn effect(&self, name: &str) -> Option<&EffectReport> {
-        self.effects.iter().find(|e| e.name == name)
+    /// The report of an effect.
+    pub fn effect(&self, effect: Effect) -> Option<&EffectReport> {
+        self.effects.iter().find(|e| e.name == effect)
     }
 
-    /// A parameter of an effect by name.
-    pub fn parameter(&self, effect: &str, name: &str) -> Option<f64> {
-        self.effect(effect)?
-            .parameters
-            .iter()
-            .find(|p| p.name == name)
+    /// A parameter's value, from its effect's report.
+    pub fn parameter(&self, param: Param) -> Option<f64> {
+        self.effect(param.effect())?
+            .parameter(param)
             .map(|p| p.value)
     }
 
     /// Selected effects in rank order.
-    pub fn selected(&self) -> Vec<&str> {
+    pub fn selected(&self) -> Vec<Effect> {
         self.effects
             .iter()
             .filter(|e| e.selected)
-            .map(|e| e.name.as_str())
+            .map(|e| e.name)
             .collect()
     }
 
     /// Effects other than `expected` that are selected with high confidence
     /// (>= [`HIGH_CONFIDENCE`]), in rank order.
-    pub fn confidently_claimed_besides(&self, expected: &[&str]) -> Vec<&str> {
+    pub fn confidently_claimed_besides(&self, expected: &[Effect]) -> Vec<Effect> {
         self.effects
             .iter()
             .filter(|e| e.selected && e.confidence.is_some_and(|c| c >= HIGH_CONFIDENCE))
-            .map(|e| e.name.as_str())
+            .map(|e| e.name)
             .filter(|n| !expected.contains(n))
             .collect()
     }
@@ -237,7 +246,7 @@ pub enum Decision {
     /// in for it, at least the acceptance's `SWAP_RECOVERY` of its held-out gain): with
     /// those calibrations one finding, which the model carries as the
     /// calibration (the simpler account) and the report names as both.
-    OneFindingWith { calibrations: Vec<String> },
+    OneFindingWith { calibrations: Vec<Effect> },
     /// Lowers the one-step residual but not the 0.5 s prediction;
     /// `reduced` when judged on the model left after other rejections.
     /// Both errors are over the same starts (those both models replayed).

@@ -48,6 +48,7 @@ mod noise;
 pub mod regions;
 
 pub mod output;
+pub mod parameter;
 mod physical;
 pub mod recording;
 pub mod replay;

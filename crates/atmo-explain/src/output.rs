@@ -9,6 +9,7 @@ use plotters::prelude::*;
 use serde_json::json;
 
 use crate::data::{CHANNEL_UNITS, CHANNELS};
+use crate::effects::{self, Effect};
 use crate::regions::{HEIGHT_EDGES, Location, VARPHI_EDGES};
 use crate::{ExplainError, Explanation, HIGH_CONFIDENCE};
 
@@ -320,7 +321,7 @@ fn report_physics(s: &mut String, ex: &Explanation) {
         let params: Vec<String> = e
             .parameters
             .iter()
-            .take(if e.name == "ground_effect" { 0 } else { 8 })
+            .take(if e.name == Effect::GroundEffect { 0 } else { 8 })
             .map(|p| {
                 let value = match p.std {
                     Some(sd) => format!("{} = {:.4} +- {:.4} {}", p.name, p.value, sd, p.unit),
@@ -333,7 +334,7 @@ fn report_physics(s: &mut String, ex: &Explanation) {
                 }
             })
             .collect();
-        let mut params = if e.name == "ground_effect" {
+        let mut params = if e.name == Effect::GroundEffect {
             "gain grid below".to_string()
         } else {
             params.join("; ")
@@ -358,12 +359,15 @@ fn report_physics(s: &mut String, ex: &Explanation) {
             } else {
                 format!(
                     "; cannot be told apart from {}",
-                    e.indistinguishable_from.join(", ")
+                    effects::join(&e.indistinguishable_from, ", ")
                 )
             } + &if e.same_finding_as.is_empty() {
                 String::new()
             } else {
-                format!("; one finding with {}", e.same_finding_as.join(", "))
+                format!(
+                    "; one finding with {}",
+                    effects::join(&e.same_finding_as, ", ")
+                )
             },
             e.confidence
                 .map_or_else(|| "-".into(), |c| format!("{c:.2}")),
@@ -378,7 +382,7 @@ fn report_gain_grid(s: &mut String, ex: &Explanation) {
     if ex
         .effects
         .iter()
-        .any(|e| e.name == "ground_effect" && e.selected)
+        .any(|e| e.name == Effect::GroundEffect && e.selected)
     {
         let _ = writeln!(
             s,
@@ -610,7 +614,7 @@ fn effects_png(path: &Path, ex: &Explanation) -> Result<(), ExplainError> {
         .y_label_area_size(110)
         .build_cartesian_2d(0.0..1.0, 0..n)
         .map_err(out_err)?;
-    let names: Vec<String> = ex.effects.iter().map(|e| e.name.clone()).collect();
+    let names: Vec<String> = ex.effects.iter().map(|e| e.name.to_string()).collect();
     chart
         .configure_mesh()
         .disable_y_mesh()

@@ -319,7 +319,7 @@ fn columns_of(layout: &Layout, set: &[Effect]) -> Vec<usize> {
 /// One step of the forward selection (for the report).
 #[derive(Debug, Clone, serde::Serialize)]
 pub struct Step {
-    pub added: String,
+    pub added: Effect,
     /// Held-out error before and after, noise-floor variances per entry.
     pub cv_before: f64,
     pub cv_after: f64,
@@ -372,7 +372,7 @@ fn select_from(
             break;
         }
         steps.push(Step {
-            added: e.name().into(),
+            added: e,
             cv_before: current / entries,
             cv_after: cv / entries,
         });

@@ -1,7 +1,7 @@
 //! Deterministic replay of a flight log through the flight stack.
 //!
 //! A flight log ([`crate::flight_log`]) holds every tick's inputs
-//! ([`StepInputs`], the tick's clock value included), every tick's outputs
+//! ([`StepInputs`](crate::step_io::StepInputs), the tick's clock value included), every tick's outputs
 //! (`MpcStatus`) and the configuration files. [`replay`] rebuilds the
 //! flight stack from a configuration, feeds it the logged inputs tick by
 //! tick (`step`, then `prepare_next`, as `ControlLoop::tick` does) and

@@ -309,7 +309,7 @@ fn logging_a_tick_does_not_allocate() {
     use atmo_flight::flight_log::{INPUTS_TOPIC, TickChannels};
     use atmo_io::mcap_log::{LoggerOptions, McapLogger, read_topic};
     use atmo_io::msg::TickInputs;
-    let dir = std::path::PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("issue19");
+    let dir = std::path::PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("no_alloc_log");
     std::fs::create_dir_all(&dir).unwrap();
     let path = dir.join("no_alloc_tick_log.mcap");
     let ticks = 2000u64;

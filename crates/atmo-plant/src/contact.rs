@@ -35,7 +35,7 @@
 //!
 //! **Two forms of the law, side by side.** [`ContactLaw`] states the law for
 //! one point with nalgebra vectors; the plant uses it for the base-box
-//! corners. The wheels take the same law four at a time ([`WheelLanes`]:
+//! corners. The wheels take the same law four at a time (`WheelLanes`:
 //! `forces` inside the RK4 derivative, `report` after the step), restated as
 //! straight-line arithmetic on `[component][wheel]` arrays so that the
 //! compiler vectorizes it. The test `the_wheel_kernels_are_the_scalar_contact_law`

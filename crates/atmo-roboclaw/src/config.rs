@@ -1,10 +1,14 @@
-//! The driver's TOML file: one board, in tilt or wheel mode. Strict
-//! (`deny_unknown_fields`), every value checked with its key, range and
-//! unit through atmo-core's `ConfigFile`.
+//! The driver's TOML file: one board, in tilt or wheel mode. Its tables
+//! are declared with `atmo_core::params!` (each key once, with doc,
+//! default, range and unit); the file itself stays a strict serde derive
+//! (`deny_unknown_fields`) because it keeps the path it was read from,
+//! and checks what spans tables (the mode against `[tilt]`/`[wheels]`,
+//! the tilt calibration's form).
 
 use std::path::{Path, PathBuf};
 
 use atmo_core::config_file::{Checker, ConfigFile};
+use atmo_core::params::Params as _;
 use atmo_core::{Linkage, RobotConfig};
 use atmo_io::drivers::DriverPortsConfig;
 use serde::Deserialize;
@@ -41,62 +45,52 @@ impl From<MotorName> for Motor {
     }
 }
 
-/// The serial link.
-#[derive(Debug, Clone, PartialEq, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct SerialConfig {
-    /// Device path (`/dev/ttyACM0`, or a simulated board's pty).
-    pub port: String,
-    /// Baud rate (the board's packet-serial setting).
-    #[serde(default = "default_baud")]
-    pub baud: u32,
-    /// Packet-serial address, 128..=135 (0x80..=0x87).
-    #[serde(default = "default_address")]
-    pub address: u32,
-    /// How long one attempt waits for its answer, ms.
-    #[serde(default = "default_answer_timeout_ms")]
-    pub answer_timeout_ms: u64,
-    /// Attempts after the first, per transaction.
-    #[serde(default = "default_retries")]
-    pub retries: u32,
-}
-
-fn default_baud() -> u32 {
-    115_200
-}
-fn default_address() -> u32 {
-    0x80
-}
-fn default_answer_timeout_ms() -> u64 {
-    10
-}
-fn default_retries() -> u32 {
-    2
-}
-
-/// Timing and the two stops.
-#[derive(Debug, Clone, PartialEq, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct TimingConfig {
-    /// Driver loop rate, Hz.
-    pub rate_hz: f64,
-    /// The driver's watchdog: motors to zero when no command for this long, ms.
-    pub command_timeout_ms: u64,
-    /// The board's own serial timeout (set at start), ms, a multiple of 100:
-    /// the board stops both motors if the driver itself goes silent.
-    pub board_serial_timeout_ms: u64,
-    /// How often the board's settings are read back (reset detection), ms.
-    pub health_check_period_ms: u64,
-}
-
-impl Default for TimingConfig {
-    fn default() -> Self {
-        Self {
-            rate_hz: 100.0,
-            command_timeout_ms: 200,
-            board_serial_timeout_ms: 500,
-            health_check_period_ms: 500,
+atmo_core::params! {
+    /// The serial link.
+    #[derive(Debug, Clone, PartialEq)]
+    pub struct SerialConfig {
+        /// Device path (`/dev/ttyACM0`, or a simulated board's pty).
+        pub port: String;
+        /// Baud rate (the board's packet-serial setting).
+        pub baud: u32 = 115_200, range 2400..=460_800, unit "baud";
+        /// Packet-serial address, 128..=135 (0x80..=0x87).
+        pub address: u32 = 0x80, range 0x80..=0x87;
+        /// How long one attempt waits for its answer.
+        pub answer_timeout_ms: u64 = 10, range 1..=1000, unit "ms";
+        /// Attempts after the first, per transaction.
+        pub retries: u32 = 2, range 0..=10;
+    }
+    check |serial, c, prefix| {
+        if serial.port.is_empty() {
+            return Err(c.fail(&atmo_core::params::key(prefix, "port"), "a device path", "\"\""));
         }
+        Ok(())
+    }
+}
+
+atmo_core::params! {
+    /// Timing and the two stops.
+    #[derive(Debug, Clone, PartialEq)]
+    pub struct TimingConfig: Default {
+        /// Driver loop rate.
+        pub rate_hz: f64 = 100.0, range 1.0..=1000.0, unit "Hz";
+        /// The driver's watchdog: motors to zero when no command for this long.
+        pub command_timeout_ms: u64 = 200, range 10..=10_000, unit "ms";
+        /// The board's own serial timeout (set at start), a multiple of 100:
+        /// the board stops both motors if the driver itself goes silent.
+        pub board_serial_timeout_ms: u64 = 500, range 100..=25_500, unit "ms";
+        /// How often the board's settings are read back (reset detection).
+        pub health_check_period_ms: u64 = 500, range 10..=60_000, unit "ms";
+    }
+    check |timing, c, prefix| {
+        if timing.board_serial_timeout_ms % 100 != 0 {
+            return Err(c.fail(
+                &atmo_core::params::key(prefix, "board_serial_timeout_ms"),
+                "a multiple of 100 ms (the board counts tenths of a second)",
+                timing.board_serial_timeout_ms,
+            ));
+        }
+        Ok(())
     }
 }
 
@@ -125,68 +119,66 @@ impl From<SwitchName> for SwitchInput {
     }
 }
 
-/// Tilt mode.
-#[derive(Debug, Clone, PartialEq, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct TiltConfig {
-    /// The robot file (relative to this file): its linkage model defines
-    /// the counts the daemon reads on `tilt_encoder`.
-    pub robot_file: PathBuf,
-    pub calibration: CalibrationKind,
-    /// Measured table: board counts (strictly increasing) ...
-    #[serde(default)]
-    pub table_counts: Vec<f64>,
-    /// ... and the tilt at each, deg (strictly monotonic, 0..=90).
-    #[serde(default)]
-    pub table_tilt_deg: Vec<f64>,
-    /// Linkage calibration: board counts per model count (+1 or -1).
-    #[serde(default = "default_encoder_sign")]
-    pub encoder_sign: f64,
-    /// Tilt at the home switch (where the board's counter is 0), deg.
-    #[serde(default = "default_home_tilt_deg")]
-    pub home_tilt_deg: f64,
-    /// No motion towards smaller tilt below this, deg (the authors' 1 deg).
-    #[serde(default = "default_min_tilt_deg")]
-    pub min_tilt_deg: f64,
-    /// Speed limit of the tilt motor, counts/s.
-    pub max_speed_counts_per_s: f64,
-    /// Homing speed towards the switch, counts/s (a magnitude).
-    pub homing_speed_counts_per_s: f64,
-    /// Homing fails after this long, s.
-    #[serde(default = "default_homing_timeout_s")]
-    pub homing_timeout_s: f64,
-    #[serde(default = "default_switch")]
-    pub home_switch: SwitchName,
+atmo_core::params! {
+    /// Tilt mode.
+    #[derive(Debug, Clone, PartialEq)]
+    pub struct TiltConfig {
+        /// The robot file (relative to this file): its linkage model defines
+        /// the counts the daemon reads on `tilt_encoder`.
+        pub robot_file: PathBuf;
+        /// `table` or `linkage`.
+        pub calibration: CalibrationKind;
+        /// Measured table: board counts (strictly increasing) ...
+        pub table_counts: Vec<f64> = Vec::new();
+        /// ... and the tilt at each (strictly monotonic, 0..=90).
+        pub table_tilt_deg: Vec<f64> = Vec::new(), unit "deg";
+        /// Linkage calibration: board counts per model count (+1 or -1).
+        pub encoder_sign: f64 = -1.0;
+        /// Tilt at the home switch (where the board's counter is 0).
+        pub home_tilt_deg: f64 = 90.0, range 0.0..=90.0, unit "deg";
+        /// No motion towards smaller tilt below this (the authors' 1 deg).
+        pub min_tilt_deg: f64 = 1.0, range 0.0..=90.0, unit "deg";
+        /// Speed limit of the tilt motor.
+        pub max_speed_counts_per_s: f64, range 1.0..=1.0e7, unit "counts/s";
+        /// Homing speed towards the switch (a magnitude, at most
+        /// `max_speed_counts_per_s`).
+        pub homing_speed_counts_per_s: f64,
+            range 1.0..=max_speed_counts_per_s.max(1.0), unit "counts/s";
+        /// Homing fails after this long.
+        pub homing_timeout_s: f64 = 30.0, range 0.1..=600.0, unit "s";
+        /// The home switch's input.
+        pub home_switch: SwitchName = SwitchName::S5;
+    }
 }
 
-fn default_encoder_sign() -> f64 {
-    -1.0
-}
-fn default_home_tilt_deg() -> f64 {
-    90.0
-}
-fn default_min_tilt_deg() -> f64 {
-    1.0
-}
-fn default_homing_timeout_s() -> f64 {
-    30.0
-}
-fn default_switch() -> SwitchName {
-    SwitchName::S5
-}
-
-/// Wheel mode.
-#[derive(Debug, Clone, PartialEq, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct WheelsConfig {
-    /// The left wheel's motor; the right wheel is on the other.
-    pub left_motor: MotorName,
-    /// Board counts per rad of wheel rotation, signed (the sign turns a
-    /// motor wired backwards).
-    pub left_counts_per_rad: f64,
-    pub right_counts_per_rad: f64,
-    /// Speed limit of each motor, counts/s.
-    pub max_speed_counts_per_s: f64,
+atmo_core::params! {
+    /// Wheel mode.
+    #[derive(Debug, Clone, PartialEq)]
+    pub struct WheelsConfig {
+        /// The left wheel's motor; the right wheel is on the other.
+        pub left_motor: MotorName;
+        /// Board counts per rad of wheel rotation, signed (the sign turns a
+        /// motor wired backwards); magnitude 1 to 1e6.
+        pub left_counts_per_rad: f64, unit "counts/rad";
+        /// The same for the right wheel.
+        pub right_counts_per_rad: f64, unit "counts/rad";
+        /// Speed limit of each motor.
+        pub max_speed_counts_per_s: f64, range 1.0..=1.0e7, unit "counts/s";
+    }
+    check |wheels, c, prefix| {
+        for (name, v) in [
+            ("left_counts_per_rad", wheels.left_counts_per_rad),
+            ("right_counts_per_rad", wheels.right_counts_per_rad),
+        ] {
+            c.range(
+                &atmo_core::params::key(prefix, name),
+                v.abs(),
+                1.0..=1.0e6,
+                "counts/rad (magnitude)",
+            )?;
+        }
+        Ok(())
+    }
 }
 
 /// One board's driver file.
@@ -222,63 +214,11 @@ impl ConfigFile for RoboclawConfig {
 
     fn validate(&self, file: &Path) -> Result<()> {
         let c = Checker::new(file);
-        let s = &self.serial;
-        if s.port.is_empty() {
-            return Err(c.fail("serial.port", "a device path", "\"\"").into());
-        }
-        c.range("serial.baud", u64::from(s.baud), 2400..=460_800, "baud")?;
-        c.range("serial.address", u64::from(s.address), 0x80..=0x87, "")?;
-        c.range(
-            "serial.answer_timeout_ms",
-            s.answer_timeout_ms,
-            1..=1000,
-            "ms",
-        )?;
-        c.range("serial.retries", u64::from(s.retries), 0..=10, "")?;
-        let t = &self.timing;
-        c.range("timing.rate_hz", t.rate_hz, 1.0..=1000.0, "Hz")?;
-        c.range(
-            "timing.command_timeout_ms",
-            t.command_timeout_ms,
-            10..=10_000,
-            "ms",
-        )?;
-        c.range(
-            "timing.board_serial_timeout_ms",
-            t.board_serial_timeout_ms,
-            100..=25_500,
-            "ms",
-        )?;
-        if t.board_serial_timeout_ms % 100 != 0 {
-            return Err(c
-                .fail(
-                    "timing.board_serial_timeout_ms",
-                    "a multiple of 100 ms (the board counts tenths of a second)",
-                    t.board_serial_timeout_ms,
-                )
-                .into());
-        }
-        c.range(
-            "timing.health_check_period_ms",
-            t.health_check_period_ms,
-            10..=60_000,
-            "ms",
-        )?;
-        // atmo-io names its keys from the table's root: say `ports.`.
-        self.ports.validate(file).map_err(|e| match e {
-            atmo_io::IoError::Config(atmo_core::CoreError::ConfigValue {
-                file,
-                key,
-                expected,
-                got,
-            }) => RoboclawError::Core(atmo_core::CoreError::ConfigValue {
-                file,
-                key: format!("ports.{key}"),
-                expected,
-                got,
-            }),
-            other => other.into(),
-        })?;
+        self.serial.check(&c, "serial")?;
+        self.timing.check(&c, "timing")?;
+        self.ports.check(&c, "ports")?;
+        self.tilt.check(&c, "tilt")?;
+        self.wheels.check(&c, "wheels")?;
         match self.mode {
             Mode::Tilt => {
                 let Some(tilt) = &self.tilt else {
@@ -292,28 +232,16 @@ impl ConfigFile for RoboclawConfig {
                 validate_tilt(&c, tilt, file)?;
             }
             Mode::Wheels => {
-                let Some(w) = &self.wheels else {
+                if self.wheels.is_none() {
                     return Err(c
                         .fail("wheels", "a [wheels] table in wheels mode", "none")
                         .into());
-                };
+                }
                 if self.tilt.is_some() {
                     return Err(c
                         .fail("tilt", "no [tilt] table in wheels mode", "one")
                         .into());
                 }
-                for (key, v) in [
-                    ("wheels.left_counts_per_rad", w.left_counts_per_rad),
-                    ("wheels.right_counts_per_rad", w.right_counts_per_rad),
-                ] {
-                    c.range(key, v.abs(), 1.0..=1.0e6, "counts/rad (magnitude)")?;
-                }
-                c.range(
-                    "wheels.max_speed_counts_per_s",
-                    w.max_speed_counts_per_s,
-                    1.0..=1.0e7,
-                    "counts/s",
-                )?;
             }
         }
         Ok(())
@@ -342,26 +270,6 @@ fn validate_tilt(c: &Checker<'_>, tilt: &TiltConfig, file: &Path) -> Result<()> 
             }
         }
     }
-    c.range("tilt.home_tilt_deg", tilt.home_tilt_deg, 0.0..=90.0, "deg")?;
-    c.range("tilt.min_tilt_deg", tilt.min_tilt_deg, 0.0..=90.0, "deg")?;
-    c.range(
-        "tilt.max_speed_counts_per_s",
-        tilt.max_speed_counts_per_s,
-        1.0..=1.0e7,
-        "counts/s",
-    )?;
-    c.range(
-        "tilt.homing_speed_counts_per_s",
-        tilt.homing_speed_counts_per_s,
-        1.0..=tilt.max_speed_counts_per_s.max(1.0),
-        "counts/s (at most tilt.max_speed_counts_per_s)",
-    )?;
-    c.range(
-        "tilt.homing_timeout_s",
-        tilt.homing_timeout_s,
-        0.1..=600.0,
-        "s",
-    )?;
     Ok(())
 }
 

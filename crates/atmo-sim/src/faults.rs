@@ -52,10 +52,12 @@ use std::path::Path;
 
 use atmo_core::config_file::Checker;
 use atmo_core::model::State;
+use atmo_core::params::Params as _;
 use atmo_flight::Mode;
 use atmo_mpc::SolverCuts;
 use atmo_mpc::qp::cuts::MAX_CUTS;
-use serde::Deserialize;
+
+use crate::actuator_faults::Onset;
 
 use crate::error::Result;
 
@@ -63,100 +65,86 @@ use crate::error::Result;
 /// so a backward jump of up to this much keeps its stamps positive.
 pub const ESTIMATOR_CLOCK_ORIGIN_S: f64 = 1000.0;
 
-/// A window of plant time, `[t, t + duration)`, s.
-#[derive(Debug, Clone, Copy, Deserialize, PartialEq)]
-#[serde(deny_unknown_fields)]
-pub struct FaultWindow {
-    pub t: f64,
-    pub duration: f64,
-}
-
-/// `[[faults.estimate_latency]]`.
-#[derive(Debug, Clone, Copy, Deserialize, PartialEq)]
-#[serde(deny_unknown_fields)]
-pub struct LatencySpike {
-    pub t: f64,
-    pub duration: f64,
-    /// s added to each estimate's delivery.
-    pub delay: f64,
-}
-
-/// `[[faults.estimate_clock_jump]]`.
-#[derive(Debug, Clone, Copy, Deserialize, PartialEq)]
-#[serde(deny_unknown_fields)]
-pub struct ClockJump {
-    pub t: f64,
-    /// s, the step of the estimator's clock (negative: back).
-    pub jump: f64,
-}
-
-/// `[faults.driver_death]`.
-#[derive(Debug, Clone, Deserialize, PartialEq)]
-#[serde(deny_unknown_fields)]
-pub struct DriverDeath {
-    /// Plant time the countdown starts, s.
-    pub t: Option<f64>,
-    /// Or: the first tick in this mode (a `Mode` name, e.g. "transition").
-    pub mode: Option<String>,
-    /// s after `t` or the mode's first tick.
-    #[serde(default)]
-    pub delay: f64,
-}
-
-/// `[[faults.solver_overrun]]`.
-#[derive(Debug, Clone, Copy, Deserialize, PartialEq)]
-#[serde(deny_unknown_fields)]
-pub struct SolverOverrun {
-    pub t: f64,
-    pub duration: f64,
-    /// Interior-point iteration each solve is cut at (0: before the first).
-    #[serde(default = "SolverOverrun::default_iteration")]
-    pub iteration: u32,
-}
-
-impl SolverOverrun {
-    fn default_iteration() -> u32 {
-        1
-    }
-}
-
-/// A scenario's `[faults]` (every list empty: no fault).
-#[derive(Debug, Clone, Default, Deserialize, PartialEq)]
-#[serde(deny_unknown_fields)]
-pub struct FaultsConfig {
-    #[serde(default)]
-    pub estimate_dropout: Vec<FaultWindow>,
-    #[serde(default)]
-    pub estimate_burst: Vec<FaultWindow>,
-    #[serde(default)]
-    pub estimate_latency: Vec<LatencySpike>,
-    #[serde(default)]
-    pub estimate_duplicate: Vec<FaultWindow>,
-    #[serde(default)]
-    pub estimate_reorder: Vec<FaultWindow>,
-    #[serde(default)]
-    pub estimate_clock_jump: Vec<ClockJump>,
-    pub driver_death: Option<DriverDeath>,
-    #[serde(default)]
-    pub solver_overrun: Vec<SolverOverrun>,
-    /// Faults of the rotors, the tilt encoder and the contact signal
-    /// ([`crate::actuator_faults`]).
-    #[serde(default)]
-    pub actuators: crate::actuator_faults::ActuatorFaults,
-}
-
 /// Longest window or delay, s (bounds the transport's queue).
 pub const MAX_FAULT_SPAN_S: f64 = 60.0;
 
-fn check_window(c: &Checker<'_>, key: &str, t: f64, duration: f64, end: f64) -> Result<()> {
-    c.within(&format!("{key}.t"), t, 0.0, end)?;
-    c.range(
-        &format!("{key}.duration"),
-        duration,
-        1e-3..=MAX_FAULT_SPAN_S,
-        "s",
-    )?;
-    Ok(())
+atmo_core::params! {
+    /// A window of plant time, `[t, t + duration)`.
+    #[derive(Debug, Clone, Copy, PartialEq)]
+    pub struct FaultWindow {
+        /// Start (within the scenario's duration).
+        pub t: f64, unit "s";
+        /// Length.
+        pub duration: f64, range 1e-3..=MAX_FAULT_SPAN_S, unit "s";
+    }
+}
+
+atmo_core::params! {
+    /// `[[faults.estimate_latency]]`.
+    #[derive(Debug, Clone, Copy, PartialEq)]
+    pub struct LatencySpike {
+        /// Start (within the scenario's duration).
+        pub t: f64, unit "s";
+        /// Length.
+        pub duration: f64, range 1e-3..=MAX_FAULT_SPAN_S, unit "s";
+        /// Added to each estimate's delivery.
+        pub delay: f64, range 1e-4..=MAX_FAULT_SPAN_S, unit "s";
+    }
+}
+
+atmo_core::params! {
+    /// `[[faults.estimate_clock_jump]]`.
+    #[derive(Debug, Clone, Copy, PartialEq)]
+    pub struct ClockJump {
+        /// When (within the scenario's duration).
+        pub t: f64, unit "s";
+        /// The step of the estimator's clock (negative: back).
+        pub jump: f64, range -ESTIMATOR_CLOCK_ORIGIN_S..=1e6, unit "s";
+    }
+}
+
+/// `[faults.driver_death]`: the drivers stop at an [`Onset`] (`t`, or the
+/// first tick in `mode`, e.g. "transition", plus `delay`).
+pub type DriverDeath = Onset;
+
+atmo_core::params! {
+    /// `[[faults.solver_overrun]]`.
+    #[derive(Debug, Clone, Copy, PartialEq)]
+    pub struct SolverOverrun {
+        /// Start (within the scenario's duration).
+        pub t: f64, unit "s";
+        /// Length.
+        pub duration: f64, range 1e-3..=MAX_FAULT_SPAN_S, unit "s";
+        /// Interior-point iteration each solve is cut at (0: before the first).
+        pub iteration: u32 = 1, range 0..=1000;
+    }
+}
+
+atmo_core::params! {
+    /// A scenario's `[faults]` (every list empty: no fault).
+    #[derive(Debug, Clone, PartialEq)]
+    pub struct FaultsConfig: Default {
+        /// Estimates lost.
+        pub estimate_dropout: Vec<FaultWindow> = Vec::new();
+        /// Estimates held back and delivered at once.
+        pub estimate_burst: Vec<FaultWindow> = Vec::new();
+        /// Estimates delivered late.
+        pub estimate_latency: Vec<LatencySpike> = Vec::new();
+        /// Estimates delivered twice.
+        pub estimate_duplicate: Vec<FaultWindow> = Vec::new();
+        /// Estimates delivered out of order.
+        pub estimate_reorder: Vec<FaultWindow> = Vec::new();
+        /// Steps of the estimator's clock.
+        pub estimate_clock_jump: Vec<ClockJump> = Vec::new();
+        /// The drivers stop.
+        pub driver_death: Option<DriverDeath> = None;
+        /// Solves cut short.
+        pub solver_overrun: Vec<SolverOverrun> = Vec::new();
+        /// Faults of the rotors, the tilt encoder and the contact signal
+        /// ([`crate::actuator_faults`]).
+        pub actuators: crate::actuator_faults::ActuatorFaults =
+            crate::actuator_faults::ActuatorFaults::default();
+    }
 }
 
 impl FaultsConfig {
@@ -167,65 +155,49 @@ impl FaultsConfig {
     /// `mode`, or a mode that is not one.
     pub fn validate(&self, file: &Path, duration: f64) -> Result<()> {
         let c = Checker::new(file);
-        for (kind, windows) in [
-            ("estimate_dropout", &self.estimate_dropout),
-            ("estimate_burst", &self.estimate_burst),
-            ("estimate_duplicate", &self.estimate_duplicate),
-            ("estimate_reorder", &self.estimate_reorder),
-        ] {
-            for (i, w) in windows.iter().enumerate() {
-                check_window(
-                    &c,
-                    &format!("faults.{kind}[{i}]"),
-                    w.t,
-                    w.duration,
-                    duration,
-                )?;
+        self.check(&c, "faults")?;
+        // What the declarations cannot say: every start lies within the
+        // scenario.
+        let starts = [
+            (
+                "estimate_dropout",
+                self.estimate_dropout
+                    .iter()
+                    .map(|w| w.t)
+                    .collect::<Vec<_>>(),
+            ),
+            (
+                "estimate_burst",
+                self.estimate_burst.iter().map(|w| w.t).collect(),
+            ),
+            (
+                "estimate_latency",
+                self.estimate_latency.iter().map(|w| w.t).collect(),
+            ),
+            (
+                "estimate_duplicate",
+                self.estimate_duplicate.iter().map(|w| w.t).collect(),
+            ),
+            (
+                "estimate_reorder",
+                self.estimate_reorder.iter().map(|w| w.t).collect(),
+            ),
+            (
+                "estimate_clock_jump",
+                self.estimate_clock_jump.iter().map(|w| w.t).collect(),
+            ),
+            (
+                "solver_overrun",
+                self.solver_overrun.iter().map(|w| w.t).collect(),
+            ),
+        ];
+        for (kind, list) in starts {
+            for (i, t) in list.into_iter().enumerate() {
+                c.within(&format!("faults.{kind}[{i}].t"), t, 0.0, duration)?;
             }
-        }
-        for (i, s) in self.estimate_latency.iter().enumerate() {
-            let key = format!("faults.estimate_latency[{i}]");
-            check_window(&c, &key, s.t, s.duration, duration)?;
-            c.range(
-                &format!("{key}.delay"),
-                s.delay,
-                1e-4..=MAX_FAULT_SPAN_S,
-                "s",
-            )?;
-        }
-        for (i, j) in self.estimate_clock_jump.iter().enumerate() {
-            let key = format!("faults.estimate_clock_jump[{i}]");
-            c.within(&format!("{key}.t"), j.t, 0.0, duration)?;
-            c.range(
-                &format!("{key}.jump"),
-                j.jump,
-                -ESTIMATOR_CLOCK_ORIGIN_S..=1e6,
-                "s",
-            )?;
         }
         if let Some(d) = &self.driver_death {
-            match (d.t, &d.mode) {
-                (Some(t), None) => c.within("faults.driver_death.t", t, 0.0, duration)?,
-                (None, Some(mode)) => {
-                    let names: Vec<&str> = Mode::ALL.iter().map(|m| m.name()).collect();
-                    c.one_of("faults.driver_death.mode", mode, &names)?;
-                }
-                _ => {
-                    return Err(c
-                        .fail(
-                            "faults.driver_death",
-                            "exactly one of `t` and `mode`",
-                            "both or neither",
-                        )
-                        .into());
-                }
-            }
-            c.range("faults.driver_death.delay", d.delay, 0.0..=duration, "s")?;
-        }
-        for (i, o) in self.solver_overrun.iter().enumerate() {
-            let key = format!("faults.solver_overrun[{i}]");
-            check_window(&c, &key, o.t, o.duration, duration)?;
-            c.range(&format!("{key}.iteration"), o.iteration, 0..=1000, "")?;
+            d.check_within(&c, "faults.driver_death", duration)?;
         }
         self.actuators.validate(file, duration)?;
         Ok(())

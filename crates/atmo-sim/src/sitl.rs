@@ -80,6 +80,11 @@ pub struct ServeCounters {
     pub publish_failures: u64,
     /// Wall time waited for the daemon to arm, ms.
     pub waited_for_daemon_ms: u64,
+    /// Wall clock (ns since the Unix epoch, the clock of the daemon's
+    /// `header.stamp`) when the last plant step published: the drivers the
+    /// server plays fell silent after it, and the daemon rightly sees them
+    /// die from then on.
+    pub served_until_ns: u64,
 }
 
 /// Progress callback: (plant time, daemon mode if known).
@@ -363,6 +368,7 @@ pub fn serve(
             progress(plant.time(), links.last_status.as_ref().and_then(mode_of));
         }
     }
+    links.counters.served_until_ns = wall_clock_ns();
     drop(ros_thread);
     let summary = tracker.summary(&crate::closed_loop::run_end(
         scenario,

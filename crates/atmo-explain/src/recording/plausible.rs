@@ -52,7 +52,7 @@ const COMMAND: &str = "rotor commands are normalized to [0, 1] (a 10 % margin is
 const TILT: &str = "the tilt is radians in [0, pi/2] (0 = quadrotor, pi/2 = drive), not degrees";
 
 /// The range of every column a [`Sample`] holds, in the order of
-/// [`cells`]: state (12), commands u1..u4, mean commands, varphi, ground_z.
+/// `cells`: state (12), commands u1..u4, mean commands, varphi, ground_z.
 pub const RANGES: [ColumnRange; 22] = [
     range("x", -1e4, 1e4, POSITION),
     range("y", -1e4, 1e4, POSITION),

@@ -1,7 +1,7 @@
 //! Stage 4b, accept: an effect the selection chose (it lowers the
 //! held-out one-step residual) is *found* only if
 //!
-//! 1. every parameter lies inside its physical range ([`RANGES`], the
+//! 1. every parameter lies inside its physical range ([`Param::range`], the
 //!    table in docs/explain.md): a value beyond a bound by more than its
 //!    uncertainty makes the effect "not identified"; a parameter at a bound
 //!    within its uncertainty, or whose uncertainty exceeds its value, is
@@ -30,6 +30,7 @@ use atmo_plant::config::PlantConfig;
 
 use crate::effects::Effect;
 use crate::explanation::Decision;
+use crate::parameter::Param;
 use crate::physical::Physical;
 use crate::recording::Recording;
 use crate::replay::{self, StartError};
@@ -42,67 +43,18 @@ use crate::{HORIZON, Result};
 /// Relative cut of the 0.5 s velocity error an effect must bring.
 pub const PREDICTION_MARGIN: f64 = 0.01;
 
-/// Physical range of a parameter (by effect and parameter name), the
-/// table of docs/explain.md. Ground-effect gains share one range.
-pub const RANGES: [(&str, &str, f64, f64); 17] = [
-    ("ground_effect", "gain", -0.5, 3.0),
-    ("ground_effect", "rotor_radius^2", 0.0, 0.36),
-    ("motor_lag", "time_constant", 0.005, 0.2),
-    ("motor_lag", "lag_term_scale", 0.5, 1.5),
-    ("drag", "rotor_drag", 0.0, 5.0),
-    ("drag", "axial_drag", 0.0, 5.0),
-    ("thrust_axis", "tilt", -0.1, 0.1),
-    ("drag", "body_cd_area", 0.0, 1.0),
-    ("wind", "steady", -15.0, 15.0),
-    ("thrust_scale", "scale_minus_one", -0.5, 0.5),
-    ("thrust_curve", "quadratic_share", -0.6, 0.6),
-    ("battery_sag", "sag", 0.0, 0.5),
-    ("com_offset", "offset", -0.05, 0.05),
-    ("inertia_error", "inertia_scale_minus_one", -0.5, 1.0),
-    ("mass_error", "mass_scale_minus_one", -0.5, 0.5),
-    ("calibration", "thrust_to_mass_minus_one", -0.5, 0.5),
-    ("drag_and_wind", "rotor_drag_times_wind", -30.0, 30.0),
-];
-
-/// The range of parameter `name` of effect `effect`, if documented.
-pub fn range_of(effect: &str, name: &str) -> Option<(f64, f64)> {
-    RANGES
-        .iter()
-        .find(|(e, p, ..)| *e == effect && !p.is_empty() && name.starts_with(p))
-        .map(|(_, _, lo, hi)| (*lo, *hi))
-}
-
-/// The physical range of each linear coefficient of `e`, from
-/// [`RANGES`]; unbounded where the coefficient is not the parameter
+/// The physical range of each linear coefficient of `e`
+/// ([`Param::range`]); unbounded where the coefficient is not a parameter
 /// itself (the wind's `k_r w` products, the battery's loss per energy).
 /// The fit holds every coefficient inside its range (`Stats::bounds`), so
 /// an absurd value of one effect cannot stand in for another effect's
 /// force during the selection.
 pub fn coefficient_bounds(e: Effect) -> Vec<(f64, f64)> {
-    let range = |p: &str| range_of(e.name(), p).unwrap_or((f64::NEG_INFINITY, f64::INFINITY));
-    match e {
-        Effect::GroundEffect => (0..16)
-            .map(|_| range("gain"))
-            .chain([range("rotor_radius^2")])
-            .collect(),
-        Effect::MotorLag => vec![range("lag_term_scale")],
-        Effect::Drag => vec![
-            range("rotor_drag"),
-            range("axial_drag"),
-            range("body_cd_area"),
-            range("body_cd_area"),
-            range("body_cd_area"),
-        ],
-        Effect::ThrustAxis => vec![range("tilt"); 2],
-        Effect::ThrustScale => vec![range("scale_minus_one")],
-        Effect::ThrustCurve => vec![range("quadratic_share")],
-        Effect::ComOffset => vec![range("offset"); 2],
-        Effect::InertiaError => vec![range("inertia_scale_minus_one")],
-        Effect::MassError => vec![range("mass_scale_minus_one")],
-        Effect::Wind | Effect::BatterySag => {
-            vec![(f64::NEG_INFINITY, f64::INFINITY); e.width()]
-        }
-    }
+    (0..e.width())
+        .map(|j| {
+            Param::of_coefficient(e, j).map_or((f64::NEG_INFINITY, f64::INFINITY), Param::range)
+        })
+        .collect()
 }
 
 /// What the acceptance tests said about one parameter.
@@ -341,8 +293,12 @@ fn failure(
         .or_else(|| {
             calibration_confusion(fit, e, model).map(|alike| {
                 let swap = alike.iter().copied().find(|c| proposed.contains(c));
-                let calibrations = alike.iter().map(|c| c.name().to_string()).collect();
-                (Decision::OneFindingWith { calibrations }, swap)
+                (
+                    Decision::OneFindingWith {
+                        calibrations: alike,
+                    },
+                    swap,
+                )
             })
         })
 }
@@ -550,7 +506,7 @@ impl Decision {
                 "one finding with {}: this data cannot tell it apart from that calibration of the \
                  robot file (swapped in for it, it explains at least {:.0} % as much); the model \
                  carries the calibration, and no physics is claimed alone",
-                calibrations.join(", "),
+                crate::effects::join(calibrations, ", "),
                 100.0 * SWAP_RECOVERY
             ),
             Decision::RejectedByPrediction {
@@ -579,7 +535,7 @@ fn wind_failure(fit: &Fit, e: Effect) -> Option<String> {
     }
     let drag = effect_parameters(fit, Effect::Drag, true);
     let identified = |p: &crate::explanation::Parameter| {
-        param_status(p.value, p.std, range_of("drag", &p.name)) == ParamStatus::Identified
+        param_status(p.value, p.std, Some(p.name.range())) == ParamStatus::Identified
     };
     if drag.iter().any(identified) {
         return None;
@@ -632,10 +588,9 @@ fn identification_failure(fit: &Fit, e: Effect) -> Option<String> {
     let params = effect_parameters(fit, e, true);
     let mut any_identified = false;
     for p in &params {
-        let range = range_of(e.name(), &p.name);
-        match param_status(p.value, p.std, range) {
+        let (lo, hi) = p.name.range();
+        match param_status(p.value, p.std, Some((lo, hi))) {
             ParamStatus::OutOfRange => {
-                let (lo, hi) = range.unwrap_or((f64::NAN, f64::NAN));
                 return Some(format!(
                     "{} = {:.4} +- {:.4} {} is outside its physical range [{lo}, {hi}]",
                     p.name,
@@ -682,10 +637,13 @@ mod tests {
             param_status(54.6, Some(1.0), Some((-15.0, 15.0))),
             ParamStatus::OutOfRange
         );
-        assert_eq!(range_of("wind", "steady_x"), Some((-15.0, 15.0)));
         assert_eq!(
-            range_of("ground_effect", "gain(h=0.25 m, varphi=40 deg)"),
-            Some((-0.5, 3.0))
+            coefficient_bounds(Effect::GroundEffect)[0],
+            Param::Gain { height: 0, tilt: 0 }.range()
+        );
+        assert_eq!(
+            coefficient_bounds(Effect::Wind),
+            vec![(f64::NEG_INFINITY, f64::INFINITY); 2]
         );
     }
 }

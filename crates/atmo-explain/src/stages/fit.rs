@@ -97,7 +97,7 @@ impl Fit {
 
     /// The effects outside the model that the data cannot tell apart from
     /// its effect `e`: swapping `e` for one of them recovers at least
-    /// [`SWAP_RECOVERY`] of what `e` explains of the cross-validated
+    /// `SWAP_RECOVERY` of what `e` explains of the cross-validated
     /// residual. The best swap first.
     pub fn swaps_for(&self, e: Effect) -> Vec<Effect> {
         if !self.chosen.contains(&e) {

@@ -24,7 +24,7 @@ pub(crate) mod wind;
 mod tests;
 
 pub use crate::explanation::Decision;
-pub use accept::{ParamStatus, RANGES, accept_effects, coefficient_bounds, param_status, range_of};
+pub use accept::{ParamStatus, accept_effects, coefficient_bounds, param_status};
 pub use fit::{Fit, fit_effects};
 pub use locate::{Mismatch, locate_mismatch, rms_table};
 pub use report::{

@@ -7,10 +7,11 @@
 use atmo_core::ground_effect::table::GroundEffect;
 
 use crate::data::CHANNELS;
-use crate::effects::Effect;
+use crate::effects::{self, Effect};
 use crate::explanation::{
     CombinedFinding, EffectReport, Explanation, GridPoint, Parameter, Series,
 };
+use crate::parameter::{Axis, Param};
 use crate::physical::{BATTERY_CAPACITY_WH, BATTERY_FULL_POWER_W};
 use crate::recording::Recording;
 use crate::selection::{self, Step};
@@ -46,14 +47,14 @@ pub fn effect_reports(
     fit: &Fit,
     confidence: &[(Effect, f64)],
     decisions: &[(Effect, Decision)],
-) -> (Vec<EffectReport>, Vec<(String, String)>) {
+) -> (Vec<EffectReport>, Vec<(Effect, Effect)>) {
     let active = vec![true; fit.stats.nseg()];
     let (stats, chosen) = (&fit.stats, &fit.chosen);
     let cv = |set: &[Effect]| stats.cv(&fit.columns_of(set), &active);
     let entries = stats.entries_in(&active).max(1) as f64;
     let cv_sel = stats.cv(&fit.idx, &active);
     let mut reports = Vec::new();
-    let mut pairs: Vec<(String, String)> = Vec::new();
+    let mut pairs: Vec<(Effect, Effect)> = Vec::new();
     for &e in &Effect::ALL {
         let selected = chosen.contains(&e);
         // A profiled wind is the knob of the drag's columns: one finding
@@ -76,12 +77,8 @@ pub fn effect_reports(
             more.push(e);
             (cv_sel - cv(&more)) / entries
         };
-        let indist: Vec<String> = fit
-            .swaps_for(e)
-            .iter()
-            .map(|f| f.name().to_string())
-            .collect();
-        pairs.extend(indist.iter().map(|f| (e.name().to_string(), f.clone())));
+        let indist: Vec<Effect> = fit.swaps_for(e);
+        pairs.extend(indist.iter().map(|&f| (e, f)));
         let decided_by = decisions.iter().find(|d| d.0 == e).map_or_else(
             || {
                 "not selected: adding it lowers the held-out residual by less than the threshold"
@@ -92,7 +89,7 @@ pub fn effect_reports(
         // A rejected effect's parameters are those of the fit it was
         // rejected from (what it would have claimed).
         reports.push(EffectReport {
-            name: e.name().into(),
+            name: e,
             physics: e.physics().into(),
             decided_by,
             calibration: e.is_calibration(),
@@ -105,9 +102,9 @@ pub fn effect_reports(
             parameters: effect_parameters(fit, e, selected)
                 .into_iter()
                 .map(|mut p| {
-                    let range = crate::stages::range_of(e.name(), &p.name);
-                    p.identified = crate::stages::param_status(p.value, p.std, range)
-                        == crate::stages::ParamStatus::Identified;
+                    p.identified =
+                        crate::stages::param_status(p.value, p.std, Some(p.name.range()))
+                            == crate::stages::ParamStatus::Identified;
                     p
                 })
                 .collect(),
@@ -148,7 +145,7 @@ fn link_physics_and_calibration(
         }
         for (p, d) in decisions {
             if let Decision::OneFindingWith { calibrations } = d
-                && calibrations.iter().any(|n| n == c.name())
+                && calibrations.contains(&c)
                 && !pairs.contains(&(*p, c))
             {
                 pairs.push((*p, c));
@@ -157,14 +154,14 @@ fn link_physics_and_calibration(
     }
     for r in reports.iter_mut() {
         for (p, c) in &pairs {
-            let other = if r.name == p.name() {
+            let other = if r.name == *p {
                 c
-            } else if r.name == c.name() {
+            } else if r.name == *c {
                 p
             } else {
                 continue;
             };
-            r.same_finding_as.push(other.name().to_string());
+            r.same_finding_as.push(*other);
         }
         if matches!(r.decision, Some(Decision::OneFindingWith { .. }))
             && r.same_finding_as.is_empty()
@@ -219,10 +216,10 @@ fn combine_inseparable(fit: &Fit, reports: &mut [EffectReport]) {
             if rho.abs() < COMBINED_CORRELATION {
                 continue;
             }
-            let name_of = |e: Effect, j: usize| -> Option<(String, String)> {
-                let r = reports.iter().find(|r| r.name == e.name())?;
+            let name_of = |e: Effect, j: usize| -> Option<(Param, String)> {
+                let r = reports.iter().find(|r| r.name == e)?;
                 let p = r.parameters.get(j)?;
-                Some((format!("{}.{}", e.name(), p.name), p.unit.clone()))
+                Some((p.name, p.unit.clone()))
             };
             let (Some((first, unit)), Some((second, _))) = (name_of(ea, ja), name_of(eb, jb))
             else {
@@ -238,12 +235,9 @@ fn combine_inseparable(fit: &Fit, reports: &mut [EffectReport]) {
                 std: vaa.sqrt() * (1.0 - rho * rho).max(0.0).sqrt(),
                 unit,
             };
-            for r in reports
-                .iter_mut()
-                .filter(|r| r.name == ea.name() || r.name == eb.name())
-            {
+            for r in reports.iter_mut().filter(|r| r.name == ea || r.name == eb) {
                 for (e, j) in [(ea, ja), (eb, jb)] {
-                    if r.name != e.name() {
+                    if r.name != e {
                         continue;
                     }
                     if let Some(p) = r.parameters.get_mut(j) {
@@ -276,51 +270,38 @@ pub(crate) fn effect_parameters(fit: &Fit, e: Effect, selected: bool) -> Vec<Par
             .position(|i| *i == c)
             .map_or((f64::NAN, f64::NAN), |p| (ptheta[p], psd[p]))
     };
-    let param = |name: String, (value, std): (f64, f64), unit: &str| Parameter {
+    let param = |name: Param, value: f64, std: Option<f64>| Parameter {
         identified: true,
         name,
         value,
-        std: Some(std),
-        unit: unit.into(),
+        std,
+        unit: name.unit().into_owned(),
     };
     let cols = layout.columns(e);
     match e {
-        Effect::MotorLag => vec![
-            Parameter {
-                identified: true,
-                name: "time_constant".into(),
-                value: fit.knobs.tau,
-                std: None,
-                unit: "s".into(),
-            },
-            param(
-                "lag_term_scale".into(),
-                coef(cols.start),
-                "1 (1 = consistent)",
-            ),
-        ],
+        Effect::MotorLag => {
+            let (c, cs) = coef(cols.start);
+            vec![
+                param(Param::TimeConstant, fit.knobs.tau, None),
+                param(Param::LagTermScale, c, Some(cs)),
+            ]
+        }
         Effect::Wind if selected && fit.wind.is_some() => {
             // Infinite for a component the profile did not identify
             // (`WindProfile::identified`).
             let sd = fit.wind.as_ref().map_or([f64::NAN; 2], |p| p.sd);
-            ["x", "y"]
+            Axis::XY
                 .iter()
                 .enumerate()
-                .map(|(j, axis)| Parameter {
-                    identified: true,
-                    name: format!("steady_{axis}"),
-                    value: fit.knobs.wind[j],
-                    std: Some(sd[j]),
-                    unit: "m/s (NED)".into(),
-                })
+                .map(|(j, &axis)| param(Param::SteadyWind(axis), fit.knobs.wind[j], Some(sd[j])))
                 .collect()
         }
         Effect::Wind => {
             let kr = coef(layout.columns(Effect::Drag).start).0;
-            ["x", "y"]
+            Axis::XY
                 .iter()
                 .enumerate()
-                .map(|(j, axis)| {
+                .map(|(j, &axis)| {
                     let (c, cs) = coef(cols.start + j);
                     let (v, s) = if kr.abs() > 1e-3 {
                         (
@@ -332,56 +313,22 @@ pub(crate) fn effect_parameters(fit: &Fit, e: Effect, selected: bool) -> Vec<Par
                         // measured, and not a zero wind either.
                         (f64::NAN, f64::NAN)
                     };
-                    Parameter {
-                        identified: true,
-                        name: format!("steady_{axis}"),
-                        value: v,
-                        std: s.is_finite().then_some(s),
-                        unit: "m/s (NED)".into(),
-                    }
+                    param(Param::SteadyWind(axis), v, s.is_finite().then_some(s))
                 })
                 .collect()
         }
         Effect::BatterySag => {
             let (c, cs) = coef(cols.start);
             let k = 3600.0 * BATTERY_CAPACITY_WH / BATTERY_FULL_POWER_W;
-            vec![param(
-                "sag".into(),
-                (c * k, cs * k),
-                &format!(
-                    "thrust fraction at {BATTERY_CAPACITY_WH} Wh drawn at {BATTERY_FULL_POWER_W} W per rotor"
-                ),
-            )]
+            vec![param(Param::Sag, c * k, Some(cs * k))]
         }
-        Effect::GroundEffect => {
-            let names = e.coefficient_names();
-            cols.enumerate()
-                .map(|(j, c)| param(names[j].clone(), coef(c), if j == 16 { "m^2" } else { "1" }))
-                .collect()
-        }
-        _ => {
-            let (names, units): (&[&str], &[&str]) = match e {
-                Effect::Drag => (
-                    &[
-                        "rotor_drag",
-                        "axial_drag",
-                        "body_cd_area_x",
-                        "body_cd_area_y",
-                        "body_cd_area_z",
-                    ],
-                    &["N/(m/s)", "N/(m/s)", "m^2", "m^2", "m^2"],
-                ),
-                Effect::ComOffset => (&["offset_x", "offset_y"], &["m", "m"]),
-                Effect::ThrustAxis => (&["tilt_x", "tilt_y"], &["rad", "rad"]),
-                Effect::ThrustScale => (&["scale_minus_one"], &["1"]),
-                Effect::ThrustCurve => (&["quadratic_share"], &["1"]),
-                Effect::InertiaError => (&["inertia_scale_minus_one"], &["1"]),
-                _ => (&["mass_scale_minus_one"], &["1"]),
-            };
-            cols.enumerate()
-                .map(|(j, c)| param(names[j].into(), coef(c), units[j]))
-                .collect()
-        }
+        _ => cols
+            .enumerate()
+            .filter_map(|(j, c)| {
+                let (v, s) = coef(c);
+                Param::of_coefficient(e, j).map(|p| param(p, v, Some(s)))
+            })
+            .collect(),
     }
 }
 
@@ -456,7 +403,7 @@ pub fn verdict(reports: &[EffectReport], chosen: &[Effect], mismatch: &Mismatch)
                 format!(
                     "{} ({conf}; this data cannot tell it apart from {})",
                     r.name,
-                    r.indistinguishable_from.join(", ")
+                    effects::join(&r.indistinguishable_from, ", ")
                 )
             }
         };
@@ -476,7 +423,7 @@ pub fn verdict(reports: &[EffectReport], chosen: &[Effect], mismatch: &Mismatch)
                         format!(
                             "{} or {} (one finding, carried by the calibration {}; {})",
                             r.name,
-                            r.same_finding_as.join(" or "),
+                            effects::join(&r.same_finding_as, " or "),
                             r.name,
                             describe(r)
                         )

@@ -381,9 +381,9 @@ fn acceptance_never_compares_against_a_prediction_that_failed() {
 #[test]
 fn physics_a_claimed_calibration_explains_alike_is_one_finding_not_a_rejection() {
     let run = heavy();
-    let report = |name: &str, calibration: bool, selected: bool, other: &str, d: Decision| {
+    let report = |name: Effect, calibration: bool, selected: bool, other: Effect, d: Decision| {
         crate::EffectReport {
-            name: name.into(),
+            name,
             physics: String::new(),
             selected,
             confidence: selected.then_some(1.0),
@@ -393,7 +393,7 @@ fn physics_a_claimed_calibration_explains_alike_is_one_finding_not_a_rejection()
             heldout_gain: 0.1,
             parameters: Vec::new(),
             indistinguishable_from: Vec::new(),
-            same_finding_as: vec![other.into()],
+            same_finding_as: vec![other],
             combined: Vec::new(),
             calibration,
         }
@@ -403,11 +403,11 @@ fn physics_a_claimed_calibration_explains_alike_is_one_finding_not_a_rejection()
         without: Some(0.6),
     };
     let alike = Decision::OneFindingWith {
-        calibrations: vec!["thrust_axis".into()],
+        calibrations: vec![Effect::ThrustAxis],
     };
     let reports = [
-        report("thrust_axis", true, true, "wind", found),
-        report("wind", false, false, "thrust_axis", alike),
+        report(Effect::ThrustAxis, true, true, Effect::Wind, found),
+        report(Effect::Wind, false, false, Effect::ThrustAxis, alike),
     ];
     let (_, v) = verdict(&reports, &[Effect::ThrustAxis], &run.mismatch);
     assert!(

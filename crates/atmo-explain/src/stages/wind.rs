@@ -110,12 +110,12 @@ pub struct WindProfile {
     pub rss_no_wind: f64,
     /// What each component (x, y) of the two-dimensional optimum gains:
     /// the least residual with it held at 0 (the other profiled), relative
-    /// to the residual at that optimum. Below [`MIN_AXIS_GAIN`] the
+    /// to the residual at that optimum. Below `MIN_AXIS_GAIN` the
     /// component is not identified, held at 0, and the wind is the profile
     /// along the other axis.
     pub axis_gain: [f64; 2],
     /// Whether each component is identified: its gain at least
-    /// [`MIN_AXIS_GAIN`] and its value at the optimum inside its physical
+    /// `MIN_AXIS_GAIN` and its value at the optimum inside its physical
     /// range. When exactly one is not, it is held at 0 and
     /// [`Self::wind`] is the profile along the other axis.
     pub identified: [bool; 2],
@@ -433,8 +433,8 @@ pub fn profile_wind(
     // A component beyond its physical range is not identified either (the
     // finder's rule for every parameter).
     let identified: [bool; 2] = std::array::from_fn(|axis| {
-        let name = ["steady_x", "steady_y"][axis];
-        let (lo, hi) = crate::stages::range_of("wind", name).unwrap_or((f64::MIN, f64::MAX));
+        let (lo, hi) =
+            crate::parameter::Param::SteadyWind(crate::parameter::Axis::XY[axis]).range();
         axis_gain[axis] >= MIN_AXIS_GAIN && (lo..=hi).contains(&best.0[axis])
     });
     // One component not identified: it is held at 0 and the wind is the

@@ -27,7 +27,12 @@ fn fitted_ground_effect_makes_a_replayed_landing_match_better() {
     // Calibration flight -> fitted_effects.toml.
     let calibration = record(&robot, &truth, &Flight::new(Profile::Mixed, 48.0, 11)).unwrap();
     let ex = explain(&calibration, &robot, &Options::default()).unwrap();
-    assert!(ex.selected().contains(&"ground_effect"), "{}", ex.verdict);
+    assert!(
+        ex.selected()
+            .contains(&atmo_explain::effects::Effect::GroundEffect),
+        "{}",
+        ex.verdict
+    );
     let dir = std::env::temp_dir().join(format!("atmo_explain_loop_{}", std::process::id()));
     write_all(&ex, &dir).unwrap();
     let fitted = PlantConfig::load(dir.join("fitted_effects.toml")).unwrap();

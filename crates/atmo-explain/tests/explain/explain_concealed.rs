@@ -10,6 +10,8 @@
 use atmo_core::ground_effect::table::{GroundEffect, GroundEffectConfig};
 use atmo_core::{ConfigFile, RobotConfig};
 use atmo_explain::data::{CHANNEL_UNITS, CHANNELS};
+use atmo_explain::effects::Effect;
+use atmo_explain::parameter::{Axis, Param};
 use atmo_explain::synth::{Flight, Profile, record};
 use atmo_explain::{Explanation, Options, explain};
 use atmo_plant::config::{
@@ -61,11 +63,11 @@ fn summary(ex: &Explanation) -> String {
 
 /// The concealed effects are the top-ranked ones, all selected, and no
 /// other effect is claimed with high confidence.
-fn assert_named(ex: &Explanation, concealed: &[&str]) {
+fn assert_named(ex: &Explanation, concealed: &[Effect]) {
     let n = concealed.len();
-    let top: Vec<&str> = ex.effects[..n].iter().map(|e| e.name.as_str()).collect();
-    for c in concealed {
-        assert!(top.contains(c), "{c} not in the top {n}: {}", summary(ex));
+    let top: Vec<Effect> = ex.effects[..n].iter().map(|e| e.name).collect();
+    for &c in concealed {
+        assert!(top.contains(&c), "{c} not in the top {n}: {}", summary(ex));
         assert!(
             ex.effect(c).is_some_and(|e| e.selected),
             "{c} not selected: {}",
@@ -164,7 +166,7 @@ fn case1_ground_effect() {
         ground_effect: Some(GroundEffectConfig::default()),
         ..EffectsConfig::none()
     });
-    assert_named(&ex, &["ground_effect"]);
+    assert_named(&ex, &[Effect::GroundEffect]);
     assert_ground_effect_grid(&ex);
     assert_eq!(assert_most_affected_improved(&ex), "a_z");
     assert_ground_effect_located_low(&ex);
@@ -180,7 +182,7 @@ fn case1_ground_effect_mean_surface() {
         ground_effect: Some(ge),
         ..EffectsConfig::none()
     });
-    assert_named(&ex, &["ground_effect"]);
+    assert_named(&ex, &[Effect::GroundEffect]);
     assert_ground_effect_grid(&ex);
     assert_improved(&ex);
     assert_ground_effect_located_low(&ex);
@@ -208,8 +210,8 @@ fn case2_motor_lag() {
         motor_lag: Some(MotorLagConfig::default()),
         ..EffectsConfig::none()
     });
-    assert_named(&ex, &["motor_lag"]);
-    let tau = ex.parameter("motor_lag", "time_constant").unwrap();
+    assert_named(&ex, &[Effect::MotorLag]);
+    let tau = ex.parameter(Param::TimeConstant).unwrap();
     assert_within("motor_lag.time_constant", tau, 0.03, 0.15);
     assert_improved(&ex);
 }
@@ -233,23 +235,23 @@ fn case3_drag_and_steady_wind() {
         },
         96.0,
     );
-    assert_named(&ex, &["drag", "wind"]);
+    assert_named(&ex, &[Effect::Drag, Effect::Wind]);
     let d = DragConfig::default();
     assert_within(
         "rotor_drag",
-        ex.parameter("drag", "rotor_drag").unwrap(),
+        ex.parameter(Param::RotorDrag).unwrap(),
         d.rotor_drag,
         0.15,
     );
     assert_within(
         "body_cd_area_x",
-        ex.parameter("drag", "body_cd_area_x").unwrap(),
+        ex.parameter(Param::BodyCdArea(Axis::X)).unwrap(),
         d.body_cd_area[0],
         0.15,
     );
     assert_within(
         "body_cd_area_y",
-        ex.parameter("drag", "body_cd_area_y").unwrap(),
+        ex.parameter(Param::BodyCdArea(Axis::Y)).unwrap(),
         d.body_cd_area[1],
         0.15,
     );
@@ -257,11 +259,11 @@ fn case3_drag_and_steady_wind() {
     // loosely determined; it must agree with the truth within its own
     // uncertainty (2.5 standard deviations).
     let cdz = ex
-        .effect("drag")
+        .effect(Effect::Drag)
         .unwrap()
         .parameters
         .iter()
-        .find(|p| p.name == "body_cd_area_z")
+        .find(|p| p.name == Param::BodyCdArea(Axis::Z))
         .unwrap();
     assert!(
         (cdz.value - d.body_cd_area[2]).abs() <= 2.5 * cdz.std.unwrap(),
@@ -271,13 +273,13 @@ fn case3_drag_and_steady_wind() {
     );
     assert_within(
         "wind x",
-        ex.parameter("wind", "steady_x").unwrap(),
+        ex.parameter(Param::SteadyWind(Axis::X)).unwrap(),
         wind[0],
         0.15,
     );
     assert_within(
         "wind y",
-        ex.parameter("wind", "steady_y").unwrap(),
+        ex.parameter(Param::SteadyWind(Axis::Y)).unwrap(),
         wind[1],
         0.15,
     );
@@ -294,16 +296,16 @@ fn case4_centre_of_mass_offset() {
         }),
         ..EffectsConfig::none()
     });
-    assert_named(&ex, &["com_offset"]);
+    assert_named(&ex, &[Effect::ComOffset]);
     assert_within(
         "offset_x",
-        ex.parameter("com_offset", "offset_x").unwrap(),
+        ex.parameter(Param::ComOffset(Axis::X)).unwrap(),
         offset[0],
         0.15,
     );
     assert_within(
         "offset_y",
-        ex.parameter("com_offset", "offset_y").unwrap(),
+        ex.parameter(Param::ComOffset(Axis::Y)).unwrap(),
         offset[1],
         0.15,
     );
@@ -317,8 +319,8 @@ fn case5_ground_effect_and_motor_lag() {
         motor_lag: Some(MotorLagConfig::default()),
         ..EffectsConfig::none()
     });
-    assert_named(&ex, &["ground_effect", "motor_lag"]);
-    let tau = ex.parameter("motor_lag", "time_constant").unwrap();
+    assert_named(&ex, &[Effect::GroundEffect, Effect::MotorLag]);
+    let tau = ex.parameter(Param::TimeConstant).unwrap();
     assert_within("motor_lag.time_constant", tau, 0.03, 0.15);
     assert_ground_effect_grid(&ex);
     assert_improved(&ex);

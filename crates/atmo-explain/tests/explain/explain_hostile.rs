@@ -27,11 +27,11 @@ pub(crate) fn cruise_with_motor_lag() -> Recording {
 }
 
 /// The names of the effects reported as found.
-pub(crate) fn found(ex: &Explanation) -> Vec<&str> {
+pub(crate) fn found(ex: &Explanation) -> Vec<&'static str> {
     ex.effects
         .iter()
         .filter(|e| e.selected)
-        .map(|e| e.name.as_str())
+        .map(|e| e.name.name())
         .collect()
 }
 

@@ -31,8 +31,9 @@ fn equal_mass_and_inertia_scale_is_reported_as_indistinguishable_from_thrust_sca
     );
     // Whatever was selected, the pair is flagged.
     let flagged = ex.indistinguishable.iter().any(|(a, b)| {
-        (a == "thrust_scale" && (b == "mass_error" || b == "inertia_error"))
-            || ((a == "mass_error" || a == "inertia_error") && b == "thrust_scale")
+        use atmo_explain::effects::Effect::{InertiaError, MassError, ThrustScale};
+        (*a == ThrustScale && (*b == MassError || *b == InertiaError))
+            || ((*a == MassError || *a == InertiaError) && *b == ThrustScale)
     });
     assert!(flagged, "{:?}", ex.indistinguishable);
     // And the fit is right whichever way it is written: the thrust seen

@@ -7,6 +7,7 @@
 use std::path::PathBuf;
 
 use atmo_core::{ConfigFile, RobotConfig};
+use atmo_explain::effects::Effect;
 use atmo_explain::output::write_all;
 use atmo_explain::recording::{REQUIRED_COLUMNS, Recording};
 use atmo_explain::synth::{Flight, Profile, record};
@@ -168,7 +169,7 @@ fn csv_round_trip_and_outputs_are_written_and_loadable() {
     assert_eq!(back.samples.len(), rec.samples.len());
     assert_eq!(back.skipped_nonfinite + back.skipped_time, 0);
     let ex = explain(&back, &robot, &Options::default()).unwrap();
-    assert_eq!(ex.selected(), vec!["motor_lag"]);
+    assert_eq!(ex.selected(), vec![Effect::MotorLag]);
     write_all(&ex, &dir).unwrap();
     for f in [
         "report.md",
@@ -185,7 +186,7 @@ fn csv_round_trip_and_outputs_are_written_and_loadable() {
     // The plant loads the fitted file and has the effect in it.
     let cfg = PlantConfig::load(dir.join("fitted_effects.toml")).unwrap();
     assert_eq!(cfg.effects.enabled_names(), vec!["motor_lag"]);
-    // explain.json has the keys the issue asks for.
+    // explain.json has the keys a report promises.
     let json: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(dir.join("explain.json")).unwrap()).unwrap();
     for key in [
@@ -285,13 +286,13 @@ fn mcap_logs_are_read_and_truncated_ones_are_clear_errors() {
         assert!((a.ground_z - b.ground_z).abs() < 1e-9);
     }
     // Read from the log, the concealed lag is what the tool names: the top
-    // effect, and nothing else claimed with high confidence (the issue's
+    // effect, and nothing else claimed with high confidence (the finder's
     // criterion; on this short 24 s cruise an inertia error of about 5 %
     // can enter at low confidence, 0.3-0.6, depending on the seed).
     let ex = explain(&back, &robot, &Options::default()).unwrap();
-    assert_eq!(ex.effects[0].name, "motor_lag");
+    assert_eq!(ex.effects[0].name, Effect::MotorLag);
     assert!(ex.effects[0].selected);
-    let others = ex.confidently_claimed_besides(&["motor_lag"]);
+    let others = ex.confidently_claimed_besides(&[Effect::MotorLag]);
     assert!(others.is_empty(), "{others:?} claimed: {}", ex.verdict);
 
     // Cut short (a killed writer without recovery): a clear error, no panic.

@@ -6,6 +6,8 @@ use std::path::{Path, PathBuf};
 
 use atmo_core::model::{idx, rotation};
 use atmo_core::{ConfigFile as _, RobotConfig};
+use atmo_explain::effects::Effect;
+use atmo_explain::parameter::{Axis, Param};
 use atmo_explain::recording::Recording;
 use atmo_explain::recording::neural_fly::split_row;
 use nalgebra::Vector3;
@@ -153,7 +155,7 @@ fn fan_flight_explained() -> &'static atmo_explain::Explanation {
 }
 
 /// The selected effect `name` of a report (fails the test if not selected).
-fn selected<'a>(ex: &'a atmo_explain::Explanation, name: &str) -> &'a atmo_explain::EffectReport {
+fn selected(ex: &atmo_explain::Explanation, name: Effect) -> &atmo_explain::EffectReport {
     ex.effects
         .iter()
         .find(|e| e.name == name && e.selected)
@@ -161,10 +163,8 @@ fn selected<'a>(ex: &'a atmo_explain::Explanation, name: &str) -> &'a atmo_expla
 }
 
 /// Parameter `name` of an effect's report.
-fn parameter<'a>(e: &'a atmo_explain::EffectReport, name: &str) -> &'a atmo_explain::Parameter {
-    e.parameters
-        .iter()
-        .find(|p| p.name == name)
+fn parameter(e: &atmo_explain::EffectReport, name: Param) -> &atmo_explain::Parameter {
+    e.parameter(name)
         .unwrap_or_else(|| panic!("{} has no {name}", e.name))
 }
 
@@ -176,14 +176,14 @@ fn the_fan_wind_is_named_along_the_fan_and_no_sideways_wind_is_claimed() {
     // not identified (`stages::wind::MIN_AXIS_GAIN`), the wind is profiled
     // along x alone.
     let ex = fan_flight_explained();
-    let wind = selected(ex, "wind");
+    let wind = selected(ex, Effect::Wind);
     assert!(
         wind.confidence.is_some_and(|c| c >= 0.5),
         "{:?}",
         wind.confidence
     );
-    let param = |n: &str| parameter(wind, n);
-    let (x, y) = (param("steady_x"), param("steady_y"));
+    let param = |a: Axis| parameter(wind, Param::SteadyWind(a));
+    let (x, y) = (param(Axis::X), param(Axis::Y));
     assert!(x.identified && (-15.0..-8.0).contains(&x.value), "{x:?}");
     assert!(!y.identified && y.value == 0.0, "{y:?}");
 }
@@ -196,9 +196,11 @@ fn rotor_drag_and_body_drag_at_one_airspeed_are_one_combined_finding() {
     // best-determined combination is, with a deviation far below the
     // separate ones.
     let ex = fan_flight_explained();
-    let drag = selected(ex, "drag");
-    let param = |n: &str| parameter(drag, n);
-    let (rotor, area_x) = (param("rotor_drag"), param("body_cd_area_x"));
+    let drag = selected(ex, Effect::Drag);
+    let (rotor, area_x) = (
+        parameter(drag, Param::RotorDrag),
+        parameter(drag, Param::BodyCdArea(Axis::X)),
+    );
     assert!(
         !rotor.identified && !area_x.identified,
         "{rotor:?} {area_x:?}"
@@ -206,7 +208,7 @@ fn rotor_drag_and_body_drag_at_one_airspeed_are_one_combined_finding() {
     let pair = drag
         .combined
         .iter()
-        .find(|c| c.first == "drag.rotor_drag" && c.second == "drag.body_cd_area_x")
+        .find(|c| c.first == Param::RotorDrag && c.second == Param::BodyCdArea(Axis::X))
         .unwrap_or_else(|| panic!("no combined finding: {:?}", drag.combined));
     assert!(pair.correlation <= -0.9, "{pair:?}");
     // The combination is determined where its parts are not.

@@ -6,6 +6,8 @@
 #![allow(clippy::unwrap_used)]
 
 use atmo_core::{ConfigFile, RobotConfig};
+use atmo_explain::effects::Effect;
+use atmo_explain::parameter::Param;
 use atmo_explain::recording::Recording;
 use atmo_explain::synth::{Flight, Profile, record};
 use atmo_explain::{Explanation, Options, explain};
@@ -46,11 +48,11 @@ fn the_model_is_the_robot_files_a_quadrotor_with_a_concealed_motor_lag() {
         ..EffectsConfig::none()
     });
     assert!(ex.mismatch_found);
-    assert_eq!(ex.effects[0].name, "motor_lag", "{}", ex.verdict);
+    assert_eq!(ex.effects[0].name, Effect::MotorLag, "{}", ex.verdict);
     assert!(ex.effects[0].selected);
-    let others = ex.confidently_claimed_besides(&["motor_lag"]);
+    let others = ex.confidently_claimed_besides(&[Effect::MotorLag]);
     assert!(others.is_empty(), "{others:?} claimed: {}", ex.verdict);
-    let tau = ex.parameter("motor_lag", "time_constant").unwrap();
+    let tau = ex.parameter(Param::TimeConstant).unwrap();
     assert!((tau - 0.03).abs() <= 0.15 * 0.03, "time constant {tau}");
     let (b, a) = (
         ex.heldout_rms_before.located_normalized,

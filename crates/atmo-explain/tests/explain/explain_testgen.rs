@@ -9,6 +9,8 @@ use std::fmt::Write as _;
 use std::path::Path;
 
 use atmo_core::{ConfigFile as _, RobotConfig};
+use atmo_explain::effects::Effect;
+use atmo_explain::parameter::{Axis, Param};
 use atmo_explain::recording::Recording;
 use atmo_explain::{Explanation, Options, Parameter, explain};
 use atmo_testgen::flight::{FlightPlan, fly, to_csv};
@@ -100,22 +102,16 @@ fn summary(ex: &Explanation) -> String {
     s
 }
 
-fn parameter<'a>(ex: &'a Explanation, effect: &str, name: &str) -> Option<&'a Parameter> {
-    ex.effects
-        .iter()
-        .find(|e| e.name == effect)
-        .and_then(|e| e.parameters.iter().find(|p| p.name == name))
+fn parameter(ex: &Explanation, name: Param) -> Option<&Parameter> {
+    ex.effect(name.effect())?.parameter(name)
 }
 
-fn param(ex: &Explanation, effect: &str, name: &str) -> f64 {
-    parameter(ex, effect, name).map_or(f64::NAN, |p| p.value)
-}
-
-fn within(ex: &Explanation, effect: &str, name: &str, truth: f64) {
-    let v = param(ex, effect, name);
+fn within(ex: &Explanation, name: Param, truth: f64) {
+    let v = ex.parameter(name).unwrap_or(f64::NAN);
     assert!(
         ((v - truth) / truth).abs() <= 0.15,
-        "{effect}.{name} = {v}, truth {truth}: {}",
+        "{}.{name} = {v}, truth {truth}: {}",
+        name.effect(),
         summary(ex)
     );
 }
@@ -123,9 +119,9 @@ fn within(ex: &Explanation, effect: &str, name: &str, truth: f64) {
 /// The concealed effects are the selected ones, ranked first, nothing
 /// else at confidence >= 0.5, and the held-out 0.5 s velocity error at
 /// least halved.
-fn assert_named(ex: &Explanation, concealed: &[&str]) {
+fn assert_named(ex: &Explanation, concealed: &[Effect]) {
     let n = concealed.len();
-    let top: Vec<&str> = ex.effects[..n].iter().map(|e| e.name.as_str()).collect();
+    let top: Vec<Effect> = ex.effects[..n].iter().map(|e| e.name).collect();
     for c in concealed {
         assert!(top.contains(c), "{c} not in the top {n}: {}", summary(ex));
         assert!(
@@ -134,10 +130,10 @@ fn assert_named(ex: &Explanation, concealed: &[&str]) {
             summary(ex)
         );
     }
-    let others: Vec<&str> = ex.effects[n..]
+    let others: Vec<Effect> = ex.effects[n..]
         .iter()
         .filter(|e| e.selected || e.selection_frequency >= 0.5)
-        .map(|e| e.name.as_str())
+        .map(|e| e.name)
         .collect();
     assert!(others.is_empty(), "{others:?} claimed: {}", summary(ex));
     let (b, a) = (
@@ -170,7 +166,7 @@ fn ground_effect() {
         ground_effect_radius: Some(0.19),
         ..Concealed::default()
     };
-    assert_named(&analyse(&fx, 1), &["ground_effect"]);
+    assert_named(&analyse(&fx, 1), &[Effect::GroundEffect]);
 }
 
 #[test]
@@ -180,8 +176,8 @@ fn motor_lag() {
         ..Concealed::default()
     };
     let ex = analyse(&fx, 1);
-    assert_named(&ex, &["motor_lag"]);
-    within(&ex, "motor_lag", "time_constant", 0.03);
+    assert_named(&ex, &[Effect::MotorLag]);
+    within(&ex, Param::TimeConstant, 0.03);
 }
 
 /// The generator's drag + wind (rotor drag 0.03 N per (m/s) per N of
@@ -201,10 +197,10 @@ fn drag_and_wind_fx() -> Concealed {
 #[test]
 fn drag_and_wind() {
     let ex = analyse_drag_and_wind(&drag_and_wind_fx(), 1);
-    assert_named(&ex, &["drag", "wind"]);
-    within(&ex, "wind", "steady_x", 2.0);
+    assert_named(&ex, &[Effect::Drag, Effect::Wind]);
+    within(&ex, Param::SteadyWind(Axis::X), 2.0);
     let k_thrust = RobotConfig::load(robot_path()).unwrap().rotor.k_thrust;
-    within(&ex, "drag", "rotor_drag", 0.03 * k_thrust);
+    within(&ex, Param::RotorDrag, 0.03 * k_thrust);
     if let Err(missed) = body_drag_right(&ex) {
         panic!("{missed}: {}", summary(&ex));
     }
@@ -217,14 +213,14 @@ fn drag_and_wind() {
 /// (`weight x 0.10`). `Err` says what missed.
 fn body_drag_right(ex: &Explanation) -> Result<(), String> {
     let near = |v: f64, truth: f64| ((v - truth) / truth).abs() <= 0.15;
-    let area = |axis: &str| parameter(ex, "drag", &format!("body_cd_area_{axis}"));
-    for axis in ["x", "y"] {
-        let a = area(axis).ok_or(format!("no {axis} area"))?;
+    let area = |axis: Axis| parameter(ex, Param::BodyCdArea(axis));
+    for axis in Axis::XY {
+        let a = area(axis).ok_or(format!("no {axis:?} area"))?;
         if !(a.identified && near(a.value, 0.06)) {
-            return Err(format!("{axis} area {:.4}", a.value));
+            return Err(format!("{} area {:.4}", axis.suffix(), a.value));
         }
     }
-    let z = area("z").ok_or("no vertical area")?;
+    let z = area(Axis::Z).ok_or("no vertical area")?;
     if z.identified {
         return if near(z.value, 0.10) {
             Ok(())
@@ -235,12 +231,12 @@ fn body_drag_right(ex: &Explanation) -> Result<(), String> {
     let drag = ex
         .effects
         .iter()
-        .find(|e| e.name == "drag")
+        .find(|e| e.name == Effect::Drag)
         .ok_or("no drag")?;
     let pair = drag
         .combined
         .iter()
-        .find(|c| c.first == "drag.axial_drag" && c.second == "drag.body_cd_area_z")
+        .find(|c| c.first == Param::AxialDrag && c.second == Param::BodyCdArea(Axis::Z))
         .ok_or(format!(
             "vertical area not identified, no combination: {:?}",
             drag.combined
@@ -287,9 +283,9 @@ fn a_wind_with_two_real_components_is_named_in_both() {
         ..Concealed::default()
     };
     let ex = analyse(&fx, 1);
-    assert_named(&ex, &["drag", "wind"]);
-    within(&ex, "wind", "steady_x", 2.0);
-    within(&ex, "wind", "steady_y", -1.5);
+    assert_named(&ex, &[Effect::Drag, Effect::Wind]);
+    within(&ex, Param::SteadyWind(Axis::X), 2.0);
+    within(&ex, Param::SteadyWind(Axis::Y), -1.5);
 }
 
 #[test]
@@ -299,9 +295,9 @@ fn centre_of_mass_offset() {
         ..Concealed::default()
     };
     let ex = analyse(&fx, 1);
-    assert_named(&ex, &["com_offset"]);
-    within(&ex, "com_offset", "offset_x", 0.008);
-    within(&ex, "com_offset", "offset_y", -0.005);
+    assert_named(&ex, &[Effect::ComOffset]);
+    within(&ex, Param::ComOffset(Axis::X), 0.008);
+    within(&ex, Param::ComOffset(Axis::Y), -0.005);
 }
 
 #[test]
@@ -311,8 +307,8 @@ fn thrust_scale() {
         ..Concealed::default()
     };
     let ex = analyse(&fx, 1);
-    assert_named(&ex, &["thrust_scale"]);
-    within(&ex, "thrust_scale", "scale_minus_one", 0.08);
+    assert_named(&ex, &[Effect::ThrustScale]);
+    within(&ex, Param::ThrustScaleMinusOne, 0.08);
 }
 
 #[test]
@@ -322,8 +318,8 @@ fn thrust_curve() {
         ..Concealed::default()
     };
     let ex = analyse(&fx, 1);
-    assert_named(&ex, &["thrust_curve"]);
-    within(&ex, "thrust_curve", "quadratic_share", 0.3);
+    assert_named(&ex, &[Effect::ThrustCurve]);
+    within(&ex, Param::QuadraticShare, 0.3);
 }
 
 #[test]
@@ -334,8 +330,8 @@ fn ground_effect_and_motor_lag() {
         ..Concealed::default()
     };
     let ex = analyse(&fx, 1);
-    assert_named(&ex, &["ground_effect", "motor_lag"]);
-    within(&ex, "motor_lag", "time_constant", 0.03);
+    assert_named(&ex, &[Effect::GroundEffect, Effect::MotorLag]);
+    within(&ex, Param::TimeConstant, 0.03);
 }
 
 /// Recordings built to push a parameter beyond its physical range
@@ -420,7 +416,8 @@ fn no_parameter_outside_its_physical_range_is_a_finding() {
         eprintln!("{fx:?}: {}", summary(&ex));
         for e in ex.effects.iter().filter(|e| e.selected) {
             for p in &e.parameters {
-                if let Some((lo, hi)) = atmo_explain::stages::range_of(&e.name, &p.name) {
+                {
+                    let (lo, hi) = p.name.range();
                     assert!(
                         (lo..=hi).contains(&p.value) || !p.identified,
                         "{fx:?}: {}.{} = {} outside [{lo}, {hi}] printed as found: {}",

@@ -35,7 +35,7 @@ enum Command {
     /// Copies every complete message of INPUT (no summary, no footer, maybe
     /// half a chunk) into OUTPUT, a finished log, and says where and why
     /// reading stopped. A daemon killed
-    /// in flight loses at most its last flush period ([log] flush_period_ms).
+    /// in flight loses at most its last flush period (`[log] flush_period_ms`).
     Recover {
         /// The truncated log.
         input: PathBuf,

@@ -49,7 +49,6 @@ use iceoryx2::prelude::{
     ZeroCopySend, set_log_level_from_env_or,
 };
 use iceoryx2::service::ipc;
-use serde::Deserialize;
 
 use crate::error::{IoError, Result};
 
@@ -91,30 +90,64 @@ impl DriverId {
     }
 }
 
-/// Driver-port settings (a `[drivers]`-style TOML table; all optional).
-#[derive(Debug, Clone, PartialEq, Eq, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct DriverPortsConfig {
-    /// Service name prefix.
-    pub prefix: String,
-    /// A driver not heard from for this long is dead, ms.
-    pub liveness_timeout_ms: u64,
-    /// iceoryx2 file prefix (isolates runs: tests use their own). Empty:
-    /// iceoryx2's default.
-    pub iceoryx_prefix: String,
-    /// Drivers whose liveness is required (by name: thrusters, tilt,
-    /// wheels, ground_contact).
-    pub required: Vec<String>,
+atmo_core::params! {
+    /// Driver-port settings (a `[drivers]`-style TOML table; all optional).
+    #[derive(Debug, Clone, PartialEq, Eq)]
+    pub struct DriverPortsConfig: Default {
+        /// Service name prefix (letters, digits, `_ / -`).
+        pub prefix: String = "atmo/drivers".into();
+        /// A driver not heard from for this long is dead.
+        pub liveness_timeout_ms: u64 = 100, range 1..=10_000, unit "ms";
+        /// iceoryx2 file prefix (isolates runs: tests use their own), at
+        /// most 32 letters, digits or `_`. Empty: iceoryx2's default.
+        pub iceoryx_prefix: String = String::new();
+        /// Drivers whose liveness is required (by name: thrusters, tilt,
+        /// wheels, ground_contact).
+        pub required: Vec<String> =
+            DriverId::ALL.iter().map(|d| d.name().to_string()).collect();
+    }
+    check |ports, c, prefix| ports.check_names(c, prefix)
 }
 
-impl Default for DriverPortsConfig {
-    fn default() -> Self {
-        Self {
-            prefix: "atmo/drivers".into(),
-            liveness_timeout_ms: 100,
-            iceoryx_prefix: String::new(),
-            required: DriverId::ALL.iter().map(|d| d.name().to_string()).collect(),
+impl DriverPortsConfig {
+    /// The prefixes' characters and the required drivers' names; errors
+    /// name `prefix.<key>`.
+    fn check_names(&self, c: &Checker<'_>, prefix: &str) -> atmo_core::Result<()> {
+        let key = |name| atmo_core::params::key(prefix, name);
+        if self.prefix.is_empty()
+            || !self
+                .prefix
+                .chars()
+                .all(|ch| ch.is_ascii_alphanumeric() || "_/-".contains(ch))
+        {
+            return Err(c.fail(
+                &key("prefix"),
+                "a service name prefix like atmo/drivers",
+                &self.prefix,
+            ));
         }
+        if !self
+            .iceoryx_prefix
+            .chars()
+            .all(|ch| ch.is_ascii_alphanumeric() || ch == '_')
+            || self.iceoryx_prefix.len() > 32
+        {
+            return Err(c.fail(
+                &key("iceoryx_prefix"),
+                "at most 32 letters, digits or _",
+                &self.iceoryx_prefix,
+            ));
+        }
+        for name in &self.required {
+            if !DriverId::ALL.iter().any(|d| d.name() == name) {
+                return Err(c.fail(
+                    &key("required"),
+                    "thrusters, tilt, wheels or ground_contact",
+                    name,
+                ));
+            }
+        }
+        Ok(())
     }
 }
 
@@ -123,53 +156,7 @@ impl ConfigFile for DriverPortsConfig {
 
     /// Checks the values; errors name `file` and the key.
     fn validate(&self, file: &Path) -> Result<()> {
-        let c = Checker::new(file);
-        if self.prefix.is_empty()
-            || !self
-                .prefix
-                .chars()
-                .all(|ch| ch.is_ascii_alphanumeric() || "_/-".contains(ch))
-        {
-            return Err(c
-                .fail(
-                    "prefix",
-                    "a service name prefix like atmo/drivers",
-                    &self.prefix,
-                )
-                .into());
-        }
-        c.range(
-            "liveness_timeout_ms",
-            self.liveness_timeout_ms,
-            1..=10_000,
-            "ms",
-        )?;
-        if !self
-            .iceoryx_prefix
-            .chars()
-            .all(|ch| ch.is_ascii_alphanumeric() || ch == '_')
-            || self.iceoryx_prefix.len() > 32
-        {
-            return Err(c
-                .fail(
-                    "iceoryx_prefix",
-                    "at most 32 letters, digits or _",
-                    &self.iceoryx_prefix,
-                )
-                .into());
-        }
-        for name in &self.required {
-            if !DriverId::ALL.iter().any(|d| d.name() == name) {
-                return Err(c
-                    .fail(
-                        "required",
-                        "thrusters, tilt, wheels or ground_contact",
-                        name,
-                    )
-                    .into());
-            }
-        }
-        Ok(())
+        Ok(atmo_core::params::check_file(self, file)?)
     }
 }
 

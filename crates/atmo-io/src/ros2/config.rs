@@ -3,82 +3,12 @@
 use std::path::Path;
 
 use atmo_core::config_file::{Checker, ConfigFile};
-use serde::Deserialize;
 
 use crate::error::{IoError, Result};
 use crate::msg::{
     ActuatorMotors, Clock, DiagnosticArray, InputRc, MpcStatus, Odometry, OffboardControlMode,
     PilotInput, PointStamped, RosMessage, Twist, Vector3Stamped, VehicleOdometry,
 };
-
-/// The node's settings: a `[ros2]`-style table (or a whole file).
-/// Every key has a default; unknown keys are errors.
-#[derive(Debug, Clone, PartialEq, Eq, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct Ros2Config {
-    /// ROS 2 node name.
-    pub node_name: String,
-    /// Node namespace (`/` or `/name`).
-    pub namespace: String,
-    /// Keep DDS traffic on 127.0.0.1 (no other interface, no multicast).
-    pub loopback_only: bool,
-    /// Period of the node's own `diagnostics` message, ms.
-    pub diagnostics_period_ms: u64,
-    /// Slots of the queue from the control thread to the ROS 2 thread.
-    pub publish_queue: usize,
-    /// ROS time is the newest `topics.clock` message (`rosgraph_msgs/Clock`,
-    /// 0 until the first), not the wall clock: ROS 2's `use_sim_time`.
-    pub use_sim_time: bool,
-    pub topics: Topics,
-}
-
-/// One topic: its ROS 2 name, its type, and whether it is used.
-#[derive(Debug, Clone, PartialEq, Eq, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct TopicConfig {
-    pub name: String,
-    #[serde(rename = "type")]
-    pub type_name: String,
-    #[serde(default = "atmo_core::config_file::default_true")]
-    pub enabled: bool,
-}
-
-/// The node's topics (see the README's table).
-#[derive(Debug, Clone, PartialEq, Eq, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct Topics {
-    /// Out: one `MpcStatus` per tick.
-    pub status: TopicConfig,
-    /// In: the state estimate (`nav_msgs/msg/Odometry` ENU/FLU from motion
-    /// capture, or `px4_msgs/msg/VehicleOdometry` NED/FRD from PX4).
-    pub estimate: TopicConfig,
-    /// In: drive commands (`geometry_msgs/msg/Twist`, FLU: linear.x forward,
-    /// angular.z yaw rate left-positive).
-    pub drive_command: TopicConfig,
-    /// In: pilot inputs (`atmo_msgs/msg/PilotInput`: NED velocity command,
-    /// FRD yaw rate, throttle in [0, 1], switches), e.g. from the SITL plant
-    /// server or a ground station.
-    pub pilot: TopicConfig,
-    /// Out: thruster commands through PX4 offboard.
-    pub actuator_motors: TopicConfig,
-    /// Out: PX4 offboard heartbeat (direct actuator control).
-    pub offboard_mode: TopicConfig,
-    /// Out: health.
-    pub diagnostics: TopicConfig,
-    /// In: the ground height (`geometry_msgs/msg/PointStamped`, ENU world
-    /// frame: `point.z` is the height of the ground under the robot, up).
-    pub ground: TopicConfig,
-    /// In: the ground plane's normal (`geometry_msgs/msg/Vector3Stamped`,
-    /// ENU world frame: the unit normal of the ground under the robot,
-    /// pointing out of the ground, so `vector.z > 0`). Optional: while no
-    /// fresh normal arrives the ground is level.
-    pub ground_normal: TopicConfig,
-    /// In, with `use_sim_time` only: ROS time (`rosgraph_msgs/msg/Clock`).
-    pub clock: TopicConfig,
-    /// In: the radio through PX4 (`px4_msgs/msg/InputRc`, raw pulse
-    /// widths); off unless enabled. The daemon's `[rc]` table maps it.
-    pub rc: TopicConfig,
-}
 
 fn topic(name: &str, type_name: &str) -> TopicConfig {
     TopicConfig {
@@ -88,41 +18,178 @@ fn topic(name: &str, type_name: &str) -> TopicConfig {
     }
 }
 
-impl Default for Topics {
-    fn default() -> Self {
-        Self {
-            status: topic("/atmo/status", MpcStatus::TYPE_NAME),
-            estimate: topic("/atmo/mocap/odom", Odometry::TYPE_NAME),
-            drive_command: topic("/atmo/cmd_drive", Twist::TYPE_NAME),
-            pilot: topic("/atmo/pilot", PilotInput::TYPE_NAME),
-            actuator_motors: topic("/fmu/in/actuator_motors", ActuatorMotors::TYPE_NAME),
-            offboard_mode: topic(
-                "/fmu/in/offboard_control_mode",
-                OffboardControlMode::TYPE_NAME,
-            ),
-            diagnostics: topic("/diagnostics", DiagnosticArray::TYPE_NAME),
-            ground: topic("/atmo/ground", PointStamped::TYPE_NAME),
-            ground_normal: topic("/atmo/ground_normal", Vector3Stamped::TYPE_NAME),
-            clock: topic("/clock", Clock::TYPE_NAME),
-            rc: TopicConfig {
-                enabled: false,
-                ..topic("/fmu/out/input_rc", InputRc::TYPE_NAME)
-            },
+atmo_core::params! {
+    /// The node's settings: a `[ros2]`-style table (or a whole file).
+    /// Every key has a default; unknown keys are errors.
+    #[derive(Debug, Clone, PartialEq, Eq)]
+    pub struct Ros2Config: Default {
+        /// ROS 2 node name (`[A-Za-z_][A-Za-z0-9_]*`).
+        pub node_name: String = "atmo_daemon".into();
+        /// Node namespace (`/` or `/name`).
+        pub namespace: String = "/".into();
+        /// Keep DDS traffic on 127.0.0.1 (no other interface, no multicast).
+        pub loopback_only: bool = true;
+        /// Period of the node's own `diagnostics` message.
+        pub diagnostics_period_ms: u64 = 1000, range 10..=60_000, unit "ms";
+        /// Slots of the queue from the control thread to the ROS 2 thread.
+        pub publish_queue: usize = 64, range 1..=65_536, unit "slots";
+        /// ROS time is the newest `topics.clock` message (`rosgraph_msgs/Clock`,
+        /// 0 until the first), not the wall clock: ROS 2's `use_sim_time`.
+        pub use_sim_time: bool = false;
+        /// The node's topics.
+        pub topics: Topics = Topics::default();
+    }
+    check |ros2, c, prefix| {
+        let key = |name| atmo_core::params::key(prefix, name);
+        if !valid_segment(&ros2.node_name) {
+            return Err(c.fail(
+                &key("node_name"),
+                "a ROS 2 name ([A-Za-z_][A-Za-z0-9_]*)",
+                &ros2.node_name,
+            ));
         }
+        if ros2.namespace != "/" && !valid_topic_name(&ros2.namespace) {
+            return Err(c.fail(
+                &key("namespace"),
+                "`/` or an absolute name like /atmo",
+                &ros2.namespace,
+            ));
+        }
+        if ros2.use_sim_time && !ros2.topics.clock.enabled {
+            return Err(c.fail(
+                &key("topics.clock.enabled"),
+                "true: use_sim_time takes ROS time from it",
+                false,
+            ));
+        }
+        Ok(())
     }
 }
 
-impl Default for Ros2Config {
-    fn default() -> Self {
-        Self {
-            node_name: "atmo_daemon".into(),
-            namespace: "/".into(),
-            loopback_only: true,
-            diagnostics_period_ms: 1000,
-            publish_queue: 64,
-            use_sim_time: false,
-            topics: Topics::default(),
+atmo_core::params! {
+    /// One topic: its ROS 2 name, its type, and whether it is used.
+    #[derive(Debug, Clone, PartialEq, Eq)]
+    pub struct TopicConfig {
+        /// Absolute ROS 2 topic name (`/seg(/seg)*`).
+        pub name: String;
+        /// The message type (each role allows its own).
+        pub type_name: String, key "type";
+        /// Whether the node uses it.
+        pub enabled: bool = true;
+    }
+    check |topic, c, prefix| {
+        if !valid_topic_name(&topic.name) {
+            return Err(c.fail(
+                &atmo_core::params::key(prefix, "name"),
+                "an absolute ROS 2 topic name like /atmo/status",
+                &topic.name,
+            ));
         }
+        Ok(())
+    }
+}
+
+atmo_core::params! {
+    /// The node's topics (see the README's table).
+    #[derive(Debug, Clone, PartialEq, Eq)]
+    pub struct Topics: Default {
+        /// Out: one `MpcStatus` per tick.
+        pub status: TopicConfig = topic("/atmo/status", MpcStatus::TYPE_NAME);
+        /// In: the state estimate (`nav_msgs/msg/Odometry` ENU/FLU from motion
+        /// capture, or `px4_msgs/msg/VehicleOdometry` NED/FRD from PX4).
+        pub estimate: TopicConfig = topic("/atmo/mocap/odom", Odometry::TYPE_NAME);
+        /// In: drive commands (`geometry_msgs/msg/Twist`, FLU: linear.x forward,
+        /// angular.z yaw rate left-positive).
+        pub drive_command: TopicConfig = topic("/atmo/cmd_drive", Twist::TYPE_NAME);
+        /// In: pilot inputs (`atmo_msgs/msg/PilotInput`: NED velocity command,
+        /// FRD yaw rate, throttle in [0, 1], switches), e.g. from the SITL plant
+        /// server or a ground station.
+        pub pilot: TopicConfig = topic("/atmo/pilot", PilotInput::TYPE_NAME);
+        /// Out: thruster commands through PX4 offboard.
+        pub actuator_motors: TopicConfig =
+            topic("/fmu/in/actuator_motors", ActuatorMotors::TYPE_NAME);
+        /// Out: PX4 offboard heartbeat (direct actuator control).
+        pub offboard_mode: TopicConfig =
+            topic("/fmu/in/offboard_control_mode", OffboardControlMode::TYPE_NAME);
+        /// Out: health.
+        pub diagnostics: TopicConfig = topic("/diagnostics", DiagnosticArray::TYPE_NAME);
+        /// In: the ground height (`geometry_msgs/msg/PointStamped`, ENU world
+        /// frame: `point.z` is the height of the ground under the robot, up).
+        pub ground: TopicConfig = topic("/atmo/ground", PointStamped::TYPE_NAME);
+        /// In: the ground plane's normal (`geometry_msgs/msg/Vector3Stamped`,
+        /// ENU world frame: the unit normal of the ground under the robot,
+        /// pointing out of the ground, so `vector.z > 0`). Optional: while no
+        /// fresh normal arrives the ground is level.
+        pub ground_normal: TopicConfig =
+            topic("/atmo/ground_normal", Vector3Stamped::TYPE_NAME);
+        /// In, with `use_sim_time` only: ROS time (`rosgraph_msgs/msg/Clock`).
+        pub clock: TopicConfig = topic("/clock", Clock::TYPE_NAME);
+        /// In: the radio through PX4 (`px4_msgs/msg/InputRc`, raw pulse
+        /// widths); off unless enabled. The daemon's `[rc]` table maps it.
+        pub rc: TopicConfig = TopicConfig {
+            enabled: false,
+            ..topic("/fmu/out/input_rc", InputRc::TYPE_NAME)
+        };
+    }
+    check |topics, c, prefix| topics.check_roles(c, prefix)
+}
+
+impl Topics {
+    /// Each topic's type is one its role takes, and no two used topics
+    /// share a name; errors name `prefix.<role>.<key>`.
+    fn check_roles(&self, c: &Checker<'_>, prefix: &str) -> atmo_core::Result<()> {
+        let t = self;
+        let roles: [(&str, &TopicConfig, &[&str]); 11] = [
+            ("status", &t.status, &[MpcStatus::TYPE_NAME]),
+            (
+                "estimate",
+                &t.estimate,
+                &[Odometry::TYPE_NAME, VehicleOdometry::TYPE_NAME],
+            ),
+            ("drive_command", &t.drive_command, &[Twist::TYPE_NAME]),
+            ("pilot", &t.pilot, &[PilotInput::TYPE_NAME]),
+            (
+                "actuator_motors",
+                &t.actuator_motors,
+                &[ActuatorMotors::TYPE_NAME],
+            ),
+            (
+                "offboard_mode",
+                &t.offboard_mode,
+                &[OffboardControlMode::TYPE_NAME],
+            ),
+            ("diagnostics", &t.diagnostics, &[DiagnosticArray::TYPE_NAME]),
+            ("ground", &t.ground, &[PointStamped::TYPE_NAME]),
+            (
+                "ground_normal",
+                &t.ground_normal,
+                &[Vector3Stamped::TYPE_NAME],
+            ),
+            ("clock", &t.clock, &[Clock::TYPE_NAME]),
+            ("rc", &t.rc, &[InputRc::TYPE_NAME]),
+        ];
+        let mut names: Vec<&str> = Vec::new();
+        for (role, topic, types) in roles {
+            let key = atmo_core::params::key(prefix, role);
+            if !types.contains(&topic.type_name.as_str()) {
+                return Err(c.fail(
+                    &format!("{key}.type"),
+                    format!("one of {types:?}"),
+                    &topic.type_name,
+                ));
+            }
+            if topic.enabled {
+                if names.contains(&topic.name.as_str()) {
+                    return Err(c.fail(
+                        &format!("{key}.name"),
+                        "a name no other topic uses",
+                        &topic.name,
+                    ));
+                }
+                names.push(&topic.name);
+            }
+        }
+        Ok(())
     }
 }
 
@@ -146,112 +213,6 @@ impl ConfigFile for Ros2Config {
 
     /// Checks names, types and ranges; errors name `file` and the key.
     fn validate(&self, file: &Path) -> Result<()> {
-        let c = Checker::new(file);
-        if !valid_segment(&self.node_name) {
-            return Err(c
-                .fail(
-                    "node_name",
-                    "a ROS 2 name ([A-Za-z_][A-Za-z0-9_]*)",
-                    &self.node_name,
-                )
-                .into());
-        }
-        if self.namespace != "/" && !valid_topic_name(&self.namespace) {
-            return Err(c
-                .fail(
-                    "namespace",
-                    "`/` or an absolute name like /atmo",
-                    &self.namespace,
-                )
-                .into());
-        }
-        c.range(
-            "diagnostics_period_ms",
-            self.diagnostics_period_ms,
-            10..=60_000,
-            "ms",
-        )?;
-        c.range("publish_queue", self.publish_queue, 1..=65_536, "slots")?;
-        let t = &self.topics;
-        if self.use_sim_time && !t.clock.enabled {
-            return Err(c
-                .fail(
-                    "topics.clock.enabled",
-                    "true: use_sim_time takes ROS time from it",
-                    false,
-                )
-                .into());
-        }
-        let roles: [(&str, &TopicConfig, &[&str]); 11] = [
-            ("topics.status", &t.status, &[MpcStatus::TYPE_NAME]),
-            (
-                "topics.estimate",
-                &t.estimate,
-                &[Odometry::TYPE_NAME, VehicleOdometry::TYPE_NAME],
-            ),
-            (
-                "topics.drive_command",
-                &t.drive_command,
-                &[Twist::TYPE_NAME],
-            ),
-            ("topics.pilot", &t.pilot, &[PilotInput::TYPE_NAME]),
-            (
-                "topics.actuator_motors",
-                &t.actuator_motors,
-                &[ActuatorMotors::TYPE_NAME],
-            ),
-            (
-                "topics.offboard_mode",
-                &t.offboard_mode,
-                &[OffboardControlMode::TYPE_NAME],
-            ),
-            (
-                "topics.diagnostics",
-                &t.diagnostics,
-                &[DiagnosticArray::TYPE_NAME],
-            ),
-            ("topics.ground", &t.ground, &[PointStamped::TYPE_NAME]),
-            (
-                "topics.ground_normal",
-                &t.ground_normal,
-                &[Vector3Stamped::TYPE_NAME],
-            ),
-            ("topics.clock", &t.clock, &[Clock::TYPE_NAME]),
-            ("topics.rc", &t.rc, &[InputRc::TYPE_NAME]),
-        ];
-        let mut names: Vec<&str> = Vec::new();
-        for (key, topic, types) in roles {
-            if !valid_topic_name(&topic.name) {
-                return Err(c
-                    .fail(
-                        &format!("{key}.name"),
-                        "an absolute ROS 2 topic name like /atmo/status",
-                        &topic.name,
-                    )
-                    .into());
-            }
-            if !types.contains(&topic.type_name.as_str()) {
-                return Err(c
-                    .fail(
-                        &format!("{key}.type"),
-                        format!("one of {types:?}"),
-                        &topic.type_name,
-                    )
-                    .into());
-            }
-            if topic.enabled {
-                if names.contains(&topic.name.as_str()) {
-                    return Err(c
-                        .fail(
-                            &format!("{key}.name"),
-                            "a name no other topic uses",
-                            &topic.name,
-                        )
-                        .into());
-                }
-                names.push(&topic.name);
-            }
-        }
-        Ok(())
+        Ok(atmo_core::params::check_file(self, file)?)
     }
 }

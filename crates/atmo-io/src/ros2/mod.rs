@@ -22,10 +22,10 @@
 //!   best-effort publishers alike; a late sample is worth nothing.
 //!
 //! Shutdown: the endpoints are dropped before the node and the node before
-//! the DDS participant ([`DdsNode`](dds::DdsNode) is the last field of the
+//! the DDS participant (`dds::DdsNode` is the last field of the
 //! thread structs), so RustDDS disposes every endpoint (SEDP) and the
 //! participant while its event loop still runs. Fast DDS discards those
-//! disposes (they carry no key hash, see [`farewell`]), so once the
+//! disposes (they carry no key hash, see `farewell`), so once the
 //! participant has stopped the node sends its own SPDP dispose with the key
 //! hash, and a Fast DDS peer's graph forgets the participant and all its
 //! endpoints at once instead of after the 50 s participant lease.

@@ -126,7 +126,7 @@ pub struct TickOutput {
     pub tilt_rate: Option<f64>,
 }
 
-/// Result of [`Mpc::converge_sqp`].
+/// Result of `Mpc::converge_sqp`.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SqpReport {
     pub iterations: usize,

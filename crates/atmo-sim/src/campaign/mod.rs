@@ -105,32 +105,37 @@ impl SweepParameter {
     }
 }
 
-/// One swept parameter and its grid: `values`, or `from`, `to` and `steps`
-/// (evenly spaced, both ends included).
-#[derive(Debug, Clone, PartialEq, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct SweepAxis {
-    pub parameter: SweepParameter,
-    #[serde(default)]
-    pub values: Option<Vec<f64>>,
-    #[serde(default)]
-    pub from: Option<f64>,
-    #[serde(default)]
-    pub to: Option<f64>,
-    #[serde(default)]
-    pub steps: Option<usize>,
+atmo_core::params! {
+    /// One swept parameter and its grid: `values`, or `from`, `to` and `steps`
+    /// (evenly spaced, both ends included).
+    #[derive(Debug, Clone, PartialEq)]
+    pub struct SweepAxis {
+        /// What is swept.
+        pub parameter: SweepParameter;
+        /// The grid as a list (1 to 1000 values).
+        pub values: Option<Vec<f64>> = None;
+        /// Or: the first value,
+        pub from: Option<f64> = None;
+        /// the last,
+        pub to: Option<f64> = None;
+        /// and how many (2 to 1000).
+        pub steps: Option<usize> = None;
+    }
 }
 
-/// The wheel-landing target a campaign counts per cell.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct Target {
-    /// deg, at least.
-    pub touchdown_tilt_min_deg: f64,
-    /// m/s, at most.
-    pub impact_speed_max_mps: f64,
+atmo_core::params! {
+    /// The wheel-landing target a campaign counts per cell.
+    #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+    pub struct Target {
+        /// Least touchdown tilt.
+        pub touchdown_tilt_min_deg: f64, range 0.0..=90.0, unit "deg";
+        /// Largest impact speed.
+        pub impact_speed_max_mps: f64, range 0.0..=10.0, unit "m/s";
+    }
 }
 
+/// A file without `[target]`: the wheel-landing target. A `[target]` table
+/// gives both keys.
 impl Default for Target {
     fn default() -> Self {
         Self {
@@ -140,50 +145,35 @@ impl Default for Target {
     }
 }
 
-/// A campaign file (TOML; examples in config/campaigns/).
-#[derive(Debug, Clone, PartialEq, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct CampaignFile {
-    /// Names the campaign's outputs.
-    pub name: String,
-    /// Scenario file, relative to the campaign file.
-    pub scenario: PathBuf,
-    #[serde(default = "CampaignFile::default_controller")]
-    pub controller: ControllerPreset,
-    /// Seed of run 0 of every cell.
-    #[serde(default = "CampaignFile::default_seed")]
-    pub base_seed: u64,
-    pub runs_per_cell: usize,
-    /// How many shards `campaign plan` and `campaign slurm` split it into.
-    #[serde(default = "CampaignFile::default_shards")]
-    pub shards: usize,
-    #[serde(default)]
-    pub target: Target,
-    /// Each run's wall-clock budget, s.
-    #[serde(default = "CampaignFile::default_run_time_limit")]
-    pub run_time_limit_s: f64,
-    /// At most two axes for the map; more give the table only.
-    #[serde(default)]
-    pub sweep: Vec<SweepAxis>,
-    /// `sbatch` resources of each array task.
-    #[serde(default)]
-    pub slurm: slurm::SlurmResources,
+atmo_core::params! {
+    /// A campaign file (TOML; examples in config/campaigns/).
+    #[derive(Debug, Clone, PartialEq)]
+    pub struct CampaignFile {
+        /// Names the campaign's outputs (a folder name).
+        pub name: String;
+        /// Scenario file, relative to the campaign file.
+        pub scenario: PathBuf;
+        /// The controller every run flies.
+        pub controller: ControllerPreset = ControllerPreset::Config;
+        /// Seed of run 0 of every cell.
+        pub base_seed: u64 = 1;
+        /// Runs per cell.
+        pub runs_per_cell: usize, range 1..=100_000;
+        /// How many shards `campaign plan` and `campaign slurm` split it into.
+        pub shards: usize = 1, range 1..=10_000;
+        /// The target counted per cell.
+        pub target: Target = Target::default();
+        /// Each run's wall-clock budget.
+        pub run_time_limit_s: f64 = crate::monte_carlo::RUN_TIME_LIMIT.as_secs_f64(),
+            range 1.0..=86_400.0, unit "s";
+        /// At most two axes for the map; more give the table only.
+        pub sweep: Vec<SweepAxis> = Vec::new();
+        /// `sbatch` resources of each array task.
+        pub slurm: slurm::SlurmResources = slurm::SlurmResources::default();
+    }
 }
 
 impl CampaignFile {
-    fn default_controller() -> ControllerPreset {
-        ControllerPreset::Config
-    }
-    fn default_seed() -> u64 {
-        1
-    }
-    fn default_shards() -> usize {
-        1
-    }
-    fn default_run_time_limit() -> f64 {
-        crate::monte_carlo::RUN_TIME_LIMIT.as_secs_f64()
-    }
-
     /// Reads and checks `path`; every error names the file and the key.
     pub fn load(path: &Path) -> Result<Self, CoreError> {
         Self::from_toml_str(&atmo_core::config_file::read_config_file(path)?, path)
@@ -205,37 +195,7 @@ impl CampaignFile {
         if file.name.is_empty() || file.name.contains(['/', '\\']) || file.name.starts_with('.') {
             return Err(bad("name", format!("{:?}: a folder name", file.name)));
         }
-        if !(1..=100_000).contains(&file.runs_per_cell) {
-            return Err(bad(
-                "runs_per_cell",
-                format!("{}: 1 to 100000", file.runs_per_cell),
-            ));
-        }
-        if !(1..=10_000).contains(&file.shards) {
-            return Err(bad("shards", format!("{}: 1 to 10000", file.shards)));
-        }
-        if !(file.run_time_limit_s.is_finite() && (1.0..=86_400.0).contains(&file.run_time_limit_s))
-        {
-            return Err(bad(
-                "run_time_limit_s",
-                format!("{} s: 1 to 86400 s", file.run_time_limit_s),
-            ));
-        }
-        let t = file.target;
-        if !(t.touchdown_tilt_min_deg.is_finite()
-            && (0.0..=90.0).contains(&t.touchdown_tilt_min_deg))
-        {
-            return Err(bad(
-                "target.touchdown_tilt_min_deg",
-                format!("{} deg: 0 to 90 deg", t.touchdown_tilt_min_deg),
-            ));
-        }
-        if !(t.impact_speed_max_mps.is_finite() && (0.0..=10.0).contains(&t.impact_speed_max_mps)) {
-            return Err(bad(
-                "target.impact_speed_max_mps",
-                format!("{} m/s: 0 to 10 m/s", t.impact_speed_max_mps),
-            ));
-        }
+        atmo_core::params::check_file(&file, path)?;
         let mut seen = Vec::new();
         for (i, axis) in file.sweep.iter().enumerate() {
             let key = |k: &str| format!("sweep[{i}].{k}");
@@ -277,9 +237,6 @@ impl CampaignFile {
                 ),
             ));
         }
-        file.slurm
-            .check()
-            .map_err(|(k, m)| bad(&format!("slurm.{k}"), m))?;
         Ok(file)
     }
 }
@@ -457,6 +414,11 @@ steps = 3
             (FILE.replace("shards = 4", "shards = 0"), "shards"),
             (FILE.replace("name = \"grid\"", "name = \"../x\""), "name"),
             (FILE.replace("shards = 4", "shards = 4\nspeed = 3"), "speed"),
+            (
+                format!("{FILE}\n[target]\ntouchdown_tilt_min_deg = 64.0\n"),
+                "impact_speed_max_mps",
+            ),
+            (format!("{FILE}\n[slurm]\nmem_mib = 10\n"), "slurm.mem_mib"),
         ];
         for (text, key) in cases {
             let err = CampaignFile::from_toml_str(&text, Path::new("c.toml"))

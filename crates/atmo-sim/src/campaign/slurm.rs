@@ -3,67 +3,37 @@
 use std::fmt::Write as _;
 use std::path::Path;
 
-use serde::Deserialize;
-
-/// `[slurm]` of a campaign file: what each array task asks for.
-#[derive(Debug, Clone, PartialEq, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct SlurmResources {
-    /// Cores per task (the shard's threads).
-    pub cpus_per_task: usize,
-    /// Memory per task, MiB.
-    pub mem_mib: usize,
-    /// Wall-clock limit per task, minutes.
-    pub time_minutes: usize,
-    /// Partition (none: the cluster's default).
-    pub partition: Option<String>,
-    /// At most this many tasks at once (none: as many as fit).
-    pub max_parallel: Option<usize>,
-}
-
-impl Default for SlurmResources {
-    fn default() -> Self {
-        Self {
-            cpus_per_task: 1,
-            mem_mib: 1024,
-            time_minutes: 60,
-            partition: None,
-            max_parallel: None,
-        }
+atmo_core::params! {
+    /// `[slurm]` of a campaign file: what each array task asks for.
+    #[derive(Debug, Clone, PartialEq)]
+    pub struct SlurmResources: Default {
+        /// Cores per task (the shard's threads).
+        pub cpus_per_task: usize = 1, range 1..=1024;
+        /// Memory per task.
+        pub mem_mib: usize = 1024, range 64..=(4 << 20), unit "MiB";
+        /// Wall-clock limit per task.
+        pub time_minutes: usize = 60, range 1..=43_200, unit "min";
+        /// Partition (none: the cluster's default): letters, digits, `_ - .`.
+        pub partition: Option<String> = None;
+        /// At most this many tasks at once (none: as many as fit).
+        pub max_parallel: Option<usize> = None, range 1..=usize::MAX;
     }
-}
-
-impl SlurmResources {
-    /// The key at fault and why (`"<given>: <expected>"`).
-    pub(super) fn check(&self) -> Result<(), (&'static str, String)> {
-        if !(1..=1024).contains(&self.cpus_per_task) {
-            return Err((
-                "cpus_per_task",
-                format!("{}: 1 to 1024", self.cpus_per_task),
-            ));
-        }
-        if !(64..=4 << 20).contains(&self.mem_mib) {
-            return Err(("mem_mib", format!("{}: 64 to 4194304 MiB", self.mem_mib)));
-        }
-        if !(1..=43_200).contains(&self.time_minutes) {
-            return Err((
-                "time_minutes",
-                format!("{}: 1 to 43200 min", self.time_minutes),
-            ));
-        }
-        if let Some(p) = &self.partition {
-            if p.is_empty()
-                || !p
-                    .chars()
-                    .all(|c| c.is_ascii_alphanumeric() || "_-.".contains(c))
+    check |slurm, c, prefix| {
+        match &slurm.partition {
+            Some(p)
+                if p.is_empty()
+                    || !p
+                        .chars()
+                        .all(|ch| ch.is_ascii_alphanumeric() || "_-.".contains(ch)) =>
             {
-                return Err(("partition", format!("{p:?}: letters, digits, _ - .")));
+                Err(c.fail(
+                    &atmo_core::params::key(prefix, "partition"),
+                    "letters, digits, _ - .",
+                    format!("{p:?}"),
+                ))
             }
+            _ => Ok(()),
         }
-        if self.max_parallel == Some(0) {
-            return Err(("max_parallel", "0: at least 1".to_string()));
-        }
-        Ok(())
     }
 }
 

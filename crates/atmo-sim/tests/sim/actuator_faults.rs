@@ -351,6 +351,18 @@ fn a_bad_actuator_fault_is_refused_naming_the_key() {
             "[[faults.actuators.tilt_encoder]]\nstuck = true",
             "faults.actuators.tilt_encoder[0]",
         ),
+        (
+            "[[faults.actuators.radio]]\nt = 1.0\ndelay = \"soon\"\nduration = 1.0",
+            "faults.actuators.radio[0].delay",
+        ),
+        (
+            "[[faults.actuators.rotor]]\nmode = \"flight\"\nrotor = 1\nspeed = 2.0",
+            "faults.actuators.rotor[0]",
+        ),
+        (
+            "[[faults.actuators.tilt_jam]]\nmode = \"morphing\"\ndelay = 99999.0",
+            "faults.actuators.tilt_jam[0].delay",
+        ),
     ] {
         let path = super::faults::scenario_path();
         let text = std::fs::read_to_string(&path).unwrap();

@@ -47,9 +47,7 @@ fn fitted_ground_effect_in_the_mpc_lands_steeper_than_the_nominal_mpc() {
     let rec = record(&robot, &plant, &Flight::new(Profile::Mixed, 48.0, 7)).unwrap();
     let ex = explain(&rec, &robot, &Options::default()).unwrap();
     let found = ex
-        .effects
-        .iter()
-        .find(|e| e.name == "ground_effect")
+        .effect(atmo_explain::effects::Effect::GroundEffect)
         .unwrap();
     eprintln!(
         "explain: ground_effect selected={} confidence={:?}",

@@ -90,6 +90,26 @@ fn negative_time_constant_is_an_error_naming_the_key() {
 }
 
 #[test]
+fn a_gust_out_of_range_is_an_error_naming_its_index() {
+    let msg = plant_error(
+        "# gusts = [",
+        "gusts = [{ t = 5.0, duration = 1.0, velocity = [2.0, 0.0, 0.0] }, \
+         { t = 6.0, duration = 0.0, velocity = [1.0, 0.0, 0.0] }]\n# gusts = [",
+    );
+    assert!(msg.contains("effects.wind.gusts[1].duration"), "{msg}");
+}
+
+#[test]
+fn a_motor_lag_curve_beside_a_thrust_curve_is_an_error() {
+    let msg = plant_error(
+        "curve = 0.0",
+        "curve = 0.2\n\n[effects.thrust_curve]\ncurve = 0.1",
+    );
+    assert!(msg.contains("effects.motor_lag.curve"), "{msg}");
+    assert!(msg.contains("effects.thrust_curve"), "{msg}");
+}
+
+#[test]
 fn a_step_above_one_millisecond_is_an_error() {
     let msg = plant_error("dt = 0.001", "dt = 0.002");
     assert!(msg.contains("`dt`"), "{msg}");

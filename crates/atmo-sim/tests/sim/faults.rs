@@ -507,7 +507,7 @@ fn estimate_dropout_mid_morph_fails_safe_then_holds_below_z_star_until_tilted_an
 fn injected_solver_cuts_are_logged_and_a_replay_repeats_them() {
     use atmo_flight::replay::{CutReplay, RecordedFlight, replay};
     use atmo_sim::closed_loop::{STATUS_TOPIC, fly_logged};
-    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("issue21-faults");
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("sim-faults");
     std::fs::create_dir_all(&dir).unwrap();
     let mut controller = ControllerConfig::atmo().unwrap().deterministic();
     controller
@@ -544,7 +544,7 @@ fn injected_solver_cuts_are_logged_and_a_replay_repeats_them() {
 fn the_tilt_planning_solves_are_in_the_window_and_their_cuts_replay() {
     use atmo_flight::replay::{CutReplay, RecordedFlight, replay};
     use atmo_sim::closed_loop::{STATUS_TOPIC, fly_logged};
-    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("issue21-faults");
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("sim-faults");
     std::fs::create_dir_all(&dir).unwrap();
     let controller = ControllerConfig::atmo().unwrap().deterministic();
     let start = clean().first_in(Mode::Transition, 0.0).unwrap().time;

@@ -25,7 +25,7 @@ fn repo() -> PathBuf {
 /// Written apart from `target/tmp/atmo-io-interop` (the Python reference
 /// reader's folder, whose logs need an `.expected.json` each).
 fn dir() -> PathBuf {
-    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("issue19-replay");
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("sim-replay");
     std::fs::create_dir_all(&dir).unwrap();
     dir
 }

@@ -20,6 +20,29 @@ use std::time::{Duration, Instant};
 use atmo_io::mcap_log::read_topic;
 use atmo_io::msg::{MpcStatus, SolverStatus};
 
+/// Every driver alive in every tick from arming until the server's last
+/// plant step (`server.served_until_ns` of its summary.json), nothing lost
+/// on the way. After that step the drivers the server plays (or the boards
+/// it answers for) are silent, and the daemon, stopped by the test only
+/// once the server has exited, rightly sees them die.
+pub(crate) fn assert_drivers_alive_while_served(
+    status: &[(u64, MpcStatus)],
+    summary: &serde_json::Value,
+) {
+    let served_until = summary["server"]["served_until_ns"].as_u64().unwrap();
+    let armed: Vec<&MpcStatus> = status
+        .iter()
+        .map(|(_, s)| s)
+        .skip_while(|s| s.mode.name() == "disarmed")
+        .take_while(|s| s.ros_stamp_ns <= served_until)
+        .collect();
+    assert!(armed.len() > 150 * 5, "{} armed ticks", armed.len());
+    for s in armed {
+        assert_eq!(s.io.drivers_alive, [true; 4], "tick {}", s.tick);
+        assert_eq!(s.io.driver_deaths, [0; 4], "tick {}", s.tick);
+    }
+}
+
 pub(crate) fn repo() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../..")
 }
@@ -309,14 +332,7 @@ fn the_daemon_binary_lands_on_the_wheels_against_the_plant_server() {
         at(0.99),
         at(1.0)
     );
-    // Every driver alive from arming to the end; nothing lost on the way.
-    let armed = status
-        .iter()
-        .skip_while(|(_, s)| s.mode.name() == "disarmed");
-    for (_, s) in armed {
-        assert_eq!(s.io.drivers_alive, [true; 4], "tick {}", s.tick);
-        assert_eq!(s.io.driver_deaths, [0; 4], "tick {}", s.tick);
-    }
+    assert_drivers_alive_while_served(&status, &summary);
     let last = &status.last().unwrap().1;
     assert_eq!(last.io.log_dropped, 0);
     // The solver's 4 ms time limit is wall-clock: on a shared machine a

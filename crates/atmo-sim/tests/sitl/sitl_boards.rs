@@ -6,15 +6,13 @@
 //! each landing is one sample of a scatter: the mean touchdowns of
 //! [`PAIRS`] landings each way must agree within 1 deg and 0.05 m/s.
 //!
-//! Ignored in `cargo test` and run alone by `.ci/run` (one retry, said
-//! aloud): through the boards the landing touches down softer by 0.03 to
-//! 0.05 m/s on average (means of three measured on a loaded 2-core
-//! machine: 0.031, 0.031, 0.039, 0.050 m/s), with three times the scatter
-//! of the ports' (standard deviation about 0.017 against 0.006 m/s); the
-//! serial links stay clean (no retries, answers under 20 ms). Why the
-//! softer landing is not known: a 50 ms speed lag added to the ports'
-//! tilt did not move their landing, and a board without its lag did not
-//! close the gap.
+//! Real time makes the comparison depend on the machine being otherwise
+//! idle, as it is when cargo runs this test binary (one binary at a time,
+//! and the flights of this one serialized by [`sitl::serial`]): there the
+//! mean touchdowns agree within a few mm/s and half a degree. With other
+//! work on the cores the boards' serial round trips and the driver's
+//! wake-ups stretch, and the landing through the boards touches down
+//! softer, by up to the bound (docs/decisions/2026-12-05-sitl-boards.md).
 // Test, bench and example code: an unwrap that fails is the failure report.
 #![allow(clippy::unwrap_used)]
 
@@ -25,7 +23,10 @@ use std::time::Duration;
 use atmo_io::mcap_log::read_topic;
 use atmo_io::msg::MpcStatus;
 
-use crate::sitl::{daemon_config, domain, repo, run_dir, serial, sibling_binary, spawn_pair_with};
+use crate::sitl::{
+    assert_drivers_alive_while_served, daemon_config, domain, repo, run_dir, serial,
+    sibling_binary, spawn_pair_with,
+};
 
 /// One SITL landing; returns the server's summary and the daemon's status.
 fn land(name: &str, serve_args: &[OsString]) -> (serde_json::Value, Vec<(u64, MpcStatus)>) {
@@ -83,7 +84,6 @@ fn mean(values: &[f64]) -> f64 {
 }
 
 #[test]
-#[ignore = "real time, softer by 0.03-0.05 m/s: `cargo test -p atmo-sim --test sitl sitl_boards -- --ignored`"]
 fn the_wheel_landing_through_the_roboclaw_drivers_matches_the_driver_ports() {
     let _serial = serial();
     let roboclaw = sibling_binary("atmo-roboclaw");
@@ -130,16 +130,7 @@ fn the_wheel_landing_through_the_roboclaw_drivers_matches_the_driver_ports() {
     assert!(boards["summary"]["drive_distance_m"].as_f64().unwrap() >= 1.0);
 
     // The daemon heard the real drivers: alive from arming on, never dead.
-    let armed: Vec<&MpcStatus> = status
-        .iter()
-        .map(|(_, s)| s)
-        .skip_while(|s| s.mode.name() == "disarmed")
-        .collect();
-    assert!(armed.len() > 150 * 5, "{} armed ticks", armed.len());
-    for s in &armed {
-        assert_eq!(s.io.drivers_alive, [true; 4], "tick {}", s.tick);
-        assert_eq!(s.io.driver_deaths, [0; 4], "tick {}", s.tick);
-    }
+    assert_drivers_alive_while_served(&status, &boards);
     // The tilt driver homed once and its serial link stayed clean.
     let log = std::fs::read_to_string(
         Path::new(env!("CARGO_TARGET_TMPDIR"))
