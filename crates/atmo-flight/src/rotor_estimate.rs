@@ -8,7 +8,11 @@
 //! (`TiltedBody::thrust_force` / `thrust_torque`). The four rotors' roll
 //! and pitch torques point into four different quadrants, so the sign of
 //! the observer's roll and pitch torque names the rotor even when the
-//! observer is at its limit on both axes.
+//! observer is at its limit on both axes, up to the sign of `delta`: a
+//! surplus on a rotor turns the robot as a loss on its diagonal partner
+//! does, and the yaw torque tells them apart ([`RotorEstimate::name_rotor`]).
+//! A rotor named with a surplus is stuck: out at once, and what it
+//! delivers is learned instead of an effectiveness.
 //!
 //! From the detection on, every tick moves the part of the observer's
 //! wrench that rotor `i` explains into its effectiveness `e_i`:
@@ -56,19 +60,26 @@ const OVER: f64 = 1.0;
 const STUCK_BOX: f64 = 0.01;
 
 impl RotorEstimate {
-    /// The rotor (0-based) whose loss of thrust explains the observer's
-    /// roll and pitch torque `d` best at `body`: the largest projection of
-    /// the lost thrust's torque (`-B_i`) on `d`.
-    pub fn name_rotor(body: &TiltedBody, d: &Vector6<f64>) -> usize {
-        let mut best = (0, f64::NEG_INFINITY);
+    /// The rotor (0-based) whose thrust explains the observer's torque `d`
+    /// best at `body`, and whether it gives more than commanded (stuck)
+    /// rather than less: the largest projection of `-B_i` (a loss) or
+    /// `+B_i` (a surplus) on the roll, pitch and yaw torque. A loss on a
+    /// rotor and a surplus on its diagonal partner turn the robot alike
+    /// in roll and pitch; the yaw tells them apart (diagonal partners
+    /// spin the same way and lean the same way about z, so a surplus on
+    /// one yaws against a loss on the other).
+    pub fn name_rotor(body: &TiltedBody, d: &Vector6<f64>) -> (usize, bool) {
+        let mut best = (0, false, f64::NEG_INFINITY);
         for i in 0..4 {
             let b = body.thrust_torque.column(i);
-            let lost = -(b[0] * d[3] + b[1] * d[4]) / b[0].hypot(b[1]).max(1e-9);
-            if lost > best.1 {
-                best = (i, lost);
+            let along = (b[0] * d[3] + b[1] * d[4] + b[2] * d[5]) / b.norm().max(1e-9);
+            for (surplus, score) in [(false, -along), (true, along)] {
+                if score > best.2 {
+                    best = (i, surplus, score);
+                }
             }
         }
-        best.0
+        (best.0, best.1)
     }
 
     /// Starts learning rotor `rotor`'s effectiveness from 1.
@@ -78,6 +89,17 @@ impl RotorEstimate {
             self.effectiveness = 1.0;
             self.delivered = 0.0;
             self.over = false;
+        }
+    }
+
+    /// Starts with rotor `rotor` stuck: out of the commands, its thrust
+    /// learned as what it delivers whatever it is commanded.
+    pub fn start_stuck(&mut self, rotor: usize) {
+        if self.rotor.is_none() {
+            self.rotor = Some(rotor.min(3));
+            self.effectiveness = 0.0;
+            self.delivered = 0.0;
+            self.over = true;
         }
     }
 
@@ -187,6 +209,13 @@ impl RotorEstimate {
         (lo, hi)
     }
 
+    /// What an out rotor seen to give more than commanded still delivers
+    /// (a fraction of full, whatever it is commanded): `None` for a
+    /// stopped, weak or healthy one.
+    pub fn stuck_thrust(&self, out_below: f64) -> Option<f64> {
+        (self.out(out_below) && self.over).then_some(self.delivered)
+    }
+
     /// The failed rotor is out: no thrust to fly on.
     pub fn out(&self, out_below: f64) -> bool {
         self.rotor.is_some() && self.effectiveness < out_below
@@ -213,10 +242,42 @@ mod tests {
                     .chain(b.thrust_torque.column(i).iter())
                     .map(|v| -v * 0.4),
             );
-            assert_eq!(RotorEstimate::name_rotor(&b, &lost), i);
+            assert_eq!(RotorEstimate::name_rotor(&b, &lost), (i, false));
             let clipped = lost.map(|v| v.clamp(-1.0, 1.0));
-            assert_eq!(RotorEstimate::name_rotor(&b, &clipped), i);
+            assert_eq!(RotorEstimate::name_rotor(&b, &clipped), (i, false));
+            // The same rotor giving more than commanded: a surplus, not a
+            // loss on its diagonal partner, even clipped in roll and pitch.
+            let surplus = -lost;
+            assert_eq!(RotorEstimate::name_rotor(&b, &surplus), (i, true));
+            let clipped = surplus.map(|v| v.clamp(-1.0, 1.0));
+            assert_eq!(RotorEstimate::name_rotor(&b, &clipped), (i, true));
         }
+    }
+
+    #[test]
+    fn a_rotor_named_stuck_is_out_and_learns_what_it_delivers() {
+        let b = body();
+        let mut e = RotorEstimate::default();
+        e.start_stuck(2);
+        assert!(e.out(0.5));
+        // The MPC plans 0.2 on it, it delivers 0.7: the observer's torque.
+        let planned = Input::from_element(0.2);
+        let bt = b.thrust_torque.column(2);
+        let d = Vector6::new(0.0, 0.0, 0.0, bt[0] * 0.5, bt[1] * 0.5, bt[2] * 0.5);
+        let taken = e.learn(&b, &d, &planned, 0.5);
+        assert!((e.stuck_thrust(0.5).unwrap() - 0.7).abs() < 1e-9);
+        assert!(
+            (taken[3] - d[3]).abs() < 1e-9,
+            "what it explains leaves the observer"
+        );
+        // Commanded nothing, bounded around what it delivers.
+        assert_eq!(e.command(&planned, 0.5)[2], 0.0);
+        let (lo, hi) = e.rotor_bounds(0.5);
+        assert!(lo[2] < 0.7 && hi[2] > 0.7 && hi[2] - lo[2] < 0.05);
+        // A stopped rotor is out and delivers nothing it learns.
+        let mut stopped = RotorEstimate::default();
+        stopped.start(2);
+        assert_eq!(stopped.stuck_thrust(0.5), None);
     }
 
     #[test]

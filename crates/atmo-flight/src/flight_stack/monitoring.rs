@@ -55,8 +55,10 @@ impl FlightStack {
             self.rotor.reset();
         } else if self.rotor.rotor().is_none() {
             let body = self.model.at_tilt(self.last_tilt);
-            self.rotor
-                .start(RotorEstimate::name_rotor(&body, &self.observer.wrench()));
+            match RotorEstimate::name_rotor(&body, &self.observer.wrench()) {
+                (rotor, true) => self.rotor.start_stuck(rotor),
+                (rotor, false) => self.rotor.start(rotor),
+            }
         }
     }
 
@@ -95,8 +97,9 @@ impl FlightStack {
         // In [0, 1] by construction: refused only if not, keeping the old.
         let (min, max) = self.rotor.rotor_bounds(out_below);
         let _ = self.mpc.set_rotor_bounds(&min, &max);
+        let stuck = self.rotor.stuck_thrust(out_below).is_some();
         self.mpc
-            .set_yaw_free(self.rotor_out() && self.mode == Mode::Failsafe);
+            .set_yaw_free(self.rotor_out() && (self.mode == Mode::Failsafe || stuck));
     }
 
     /// The commands sent for the delivered thrust `planned`.
@@ -112,11 +115,14 @@ impl FlightStack {
     /// The balanced collective thrust left with a failed rotor, as a
     /// fraction of four full rotors: rotor i at e and its diagonal
     /// partner matched to it (roll and pitch balance), the other diagonal
-    /// full: (2 + 2 e) / 4. `None` without a rotor fault.
+    /// full: (2 + 2 e) / 4, where `e` is what the rotor can give (nothing
+    /// once out, what it delivers once stuck). `None` without a rotor
+    /// fault.
     pub(super) fn thrust_left(&self) -> Option<f64> {
         self.rotor.rotor()?;
+        let out_below = self.settings.monitor.rotor_out_effectiveness;
         let e = if self.rotor_out() {
-            0.0
+            self.rotor.stuck_thrust(out_below).unwrap_or(0.0)
         } else {
             self.rotor.effectiveness()
         };
