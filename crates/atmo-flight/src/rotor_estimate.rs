@@ -82,24 +82,14 @@ impl RotorEstimate {
         (best.0, best.1)
     }
 
-    /// Starts learning rotor `rotor`'s effectiveness from 1.
-    pub fn start(&mut self, rotor: usize) {
+    /// Starts learning rotor `rotor`: its effectiveness from 1, or, when
+    /// `stuck`, what it delivers whatever it is commanded (out at once).
+    pub fn start(&mut self, rotor: usize, stuck: bool) {
         if self.rotor.is_none() {
             self.rotor = Some(rotor.min(3));
-            self.effectiveness = 1.0;
+            self.effectiveness = if stuck { 0.0 } else { 1.0 };
             self.delivered = 0.0;
-            self.over = false;
-        }
-    }
-
-    /// Starts with rotor `rotor` stuck: out of the commands, its thrust
-    /// learned as what it delivers whatever it is commanded.
-    pub fn start_stuck(&mut self, rotor: usize) {
-        if self.rotor.is_none() {
-            self.rotor = Some(rotor.min(3));
-            self.effectiveness = 0.0;
-            self.delivered = 0.0;
-            self.over = true;
+            self.over = stuck;
         }
     }
 
@@ -258,7 +248,7 @@ mod tests {
     fn a_rotor_named_stuck_is_out_and_learns_what_it_delivers() {
         let b = body();
         let mut e = RotorEstimate::default();
-        e.start_stuck(2);
+        e.start(2, true);
         assert!(e.out(0.5));
         // The MPC plans 0.2 on it, it delivers 0.7: the observer's torque.
         let planned = Input::from_element(0.2);
@@ -274,10 +264,10 @@ mod tests {
         assert_eq!(e.command(&planned, 0.5)[2], 0.0);
         let (lo, hi) = e.rotor_bounds(0.5);
         assert!(lo[2] < 0.7 && hi[2] > 0.7 && hi[2] - lo[2] < 0.05);
-        // A stopped rotor is out and delivers nothing it learns.
-        let mut stopped = RotorEstimate::default();
-        stopped.start(2);
-        assert_eq!(stopped.stuck_thrust(0.5), None);
+        // A rotor named for a loss is not stuck.
+        let mut lost = RotorEstimate::default();
+        lost.start(2, false);
+        assert_eq!(lost.stuck_thrust(0.5), None);
     }
 
     #[test]
@@ -286,7 +276,7 @@ mod tests {
         let truth = 0.6;
         let planned = Input::from_element(0.5);
         let mut e = RotorEstimate::default();
-        e.start(1);
+        e.start(1, false);
         let mut d = Vector6::zeros();
         for _ in 0..200 {
             // What the observer learns: the rotor, commanded planned / e,
@@ -327,7 +317,7 @@ mod tests {
             e.command(&Input::from_element(0.5), 0.2),
             Input::from_element(0.5)
         );
-        e.start(2);
+        e.start(2, false);
         e.effectiveness = 0.1;
         assert!(e.out(0.2));
         assert_eq!(e.command(&Input::from_element(0.5), 0.2)[2], 0.0);

@@ -158,41 +158,38 @@ impl FaultsConfig {
         self.check(&c, "faults")?;
         // What the declarations cannot say: every start lies within the
         // scenario.
-        let starts = [
+        let starts: [(&str, &mut dyn Iterator<Item = f64>); 7] = [
             (
                 "estimate_dropout",
-                self.estimate_dropout
-                    .iter()
-                    .map(|w| w.t)
-                    .collect::<Vec<_>>(),
+                &mut self.estimate_dropout.iter().map(|w| w.t),
             ),
             (
                 "estimate_burst",
-                self.estimate_burst.iter().map(|w| w.t).collect(),
+                &mut self.estimate_burst.iter().map(|w| w.t),
             ),
             (
                 "estimate_latency",
-                self.estimate_latency.iter().map(|w| w.t).collect(),
+                &mut self.estimate_latency.iter().map(|w| w.t),
             ),
             (
                 "estimate_duplicate",
-                self.estimate_duplicate.iter().map(|w| w.t).collect(),
+                &mut self.estimate_duplicate.iter().map(|w| w.t),
             ),
             (
                 "estimate_reorder",
-                self.estimate_reorder.iter().map(|w| w.t).collect(),
+                &mut self.estimate_reorder.iter().map(|w| w.t),
             ),
             (
                 "estimate_clock_jump",
-                self.estimate_clock_jump.iter().map(|w| w.t).collect(),
+                &mut self.estimate_clock_jump.iter().map(|w| w.t),
             ),
             (
                 "solver_overrun",
-                self.solver_overrun.iter().map(|w| w.t).collect(),
+                &mut self.solver_overrun.iter().map(|w| w.t),
             ),
         ];
         for (kind, list) in starts {
-            for (i, t) in list.into_iter().enumerate() {
+            for (i, t) in list.enumerate() {
                 c.within(&format!("faults.{kind}[{i}].t"), t, 0.0, duration)?;
             }
         }

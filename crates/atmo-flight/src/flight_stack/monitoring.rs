@@ -55,10 +55,8 @@ impl FlightStack {
             self.rotor.reset();
         } else if self.rotor.rotor().is_none() {
             let body = self.model.at_tilt(self.last_tilt);
-            match RotorEstimate::name_rotor(&body, &self.observer.wrench()) {
-                (rotor, true) => self.rotor.start_stuck(rotor),
-                (rotor, false) => self.rotor.start(rotor),
-            }
+            let (rotor, stuck) = RotorEstimate::name_rotor(&body, &self.observer.wrench());
+            self.rotor.start(rotor, stuck);
         }
     }
 

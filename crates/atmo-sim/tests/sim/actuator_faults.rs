@@ -10,18 +10,21 @@ use atmo_flight::Mode;
 use atmo_flight::actuator_monitor::Detected;
 use atmo_sim::closed_loop::{ControllerConfig, TickRecord};
 
-use super::faults::{Flight, assert_clean_landing, clean, fly_with};
+use super::faults::{Flight, assert_clean_landing, clean, fly_scenario, fly_with};
 
-fn rotor(onset: &str, rotor: usize, what: &str) -> Flight {
-    fly_with(&format!(
-        "[[faults.actuators.rotor]]\n{onset}\nrotor = {rotor}\n{what}"
-    ))
+/// The wheel landing with one rotor fault (`what`, from `onset`), with
+/// the Monte Carlo's draws of `seed` (0: the scenario as it is).
+fn rotor(onset: &str, rotor: usize, what: &str, seed: u64) -> Flight {
+    fly_seeded(
+        &format!("[[faults.actuators.rotor]]\n{onset}\nrotor = {rotor}\n{what}"),
+        seed,
+    )
 }
 
 #[test]
 fn a_rotor_at_80_percent_is_taken_up_by_the_observer_and_the_landing_made() {
     for onset in ["t = 1.0", "mode = \"transition\""] {
-        let f = rotor(onset, 2, "scale = 0.8");
+        let f = rotor(onset, 2, "scale = 0.8", 0);
         assert_clean_landing(&f, onset);
     }
 }
@@ -44,10 +47,7 @@ fn fly_seeded(faults: &str, seed: u64) -> Flight {
     } else {
         atmo_sim::monte_carlo::randomized_with_draws(&base, seed).0
     };
-    let controller = ControllerConfig::atmo().unwrap().deterministic();
-    let mut ticks = Vec::new();
-    let summary = atmo_sim::closed_loop::fly(&flown, &controller, |r| ticks.push(*r)).unwrap();
-    Flight { summary, ticks }
+    fly_scenario(&flown)
 }
 
 const SEEDS: [u64; 3] = [0, 7_000_001, 7_000_002];
@@ -144,10 +144,7 @@ fn a_rotor_at_60_percent_in_flight_is_allocated_around_too_late_to_land() {
 #[test]
 fn a_rotor_stuck_in_flight_is_detected_and_the_robot_not_turned_over() {
     for n in 1..=4 {
-        let f = fly_seeded(
-            &format!("[[faults.actuators.rotor]]\nt = 1.0\nrotor = {n}\nstuck = true"),
-            0,
-        );
+        let f = rotor("t = 1.0", n, "stuck = true", 0);
         let seen = detected(&f, Detected::ROTOR).unwrap_or_else(|| panic!("rotor {n}"));
         assert!(
             seen.time > 1.0 && seen.time < 2.5,
@@ -176,12 +173,7 @@ fn a_rotor_stuck_in_flight_is_detected_and_the_robot_not_turned_over() {
 #[test]
 fn a_rotor_stuck_in_the_transition_touches_down_on_the_wheels() {
     for n in 1..=4 {
-        let f = fly_seeded(
-            &format!(
-                "[[faults.actuators.rotor]]\nmode = \"transition\"\nrotor = {n}\nstuck = true"
-            ),
-            7_000_002,
-        );
+        let f = rotor("mode = \"transition\"", n, "stuck = true", 7_000_002);
         detected(&f, Detected::ROTOR).unwrap_or_else(|| panic!("rotor {n}"));
         let s = &f.summary;
         assert!(s.crash_reason.is_none(), "rotor {n}: {s:?}");
@@ -227,7 +219,7 @@ fn a_rotor_failed_in_the_transition_is_detected_and_landed_on_the_wheels() {
             );
         }
     }
-    let f = rotor("mode = \"transition\"", 1, "stuck = true");
+    let f = rotor("mode = \"transition\"", 1, "stuck = true", 0);
     assert_clean_landing(&f, "stuck in the transition");
 }
 
@@ -436,10 +428,7 @@ fn rotor_fault_outcomes() {
                     if !only.is_empty() && !only.split(',').any(|k| what.contains(k)) {
                         continue;
                     }
-                    let f = fly_seeded(
-                        &format!("[[faults.actuators.rotor]]\n{onset}\nrotor = {n}\n{what}"),
-                        seed,
-                    );
+                    let f = rotor(onset, n, what, seed);
                     let seen = detected(&f, Detected::ROTOR).map(|t| t.time);
                     let tipped = tipped(&f, 0.0, 0.3);
                     let spin = f
@@ -471,13 +460,7 @@ fn rotor_fault_trace() {
     let spec = std::env::var("ROTOR_TRACE").unwrap_or_else(|_| "t = 1.0|2|scale = 0.0".into());
     let parts: Vec<&str> = spec.split('|').collect();
     let seed = std::env::var("ROTOR_SEEDS").map_or(0, |s| s.trim().parse().unwrap());
-    let f = fly_seeded(
-        &format!(
-            "[[faults.actuators.rotor]]\n{}\nrotor = {}\n{}",
-            parts[0], parts[1], parts[2]
-        ),
-        seed,
-    );
+    let f = rotor(parts[0], parts[1].parse().unwrap(), parts[2], seed);
     for t in f.ticks.iter().filter(|t| t.time > 0.9).step_by(5) {
         let s = &t.truth;
         let o = &t.outputs;

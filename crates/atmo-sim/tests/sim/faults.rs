@@ -58,7 +58,7 @@ impl Flight {
     }
 }
 
-fn fly_scenario(scenario: &Scenario) -> Flight {
+pub(crate) fn fly_scenario(scenario: &Scenario) -> Flight {
     let controller = ControllerConfig::atmo().unwrap().deterministic();
     let mut ticks = Vec::new();
     let summary = fly(scenario, &controller, |r| ticks.push(*r)).unwrap();
