@@ -289,11 +289,19 @@ pub fn explain_with_progress(
     let steps = selection.steps.clone();
     let confidence = t.step("stability", || selection.stability(opts.seed));
     let fit = t.step("final fit", || fit_effects(&res, rec, selection));
+    let replayed = replay::within_flown_tilts(robot, rec);
     let (fit, decisions) = t.step("acceptance", || {
-        accept_effects(rec, robot, &res, fit, opts.max_replay_starts)
+        accept_effects(rec, &replayed, &res, fit, opts.max_replay_starts)
     })?;
     let validation = t.step("validate", || {
-        validate(rec, robot, &res, &mismatch, &fit, opts.max_replay_starts)
+        validate(
+            rec,
+            &replayed,
+            &res,
+            &mismatch,
+            &fit,
+            opts.max_replay_starts,
+        )
     })?;
     let findings = Findings {
         rec,

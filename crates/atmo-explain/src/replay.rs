@@ -2,6 +2,7 @@
 //! effects) started from the recorded state and driven by the recorded
 //! commands and tilt for a short horizon, against what was recorded.
 
+use atmo_core::RobotConfig;
 use atmo_core::control::WheelRates;
 use atmo_core::model::{State, idx};
 
@@ -148,6 +149,26 @@ pub fn smoothed_state(rec: &Recording, prep: &Prepared, k: usize) -> State {
         }
     }
     center + out
+}
+
+/// The robot the replays run: its tilt range cut to the tilts the
+/// recording flew (1 deg at the least). The plant checks a file's mass
+/// properties at every tilt of its range; the finder measured them at the
+/// flown tilts only, so a fitted mass property is replayed where it was
+/// measured and not refused for tilts the recording never reached.
+pub fn within_flown_tilts(robot: &RobotConfig, rec: &Recording) -> RobotConfig {
+    let flown = rec
+        .samples
+        .iter()
+        .map(|s| s.varphi.to_degrees())
+        .fold(0.0, f64::max);
+    let mut cut = robot.clone();
+    let limits = &mut cut.limits;
+    let top = (flown + 1.0).clamp(1.0, limits.tilt_max_deg);
+    limits.tilt_max_deg = top;
+    limits.tilt_flight_max_deg = limits.tilt_flight_max_deg.min(top);
+    limits.tilt_transition_max_deg = limits.tilt_transition_max_deg.min(top);
+    cut
 }
 
 /// Start rows: fit rows whose next `horizon` seconds stay in one run,

@@ -417,3 +417,24 @@ fn physics_a_claimed_calibration_explains_alike_is_one_finding_not_a_rejection()
     assert!(!v.contains("rejected"), "{v}");
     assert!(!v.contains("nominal calibration alone"), "{v}");
 }
+
+/// Mass properties are measured at the tilts a recording flew (this hover:
+/// 0 deg). A mass scale with the inertia about B as filed is physical
+/// there but leaves no positive-definite mass matrix at the robot's
+/// largest tilts: the replays run it on the flown tilts instead of
+/// refusing it for tilts never reached.
+#[test]
+fn a_fitted_mass_property_is_replayed_on_the_tilts_flown() {
+    let (robot, rec) = hover(MASS_SCALE);
+    let mut cfg = PlantConfig::ideal();
+    cfg.arm_inertia_convention = robot.arm.inertia_convention;
+    cfg.effects.mass_error = Some(MassErrorConfig {
+        enabled: true,
+        mass_scale: 1.6,
+        inertia_scale: 1.0,
+    });
+    assert!(atmo_plant::PlantTemplate::new(&robot, &cfg).is_err());
+    let cut = crate::replay::within_flown_tilts(&robot, &rec);
+    assert!(cut.limits.tilt_max_deg <= 1.0, "{:?}", cut.limits);
+    assert!(atmo_plant::PlantTemplate::new(&cut, &cfg).is_ok());
+}
