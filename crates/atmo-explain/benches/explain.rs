@@ -22,7 +22,8 @@ use criterion::{Criterion, criterion_group, criterion_main};
 fn bench(c: &mut Criterion) {
     let robot_path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../config/atmo.toml");
     let body = RigidBody::at_tilt(&RobotFile::load(&robot_path).unwrap(), 0.0);
-    let concealed = atmo_testgen::concealed("ground_effect,motor_lag").unwrap();
+    let concealed =
+        atmo_testgen::concealed("ground_effect,motor_lag", atmo_testgen::Form::First).unwrap();
     let plan = FlightPlan {
         seed: 3,
         duration: 600.0,

@@ -1,40 +1,19 @@
-//! Cascaded PID at the recording rate, knowing only the robot file's
-//! nominal rigid body.
+//! What the generator's controllers share: the measured state, the
+//! reference, the nominal body they know (the robot file's only), and the
+//! steps before and after each control law: the centre of mass's motion
+//! from the measured base, the attitude that points the thrust, and the
+//! allocation of a collective thrust and a torque to the four rotors (the
+//! 4x4 map from rotor thrusts to thrust along body -z and torque about the
+//! nominal CoM, inverted once; commands `u = T / k_thrust` clamped to
+//! [0, 1]).
 //!
-//! Position: `a_cmd = a_ref + kp e_p + kd e_v + ki int e_p` (NED); the thrust
-//! vector `F = m (a_cmd - g e_z)` sets the desired body -z axis and, with
-//! the reference yaw, the desired attitude `R_d`. Attitude:
-//! `e_R = vee(R_d^T R - R^T R_d) / 2`, desired rates `w_d = -k_att e_R`,
-//! torque `tau = I_c k_rate (w_d - w) + w x I_c w`. Allocation: the 4x4
-//! map from rotor thrusts to (thrust along body -z, torque about the
-//! nominal CoM) inverted once; commands `u = T / k_thrust` clamped to
-//! [0, 1].
+//! Two laws, so that a finder rule chosen on one controller's flights can
+//! be checked on the other's: [`crate::pid`] (cascaded PID) and
+//! [`crate::lqr`] (a discrete LQR on the full state).
 
 use nalgebra::{Matrix3, Matrix4, Rotation3, Vector3, Vector4};
 
 use crate::robot::RigidBody;
-
-/// Gains (SI, per second).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Gains {
-    pub kp: f64,
-    pub kd: f64,
-    pub ki: f64,
-    pub k_att: f64,
-    pub k_rate: f64,
-}
-
-impl Default for Gains {
-    fn default() -> Self {
-        Self {
-            kp: 4.0,
-            kd: 3.6,
-            ki: 1.0,
-            k_att: 6.0,
-            k_rate: 16.0,
-        }
-    }
-}
 
 /// A measured state: base position and velocity (NED), attitude, rates.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -54,42 +33,54 @@ pub struct Reference {
     pub yaw: f64,
 }
 
-/// The controller and its integrator.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Controller {
-    gains: Gains,
-    mass: f64,
-    gravity: f64,
-    inertia: Matrix3<f64>,
-    com: Vector3<f64>,
-    k_thrust: f64,
-    allocation_inv: Matrix4<f64>,
-    integral: Vector3<f64>,
+/// A control law computing at the recording rate.
+pub trait Control {
+    /// Commands for one sample of `dt`.
+    fn command(&mut self, m: &Measured, r: &Reference, dt: f64) -> [f64; 4];
 }
 
-fn vee(m: &Matrix3<f64>) -> Vector3<f64> {
+/// Which control law flies the generator's flight.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, clap::ValueEnum)]
+pub enum ControllerKind {
+    /// Cascaded PID (position, attitude, rate).
+    #[default]
+    Pid,
+    /// Discrete LQR on position, velocity, attitude, rates and the
+    /// position integral, designed for the recording rate.
+    Lqr,
+}
+
+/// The nominal rigid body as the controllers know it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Nominal {
+    pub mass: f64,
+    pub gravity: f64,
+    pub inertia: Matrix3<f64>,
+    pub com: Vector3<f64>,
+    pub k_thrust: f64,
+    allocation_inv: Matrix4<f64>,
+}
+
+pub(crate) fn vee(m: &Matrix3<f64>) -> Vector3<f64> {
     Vector3::new(m[(2, 1)], m[(0, 2)], m[(1, 0)])
 }
 
-impl Controller {
-    /// For the nominal body (the robot file's).
-    pub fn new(nominal: &RigidBody, gains: Gains) -> Self {
+impl Nominal {
+    pub fn new(body: &RigidBody) -> Self {
         let mut alloc = Matrix4::zeros();
         for i in 0..4 {
             let mut unit = [0.0; 4];
             unit[i] = 1.0;
-            let (f, t) = nominal.rotor_wrench(&unit);
+            let (f, t) = body.rotor_wrench(&unit);
             alloc.set_column(i, &Vector4::new(-f.z, t.x, t.y, t.z));
         }
         Self {
-            gains,
-            mass: nominal.mass,
-            gravity: nominal.gravity,
-            inertia: nominal.inertia_com,
-            com: nominal.com,
-            k_thrust: nominal.k_thrust,
+            mass: body.mass,
+            gravity: body.gravity,
+            inertia: body.inertia_com,
+            com: body.com,
+            k_thrust: body.k_thrust,
             allocation_inv: alloc.try_inverse().unwrap_or_else(Matrix4::zeros),
-            integral: Vector3::zeros(),
         }
     }
 
@@ -98,36 +89,37 @@ impl Controller {
         self.mass * self.gravity / (4.0 * self.k_thrust)
     }
 
-    /// Commands for one sample of `dt`.
-    pub fn command(&mut self, m: &Measured, r: &Reference, dt: f64) -> [f64; 4] {
-        let g = &self.gains;
-        // The CoM's motion is what the thrust accelerates.
-        let p_com = m.p + m.r * self.com;
-        let v_com = m.v + m.r * m.w.cross(&self.com);
-        let e_p = r.p - p_com;
-        let e_v = r.v - v_com;
-        self.integral += e_p * dt;
-        let limit = 2.0;
-        self.integral = self.integral.map(|x| x.clamp(-limit, limit));
-        let a_cmd = r.a + e_p * g.kp + e_v * g.kd + self.integral * g.ki;
-        let force = (a_cmd - Vector3::new(0.0, 0.0, self.gravity)) * self.mass;
+    /// Position and velocity of the centre of mass (NED): what the thrust
+    /// accelerates.
+    pub fn com_motion(&self, m: &Measured) -> (Vector3<f64>, Vector3<f64>) {
+        (m.p + m.r * self.com, m.v + m.r * m.w.cross(&self.com))
+    }
+
+    /// The world force (N) giving the acceleration `a` (NED) against gravity.
+    pub fn force_for(&self, a: &Vector3<f64>) -> Vector3<f64> {
+        (a - Vector3::new(0.0, 0.0, self.gravity)) * self.mass
+    }
+
+    /// The attitude whose body -z is along `force`, body x towards `yaw`.
+    pub fn attitude_for(force: &Vector3<f64>, yaw: f64) -> Matrix3<f64> {
         let z_d = -force.normalize();
-        // Desired body axes: z_d = -F/|F|, x_d from the yaw.
-        let heading = Vector3::new(r.yaw.cos(), r.yaw.sin(), 0.0);
+        let heading = Vector3::new(yaw.cos(), yaw.sin(), 0.0);
         let y_d = z_d.cross(&heading).normalize();
         let x_d = y_d.cross(&z_d);
-        let r_d = Matrix3::from_columns(&[x_d, y_d, z_d]);
-        let rm = m.r.matrix();
-        let e_r = vee(&(r_d.transpose() * rm - rm.transpose() * r_d)) * 0.5;
-        let w_d = -e_r * g.k_att;
-        let torque = self.inertia * (w_d - m.w) * g.k_rate + m.w.cross(&(self.inertia * m.w));
-        let collective = -force.dot(&(rm * Vector3::z()));
+        Matrix3::from_columns(&[x_d, y_d, z_d])
+    }
+
+    /// Attitude error `vee(R_d^T R - R^T R_d) / 2` (body frame; the small
+    /// rotation from `r_d` to `r`).
+    pub fn attitude_error(r_d: &Matrix3<f64>, r: &Matrix3<f64>) -> Vector3<f64> {
+        vee(&(r_d.transpose() * r - r.transpose() * r_d)) * 0.5
+    }
+
+    /// Rotor commands for a collective thrust along body -z (N) and a
+    /// torque about the nominal CoM (N m).
+    pub fn commands(&self, collective: f64, torque: &Vector3<f64>) -> [f64; 4] {
         let thrust =
             self.allocation_inv * Vector4::new(collective.max(0.0), torque.x, torque.y, torque.z);
-        let mut u = [0.0; 4];
-        for i in 0..4 {
-            u[i] = (thrust[i] / self.k_thrust).clamp(0.0, 1.0);
-        }
-        u
+        std::array::from_fn(|i| (thrust[i] / self.k_thrust).clamp(0.0, 1.0))
     }
 }

@@ -19,7 +19,9 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
 
-use crate::control::{Controller, Gains, Measured, Reference};
+use crate::control::{Control, ControllerKind, Measured, Nominal, Reference};
+use crate::lqr::{Lqr, Weights};
+use crate::pid::{Gains, Pid};
 use crate::robot::RigidBody;
 use crate::sim::{Concealed, Truth};
 
@@ -57,7 +59,11 @@ pub struct FlightPlan {
     /// Altitude of B in the low passes (m above the ground).
     pub low_altitude: f64,
     pub noise: Noise,
+    pub controller: ControllerKind,
+    /// The PID's gains ([`ControllerKind::Pid`]).
     pub gains: Gains,
+    /// The LQR's weights ([`ControllerKind::Lqr`]).
+    pub weights: Weights,
     pub seed: u64,
 }
 
@@ -69,7 +75,9 @@ impl Default for FlightPlan {
             substeps: 8,
             low_altitude: 0.16,
             noise: Noise::default(),
+            controller: ControllerKind::default(),
             gains: Gains::default(),
+            weights: Weights::default(),
             seed: 1,
         }
     }
@@ -138,12 +146,17 @@ pub fn euler_zyx(r: &Rotation3<f64>) -> [f64; 3] {
     ]
 }
 
-/// Flies `plan` with the true robot (`nominal` plus `fx`) under a
-/// controller that knows only `nominal`; returns the recording.
+/// Flies `plan` with the true robot (`nominal` plus `fx`) under the plan's
+/// controller, which knows only `nominal`; returns the recording.
 pub fn fly(nominal: &RigidBody, fx: &Concealed, plan: &FlightPlan) -> Vec<Row> {
     let truth = Truth::new(nominal.clone(), fx.clone());
-    let mut ctl = Controller::new(nominal, plan.gains);
     let dt = 1.0 / plan.rate_hz;
+    let known = Nominal::new(nominal);
+    let hover_command = known.hover_command();
+    let mut ctl: Box<dyn Control> = match plan.controller {
+        ControllerKind::Pid => Box::new(Pid::new(known, plan.gains)),
+        ControllerKind::Lqr => Box::new(Lqr::new(known, plan.weights, dt)),
+    };
     let h = dt / plan.substeps as f64;
     let mut rng = ChaCha8Rng::seed_from_u64(plan.seed);
     let mut gauss = |sigma: f64| -> Vector3<f64> {
@@ -151,7 +164,7 @@ pub fn fly(nominal: &RigidBody, fx: &Concealed, plan: &FlightPlan) -> Vec<Row> {
         Vector3::new(z(), z(), z()) * sigma
     };
     let start = reference(0.0, plan.low_altitude);
-    let hover = truth.steady_thrust(ctl.hover_command());
+    let hover = truth.steady_thrust(hover_command);
     let mut state = truth.at(start.p, hover);
     let n = (plan.duration * plan.rate_hz).round() as usize;
     let decay = (-dt / plan.noise.velocity_markov_tau).exp();

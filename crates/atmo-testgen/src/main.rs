@@ -5,9 +5,10 @@ use std::path::PathBuf;
 
 use clap::Parser;
 
+use atmo_testgen::control::ControllerKind;
 use atmo_testgen::flight::{FlightPlan, fly, to_csv};
 use atmo_testgen::robot::{RigidBody, RobotFile};
-use atmo_testgen::{GenError, concealed};
+use atmo_testgen::{Form, GenError, concealed};
 
 /// An independent recording generator for `atmo-sim explain`.
 #[derive(Debug, Parser)]
@@ -19,6 +20,14 @@ struct Args {
     /// wind, com_offset, thrust_scale, thrust_curve, none).
     #[arg(long, default_value = "none")]
     effects: String,
+    /// Which implementation and values of the effects (see the crate's
+    /// `Form`: `first` as the finder's tests began with, `second` another
+    /// law for each).
+    #[arg(long, value_enum, default_value_t = Form::First)]
+    form: Form,
+    /// The control law flying the flight.
+    #[arg(long, value_enum, default_value_t = ControllerKind::Pid)]
+    controller: ControllerKind,
     /// Fixed tilt of the flight (deg).
     #[arg(long, default_value_t = 0.0)]
     tilt_deg: f64,
@@ -43,9 +52,10 @@ fn main() -> Result<(), GenError> {
         duration: args.duration,
         rate_hz: args.rate,
         seed: args.seed,
+        controller: args.controller,
         ..FlightPlan::default()
     };
-    let rows = fly(&body, &concealed(&args.effects)?, &plan);
+    let rows = fly(&body, &concealed(&args.effects, args.form)?, &plan);
     std::fs::write(&args.out, to_csv(&rows)).map_err(|e| GenError::Output {
         file: args.out.display().to_string(),
         message: e.to_string(),

@@ -236,6 +236,24 @@ impl RigidBody {
         }
     }
 
+    /// The body with a point mass `part` (kg) of it, at `at` (relative to
+    /// B), slid by `shift`: the centre of mass follows, and the inertia
+    /// about it is the rest's plus the two-body term `mu S(at - rest)`,
+    /// `mu` the reduced mass, `rest` the centre of mass of the rest.
+    #[must_use]
+    pub fn with_mass_moved(&self, part: f64, at: &Vector3<f64>, shift: &Vector3<f64>) -> Self {
+        let rest_mass = self.mass - part;
+        let rest = (self.com * self.mass - at * part) / rest_mass;
+        let mu = part * rest_mass / self.mass;
+        let moved = at + shift;
+        Self {
+            com: self.com + shift * (part / self.mass),
+            inertia_com: self.inertia_com + steiner(mu, &(moved - rest))
+                - steiner(mu, &(at - rest)),
+            ..self.clone()
+        }
+    }
+
     /// Body force and torque about the CoM of rotor thrusts `t` (N).
     pub fn rotor_wrench(&self, t: &[f64; 4]) -> (Vector3<f64>, Vector3<f64>) {
         let mut force = Vector3::zeros();
@@ -247,5 +265,35 @@ impl RigidBody {
                 - self.rotor_axis[i] * (self.yaw_sign[i] * self.k_moment * t[i]);
         }
         (force, torque)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Inertia about the base origin B is additive over the parts: sliding
+    /// a part of mass `m` from `a` to `a + d` changes it by
+    /// `m (S(a + d) - S(a))`, whatever the rest; the centre of mass moves
+    /// by `m d / M`.
+    #[test]
+    fn a_moved_mass_changes_the_inertia_about_b_by_its_own_steiner_terms() {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../config/atmo.toml");
+        let body = RigidBody::at_tilt(&RobotFile::load(&path).unwrap(), 0.4);
+        let (part, at, shift) = (
+            1.2,
+            Vector3::new(0.01, -0.02, 0.0),
+            Vector3::new(-0.03, 0.04, 0.005),
+        );
+        let moved = body.with_mass_moved(part, &at, &shift);
+        let about_b = |b: &RigidBody| b.inertia_com + steiner(b.mass, &b.com);
+        let expected = about_b(&body) + steiner(part, &(at + shift)) - steiner(part, &at);
+        assert!(
+            (about_b(&moved) - expected).amax() < 1e-12,
+            "{}",
+            about_b(&moved) - expected
+        );
+        assert!((moved.com - body.com - shift * (part / body.mass)).amax() < 1e-15);
+        assert!((moved.rotor_position[0] - body.rotor_position[0]).amax() == 0.0);
     }
 }

@@ -19,25 +19,92 @@ use crate::robot::RigidBody;
 /// Air density used by the body drag (kg/m^3).
 pub const AIR_DENSITY: f64 = 1.225;
 
+/// How the thrust rises to its steady value.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum MotorLag {
+    /// First-order lag of each rotor's thrust, time constant (s).
+    Thrust(f64),
+    /// First-order lag of each rotor's speed, thrust as its square: a rise
+    /// faster from high speed than from low; the same time constant (s)
+    /// for small steps.
+    RotorSpeed(f64),
+}
+
+/// Ground effect on each rotor's thrust.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum GroundEffect {
+    /// Cheeseman-Bennett, `T / (1 - (R / 4 z)^2)`: rotor radius R (m), z
+    /// the hub height along the rotor axis.
+    CheesemanBennett(f64),
+    /// A gain `T / T_inf - 1` continuous in the hub height h and the tilt:
+    /// `G(varphi) exp(-(h - 0.25 m) / 0.1 m)` with `G` a smooth curve
+    /// through 5 % up to 30 deg, a peak of 15 % at 55 deg (between the
+    /// finder's table rows), 0 at 65 deg and suction (-6 %) from 75 deg, the
+    /// shape of the paper's Fig. 3C.
+    Continuous,
+}
+
+/// Where the centre of mass moved.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum ComOffset {
+    /// The centre of mass moved by this (body, m), the inertia about it
+    /// unchanged.
+    MovedCentre([f64; 3]),
+    /// A battery of [`BATTERY_MASS`] at the base origin slid so the centre
+    /// of mass moves by this (body, m): the composite inertia (parallel
+    /// axes of battery and the rest) and every rotor's moment arm follow.
+    Composite([f64; 3]),
+}
+
+/// Mass of the battery [`ComOffset::Composite`] slides (kg).
+pub const BATTERY_MASS: f64 = 1.2;
+
+/// Shape of the command-to-thrust curve (thrust per `k_thrust`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum ThrustCurve {
+    /// `(1 - b) u + b u^2`.
+    Quadratic(f64),
+    /// `u^e`.
+    Power(f64),
+}
+
 /// The physics the robot file does not know (all off by default).
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct Concealed {
-    /// Rotor radius (m) of the classical ground effect (Cheeseman-Bennett):
-    /// thrust / (1 - (R / 4 z)^2), z the hub height along the rotor axis.
-    pub ground_effect_radius: Option<f64>,
-    /// First-order lag of each rotor's thrust on its command (s).
-    pub motor_lag: Option<f64>,
-    /// Rotor drag `-k_r T (in-plane hub air velocity)` (1/s per N... in
-    /// N/(N m/s)) and body drag areas `Cd A` along body x, y, z (m^2).
+    pub ground_effect: Option<GroundEffect>,
+    pub motor_lag: Option<MotorLag>,
+    /// Rotor drag `-k_r T (in-plane hub air velocity)` (N per N of thrust
+    /// per m/s) and body drag areas `Cd A` along body x, y, z (m^2).
     pub drag: Option<(f64, [f64; 3])>,
     /// Steady wind (NED, m/s); only felt through the drag.
     pub wind: [f64; 3],
-    /// Centre of mass shifted by this (body frame, m) from the file's.
-    pub com_offset: Option<[f64; 3]>,
+    pub com_offset: Option<ComOffset>,
     /// Thrust = (1 + s) times the file's.
     pub thrust_scale: Option<f64>,
-    /// Thrust per unit of `k_thrust` = (1 - b) u + b u^2 instead of u.
-    pub thrust_curve: Option<f64>,
+    pub thrust_curve: Option<ThrustCurve>,
+}
+
+/// Gain of [`GroundEffect::Continuous`] at hub height `h` (m) and tilt
+/// `varphi` (rad).
+pub fn continuous_ground_gain(h: f64, varphi: f64) -> f64 {
+    // (tilt deg, G): joined by smoothsteps, flat at each knot.
+    const KNOTS: [(f64, f64); 5] = [
+        (30.0, 0.05),
+        (55.0, 0.15),
+        (65.0, 0.0),
+        (75.0, -0.06),
+        (90.0, -0.06),
+    ];
+    let deg = varphi.to_degrees();
+    let mut g = KNOTS[0].1;
+    for pair in KNOTS.windows(2) {
+        let ((a, ga), (b, gb)) = (pair[0], pair[1]);
+        if deg > a {
+            let x = ((deg - a) / (b - a)).clamp(0.0, 1.0);
+            g = ga + (gb - ga) * x * x * (3.0 - 2.0 * x);
+        }
+    }
+    g * (-(h.max(0.05) - 0.25) / 0.1).exp()
 }
 
 /// State of the true body.
@@ -51,7 +118,8 @@ pub struct Body {
     pub q: UnitQuaternion<f64>,
     /// Body rates, FRD (rad/s).
     pub w: Vector3<f64>,
-    /// Rotor thrusts (N): the lagged state when there is a motor lag.
+    /// Each rotor's lag state ([`Truth::lag_state`]): its thrust (N), or
+    /// for a rotor-speed lag the square root of it.
     pub thrust: [f64; 4],
 }
 
@@ -76,11 +144,18 @@ struct Rate {
 
 impl Truth {
     pub fn new(body: RigidBody, fx: Concealed) -> Self {
-        let mut body = body;
-        if let Some(d) = fx.com_offset {
-            // The same inertia about the (moved) centre of mass.
-            body.com += Vector3::from(d);
-        }
+        let body = match fx.com_offset {
+            None => body,
+            Some(ComOffset::MovedCentre(d)) => RigidBody {
+                com: body.com + Vector3::from(d),
+                ..body
+            },
+            Some(ComOffset::Composite(d)) => {
+                // The battery sits at the base origin.
+                let slide = Vector3::from(d) * (body.mass / BATTERY_MASS);
+                body.with_mass_moved(BATTERY_MASS, &Vector3::zeros(), &slide)
+            }
+        };
         Self {
             body,
             fx,
@@ -90,11 +165,20 @@ impl Truth {
 
     /// Thrust a command gives in steady state (N).
     pub fn steady_thrust(&self, u: f64) -> f64 {
-        let shape = self
-            .fx
-            .thrust_curve
-            .map_or(u, |b| (1.0 - b) * u + b * u * u);
+        let shape = match self.fx.thrust_curve {
+            None => u,
+            Some(ThrustCurve::Quadratic(b)) => (1.0 - b) * u + b * u * u,
+            Some(ThrustCurve::Power(e)) => u.max(0.0).powf(e),
+        };
         self.body.k_thrust * shape * (1.0 + self.fx.thrust_scale.unwrap_or(0.0))
+    }
+
+    /// The lag state of a rotor at a steady `thrust` (N).
+    pub fn lag_state(&self, thrust: f64) -> f64 {
+        match self.fx.motor_lag {
+            Some(MotorLag::RotorSpeed(_)) => thrust.max(0.0).sqrt(),
+            _ => thrust,
+        }
     }
 
     /// Base-origin position and velocity (NED).
@@ -110,7 +194,7 @@ impl Truth {
             v_com: Vector3::zeros(),
             q: UnitQuaternion::identity(),
             w: Vector3::zeros(),
-            thrust: [hover_thrust; 4],
+            thrust: [self.lag_state(hover_thrust); 4],
         }
     }
 
@@ -118,24 +202,31 @@ impl Truth {
         let b = &self.body;
         let mut thrust_rate = [0.0; 4];
         let mut t = s.thrust;
-        match self.fx.motor_lag {
-            Some(tau) => {
-                for i in 0..4 {
-                    thrust_rate[i] = (self.steady_thrust(u[i]) - s.thrust[i]) / tau;
+        for i in 0..4 {
+            let steady = self.steady_thrust(u[i]);
+            match self.fx.motor_lag {
+                Some(MotorLag::Thrust(tau)) => thrust_rate[i] = (steady - s.thrust[i]) / tau,
+                Some(MotorLag::RotorSpeed(tau)) => {
+                    thrust_rate[i] = (self.lag_state(steady) - s.thrust[i]) / tau;
+                    t[i] = s.thrust[i] * s.thrust[i];
                 }
-            }
-            None => {
-                for i in 0..4 {
-                    t[i] = self.steady_thrust(u[i]);
-                }
+                None => t[i] = steady,
             }
         }
-        if let Some(radius) = self.fx.ground_effect_radius {
+        if let Some(ge) = self.fx.ground_effect {
             for i in 0..4 {
                 let hub = s.p_com + s.q * (b.rotor_position[i] - b.com);
-                let axis_z = (s.q * b.rotor_axis[i]).z.abs().max(0.2);
-                let along = ((self.ground_z - hub.z) / axis_z).max(radius / 2.0);
-                t[i] /= 1.0 - (radius / (4.0 * along)).powi(2);
+                let height = self.ground_z - hub.z;
+                match ge {
+                    GroundEffect::CheesemanBennett(radius) => {
+                        let axis_z = (s.q * b.rotor_axis[i]).z.abs().max(0.2);
+                        let along = (height / axis_z).max(radius / 2.0);
+                        t[i] /= 1.0 - (radius / (4.0 * along)).powi(2);
+                    }
+                    GroundEffect::Continuous => {
+                        t[i] *= 1.0 + continuous_ground_gain(height, b.varphi);
+                    }
+                }
             }
         }
         let (mut force, mut torque) = b.rotor_wrench(&t);
@@ -197,7 +288,7 @@ impl Truth {
             v_com: v + q * w.cross(&c),
             q,
             w,
-            thrust: u.map(|x| self.steady_thrust(x)),
+            thrust: u.map(|x| self.lag_state(self.steady_thrust(x))),
         }
     }
 
