@@ -87,16 +87,31 @@ fn flatten(v: &serde_json::Value, out: &mut Vec<f64>) {
     }
 }
 
+/// How much of the Neural-Fly authors' residual force `fa` the finder's
+/// fitted model predicts (see the example's documentation).
+#[derive(clap::Parser)]
+struct Args {
+    /// A Neural-Fly flight (CSV of `../shared/data/neural-fly/`).
+    flight: String,
+    /// Robot file: the nominal model.
+    #[arg(long, default_value = "config/neural_fly_quadrotor.toml")]
+    robot: String,
+    /// Score only the second half's rows (the fit still uses every fold
+    /// but a row's own).
+    #[arg(long)]
+    second_half: bool,
+    /// Run the whole analysis on the first half alone; its model predicts
+    /// the second half, which alone is scored.
+    #[arg(long)]
+    fit_first_half: bool,
+}
+
 fn main() {
-    let args: Vec<String> = std::env::args().collect();
-    let path = &args[1];
-    let robot_path = args
-        .iter()
-        .position(|a| a == "--robot")
-        .map_or("config/neural_fly_quadrotor.toml", |i| args[i + 1].as_str());
-    let fit_first_half = args.iter().any(|a| a == "--fit-first-half");
-    let second_half = fit_first_half || args.iter().any(|a| a == "--second-half");
-    let robot = RobotConfig::load(robot_path).unwrap();
+    let args = <Args as clap::Parser>::parse();
+    let path = &args.flight;
+    let fit_first_half = args.fit_first_half;
+    let second_half = fit_first_half || args.second_half;
+    let robot = RobotConfig::load(&args.robot).unwrap();
     // As `explain` does: the velocity's slow band from the positions.
     let recorded = Recording::load(path).unwrap();
     let (whole, _) = atmo_explain::velocity::from_positions(&recorded);
@@ -133,7 +148,9 @@ fn main() {
             w.wind[0], w.wind[1], w.sd[0], w.sd[1], w.rss, w.rss_no_wind, w.evaluations
         );
     }
-    let (fit, decisions) = accept_effects(&rec, &robot, &res, fit, starts).unwrap();
+    // As `explain` does: replays on the tilts flown.
+    let replayed = atmo_explain::replay::within_flown_tilts(&robot, &rec);
+    let (fit, decisions) = accept_effects(&rec, &replayed, &res, fit, starts).unwrap();
     for (e, d) in &decisions {
         println!("  {}: {}", e.name(), d.describe());
     }
@@ -145,7 +162,7 @@ fn main() {
         (rec2, res2, after)
     } else {
         let mismatch = locate_mismatch(&res);
-        let validation = validate(&rec, &robot, &res, &mismatch, &fit, starts).unwrap();
+        let validation = validate(&rec, &replayed, &res, &mismatch, &fit, starts).unwrap();
         (rec, res, validation.after)
     };
     let (rec, res, after) = (&scored.0, &scored.1, &scored.2);
