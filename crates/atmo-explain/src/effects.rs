@@ -4,7 +4,7 @@
 //!
 //! | effect | parameters | wrench per unit parameter |
 //! | --- | --- | --- |
-//! | `ground_effect` | gain table over hub height {0.25, 0.35, 0.45, 0.6} m x tilt {40..70} deg (0 at 0.75 m), classical `R_p^2` below 30 deg | `sum_i phi(h_i, varphi) A e_i t_i` |
+//! | `ground_effect` | a surface over hub height and tilt: hat functions at {0.25, 0.35, 0.45, 0.6} m (0 at 0.75 m) times cubic B-splines in tilt (knots every 22.5 deg) | `sum_i phi(h_i, varphi) A e_i t_i` |
 //! | `motor_lag` | time constant tau | `A (lag_tau(u) - u)` (profiled) |
 //! | `drag` | rotor drag k_r (in the disc plane), axial k_a, body Cd A (x, y, z) | `-sum_i t_i P_i v_i`, `-sum_i t_i (1 - P_i) v_i` at the hubs, `-rho/2 \|v_k\| v_k` |
 //! | `wind` | steady wind (x, y) | `k_r sum_i t_i P_i R^T e_j` |
@@ -26,12 +26,17 @@ use nalgebra::{Matrix3, Matrix6x4, Vector3, Vector4, Vector6};
 use crate::data::{Prepared, cross_matrix};
 use crate::recording::{Recording, Sample};
 
-/// Hub heights of the fitted ground-effect table (m); the last column is 0.
+/// Hub heights of the fitted ground-effect surface's height nodes (m); the
+/// gain at the last is 0, below the first it is held.
 pub const GE_HEIGHTS: [f64; 5] = [0.25, 0.35, 0.45, 0.6, 0.75];
-/// Tilts of the fitted ground-effect table rows (deg).
-pub const GE_TILTS_DEG: [f64; 4] = [40.0, 50.0, 60.0, 70.0];
-/// Below this tilt (deg) the classical law alone applies; blended up to 40.
-pub const GE_CLASSICAL_BELOW_DEG: f64 = 30.0;
+/// Knot spacing of the surface's cubic B-splines in tilt (deg): a gain
+/// smooth in tilt that can peak, and turn into suction, between knots.
+pub const GE_TILT_KNOT_DEG: f64 = 22.5;
+/// Cubic B-splines covering 0-90 deg (`90 / GE_TILT_KNOT_DEG + 3`).
+pub const GE_TILT_SPLINES: usize = 7;
+/// Coefficients of the surface: one per tilt spline and height node below
+/// the last.
+pub const GE_WIDTH: usize = GE_TILT_SPLINES * 4;
 /// Drag coefficients: rotor drag, axial drag, body Cd A along x, y, z.
 pub const DRAG_WIDTH: usize = 5;
 /// The first drag columns, rotor and axial drag, are affine in the wind:
@@ -133,7 +138,7 @@ impl Effect {
     /// Number of linear coefficients.
     pub fn width(self) -> usize {
         match self {
-            Effect::GroundEffect => 17,
+            Effect::GroundEffect => GE_WIDTH,
             Effect::Drag => DRAG_WIDTH,
             Effect::Wind | Effect::ComOffset | Effect::ThrustAxis => 2,
             _ => 1,
@@ -143,16 +148,12 @@ impl Effect {
     /// Names of the coefficients.
     pub fn coefficient_names(self) -> Vec<String> {
         match self {
-            Effect::GroundEffect => {
-                let mut v = Vec::new();
-                for tilt in GE_TILTS_DEG {
-                    for h in &GE_HEIGHTS[..4] {
-                        v.push(format!("gain(h={h:.2} m, varphi={tilt:.0} deg)"));
-                    }
-                }
-                v.push("rotor_radius^2 (classical law), m^2".into());
-                v
-            }
+            Effect::GroundEffect => (0..GE_WIDTH)
+                .map(|c| {
+                    crate::parameter::Param::of_coefficient(Effect::GroundEffect, c)
+                        .map_or_else(String::new, |p| p.name().into_owned())
+                })
+                .collect(),
             Effect::MotorLag => vec!["scale of the lag term (1 = lag as fitted)".into()],
             Effect::Drag => vec![
                 "rotor_drag, N/(m/s)".into(),
@@ -226,46 +227,51 @@ pub struct Knobs {
     pub wind: [f64; 2],
 }
 
-/// Weight of the classical law at tilt `varphi` (rad).
-pub fn classical_weight(varphi: f64) -> f64 {
-    let lo = GE_CLASSICAL_BELOW_DEG.to_radians();
-    let hi = GE_TILTS_DEG[0].to_radians();
-    if varphi <= lo {
-        1.0
-    } else if varphi >= hi {
+/// Uniform cubic B-spline of unit knot spacing, support [0, 4).
+fn cubic_bspline(x: f64) -> f64 {
+    if !(0.0..4.0).contains(&x) {
         0.0
+    } else if x < 1.0 {
+        x.powi(3) / 6.0
+    } else if x < 2.0 {
+        let u = x - 1.0;
+        (((-3.0 * u + 3.0) * u + 3.0) * u + 1.0) / 6.0
+    } else if x < 3.0 {
+        let u = x - 2.0;
+        ((3.0 * u - 6.0) * u * u + 4.0) / 6.0
     } else {
-        1.0 - (varphi - lo) / (hi - lo)
+        (4.0 - x).powi(3) / 6.0
     }
 }
 
+/// Tilt (deg) where tilt spline `j` peaks (outside 0-90 deg for the end
+/// ones, whose peaks lie beyond the range).
+pub fn ge_spline_peak_deg(j: usize) -> f64 {
+    (j as f64 - 1.0) * GE_TILT_KNOT_DEG
+}
+
 /// Ground-effect basis at hub height `h` and tilt `varphi`: adds
-/// `scale * phi_j` into `out[j]` for the 17 coefficients.
+/// `scale * phi_j` into `out[j]` for the [`GE_WIDTH`] coefficients
+/// (`out[4 s + c]`: tilt spline s, height node c).
 pub fn ge_basis(h: f64, varphi: f64, scale: f64, out: &mut [f64]) {
-    let wc = classical_weight(varphi);
-    if wc > 0.0 {
-        // Classical law to first order: (R / 4 z)^2 with z along the slipstream.
-        let z = (h / varphi.cos().max(0.05)).max(0.05);
-        out[16] += scale * wc / (16.0 * z * z);
-    }
-    if wc < 1.0 {
-        let tilts: Vec<f64> = GE_TILTS_DEG.iter().map(|d| d.to_radians()).collect();
-        let (i, wt) = atmo_core::ground_effect::table::bracket(&tilts, varphi);
-        let (j, wh) = atmo_core::ground_effect::table::bracket(&GE_HEIGHTS, h);
-        let s = scale * (1.0 - wc);
-        for (ri, rw) in [(i, 1.0 - wt), (i + 1, wt)] {
-            for (cj, cw) in [(j, 1.0 - wh), (j + 1, wh)] {
-                if cj < 4 {
-                    out[ri * 4 + cj] += s * rw * cw;
-                }
+    let last = (GE_TILT_SPLINES - 3) as f64;
+    let x = (varphi.to_degrees() / GE_TILT_KNOT_DEG).clamp(0.0, last - 1e-9);
+    let (c, wh) = atmo_core::ground_effect::table::bracket(&GE_HEIGHTS, h);
+    let first = x.floor() as usize;
+    for spline in first..(first + 4).min(GE_TILT_SPLINES) {
+        let b = scale * cubic_bspline(x - spline as f64 + 3.0);
+        for (node, w) in [(c, 1.0 - wh), (c + 1, wh)] {
+            if node < 4 {
+                out[spline * 4 + node] += b * w;
             }
         }
     }
 }
 
-/// The ground-effect gain of coefficients `theta` (17) at (h, varphi).
+/// The ground-effect gain of coefficients `theta` ([`GE_WIDTH`]) at
+/// (h, varphi).
 pub fn ge_gain(theta: &[f64], h: f64, varphi: f64) -> f64 {
-    let mut phi = [0.0; 17];
+    let mut phi = [0.0; GE_WIDTH];
     ge_basis(h, varphi, 1.0, &mut phi);
     phi.iter().zip(theta).map(|(a, b)| a * b).sum()
 }
@@ -434,13 +440,13 @@ fn push_thrust_terms(
 /// Ground effect: each rotor's basis at its hub height, times its thrust.
 fn push_ground_effect(raw: &mut [Vec<f64>], at: &Starts, row: &Row) {
     let (s, t, r, p) = (row.sample, row.thrust, row.rot, row.position());
-    let mut per_rotor = [[0.0; 17]; 4];
+    let mut per_rotor = [[0.0; GE_WIDTH]; 4];
     for i in 0..4 {
         let hub = p + r * row.body.rotor_position[i];
         let h = s.ground_z - hub.z;
         ge_basis(h, s.varphi, 1.0, &mut per_rotor[i]);
     }
-    for j in 0..17 {
+    for j in 0..GE_WIDTH {
         let weights = Vector4::new(
             per_rotor[0][j] * t[0],
             per_rotor[1][j] * t[1],
@@ -684,35 +690,34 @@ pub fn lag_column(prep: &Prepared, tau: f64) -> Vec<f64> {
     out
 }
 
-/// Smoothness prior of the ground-effect table: first differences along
-/// height (including towards the fixed 0 at 0.75 m) and along tilt, as a
-/// 17 x 17 matrix `D^T D` on the effect's columns. Scaled by the caller to
-/// a small fraction of the data's weight, it leaves well-measured entries
-/// alone and makes entries without data follow their neighbours.
+/// Smoothness prior of the ground-effect surface: first differences of
+/// its coefficients along height (including towards the fixed 0 at 0.75
+/// m) and along the tilt splines, as a [`GE_WIDTH`] square matrix `D^T D`
+/// on the effect's columns. Scaled by the caller to a small fraction of
+/// the data's weight, it leaves well-measured coefficients alone and makes
+/// those of tilts and heights without data follow their neighbours.
 pub fn ge_smoothness() -> Vec<Vec<f64>> {
     let mut rows: Vec<Vec<f64>> = Vec::new();
-    for r in 0..4 {
+    for r in 0..GE_TILT_SPLINES {
         for c in 0..4 {
-            let mut d = vec![0.0; 17];
+            let mut d = vec![0.0; GE_WIDTH];
             d[r * 4 + c] = 1.0;
             if c < 3 {
                 d[r * 4 + c + 1] = -1.0;
             }
             rows.push(d);
+            if r + 1 < GE_TILT_SPLINES {
+                let mut d = vec![0.0; GE_WIDTH];
+                d[r * 4 + c] = 1.0;
+                d[(r + 1) * 4 + c] = -1.0;
+                rows.push(d);
+            }
         }
     }
-    for r in 0..3 {
-        for c in 0..4 {
-            let mut d = vec![0.0; 17];
-            d[r * 4 + c] = 1.0;
-            d[(r + 1) * 4 + c] = -1.0;
-            rows.push(d);
-        }
-    }
-    let mut out = vec![vec![0.0; 17]; 17];
+    let mut out = vec![vec![0.0; GE_WIDTH]; GE_WIDTH];
     for d in &rows {
-        for i in 0..17 {
-            for j in 0..17 {
+        for i in 0..GE_WIDTH {
+            for j in 0..GE_WIDTH {
                 out[i][j] += d[i] * d[j];
             }
         }

@@ -10,7 +10,7 @@ use std::fmt;
 
 use serde::{Serialize, Serializer};
 
-use crate::effects::{Effect, GE_HEIGHTS, GE_TILTS_DEG};
+use crate::effects::{Effect, GE_HEIGHTS, GE_WIDTH, ge_spline_peak_deg};
 use crate::physical::{BATTERY_CAPACITY_WH, BATTERY_FULL_POWER_W};
 
 /// A body axis of a parameter with one value per axis.
@@ -40,11 +40,11 @@ impl Axis {
 /// A parameter of a candidate effect, as reported.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum Param {
-    /// Ground-effect gain `T/T_inf - 1` at table point
-    /// (`GE_HEIGHTS[height]`, `GE_TILTS_DEG[tilt]`).
+    /// Coefficient of the ground-effect gain `T/T_inf - 1` at height node
+    /// `GE_HEIGHTS[height]` and tilt spline `tilt`
+    /// ([`crate::effects::ge_basis`]); the gains themselves are reported on
+    /// a grid (`ground_effect_gain_grid`).
     Gain { height: usize, tilt: usize },
-    /// `R_p^2` of the classical ground-effect law below 30 deg.
-    RotorRadiusSquared,
     /// The motor lag's time constant (profiled).
     TimeConstant,
     /// Scale of the lag term (1 = the lag as profiled).
@@ -77,7 +77,7 @@ impl Param {
     /// The effect the parameter belongs to.
     pub fn effect(self) -> Effect {
         match self {
-            Param::Gain { .. } | Param::RotorRadiusSquared => Effect::GroundEffect,
+            Param::Gain { .. } => Effect::GroundEffect,
             Param::TimeConstant | Param::LagTermScale => Effect::MotorLag,
             Param::RotorDrag | Param::AxialDrag | Param::BodyCdArea(_) => Effect::Drag,
             Param::SteadyWind(_) => Effect::Wind,
@@ -96,10 +96,10 @@ impl Param {
         let axis = |stem: &str, a: Axis| Cow::Owned(format!("{stem}_{}", a.suffix()));
         match self {
             Param::Gain { height, tilt } => Cow::Owned(format!(
-                "gain(h={:.2} m, varphi={:.0} deg)",
-                GE_HEIGHTS[height], GE_TILTS_DEG[tilt]
+                "gain(h={:.2} m, spline peaking at {:.1} deg)",
+                GE_HEIGHTS[height],
+                ge_spline_peak_deg(tilt)
             )),
-            Param::RotorRadiusSquared => "rotor_radius^2 (classical law), m^2".into(),
             Param::TimeConstant => "time_constant".into(),
             Param::LagTermScale => "lag_term_scale".into(),
             Param::RotorDrag => "rotor_drag".into(),
@@ -129,7 +129,7 @@ impl Param {
             | Param::QuadraticShare
             | Param::InertiaScaleMinusOne
             | Param::MassScaleMinusOne => "1".into(),
-            Param::RotorRadiusSquared | Param::BodyCdArea(_) => "m^2".into(),
+            Param::BodyCdArea(_) => "m^2".into(),
             Param::TimeConstant => "s".into(),
             Param::LagTermScale => "1 (1 = consistent)".into(),
             Param::RotorDrag | Param::AxialDrag => "N/(m/s)".into(),
@@ -147,7 +147,6 @@ impl Param {
     pub fn range(self) -> (f64, f64) {
         match self {
             Param::Gain { .. } => (-0.5, 3.0),
-            Param::RotorRadiusSquared => (0.0, 0.36),
             Param::TimeConstant => (0.005, 0.2),
             Param::LagTermScale => (0.5, 1.5),
             Param::RotorDrag | Param::AxialDrag => (0.0, 5.0),
@@ -168,11 +167,10 @@ impl Param {
     pub fn of_coefficient(e: Effect, column: usize) -> Option<Param> {
         let axis = |j: usize| Axis::XYZ[j];
         match e {
-            Effect::GroundEffect if column < 16 => Some(Param::Gain {
+            Effect::GroundEffect if column < GE_WIDTH => Some(Param::Gain {
                 height: column % 4,
                 tilt: column / 4,
             }),
-            Effect::GroundEffect => Some(Param::RotorRadiusSquared),
             Effect::MotorLag => Some(Param::LagTermScale),
             Effect::Drag => Some(match column {
                 0 => Param::RotorDrag,
@@ -185,7 +183,7 @@ impl Param {
             Effect::ComOffset => Some(Param::ComOffset(axis(column))),
             Effect::InertiaError => Some(Param::InertiaScaleMinusOne),
             Effect::MassError => Some(Param::MassScaleMinusOne),
-            Effect::Wind | Effect::BatterySag => None,
+            Effect::GroundEffect | Effect::Wind | Effect::BatterySag => None,
         }
     }
 
@@ -246,7 +244,7 @@ mod tests {
         assert_eq!(Param::of_effect(Effect::Drag).len(), Effect::Drag.width());
         assert_eq!(
             Param::Gain { height: 0, tilt: 0 }.name(),
-            "gain(h=0.25 m, varphi=40 deg)"
+            "gain(h=0.25 m, spline peaking at -22.5 deg)"
         );
         assert_eq!(Param::SteadyWind(Axis::X).range(), (-15.0, 15.0));
     }

@@ -8,7 +8,12 @@ use atmo_core::config::ArmInertiaConvention;
 use atmo_core::ground_effect::table::GroundEffectConfig;
 use nalgebra::DVector;
 
-use crate::effects::{self, DRAG_WIDTH, Effect, GE_HEIGHTS, GE_TILTS_DEG, Layout};
+use crate::effects::{self, DRAG_WIDTH, Effect, GE_HEIGHTS, Layout};
+
+/// Tilt step (deg) of the table a fitted ground effect is written as.
+const PLANT_TILT_STEP_DEG: f64 = 5.0;
+/// Rows of that table past the first (0 to 90 deg).
+const PLANT_TILT_ROWS: usize = 18;
 
 /// The robot file's name of an arm-inertia convention.
 pub(crate) fn convention_name(c: ArmInertiaConvention) -> &'static str {
@@ -82,23 +87,31 @@ impl Physical {
 
     pub(crate) fn ge_config(&self) -> Option<GroundEffectConfig> {
         let ge = self.ge.as_ref()?;
-        let radius = ge[16].max(0.0).sqrt().clamp(0.01, 1.0);
-        let gain: Vec<Vec<f64>> = (0..4)
-            .map(|r| {
-                let mut row: Vec<f64> = (0..4).map(|c| ge[r * 4 + c].clamp(-0.9, 5.0)).collect();
-                row.push(0.0);
-                row
+        // The fitted surface sampled for the plant: at its height nodes
+        // (exact: it is linear between them) and every `PLANT_TILT_STEP_DEG`
+        // of tilt (bilinear between), the table from 0 deg.
+        let tilts_deg: Vec<f64> = (0..=PLANT_TILT_ROWS)
+            .map(|r| r as f64 * PLANT_TILT_STEP_DEG)
+            .collect();
+        let gain: Vec<Vec<f64>> = tilts_deg
+            .iter()
+            .map(|t| {
+                GE_HEIGHTS
+                    .iter()
+                    .map(|h| effects::ge_gain(ge, *h, t.to_radians()).clamp(-0.9, 5.0))
+                    .collect()
             })
             .collect();
         Some(GroundEffectConfig {
             enabled: true,
-            rotor_radius: radius,
-            classical_below_deg: effects::GE_CLASSICAL_BELOW_DEG,
+            // Unused: the table starts at 0 deg.
+            rotor_radius: GroundEffectConfig::default().rotor_radius,
+            classical_below_deg: 0.0,
             correlation_time: 0.05,
             heights: GE_HEIGHTS.to_vec(),
-            tilts_deg: GE_TILTS_DEG.to_vec(),
+            std: vec![vec![0.0; GE_HEIGHTS.len()]; tilts_deg.len()],
+            tilts_deg,
             gain,
-            std: vec![vec![0.0; 5]; 4],
         })
     }
 
@@ -143,7 +156,7 @@ impl Physical {
             let _ = writeln!(s, "\n[effects.ground_effect]");
             let _ = writeln!(
                 s,
-                "# Thrust gain T/T_inf - 1 by rotor hub height (m) and tilt (deg);\n# classical law with the fitted rotor radius below 30 deg."
+                "# Thrust gain T/T_inf - 1 by rotor hub height (m) and tilt (deg): the fitted\n# surface sampled every 5 deg from 0 (no classical law: classical_below_deg = 0)."
             );
             let _ = writeln!(s, "rotor_radius = {:.6}", ge.rotor_radius);
             let _ = writeln!(s, "classical_below_deg = {:.1}", ge.classical_below_deg);

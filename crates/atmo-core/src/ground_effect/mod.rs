@@ -336,4 +336,22 @@ mod tests {
             assert!((body.hub_height(&x, i) + hub.z).abs() < 1e-12);
         }
     }
+
+    /// A table from 0 deg leaves no classical law: at 0 deg the table's
+    /// first row applies, in the surface and in its partials alike.
+    #[test]
+    fn a_table_from_zero_tilt_applies_at_zero_tilt() {
+        use table::{GroundEffect, GroundEffectConfig};
+        let config = GroundEffectConfig {
+            classical_below_deg: 0.0,
+            heights: vec![0.2, 0.8],
+            tilts_deg: vec![0.0, 90.0],
+            gain: vec![vec![0.05, 0.0], vec![0.05, 0.0]],
+            std: vec![vec![0.0; 2]; 2],
+            ..GroundEffectConfig::default()
+        };
+        let surface = GroundEffect::new(&config);
+        assert!((surface.gain(0.2, 0.0).mean - 0.05).abs() < 1e-12);
+        assert!((surface.gain_partials(0.2, 0.0).gain - 0.05).abs() < 1e-12);
+    }
 }

@@ -65,7 +65,8 @@ crate::params! {
         pub rotor_radius: f64 = 0.11, range 0.01..=1.0, unit "m";
         /// At and below this tilt only the classical law applies; between
         /// it and the first table tilt the two are blended linearly (at
-        /// most the first table tilt).
+        /// most the first table tilt; from that tilt on the table alone
+        /// applies, so a table from 0 deg has no classical law).
         pub classical_below_deg: f64 = 30.0, unit "deg";
         /// Correlation time of the thrust fluctuation.
         pub correlation_time: f64 = 0.05, range Positive, unit "s";
@@ -273,10 +274,12 @@ impl GroundEffect {
     #[inline(always)]
     pub fn slice(&self, varphi: f64) -> TiltSlice {
         let (row, row_weight) = bracket(&self.tilts, varphi);
-        let classical_weight = if varphi <= self.classical_below {
-            1.0
-        } else if varphi >= self.table_from {
+        // The table from its first tilt on (so a table from 0 deg leaves no
+        // classical law), the classical law up to `classical_below`.
+        let classical_weight = if varphi >= self.table_from {
             0.0
+        } else if varphi <= self.classical_below {
+            1.0
         } else {
             1.0 - (varphi - self.classical_below) / (self.table_from - self.classical_below)
         };
@@ -396,10 +399,10 @@ impl GroundEffect {
             d_height: cb_z * inv_cos,
             d_tilt: cb_z * h * d_inv_cos,
         };
-        let (w, dw) = if varphi <= self.classical_below {
-            (1.0, 0.0)
-        } else if varphi >= self.table_from {
+        let (w, dw) = if varphi >= self.table_from {
             (0.0, 0.0)
+        } else if varphi <= self.classical_below {
+            (1.0, 0.0)
         } else {
             let span = self.table_from - self.classical_below;
             (1.0 - (varphi - self.classical_below) / span, -1.0 / span)

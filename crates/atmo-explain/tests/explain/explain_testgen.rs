@@ -160,18 +160,8 @@ fn on_every_flight(
     duration: f64,
     check: impl Fn(&Explanation, &Concealed, &[Row]) -> Result<(), String>,
 ) {
-    on_flights(&FLOWN, effects, duration, check);
-}
-
-/// [`on_every_flight`] on the `flown` controllers and forms only.
-fn on_flights(
-    flown: &[(ControllerKind, Form)],
-    effects: &str,
-    duration: f64,
-    check: impl Fn(&Explanation, &Concealed, &[Row]) -> Result<(), String>,
-) {
     let mut failed = Vec::new();
-    for &(controller, form) in flown {
+    for (controller, form) in FLOWN {
         let fx = concealed(effects, form).unwrap();
         let rows = generated(&fx, 1, duration, controller);
         let what = format!("testgen {effects}, {controller:?}, {form:?}");
@@ -384,33 +374,11 @@ fn thrust_curve() {
     });
 }
 
-fn ground_effect_and_motor_lag_right(ex: &Explanation, fx: &Concealed) -> Result<(), String> {
-    named(ex, &[Effect::GroundEffect, Effect::MotorLag])?;
-    within(ex, Param::TimeConstant, lag_time_constant(fx))
-}
-
-/// Both effects together, on every flight but the PID's of the second
-/// form ([`ground_effect_and_motor_lag_second_form_under_the_pid`]).
 #[test]
 fn ground_effect_and_motor_lag() {
-    let flown = [FLOWN[0], FLOWN[1], FLOWN[3]];
-    on_flights(&flown, "ground_effect,motor_lag", 48.0, |ex, fx, _| {
-        ground_effect_and_motor_lag_right(ex, fx)
-    });
-}
-
-/// Fails: the PID's flight of the second form claims `mass_error` beside
-/// both (confidence 0.58, the 0.5 s error 0.049 -> 0.048 m/s). The
-/// finder's law below 30 deg is the classical one; the generator's second
-/// form decays exponentially with height, and a mass scale takes up part
-/// of the difference (with the classical law concealed instead, nothing
-/// else is claimed). Open until the ground-effect family takes any height
-/// decay (docs/testgen.md).
-#[test]
-#[ignore = "fails: mass_error claimed beside a ground effect the classical law cannot take (docs/testgen.md)"]
-fn ground_effect_and_motor_lag_second_form_under_the_pid() {
-    on_flights(&[FLOWN[2]], "ground_effect,motor_lag", 48.0, |ex, fx, _| {
-        ground_effect_and_motor_lag_right(ex, fx)
+    on_every_flight("ground_effect,motor_lag", 48.0, |ex, fx, _| {
+        named(ex, &[Effect::GroundEffect, Effect::MotorLag])?;
+        within(ex, Param::TimeConstant, lag_time_constant(fx))
     });
 }
 
