@@ -149,10 +149,7 @@ impl Effect {
     pub fn coefficient_names(self) -> Vec<String> {
         match self {
             Effect::GroundEffect => (0..GE_WIDTH)
-                .map(|c| {
-                    crate::parameter::Param::of_coefficient(Effect::GroundEffect, c)
-                        .map_or_else(String::new, |p| p.name().into_owned())
-                })
+                .map(|c| ge_coefficient_name(c % 4, c / 4))
                 .collect(),
             Effect::MotorLag => vec!["scale of the lag term (1 = lag as fitted)".into()],
             Effect::Drag => vec![
@@ -248,6 +245,16 @@ fn cubic_bspline(x: f64) -> f64 {
 /// ones, whose peaks lie beyond the range).
 pub fn ge_spline_peak_deg(j: usize) -> f64 {
     (j as f64 - 1.0) * GE_TILT_KNOT_DEG
+}
+
+/// Name of the surface's coefficient at height node `height` and tilt
+/// spline `spline`.
+pub fn ge_coefficient_name(height: usize, spline: usize) -> String {
+    format!(
+        "gain(h={:.2} m, spline peaking at {:.1} deg)",
+        GE_HEIGHTS[height],
+        ge_spline_peak_deg(spline)
+    )
 }
 
 /// Ground-effect basis at hub height `h` and tilt `varphi`: adds

@@ -10,7 +10,7 @@ use std::fmt;
 
 use serde::{Serialize, Serializer};
 
-use crate::effects::{Effect, GE_HEIGHTS, GE_WIDTH, ge_spline_peak_deg};
+use crate::effects::{Effect, GE_WIDTH, ge_coefficient_name};
 use crate::physical::{BATTERY_CAPACITY_WH, BATTERY_FULL_POWER_W};
 
 /// A body axis of a parameter with one value per axis.
@@ -41,7 +41,7 @@ impl Axis {
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum Param {
     /// Coefficient of the ground-effect gain `T/T_inf - 1` at height node
-    /// `GE_HEIGHTS[height]` and tilt spline `tilt`
+    /// `effects::GE_HEIGHTS[height]` and tilt spline `tilt`
     /// ([`crate::effects::ge_basis`]); the gains themselves are reported on
     /// a grid (`ground_effect_gain_grid`).
     Gain { height: usize, tilt: usize },
@@ -95,11 +95,7 @@ impl Param {
     pub fn name(self) -> Cow<'static, str> {
         let axis = |stem: &str, a: Axis| Cow::Owned(format!("{stem}_{}", a.suffix()));
         match self {
-            Param::Gain { height, tilt } => Cow::Owned(format!(
-                "gain(h={:.2} m, spline peaking at {:.1} deg)",
-                GE_HEIGHTS[height],
-                ge_spline_peak_deg(tilt)
-            )),
+            Param::Gain { height, tilt } => Cow::Owned(ge_coefficient_name(height, tilt)),
             Param::TimeConstant => "time_constant".into(),
             Param::LagTermScale => "lag_term_scale".into(),
             Param::RotorDrag => "rotor_drag".into(),
