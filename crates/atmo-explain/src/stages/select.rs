@@ -165,6 +165,9 @@ pub struct Selection {
     /// Selected effects, in the order they were added.
     pub chosen: Vec<Effect>,
     pub steps: Vec<Step>,
+    /// The effects the selection could choose: all but the wind when its
+    /// profile identified no component.
+    pub candidates: Vec<Effect>,
 }
 
 /// Selects among all candidates with the lag column at `tau`: pass 1 on
@@ -188,15 +191,23 @@ pub fn select_effects(res: &Residuals, rec: &Recording, tau: f64) -> Selection {
     // wind (stages::wind): the wind's columns at no wind carry only the
     // in-plane rotor drag's `k_r w`, and without the rest of the wind's
     // force other candidates took it.
+    // The profile is the wind's test: a wind none of whose components it
+    // identified is no wind, for the drag columns and for the selection,
+    // which could otherwise claim one through the wind's linear columns
+    // on the few percent a wind trims from any residual.
     let pre =
         crate::stages::wind::profile_wind(res, rec, tau, &layout, &columns.data, &stats, &weights);
-    let wind = pre.is_interior().then(|| {
+    let wind = (pre.is_interior() && pre.identified.contains(&true)).then(|| {
         knobs.wind = pre.wind;
         columns = build_columns(prep, rec, &knobs, &accel);
         stats = stats_of(&columns, &weights, &res.seg_of, res.nseg);
         pre
     });
-    let (mut chosen, mut steps) = selection::select(&stats, &layout, &Effect::ALL, &active);
+    let candidates: Vec<Effect> = Effect::ALL
+        .into_iter()
+        .filter(|e| wind.is_some() || *e != Effect::Wind)
+        .collect();
+    let (mut chosen, mut steps) = selection::select(&stats, &layout, &candidates, &active);
     if !chosen.is_empty() {
         let idx = selection::columns_for(&layout, &chosen);
         let theta = stats.solve(&idx, &|_| true);
@@ -224,7 +235,7 @@ pub fn select_effects(res: &Residuals, rec: &Recording, tau: f64) -> Selection {
         drop(columns);
         columns = build_columns(prep, rec, &knobs, &accel);
         stats = stats_of(&columns, &weights, &res.seg_of, res.nseg);
-        (chosen, steps) = selection::select(&stats, &layout, &Effect::ALL, &active);
+        (chosen, steps) = selection::select(&stats, &layout, &candidates, &active);
     }
     Selection {
         layout,
@@ -236,14 +247,22 @@ pub fn select_effects(res: &Residuals, rec: &Recording, tau: f64) -> Selection {
         stats,
         chosen,
         steps,
+        candidates,
     }
 }
 
 impl Selection {
-    /// Inclusion frequency of every candidate over random halves of the
-    /// segments (`seed` picks the halves).
+    /// Inclusion frequency of every effect over random halves of the
+    /// segments (`seed` picks the halves); 0 for one that was no candidate.
     pub fn stability(&self, seed: u64) -> Vec<(Effect, f64)> {
-        selection::stability(&self.stats, &self.layout, &Effect::ALL, seed)
+        let mut out = selection::stability(&self.stats, &self.layout, &self.candidates, seed);
+        out.extend(
+            Effect::ALL
+                .into_iter()
+                .filter(|e| !self.candidates.contains(e))
+                .map(|e| (e, 0.0)),
+        );
+        out
     }
 }
 
