@@ -13,8 +13,11 @@
 //! explain's Savitzky-Golay filter: their difference is in `fa - fa_hat` too,
 //! so the cut is bounded below 100 % by that noise.
 //!
-//! `cargo run --release -p atmo-explain --example neural_fly_fa -- FLIGHT.csv
-//! [--robot config/neural_fly_quadrotor.toml] [--second-half]`
+//! `cargo run --release -p atmo-explain --example neural_fly_fa -- [FLIGHT.csv]
+//! [--robot config/neural_fly_quadrotor.toml] [--second-half | --fit-first-half]`
+//! (FLIGHT defaults to the committed 12 s of L1 at 100 % fan; the whole
+//! flights are the Neural-Fly data set's, aerorobotics/neural-fly,
+//! `data/experiment`).
 //!
 //! `--second-half`: only the rows of the second half of the flight count
 //! (the fit still uses all folds but a row's own).
@@ -91,7 +94,10 @@ fn flatten(v: &serde_json::Value, out: &mut Vec<f64>) {
 /// fitted model predicts (see the example's documentation).
 #[derive(clap::Parser)]
 struct Args {
-    /// A Neural-Fly flight (CSV of `../shared/data/neural-fly/`).
+    /// A Neural-Fly flight in the authors' CSV format (the repository
+    /// carries 12 s pieces of two of them: crates/atmo-explain/tests/data,
+    /// sources in its README).
+    #[arg(default_value = "crates/atmo-explain/tests/data/neural_fly_L1_100wind_12s.csv")]
     flight: String,
     /// Robot file: the nominal model.
     #[arg(long, default_value = "config/neural_fly_quadrotor.toml")]

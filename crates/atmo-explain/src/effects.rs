@@ -33,7 +33,7 @@ pub const GE_HEIGHTS: [f64; 5] = [0.25, 0.35, 0.45, 0.6, 0.75];
 /// smooth in tilt that can peak, and turn into suction, between knots.
 pub const GE_TILT_KNOT_DEG: f64 = 22.5;
 /// Cubic B-splines covering 0-90 deg (`90 / GE_TILT_KNOT_DEG + 3`).
-pub const GE_TILT_SPLINES: usize = 7;
+pub const GE_TILT_SPLINES: usize = (90.0 / GE_TILT_KNOT_DEG) as usize + 3;
 /// Coefficients of the surface: one per tilt spline and height node below
 /// the last.
 pub const GE_WIDTH: usize = GE_TILT_SPLINES * 4;

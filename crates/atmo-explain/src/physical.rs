@@ -13,7 +13,7 @@ use crate::effects::{self, DRAG_WIDTH, Effect, GE_HEIGHTS, Layout};
 /// Tilt step (deg) of the table a fitted ground effect is written as.
 const PLANT_TILT_STEP_DEG: f64 = 5.0;
 /// Rows of that table past the first (0 to 90 deg).
-const PLANT_TILT_ROWS: usize = 18;
+const PLANT_TILT_ROWS: usize = (90.0 / PLANT_TILT_STEP_DEG) as usize;
 
 /// The robot file's name of an arm-inertia convention.
 pub(crate) fn convention_name(c: ArmInertiaConvention) -> &'static str {

@@ -15,6 +15,9 @@ use nalgebra::{Matrix3, Matrix4, Rotation3, Vector3, Vector4};
 
 use crate::robot::RigidBody;
 
+/// Largest position integral either controller keeps, per axis (m s).
+pub const INTEGRAL_LIMIT: f64 = 2.0;
+
 /// A measured state: base position and velocity (NED), attitude, rates.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Measured {
@@ -61,7 +64,7 @@ pub struct Nominal {
     allocation_inv: Matrix4<f64>,
 }
 
-pub(crate) fn vee(m: &Matrix3<f64>) -> Vector3<f64> {
+fn vee(m: &Matrix3<f64>) -> Vector3<f64> {
     Vector3::new(m[(2, 1)], m[(0, 2)], m[(1, 0)])
 }
 
@@ -113,6 +116,12 @@ impl Nominal {
     /// rotation from `r_d` to `r`).
     pub fn attitude_error(r_d: &Matrix3<f64>, r: &Matrix3<f64>) -> Vector3<f64> {
         vee(&(r_d.transpose() * r - r.transpose() * r_d)) * 0.5
+    }
+
+    /// Adds `e dt` to a position integral (m s), each axis held within
+    /// [`INTEGRAL_LIMIT`] (anti-windup).
+    pub fn integrate(integral: &mut Vector3<f64>, e: &Vector3<f64>, dt: f64) {
+        *integral = (*integral + e * dt).map(|x| x.clamp(-INTEGRAL_LIMIT, INTEGRAL_LIMIT));
     }
 
     /// Rotor commands for a collective thrust along body -z (N) and a

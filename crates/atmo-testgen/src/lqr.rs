@@ -141,9 +141,7 @@ impl Control for Lqr {
         let nominal = &self.nominal;
         let (p_com, v_com) = nominal.com_motion(m);
         let e_p = p_com - r.p;
-        self.integral += e_p * dt;
-        let limit = 2.0;
-        self.integral = self.integral.map(|x| x.clamp(-limit, limit));
+        Nominal::integrate(&mut self.integral, &e_p, dt);
         let force = nominal.force_for(&r.a);
         let r_d = Nominal::attitude_for(&force, r.yaw);
         let rm = m.r.matrix();

@@ -56,9 +56,7 @@ impl Control for Pid {
         let (p_com, v_com) = nominal.com_motion(m);
         let e_p = r.p - p_com;
         let e_v = r.v - v_com;
-        self.integral += e_p * dt;
-        let limit = 2.0;
-        self.integral = self.integral.map(|x| x.clamp(-limit, limit));
+        Nominal::integrate(&mut self.integral, &e_p, dt);
         let a_cmd = r.a + e_p * g.kp + e_v * g.kd + self.integral * g.ki;
         let force = nominal.force_for(&a_cmd);
         let r_d = Nominal::attitude_for(&force, r.yaw);
