@@ -466,31 +466,25 @@ fn push_ground_effect(raw: &mut [Vec<f64>], at: &Starts, row: &Row) {
     }
 }
 
-/// The drag columns of one row (body-frame generalized accelerations per
-/// unit coefficient, before filtering): rotor drag in the disc planes,
-/// thrust lost to axial inflow, and quadratic body drag along body x, y,
-/// z acting at the centre of mass, on the velocity relative to the air
-/// (`wind`, NED).
-fn drag_terms(row: &Row, wind: &Vector3<f64>) -> [Vector6<f64>; DRAG_WIDTH] {
+/// The drag wrenches of one row about B (body frame, per unit
+/// coefficient): rotor drag in the disc planes, thrust lost to axial
+/// inflow, and quadratic body drag along body x, y, z acting at the centre
+/// of mass, on the velocity relative to the air (`wind`, NED).
+fn drag_wrenches(row: &Row, wind: &Vector3<f64>) -> [Vector6<f64>; DRAG_WIDTH] {
     let (t, r, body) = (row.thrust, row.rot, &row.body);
-    let minv = &body.mass_matrix_inv;
     let w = row.rates();
     let v_air = r.transpose() * (row.velocity() - wind);
-    let mut rotor_w = Vector6::zeros();
-    let mut axial_w = Vector6::zeros();
+    let mut out = [Vector6::zeros(); DRAG_WIDTH];
     for i in 0..4 {
         let n_i = &body.rotor_axis[i];
         let r_i = &body.rotor_position[i];
         let vi = v_air + w.cross(r_i);
         let axial = n_i * vi.dot(n_i);
         let f = -(vi - axial) * t[i].max(0.0);
-        rotor_w += wrench(&f, &r_i.cross(&f));
+        out[0] += wrench(&f, &r_i.cross(&f));
         let f = -axial * t[i].max(0.0);
-        axial_w += wrench(&f, &r_i.cross(&f));
+        out[1] += wrench(&f, &r_i.cross(&f));
     }
-    let mut out = [Vector6::zeros(); DRAG_WIDTH];
-    out[0] = minv * rotor_w;
-    out[1] = minv * axial_w;
     // The body drag acts at the centre of mass (the usual rigid-body
     // model: a force without a moment about the CoM), so about B it carries
     // the moment `com x f`; ATMO's CoM moves with the tilt. It is the robot
@@ -500,9 +494,45 @@ fn drag_terms(row: &Row, wind: &Vector3<f64>) -> [Vector6<f64>; DRAG_WIDTH] {
     for axis in 0..3 {
         let mut f = Vector3::zeros();
         f[axis] = -0.5 * AIR_DENSITY * v_air[axis].abs() * v_air[axis];
-        out[2 + axis] = minv * wrench(&f, &com.cross(&f));
+        out[2 + axis] = wrench(&f, &com.cross(&f));
     }
     out
+}
+
+/// The drag columns of one row: [`drag_wrenches`] as body-frame
+/// generalized accelerations (before filtering).
+fn drag_terms(row: &Row, wind: &Vector3<f64>) -> [Vector6<f64>; DRAG_WIDTH] {
+    drag_wrenches(row, wind).map(|w| row.body.mass_matrix_inv * w)
+}
+
+/// The mean drag force (N) along the horizontal unit `direction` (NED x,
+/// y) over `rows`, for the drag `coefficients` and the rotor thrusts
+/// `thrust` in a steady `wind`: what the drag law of a fit says the air
+/// pushes the robot with where it flew.
+pub fn mean_drag_force_along(
+    prep: &Prepared,
+    rec: &Recording,
+    thrust: &[Input],
+    rows: &[usize],
+    coefficients: &[f64; DRAG_WIDTH],
+    wind: [f64; 2],
+    direction: [f64; 2],
+) -> f64 {
+    let wind = Vector3::new(wind[0], wind[1], 0.0);
+    let direction = Vector3::new(direction[0], direction[1], 0.0);
+    let total: f64 = rows
+        .iter()
+        .map(|&k| {
+            let row = Row::at(prep, rec, thrust, k);
+            let force: Vector3<f64> = drag_wrenches(&row, &wind)
+                .iter()
+                .zip(coefficients)
+                .map(|(w, c)| w.fixed_rows::<3>(0) * *c)
+                .sum();
+            (row.rot * force).dot(&direction)
+        })
+        .sum();
+    total / rows.len().max(1) as f64
 }
 
 /// Drag on the air-relative velocity (`wind` the current wind knob), and

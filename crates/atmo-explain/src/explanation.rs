@@ -191,8 +191,55 @@ pub struct Explanation {
     #[serde(skip)]
     pub series: Option<Series>,
     pub timings_s: Vec<(String, f64)>,
+    /// What the flight identifies about a claimed wind's speed.
+    pub wind_speed: Option<WindSpeed>,
     /// Warnings about how far the results can be trusted.
     pub notes: Vec<String>,
+}
+
+/// What the flight identifies about a claimed wind's speed.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct WindSpeed {
+    /// The fitted wind's speed (m/s).
+    pub speed: f64,
+    /// The fitted drag law's mean force along the wind where the robot
+    /// flew (N), and its slope in the wind's speed (N per m/s): what any
+    /// drag law that fits the flight shares.
+    pub force_n: f64,
+    pub slope_n_per_mps: f64,
+    /// The speed a linear drag law (`F / F'`) and a quadratic one
+    /// (`2 F / F'`) put at that force and slope (m/s; NaN without a
+    /// positive slope).
+    pub speed_linear_law: f64,
+    pub speed_quadratic_law: f64,
+    /// The larger held-out RMS after the fit of the disc-plane force
+    /// channels, in noise floors.
+    pub misfit_floors: f64,
+    /// The speed is separated from the drag coefficients: the misfit
+    /// below `stages::LAW_MISFIT_FLOORS`.
+    pub separable: bool,
+}
+
+impl WindSpeed {
+    /// The report's note when the speed is not separated.
+    pub fn note(&self) -> Option<String> {
+        (!self.separable).then(|| {
+            format!(
+                "the wind's speed ({:.1} m/s) is not separated from the drag coefficients: \
+                 the fitted drag law leaves {:.1} noise floors of held-out residual in the \
+                 disc-plane force, a misfit larger than the noise, so the law's shape, which \
+                 places the speed, is not established; identified: the drag force along the wind where the robot flew, \
+                 {:.2} N, and its slope, {:.3} N per m/s of wind; a linear drag law puts the \
+                 speed at {:.1} m/s, a quadratic one at {:.1} m/s",
+                self.speed,
+                self.misfit_floors,
+                self.force_n,
+                self.slope_n_per_mps,
+                self.speed_linear_law,
+                self.speed_quadratic_law
+            )
+        })
+    }
 }
 
 impl Explanation {

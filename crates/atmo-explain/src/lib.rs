@@ -62,7 +62,9 @@ use std::time::Instant;
 
 use atmo_core::RobotConfig;
 
-pub use explanation::{EffectReport, Explanation, GridPoint, Parameter, RmsTable, Series};
+pub use explanation::{
+    EffectReport, Explanation, GridPoint, Parameter, RmsTable, Series, WindSpeed,
+};
 use recording::{Recording, contract, plausible};
 use stages::{
     BaseRegressors, Findings, Residuals, accept_effects, fit_effects, locate_mismatch,

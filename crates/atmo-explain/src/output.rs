@@ -81,6 +81,7 @@ pub fn json(ex: &Explanation) -> serde_json::Value {
         "ground_effect_gain_grid": ex.ground_effect_gain_grid,
         "motor_lag_profile": ex.motor_lag_profile.iter().map(|(t, c)| json!({"time_constant_s": t, "heldout_error": c})).collect::<Vec<_>>(),
         "timings_s": ex.timings_s,
+        "wind_speed": ex.wind_speed,
         "notes": ex.notes,
     })
 }

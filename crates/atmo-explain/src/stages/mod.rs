@@ -19,6 +19,7 @@ mod residuals;
 mod select;
 mod validate;
 pub(crate) mod wind;
+mod wind_speed;
 
 #[cfg(test)]
 mod tests;
@@ -34,3 +35,4 @@ pub use residuals::Residuals;
 pub use select::{BaseRegressors, LagProfile, Selection, profile_motor_lag, select_effects};
 pub use validate::{Validation, validate};
 pub use wind::WindProfile;
+pub use wind_speed::{LAW_MISFIT_FLOORS, WIND_FORCE_CHANNELS, wind_speed};

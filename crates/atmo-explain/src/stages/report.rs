@@ -9,7 +9,7 @@ use atmo_core::ground_effect::table::GroundEffect;
 use crate::data::CHANNELS;
 use crate::effects::{self, Effect};
 use crate::explanation::{
-    CombinedFinding, EffectReport, Explanation, GridPoint, Parameter, Series,
+    CombinedFinding, EffectReport, Explanation, GridPoint, Parameter, Series, WindSpeed,
 };
 use crate::parameter::{Axis, Param};
 use crate::physical::{BATTERY_CAPACITY_WH, BATTERY_FULL_POWER_W};
@@ -604,6 +604,9 @@ pub fn report(f: &Findings) -> Explanation {
     let (mismatch_found, verdict) = verdict(&effects, &fit.chosen, f.mismatch);
     let entries = fit.stats.entries_in(&vec![true; fit.stats.nseg()]).max(1) as f64;
     let before = &f.mismatch.location;
+    let wind_speed = super::wind_speed::wind_speed(res, rec, fit, &fit.chosen, &val.rms);
+    let mut notes = notes(res, fit, f.decisions);
+    notes.extend(wind_speed.as_ref().and_then(WindSpeed::note));
     Explanation {
         source: rec.source.display().to_string(),
         rows: rec.samples.len(),
@@ -647,6 +650,7 @@ pub fn report(f: &Findings) -> Explanation {
         location_after: Some(val.location.clone()),
         series: Some(plot_series(res, f.mismatch, &val.after)),
         timings_s: Vec::new(),
-        notes: notes(res, fit, f.decisions),
+        wind_speed,
+        notes,
     }
 }

@@ -233,6 +233,15 @@ fn drag_and_wind_right(ex: &Explanation, fx: &Concealed) -> Result<(), String> {
     let (rotor_drag, areas) = fx.drag.unwrap();
     let k_thrust = RobotConfig::load(robot_path()).unwrap().rotor.k_thrust;
     within(ex, Param::RotorDrag, rotor_drag * k_thrust)?;
+    // The generator's drag law is the finder's: the speed is separated,
+    // and lies between the linear and the quadratic law's at the force
+    // and slope identified (`stages::wind_speed`).
+    let speed = ex.wind_speed.as_ref().ok_or("no wind speed")?;
+    if !speed.separable
+        || !(speed.speed_linear_law..=speed.speed_quadratic_law).contains(&speed.speed)
+    {
+        return Err(format!("wind speed {speed:?}"));
+    }
     body_drag_right(ex, &areas)
 }
 
