@@ -22,10 +22,13 @@
 //! `--second-half`: only the rows of the second half of the flight count
 //! (the fit still uses all folds but a row's own).
 //!
-//! `--fit-first-half`: the whole analysis (motor-lag and wind profiles,
-//! selection, fit, acceptance) runs on the first half of the flight alone;
-//! its model (effects, knobs, coefficients) then predicts the second half,
-//! which it never saw, and only the second half's rows are scored. The
+//! `--fit-first-half`: the whole analysis ([`atmo_explain::analyse`], the
+//! stages `explain` runs: screening, the velocity's slow band from the
+//! positions, motor-lag and wind profiles, selection, fit, acceptance)
+//! runs on the first half of the flight alone, as on a file of it; its
+//! model (effects, knobs, coefficients) then predicts the second half,
+//! which it never saw (its velocity taken from its positions the same
+//! way), and only the second half's rows are scored. The
 //! regressors of the second half are built as the selection builds them:
 //! once on the nominal accelerations, then again on the fitted model's
 //! (the mass-property columns need the model's acceleration).
@@ -37,10 +40,7 @@ use atmo_core::ConfigFile as _;
 use atmo_core::RobotConfig;
 use atmo_explain::recording::Recording;
 use atmo_explain::recording::neural_fly::split_row;
-use atmo_explain::stages::{
-    BaseRegressors, Residuals, accept_effects, fit_effects, locate_mismatch, profile_motor_lag,
-    select_effects, validate,
-};
+use atmo_explain::stages::Residuals;
 use nalgebra::{Matrix3, Vector3};
 
 const G: f64 = 9.81;
@@ -118,14 +118,12 @@ fn main() {
     let fit_first_half = args.fit_first_half;
     let second_half = fit_first_half || args.second_half;
     let robot = RobotConfig::load(&args.robot).unwrap();
-    // As `explain` does: the velocity's slow band from the positions.
     let recorded = Recording::load(path).unwrap();
-    let (whole, _) = atmo_explain::velocity::from_positions(&recorded);
-    let t_split = 0.5 * (whole.samples[0].t + whole.samples[whole.samples.len() - 1].t);
+    let t_split = 0.5 * (recorded.samples[0].t + recorded.samples[recorded.samples.len() - 1].t);
     let half = |first: bool| {
         Recording::from_samples(
             path.as_str(),
-            whole
+            recorded
                 .samples
                 .iter()
                 .filter(|s| (s.t < t_split) == first)
@@ -133,42 +131,42 @@ fn main() {
                 .collect(),
         )
     };
-    let (rec, unseen) = if fit_first_half {
+    let (analysed, unseen) = if fit_first_half {
         (half(true), Some(half(false)))
     } else {
-        (whole.into_owned(), None)
+        (recorded.clone(), None)
     };
     let text = std::fs::read_to_string(path).unwrap();
     let authors = authors_columns(&text);
 
-    let starts = atmo_explain::Options::default().max_replay_starts;
-    let res = Residuals::new(&rec, &robot).unwrap();
-    let base = BaseRegressors::new(&res, &rec);
-    let lag = profile_motor_lag(&res, &base);
-    drop(base);
-    let selection = select_effects(&res, &rec, lag.tau);
-    let fit = fit_effects(&res, &rec, selection);
-    if let Some(w) = &fit.wind {
+    // The analysis `explain` runs, stage for stage.
+    let analysis =
+        atmo_explain::analyse(&analysed, &robot, &atmo_explain::Options::default()).unwrap();
+    if let Some(w) = &analysis.fit.wind {
         println!(
             "  wind profile: ({:.2}, {:.2}) +- ({:.2}, {:.2}) m/s, weighted RSS {:.4e} against {:.4e} without wind, {} trials",
             w.wind[0], w.wind[1], w.sd[0], w.sd[1], w.rss, w.rss_no_wind, w.evaluations
         );
     }
-    // As `explain` does: replays on the tilts flown.
-    let replayed = atmo_explain::replay::within_flown_tilts(&robot, &rec);
-    let (fit, decisions) = accept_effects(&rec, &replayed, &res, fit, starts).unwrap();
-    for (e, d) in &decisions {
+    for (e, d) in &analysis.decisions {
         println!("  {}: {}", e.name(), d.describe());
     }
-    // Scored on the unseen half with the first half's model, or on this
+    let fit = &analysis.fit;
+    // Scored on the unseen half with the first half's model (its velocity
+    // taken from the positions as the analysis takes it), or on this
     // recording's held-out folds.
     let scored = if let Some(rec2) = unseen {
+        let rec2 = atmo_explain::velocity::from_positions(&rec2).0.into_owned();
         let res2 = Residuals::new(&rec2, &robot).unwrap();
         let after = fit.residual_on_unseen(&res2, &rec2);
         (rec2, res2, after)
     } else {
-        let mismatch = locate_mismatch(&res);
-        let validation = validate(&rec, &replayed, &res, &mismatch, &fit, starts).unwrap();
+        let atmo_explain::Analysis {
+            rec,
+            res,
+            validation,
+            ..
+        } = analysis;
         (rec, res, validation.after)
     };
     let (rec, res, after) = (&scored.0, &scored.1, &scored.2);

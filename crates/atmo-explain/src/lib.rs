@@ -62,13 +62,16 @@ use std::time::Instant;
 
 use atmo_core::RobotConfig;
 
+use effects::Effect;
 pub use explanation::{
     EffectReport, Explanation, GridPoint, Parameter, RmsTable, Series, WindSpeed,
 };
 use recording::{Recording, contract, plausible};
+use selection::Step;
 use stages::{
-    BaseRegressors, Findings, Residuals, accept_effects, fit_effects, locate_mismatch,
-    profile_motor_lag, report, select_effects, validate,
+    BaseRegressors, Decision, Findings, Fit, LagProfile, Mismatch, Residuals, Validation,
+    accept_effects, fit_effects, locate_mismatch, profile_motor_lag, report, select_effects,
+    validate,
 };
 
 /// What can stop the analysis.
@@ -164,7 +167,16 @@ struct Tracker<'a> {
     timings: Vec<(String, f64)>,
 }
 
-impl Tracker<'_> {
+impl<'a> Tracker<'a> {
+    fn new(report: &'a mut dyn FnMut(Progress)) -> Self {
+        Self {
+            report,
+            clock: Instant::now(),
+            done: 0,
+            timings: Vec::new(),
+        }
+    }
+
     /// Runs step `stage` (one of [`STEPS`]).
     fn step<T>(&mut self, stage: &'static str, run: impl FnOnce() -> T) -> T {
         (self.report)(Progress {
@@ -254,7 +266,87 @@ fn screen(rec: &Recording, robot: &RobotConfig) -> Result<Option<Recording>> {
     Ok(copy)
 }
 
-/// Runs the whole analysis.
+/// What the analysis found, stage by stage, before it is reported: what
+/// [`explain`] reports, and what a tool that scores the fitted model on
+/// other data reads (`examples/neural_fly_fa`).
+pub struct Analysis {
+    /// The recording analysed: the reader contract's screening applied and
+    /// the velocity's band below 3 Hz taken from the positions.
+    pub rec: Recording,
+    pub velocity_correction: velocity::VelocityCorrection,
+    /// The robot the replays ran: its tilt range cut to the tilts flown.
+    pub replayed: RobotConfig,
+    pub res: Residuals,
+    pub mismatch: Mismatch,
+    pub lag: LagProfile,
+    pub steps: Vec<Step>,
+    pub confidence: Vec<(Effect, f64)>,
+    pub fit: Fit,
+    pub decisions: Vec<(Effect, Decision)>,
+    pub validation: Validation,
+}
+
+/// Runs the analysis's stages on a recording (no report).
+pub fn analyse(rec: &Recording, robot: &RobotConfig, opts: &Options) -> Result<Analysis> {
+    analyse_tracked(rec, robot, opts, &mut Tracker::new(&mut |_| {}))
+}
+
+/// The stages, each timed and announced by `t`.
+fn analyse_tracked(
+    rec: &Recording,
+    robot: &RobotConfig,
+    opts: &Options,
+    t: &mut Tracker,
+) -> Result<Analysis> {
+    if rec.samples.len() > recording::MAX_ROWS {
+        return Err(ExplainError::Input {
+            file: rec.source.clone(),
+            message: recording::row_limit_error(&format!("{} rows", rec.samples.len())),
+        });
+    }
+    let screened = screen(rec, robot)?;
+    let rec = screened.as_ref().unwrap_or(rec);
+    let (corrected, velocity_correction) = velocity::from_positions(rec);
+    let rec = corrected.into_owned();
+    let res = t.step("residuals", || Residuals::new(&rec, robot))?;
+    let mismatch = t.step("locate", || locate_mismatch(&res));
+    let base = t.step("regressors", || BaseRegressors::new(&res, &rec));
+    let lag = t.step("motor lag profile", || profile_motor_lag(&res, &base));
+    drop(base);
+    let selection = t.step("selection", || select_effects(&res, &rec, lag.tau));
+    let steps = selection.steps.clone();
+    let confidence = t.step("stability", || selection.stability(opts.seed));
+    let fit = t.step("final fit", || fit_effects(&res, &rec, selection));
+    let replayed = replay::within_flown_tilts(robot, &rec);
+    let (fit, decisions) = t.step("acceptance", || {
+        accept_effects(&rec, &replayed, &res, fit, opts.max_replay_starts)
+    })?;
+    let validation = t.step("validate", || {
+        validate(
+            &rec,
+            &replayed,
+            &res,
+            &mismatch,
+            &fit,
+            opts.max_replay_starts,
+        )
+    })?;
+    Ok(Analysis {
+        rec,
+        velocity_correction,
+        replayed,
+        res,
+        mismatch,
+        lag,
+        steps,
+        confidence,
+        fit,
+        decisions,
+        validation,
+    })
+}
+
+/// Runs the whole analysis and reports it.
 pub fn explain(rec: &Recording, robot: &RobotConfig, opts: &Options) -> Result<Explanation> {
     explain_with_progress(rec, robot, opts, &mut |_| {})
 }
@@ -266,60 +358,23 @@ pub fn explain_with_progress(
     opts: &Options,
     progress: &mut dyn FnMut(Progress),
 ) -> Result<Explanation> {
-    let mut t = Tracker {
-        report: progress,
-        clock: Instant::now(),
-        done: 0,
-        timings: Vec::new(),
-    };
-    if rec.samples.len() > recording::MAX_ROWS {
-        return Err(ExplainError::Input {
-            file: rec.source.clone(),
-            message: recording::row_limit_error(&format!("{} rows", rec.samples.len())),
-        });
-    }
-    let screened = screen(rec, robot)?;
-    let rec = screened.as_ref().unwrap_or(rec);
-    let (corrected, velocity_correction) = velocity::from_positions(rec);
-    let rec = &corrected;
-    let res = t.step("residuals", || Residuals::new(rec, robot))?;
-    let mismatch = t.step("locate", || locate_mismatch(&res));
-    let base = t.step("regressors", || BaseRegressors::new(&res, rec));
-    let lag = t.step("motor lag profile", || profile_motor_lag(&res, &base));
-    drop(base);
-    let selection = t.step("selection", || select_effects(&res, rec, lag.tau));
-    let steps = selection.steps.clone();
-    let confidence = t.step("stability", || selection.stability(opts.seed));
-    let fit = t.step("final fit", || fit_effects(&res, rec, selection));
-    let replayed = replay::within_flown_tilts(robot, rec);
-    let (fit, decisions) = t.step("acceptance", || {
-        accept_effects(rec, &replayed, &res, fit, opts.max_replay_starts)
-    })?;
-    let validation = t.step("validate", || {
-        validate(
-            rec,
-            &replayed,
-            &res,
-            &mismatch,
-            &fit,
-            opts.max_replay_starts,
-        )
-    })?;
+    let mut t = Tracker::new(progress);
+    let a = analyse_tracked(rec, robot, opts, &mut t)?;
     let findings = Findings {
-        rec,
-        res: &res,
-        mismatch: &mismatch,
-        lag: &lag,
-        steps: &steps,
-        confidence: &confidence,
-        fit: &fit,
-        decisions: &decisions,
-        validation: &validation,
+        rec: &a.rec,
+        res: &a.res,
+        mismatch: &a.mismatch,
+        lag: &a.lag,
+        steps: &a.steps,
+        confidence: &a.confidence,
+        fit: &a.fit,
+        decisions: &a.decisions,
+        validation: &a.validation,
     };
     let mut ex = t.step("report", || report(&findings));
-    ex.velocity_from_positions = velocity_correction;
-    if !velocity_correction.applied {
-        ex.notes.push(velocity_note(&velocity_correction));
+    ex.velocity_from_positions = a.velocity_correction;
+    if !a.velocity_correction.applied {
+        ex.notes.push(velocity_note(&a.velocity_correction));
     }
     t.lap("total");
     (t.report)(Progress {
