@@ -228,9 +228,9 @@ impl WindSpeed {
                 "the wind's speed ({:.1} m/s) is not separated from the drag coefficients: \
                  the fitted drag law leaves {:.1} noise floors of held-out residual in the \
                  disc-plane force, a misfit larger than the noise, so the law's shape, which \
-                 places the speed, is not established; identified: the drag force along the wind where the robot flew, \
-                 {:.2} N, and its slope, {:.3} N per m/s of wind; a linear drag law puts the \
-                 speed at {:.1} m/s, a quadratic one at {:.1} m/s",
+                 places the speed, is not established; identified: the drag force along the \
+                 wind where the robot flew, {:.2} N, and its slope, {:.3} N per m/s of wind; \
+                 a linear drag law puts the speed at {:.1} m/s, a quadratic one at {:.1} m/s",
                 self.speed,
                 self.misfit_floors,
                 self.force_n,
