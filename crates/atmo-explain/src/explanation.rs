@@ -290,10 +290,15 @@ pub enum Decision {
     /// A parameter outside its physical range, or none identified.
     NotIdentified { reason: String },
     /// Physics a calibration of the robot file explains as well (swapped
-    /// in for it, at least the acceptance's `SWAP_RECOVERY` of its held-out gain): with
-    /// those calibrations one finding, which the model carries as the
-    /// calibration (the simpler account) and the report names as both.
-    OneFindingWith { calibrations: Vec<Effect> },
+    /// in for it, at least the acceptance's `SWAP_RECOVERY` of its held-out
+    /// gain): with those calibrations one finding, which the model carries
+    /// as the calibration (the simpler account) and the report names as
+    /// both. `recovery`: the share of the physics' cross-validated gain the
+    /// best of them recovers, swapped in for it.
+    OneFindingWith {
+        calibrations: Vec<Effect>,
+        recovery: f64,
+    },
     /// Lowers the one-step residual but not the 0.5 s prediction;
     /// `reduced` when judged on the model left after other rejections.
     /// Both errors are over the same starts (those both models replayed).

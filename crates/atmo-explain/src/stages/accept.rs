@@ -292,10 +292,11 @@ fn failure(
         .map(|reason| (Decision::NotIdentified { reason }, None))
         .or_else(|| {
             calibration_confusion(fit, e, model).map(|alike| {
-                let swap = alike.iter().copied().find(|c| proposed.contains(c));
+                let swap = alike.iter().map(|(c, _)| *c).find(|c| proposed.contains(c));
                 (
                     Decision::OneFindingWith {
-                        calibrations: alike,
+                        recovery: alike[0].1,
+                        calibrations: alike.into_iter().map(|(c, _)| c).collect(),
                     },
                     swap,
                 )
@@ -502,12 +503,17 @@ impl Decision {
                 "found by the held-out residual alone (no 0.5 s stretch to predict)".into()
             }
             Decision::NotIdentified { reason } => format!("not identified: {reason}"),
-            Decision::OneFindingWith { calibrations } => format!(
+            Decision::OneFindingWith {
+                calibrations,
+                recovery,
+            } => format!(
                 "one finding with {}: this data cannot tell it apart from that calibration of the \
-                 robot file (swapped in for it, it explains at least {:.0} % as much); the model \
-                 carries the calibration, and no physics is claimed alone",
+                 robot file (swapped in for it, the calibration explains {:.2}x as much, {}x or \
+                 more making them one); the model carries the calibration, and no physics is \
+                 claimed alone",
                 crate::effects::join(calibrations, ", "),
-                100.0 * SWAP_RECOVERY
+                recovery,
+                SWAP_RECOVERY
             ),
             Decision::RejectedByPrediction {
                 with,
@@ -571,15 +577,11 @@ fn wind_failure(fit: &Fit, e: Effect) -> Option<String> {
 /// are not used, because on the fan flights an inertia or mass error swaps
 /// for the drag of a 4-9 m/s fan (docs/explain.md, "Acceptance"; the
 /// measurements: docs/decisions/2026-12-05-explain-history.md).
-fn calibration_confusion(fit: &Fit, e: Effect, model: &[Effect]) -> Option<Vec<Effect>> {
+fn calibration_confusion(fit: &Fit, e: Effect, model: &[Effect]) -> Option<Vec<(Effect, f64)>> {
     if e.is_calibration() || rides_with_wind(e, model) {
         return None;
     }
-    let calibrations: Vec<Effect> = fit
-        .swaps_for(e)
-        .into_iter()
-        .filter(|f| f.is_calibration())
-        .collect();
+    let calibrations = fit.swaps_with_recovery(e, Effect::is_calibration);
     (!calibrations.is_empty()).then_some(calibrations)
 }
 

@@ -100,6 +100,19 @@ impl Fit {
     /// `SWAP_RECOVERY` of what `e` explains of the cross-validated
     /// residual. The best swap first.
     pub fn swaps_for(&self, e: Effect) -> Vec<Effect> {
+        self.swaps_with_recovery(e, |_| true)
+            .into_iter()
+            .map(|(f, _)| f)
+            .collect()
+    }
+
+    /// [`Fit::swaps_for`] among the effects `among` admits, each with the
+    /// share of `e`'s cross-validated gain it recovers.
+    pub fn swaps_with_recovery(
+        &self,
+        e: Effect,
+        among: impl Fn(Effect) -> bool,
+    ) -> Vec<(Effect, f64)> {
         if !self.chosen.contains(&e) {
             return Vec::new();
         }
@@ -114,16 +127,16 @@ impl Fit {
         let mut swaps: Vec<(Effect, f64)> = Effect::ALL
             .iter()
             .copied()
-            .filter(|f| !self.chosen.contains(f))
+            .filter(|&f| !self.chosen.contains(&f) && among(f))
             .map(|f| {
                 let mut swapped = rest.clone();
                 swapped.push(f);
-                (f, cv(&swapped))
+                (f, (without - cv(&swapped)) / (without - with))
             })
-            .filter(|(_, cv_swap)| without - cv_swap >= SWAP_RECOVERY * (without - with))
+            .filter(|(_, recovery)| *recovery >= SWAP_RECOVERY)
             .collect();
-        swaps.sort_by(|a, b| a.1.total_cmp(&b.1));
-        swaps.into_iter().map(|(f, _)| f).collect()
+        swaps.sort_by(|a, b| b.1.total_cmp(&a.1));
+        swaps
     }
 
     /// The fit's columns of the effects `set`: the wind, when profiled, is

@@ -26,7 +26,7 @@ mod tests;
 
 pub use crate::explanation::Decision;
 pub use accept::{ParamStatus, accept_effects, coefficient_bounds, param_status};
-pub use fit::{Fit, fit_effects};
+pub use fit::{Fit, SWAP_RECOVERY, fit_effects};
 pub use locate::{Mismatch, locate_mismatch, rms_table};
 pub use report::{
     COMBINED_CORRELATION, Findings, effect_reports, gain_grid, notes, plot_series, report, verdict,

@@ -155,7 +155,7 @@ fn link_physics_and_calibration(
             pairs.push((p, c));
         }
         for (p, d) in decisions {
-            if let Decision::OneFindingWith { calibrations } = d
+            if let Decision::OneFindingWith { calibrations, .. } = d
                 && calibrations.contains(&c)
                 && !pairs.contains(&(*p, c))
             {

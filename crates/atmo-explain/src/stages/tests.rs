@@ -404,6 +404,7 @@ fn physics_a_claimed_calibration_explains_alike_is_one_finding_not_a_rejection()
     };
     let alike = Decision::OneFindingWith {
         calibrations: vec![Effect::ThrustAxis],
+        recovery: 0.95,
     };
     let reports = [
         report(Effect::ThrustAxis, true, true, Effect::Wind, found),

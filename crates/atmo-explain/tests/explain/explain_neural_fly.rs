@@ -337,6 +337,19 @@ fn no_physics_claimed_and_prediction_no_worse(name: &str) {
         .map(|e| format!("{} ({:?}): {}", e.name, e.confidence, e.decided_by))
         .collect();
     assert!(claimed.is_empty(), "physics claimed: {claimed:?}");
+    // Physics left as one finding with a calibration carries the share of
+    // its gain that calibration recovers: the number that decided it.
+    for e in &ex.effects {
+        if let Some(atmo_explain::stages::Decision::OneFindingWith { recovery, .. }) = &e.decision {
+            assert!(
+                *recovery >= atmo_explain::stages::SWAP_RECOVERY
+                    && e.decided_by.contains(&format!("{recovery:.2}x")),
+                "{}: {recovery} {}",
+                e.name,
+                e.decided_by
+            );
+        }
+    }
     let (before, after) = (
         ex.multistep_before.velocity_norm(),
         ex.multistep_after.velocity_norm(),
