@@ -62,16 +62,14 @@ use std::time::Instant;
 
 use atmo_core::RobotConfig;
 
-use effects::Effect;
 pub use explanation::{
     EffectReport, Explanation, GridPoint, Parameter, RmsTable, Series, WindSpeed,
 };
 use recording::{Recording, contract, plausible};
-use selection::Step;
+pub use stages::Analysis;
 use stages::{
-    BaseRegressors, Decision, Findings, Fit, LagProfile, Mismatch, Residuals, Validation,
-    accept_effects, fit_effects, locate_mismatch, profile_motor_lag, report, select_effects,
-    validate,
+    BaseRegressors, Residuals, accept_effects, fit_effects, locate_mismatch, profile_motor_lag,
+    report, select_effects, validate,
 };
 
 /// What can stop the analysis.
@@ -266,26 +264,6 @@ fn screen(rec: &Recording, robot: &RobotConfig) -> Result<Option<Recording>> {
     Ok(copy)
 }
 
-/// What the analysis found, stage by stage, before it is reported: what
-/// [`explain`] reports, and what a tool that scores the fitted model on
-/// other data reads (`examples/neural_fly_fa`).
-pub struct Analysis {
-    /// The recording analysed: the reader contract's screening applied and
-    /// the velocity's band below 3 Hz taken from the positions.
-    pub rec: Recording,
-    pub velocity_correction: velocity::VelocityCorrection,
-    /// The robot the replays ran: its tilt range cut to the tilts flown.
-    pub replayed: RobotConfig,
-    pub res: Residuals,
-    pub mismatch: Mismatch,
-    pub lag: LagProfile,
-    pub steps: Vec<Step>,
-    pub confidence: Vec<(Effect, f64)>,
-    pub fit: Fit,
-    pub decisions: Vec<(Effect, Decision)>,
-    pub validation: Validation,
-}
-
 /// Runs the analysis's stages on a recording (no report).
 pub fn analyse(rec: &Recording, robot: &RobotConfig, opts: &Options) -> Result<Analysis> {
     analyse_tracked(rec, robot, opts, &mut Tracker::new(&mut |_| {}))
@@ -360,18 +338,7 @@ pub fn explain_with_progress(
 ) -> Result<Explanation> {
     let mut t = Tracker::new(progress);
     let a = analyse_tracked(rec, robot, opts, &mut t)?;
-    let findings = Findings {
-        rec: &a.rec,
-        res: &a.res,
-        mismatch: &a.mismatch,
-        lag: &a.lag,
-        steps: &a.steps,
-        confidence: &a.confidence,
-        fit: &a.fit,
-        decisions: &a.decisions,
-        validation: &a.validation,
-    };
-    let mut ex = t.step("report", || report(&findings));
+    let mut ex = t.step("report", || report(&a));
     ex.velocity_from_positions = a.velocity_correction;
     if !a.velocity_correction.applied {
         ex.notes.push(velocity_note(&a.velocity_correction));

@@ -29,7 +29,7 @@ pub use accept::{ParamStatus, accept_effects, coefficient_bounds, param_status};
 pub use fit::{Fit, SWAP_RECOVERY, fit_effects};
 pub use locate::{Mismatch, locate_mismatch, rms_table};
 pub use report::{
-    COMBINED_CORRELATION, Findings, effect_reports, gain_grid, notes, plot_series, report, verdict,
+    Analysis, COMBINED_CORRELATION, effect_reports, gain_grid, notes, plot_series, report, verdict,
 };
 pub use residuals::Residuals;
 pub use select::{BaseRegressors, LagProfile, Selection, profile_motor_lag, select_effects};

@@ -36,19 +36,25 @@ pub const COMBINED_CORRELATION: f64 = 0.9;
 /// table).
 pub const COMBINED_RESOLUTION: f64 = 1e-3;
 
-/// What the report is made of: every stage's output.
-#[derive(Debug, Clone, Copy)]
-pub struct Findings<'a> {
-    pub rec: &'a Recording,
-    pub res: &'a Residuals,
-    pub mismatch: &'a Mismatch,
-    pub lag: &'a LagProfile,
-    pub steps: &'a [Step],
-    pub confidence: &'a [(Effect, f64)],
-    pub fit: &'a Fit,
+/// What the analysis found, stage by stage, before it is reported: what
+/// [`report()`] is made of, and what a tool that scores the fitted model
+/// on other data reads (`examples/neural_fly_fa`).
+pub struct Analysis {
+    /// The recording analysed: the reader contract's screening applied and
+    /// the velocity's band below 3 Hz taken from the positions.
+    pub rec: Recording,
+    pub velocity_correction: crate::velocity::VelocityCorrection,
+    /// The robot the replays ran: its tilt range cut to the tilts flown.
+    pub replayed: atmo_core::RobotConfig,
+    pub res: Residuals,
+    pub mismatch: Mismatch,
+    pub lag: LagProfile,
+    pub steps: Vec<Step>,
+    pub confidence: Vec<(Effect, f64)>,
+    pub fit: Fit,
     /// The acceptance stage's decision on each effect the selection chose.
-    pub decisions: &'a [(Effect, Decision)],
-    pub validation: &'a Validation,
+    pub decisions: Vec<(Effect, Decision)>,
+    pub validation: Validation,
 }
 
 /// Candidates' verdicts, sorted (claimed first; then by confidence, by
@@ -597,15 +603,15 @@ pub fn notes(res: &Residuals, fit: &Fit, decisions: &[(Effect, Decision)]) -> Ve
 
 /// The explanation of the findings (without timings: [`crate::explain`]
 /// adds them).
-pub fn report(f: &Findings) -> Explanation {
-    let (rec, res, fit, val) = (f.rec, f.res, f.fit, f.validation);
+pub fn report(f: &Analysis) -> Explanation {
+    let (rec, res, fit, val) = (&f.rec, &f.res, &f.fit, &f.validation);
     let prep = &res.prep;
-    let (effects, indistinguishable) = effect_reports(fit, f.confidence, f.decisions);
-    let (mismatch_found, verdict) = verdict(&effects, &fit.chosen, f.mismatch);
+    let (effects, indistinguishable) = effect_reports(fit, &f.confidence, &f.decisions);
+    let (mismatch_found, verdict) = verdict(&effects, &fit.chosen, &f.mismatch);
     let entries = fit.stats.entries_in(&vec![true; fit.stats.nseg()]).max(1) as f64;
     let before = &f.mismatch.location;
-    let wind_speed = super::wind_speed::wind_speed(res, rec, fit, &fit.chosen, &val.rms);
-    let mut notes = notes(res, fit, f.decisions);
+    let wind_speed = super::wind_speed::wind_speed(res, rec, fit, &val.rms);
+    let mut notes = notes(res, fit, &f.decisions);
     notes.extend(wind_speed.as_ref().and_then(WindSpeed::note));
     Explanation {
         source: rec.source.display().to_string(),
@@ -632,7 +638,7 @@ pub fn report(f: &Findings) -> Explanation {
             .map(|&c| CHANNELS[c].to_string())
             .collect(),
         effects,
-        selection_steps: f.steps.to_vec(),
+        selection_steps: f.steps.clone(),
         indistinguishable,
         heldout_rms_before: f.mismatch.rms.clone(),
         heldout_rms_after: val.rms.clone(),
@@ -648,7 +654,7 @@ pub fn report(f: &Findings) -> Explanation {
         fitted_effects_toml: val.toml.clone(),
         location_before: Some(before.clone()),
         location_after: Some(val.location.clone()),
-        series: Some(plot_series(res, f.mismatch, &val.after)),
+        series: Some(plot_series(res, &f.mismatch, &val.after)),
         timings_s: Vec::new(),
         wind_speed,
         notes,

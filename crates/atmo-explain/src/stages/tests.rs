@@ -129,17 +129,30 @@ fn run(mass_scale: f64) -> Run {
     let fit = fit_effects(&res, &rec, sel);
     let (fit, decisions) = super::accept_effects(&rec, &robot, &res, fit, 240).unwrap();
     let validation = validate(&rec, &robot, &res, &mismatch, &fit, 240).unwrap();
-    let explanation = report(&Findings {
-        rec: &rec,
-        res: &res,
-        mismatch: &mismatch,
-        lag: &lag,
-        steps: &steps,
-        confidence: &confidence,
-        fit: &fit,
-        decisions: &decisions,
-        validation: &validation,
-    });
+    let analysis = Analysis {
+        rec,
+        velocity_correction: crate::velocity::VelocityCorrection::default(),
+        replayed: robot,
+        res,
+        mismatch,
+        lag,
+        steps,
+        confidence,
+        fit,
+        decisions,
+        validation,
+    };
+    let explanation = report(&analysis);
+    let Analysis {
+        res,
+        mismatch,
+        lag,
+        steps,
+        confidence,
+        fit,
+        validation,
+        ..
+    } = analysis;
     Run {
         res,
         mismatch,

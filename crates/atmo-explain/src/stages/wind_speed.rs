@@ -42,15 +42,15 @@ pub const LAW_MISFIT_FLOORS: f64 = std::f64::consts::SQRT_2;
 const SLOPE_STEP: f64 = 0.1;
 
 /// What the flight identifies about the fitted wind's speed; `None`
-/// without a claimed wind (or without drag coefficients to evaluate).
+/// without a wind in the accepted fit (or without drag coefficients to
+/// evaluate). `after`: the held-out residual's RMS with the fit.
 pub fn wind_speed(
     res: &Residuals,
     rec: &Recording,
     fit: &Fit,
-    claimed: &[Effect],
     after: &RmsTable,
 ) -> Option<WindSpeed> {
-    if !claimed.contains(&Effect::Wind) {
+    if !fit.chosen.contains(&Effect::Wind) {
         return None;
     }
     let coefficients = fit.physical.drag?;
