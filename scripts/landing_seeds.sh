@@ -5,7 +5,7 @@
 #
 #   scripts/landing_seeds.sh [--controller nominal] [--runs 200] [SEED...]
 #
-# Without seeds: the judging set of docs/landing.md (600001 ... 1100001).
+# Without seeds: the judging set of docs/landing.md (3100001 ... 3500001).
 # Uses target/release/atmo-sim (built if missing); outputs under
 # out/landing_seeds/<seed>/.
 set -euo pipefail
@@ -20,7 +20,7 @@ while [ $# -gt 0 ]; do
     *) seeds+=("$1"); shift ;;
   esac
 done
-[ ${#seeds[@]} -gt 0 ] || seeds=(600001 700001 800001 1000001 1100001)
+[ ${#seeds[@]} -gt 0 ] || seeds=(3100001 3200001 3300001 3400001 3500001)
 bin=${CARGO_TARGET_DIR:-target}/release/atmo-sim
 [ -x "$bin" ] || cargo build --release -p atmo-sim
 files=()
@@ -48,7 +48,13 @@ for f in sys.argv[1:]:
     fast = sum(1 for x in pr if x["impact_speed_mps"] is not None and x["impact_speed_mps"] > 0.4)
     p = r.get("prediction") or {}
     lo, hi = r["criteria_met"]["wheel_landing_target"]["wilson_95"]
-    print(f"| {r['base_seed']} | {n} | {k} ({100*k/n:.1f} %) | {100*lo:.1f}-{100*hi:.1f} % | {low} | {fast} | {r['successes']} | {r['crashes']} | {p.get('impact_speed_bias_mps', float('nan')):+.3f}, {p.get('touchdown_tilt_bias_deg', float('nan')):+.2f} | {p.get('impact_speed_spread_mps', float('nan')):.3f}, {p.get('touchdown_tilt_spread_deg', float('nan')):.2f} |")
+    # Without a decision (the paper's tilt law) there is no prediction.
+    if "impact_speed_bias_mps" in p:
+        bias = f"{p['impact_speed_bias_mps']:+.3f}, {p['touchdown_tilt_bias_deg']:+.2f}"
+        spread = f"{p['impact_speed_spread_mps']:.3f}, {p['touchdown_tilt_spread_deg']:.2f}"
+    else:
+        bias, spread = "-", "-"
+    print(f"| {r['base_seed']} | {n} | {k} ({100*k/n:.1f} %) | {100*lo:.1f}-{100*hi:.1f} % | {low} | {fast} | {r['successes']} | {r['crashes']} | {bias} | {spread} |")
     for key, v in (("n", n), ("k", k), ("low", low), ("fast", fast), ("ok", r["successes"]), ("crash", r["crashes"])):
         tot[key] += v
     rows.append((pr, p))

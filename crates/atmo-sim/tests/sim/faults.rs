@@ -142,7 +142,9 @@ fn the_clean_landing_lands_and_its_timeline() {
 }
 
 /// A dropout shorter than the estimate timeout (50 ms; 120 Hz motion
-/// capture) is flown through on the last estimate.
+/// capture) is flown through on the last estimate. The stamps on either
+/// side of a 30 ms dropout are at least 30 ms apart; the 150 Hz ticks see
+/// the age grow to within one tick period of that gap.
 #[test]
 fn short_estimate_dropout_is_flown_through() {
     let t = clean_entry(Mode::Morphing) + 0.2;
@@ -156,8 +158,9 @@ fn short_estimate_dropout_is_flown_through() {
         .iter()
         .map(|r| r.outputs.status.estimate_age)
         .fold(0.0, f64::max);
+    let tick = 1.0 / 150.0;
     assert!(
-        max_age > 0.03 && max_age <= 0.05,
+        max_age > 0.03 - tick && max_age <= 0.05,
         "oldest estimate flown {max_age} s"
     );
 }
