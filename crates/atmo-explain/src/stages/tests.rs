@@ -23,7 +23,6 @@ use crate::Explanation;
 use crate::effects::Effect;
 use crate::recording::{Recording, Sample};
 use crate::selection;
-use crate::selection::Step;
 
 const MASS_SCALE: f64 = 1.05;
 const SECONDS: f64 = 20.0;
@@ -103,17 +102,19 @@ fn hover(mass_scale: f64) -> (RobotConfig, Recording) {
     (robot, Recording::from_samples("open-loop hover", samples))
 }
 
-/// Every stage's output for one recording.
+/// Every stage's output for one recording, with what the selection chose
+/// before the acceptance and the report.
 struct Run {
-    res: Residuals,
-    mismatch: Mismatch,
-    lag: LagProfile,
+    analysis: Analysis,
     chosen_by_selection: Vec<Effect>,
-    steps: Vec<Step>,
-    confidence: Vec<(Effect, f64)>,
-    fit: Fit,
-    validation: Validation,
     explanation: Explanation,
+}
+
+impl std::ops::Deref for Run {
+    type Target = Analysis;
+    fn deref(&self) -> &Analysis {
+        &self.analysis
+    }
 }
 
 fn run(mass_scale: f64) -> Run {
@@ -143,25 +144,9 @@ fn run(mass_scale: f64) -> Run {
         validation,
     };
     let explanation = report(&analysis);
-    let Analysis {
-        res,
-        mismatch,
-        lag,
-        steps,
-        confidence,
-        fit,
-        validation,
-        ..
-    } = analysis;
     Run {
-        res,
-        mismatch,
-        lag,
+        analysis,
         chosen_by_selection,
-        steps,
-        confidence,
-        fit,
-        validation,
         explanation,
     }
 }
