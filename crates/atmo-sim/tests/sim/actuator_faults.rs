@@ -127,6 +127,10 @@ fn a_rotor_at_60_percent_in_flight_touches_down_on_its_wheels() {
         );
         let seen = detected(&f, Detected::ROTOR).unwrap_or_else(|| panic!("{seed}"));
         assert!(seen.time > 1.0 && seen.time < 1.6, "{seed}: {}", seen.time);
+        assert!(
+            !f.modes().contains(&Mode::Disarmed),
+            "{seed}: no thrust cut"
+        );
         // Named and learned: its command is its plan over 0.6, the largest.
         assert!(
             f.ticks
