@@ -447,10 +447,16 @@ impl FlightStack {
 
     /// Learns the disturbance in free flight, holds it near the ground
     /// (ground effect and contact are not a constant wrench), forgets it on
-    /// the ground.
+    /// the ground. Other failsafes pause it (their commands may not reach
+    /// the rotors, or the estimate is gone); the rotor-out descent learns:
+    /// it flies on a model that has just lost a rotor, and a rotor stuck
+    /// below what was asked of it, named weak and then out, still
+    /// delivers what only the observer sees
+    /// (decisions/2026-12-06-stuck-rotor-in-flight.md).
     fn observe(&mut self, mode: Mode, tilt: f64) {
         let learning = self.settings.observer.enabled
-            && matches!(mode, Mode::Flight | Mode::Morphing | Mode::Transition)
+            && (matches!(mode, Mode::Flight | Mode::Morphing | Mode::Transition)
+                || (mode == Mode::Failsafe && self.rotor_out()))
             && self.last_estimate.is_some();
         if learning {
             if let Some(est) = self.last_estimate {
