@@ -139,18 +139,51 @@ fn a_rotor_at_60_percent_in_flight_touches_down_on_its_wheels() {
                 .any(|t| t.outputs.thrust[1] == 1.0),
             "{seed}"
         );
-        let s = &f.summary;
-        assert!(s.crash_reason.is_none(), "{seed}: {s:?}");
-        assert!(
-            f.modes()
-                .ends_with(&[Mode::Transition, Mode::Touchdown, Mode::Drive]),
-            "{seed}: {:?}",
-            f.modes()
-        );
-        assert!(s.touchdown_tilt_deg.unwrap() > 50.0, "{seed}: {s:?}");
-        assert!(s.impact_speed_mps.unwrap() < 0.5, "{seed}: {s:?}");
-        assert!(tipped(&f, 1.0, 0.3) < 30.0, "{seed}");
+        touches_down_slowly_on_its_wheels(&f, &seed.to_string());
     }
+}
+
+/// The same fault on the weakest robot the Monte Carlo draws (its rotors
+/// 5 % short of the robot file's thrust: 2.7 N of lift), each rotor: it
+/// touches down on its wheels, without a crash (on seed 7_300_002 two
+/// rotors' flights did not: docs/faults.md).
+#[test]
+fn a_rotor_at_60_percent_in_flight_on_a_robot_short_of_lift_touches_down_on_its_wheels() {
+    for n in 1..=4 {
+        let mut flown = super::faults::scenario(&format!(
+            "[[faults.actuators.rotor]]\nt = 1.0\nrotor = {n}\nscale = 0.6"
+        ));
+        flown.robot.rotor.k_thrust *= 0.95;
+        let f = fly_scenario(&flown);
+        let s = &f.summary;
+        println!(
+            "rotor {n}: {:?} deg, {:?} m/s",
+            s.touchdown_tilt_deg, s.impact_speed_mps
+        );
+        touches_down_on_its_wheels(&f, &format!("rotor {n}"));
+    }
+}
+
+/// No crash, down on the wheels through the transition, never tipped 30
+/// deg while 0.3 m up.
+fn touches_down_on_its_wheels(f: &Flight, label: &str) {
+    let s = &f.summary;
+    assert!(s.crash_reason.is_none(), "{label}: {s:?}");
+    assert!(
+        f.modes()
+            .ends_with(&[Mode::Transition, Mode::Touchdown, Mode::Drive]),
+        "{label}: {:?}",
+        f.modes()
+    );
+    assert!(tipped(f, 1.0, 0.3) < 30.0, "{label}");
+}
+
+/// ... and past 50 deg, under 0.5 m/s.
+fn touches_down_slowly_on_its_wheels(f: &Flight, label: &str) {
+    touches_down_on_its_wheels(f, label);
+    let s = &f.summary;
+    assert!(s.touchdown_tilt_deg.unwrap() > 50.0, "{label}: {s:?}");
+    assert!(s.impact_speed_mps.unwrap() < 0.5, "{label}: {s:?}");
 }
 
 /// A rotor stuck at its command in flight is detected when the MPC asks
