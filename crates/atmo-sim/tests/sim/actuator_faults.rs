@@ -194,7 +194,7 @@ fn touches_down_slowly_on_its_wheels(f: &Flight, label: &str) {
 /// touchdown is not soft (docs/faults.md). In the rotor-out descent the
 /// observer learns what the stuck rotor still delivers: no wheel hits
 /// hard (with the observer paused there, rotors 1 and 2 of seed 0 and
-/// 1-3 of 7_300_001 did, at 2.0-2.7 m/s). Seed 7_300_001 was named
+/// 1-3 of 7_300_001 did, at 2.0-2.4 m/s). Seed 7_300_001 was named
 /// before that change was flown on it and chose nothing.
 #[test]
 fn a_rotor_stuck_in_flight_is_detected_and_the_robot_not_turned_over() {
