@@ -30,6 +30,9 @@ use crate::modes::Mode;
 const ROTOR_OUT_EFFECTIVENESS: f64 = 0.5;
 /// Default of `monitor.rotor_out_descent_speed`, m/s.
 const ROTOR_OUT_DESCENT_SPEED: f64 = 0.3;
+/// Default of `monitor.rotor_out_landing_tilt_deg`: folded, as a flight
+/// log written before the key was flown.
+const ROTOR_OUT_LANDING_TILT_DEG: f64 = 0.0;
 
 atmo_core::params! {
     /// `[monitor]` of `config/flight.toml`: the detectors' thresholds.
@@ -65,6 +68,13 @@ atmo_core::params! {
         pub rotor_out_effectiveness: f64 = ROTOR_OUT_EFFECTIVENESS, range 0.0..=1.0;
         /// With a rotor out: the descent speed to the ground.
         pub rotor_out_descent_speed: f64 = ROTOR_OUT_DESCENT_SPEED, range 0.05..=2.0, unit "m/s";
+        /// With a rotor out: the arms' tilt in the descent when the thrust
+        /// left holds the weight there (level, four rotors' hover trim at
+        /// that tilt within the balanced thrust left), else folded (0).
+        /// Tilted past the tilt where the wheels' rims pass under the base
+        /// box, the robot comes down on its wheels, not its body (for ATMO
+        /// from about 33 deg: atmo-sim's `the_rotor_out_landing_tilt_puts_the_wheels_under_the_base`).
+        pub rotor_out_landing_tilt_deg: f64 = ROTOR_OUT_LANDING_TILT_DEG, range 0.0..=90.0, unit "deg";
     }
 }
 
@@ -83,6 +93,7 @@ impl MonitorSettings {
             contact_time: 0.0,
             rotor_out_effectiveness: ROTOR_OUT_EFFECTIVENESS,
             rotor_out_descent_speed: ROTOR_OUT_DESCENT_SPEED,
+            rotor_out_landing_tilt_deg: ROTOR_OUT_LANDING_TILT_DEG,
         }
     }
 }

@@ -117,6 +117,9 @@ pub struct FlightStack {
     /// The failed rotor and what it delivers (`last_thrust` and the MPC's
     /// plan are in delivered thrust; the commands sent are over it).
     rotor: RotorEstimate,
+    /// The rotors' mean hover trim at `monitor.rotor_out_landing_tilt_deg`
+    /// (a fraction of four full rotors), frozen at start-up.
+    rotor_out_landing_trim: f64,
 }
 
 impl FlightStack {
@@ -230,6 +233,10 @@ impl FlightStack {
             encoder_tilt: 0.0,
             tilt_sent: 0.0,
             rotor: RotorEstimate::default(),
+            rotor_out_landing_trim: model
+                .at_tilt(settings.monitor.rotor_out_landing_tilt_deg.to_radians())
+                .hover_trim()
+                .mean(),
             model,
             settings,
         })
@@ -606,7 +613,7 @@ impl FlightStack {
         let height = self.last_ground_z - state[idx::Z];
         match self.mode {
             Mode::Transition => v.z = self.settings.modes.transition_descent_speed,
-            // A rotor out: down at a set speed, folded (`modes`).
+            // A rotor out: down at a set speed (`modes`; the tilt: `tilt`).
             Mode::Failsafe if self.rotor_out() => {
                 v = Vector3::new(0.0, 0.0, self.settings.monitor.rotor_out_descent_speed);
             }

@@ -56,7 +56,7 @@ pub struct Conditions {
     /// A rotor does not deliver its command (the actuator monitor).
     pub rotor_failed: bool,
     /// ... and delivers too little to fly the wheel landing on
-    /// (`monitor.rotor_out_effectiveness`): descend folded.
+    /// (`monitor.rotor_out_effectiveness`): descend (`Mode::Failsafe`).
     pub rotor_out: bool,
     /// Measured tilt, rad.
     pub tilt: f64,
@@ -118,12 +118,14 @@ pub const TRANSITIONS: &[Transition] = &[
     },
     Transition {
         // Out (too little thrust left for the wheel landing's tilts) above
-        // z*: down folded at a set speed, the heading let go. A
-        // transition under way is already landing and lands.
+        // z*: down at a set speed, the heading let go, the arms folded or,
+        // where the thrust left holds the weight there, tilted to put the
+        // wheels under the base. A transition under way is already
+        // landing and lands.
         from: &[Mode::Takeoff, Mode::Flight, Mode::Morphing],
         to: Mode::Failsafe,
         guard: |c, _| c.rotor_out,
-        reason: "a rotor out: descend folded",
+        reason: "a rotor out: descend",
     },
     Transition {
         from: &[Mode::Disarmed],

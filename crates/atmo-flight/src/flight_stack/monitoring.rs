@@ -127,6 +127,23 @@ impl FlightStack {
         Some(0.5 * (1.0 + e))
     }
 
+    /// The arms' tilt in the rotor-out descent, rad: the landing tilt
+    /// (`monitor.rotor_out_landing_tilt_deg`, the wheels under the base)
+    /// if the balanced thrust left holds the weight there, else folded
+    /// (all the lift there is). A stuck rotor gives what it is stuck at
+    /// and tilts; a stopped one leaves two full rotors, about the weight
+    /// folded, and folds.
+    pub(super) fn rotor_out_tilt(&self) -> f64 {
+        match self.thrust_left() {
+            Some(left) if self.rotor_out_landing_trim <= left => self
+                .settings
+                .monitor
+                .rotor_out_landing_tilt_deg
+                .to_radians(),
+            _ => 0.0,
+        }
+    }
+
     /// The flight tilt limit for the thrust left, rad: the robot file's
     /// keeps its thrust reserve with four full rotors (4 kT cos phi_max
     /// over m g); the same reserve with a fraction `left` of them holds at
