@@ -12,7 +12,10 @@
 //! surplus on a rotor turns the robot as a loss on its diagonal partner
 //! does, and the yaw torque tells them apart ([`RotorEstimate::name_rotor`]).
 //! A rotor named with a surplus is stuck: out at once, and what it
-//! delivers is learned instead of an effectiveness.
+//! delivers is learned instead of an effectiveness. One that goes out for
+//! a loss is believed to give nothing until the observer, on plans that
+//! have it out, sees it give something: a rotor stuck below what the
+//! plan asked of it looks weak until then.
 //!
 //! From the detection on, every tick moves the part of the observer's
 //! wrench that rotor `i` explains into its effectiveness `e_i`:
@@ -134,14 +137,18 @@ impl RotorEstimate {
         // Delivered less planned (command fractions) that explains d.
         let delta = (d[3] * bt[0] + d[4] * bt[1]) / norm2;
         let moved = if self.effectiveness < out_below {
-            if !self.over {
-                // Stopped (or weak past flying on): commanded nothing, it
-                // gives nothing; the observer keeps the rest.
+            let u = planned[i];
+            if !self.over && u > self.delivered + STUCK_BOX {
+                // Out for a loss, it is believed to give nothing; the plan
+                // that still had it in is no evidence (the observer lags a
+                // stopped rotor's loss: learned from it, a stopped rotor
+                // was believed to give 0.1-0.2).
                 return Vector6::zeros();
             }
             // The plan gave it `planned` (within the box around the last
-            // value): what it delivers is that plus delta.
-            let u = planned[i];
+            // value): what it delivers is that plus delta. A rotor stuck
+            // below what was asked of it looks weak until it is out, and
+            // is learned here; a stopped one stays at nothing.
             self.delivered = (u + delta).clamp(0.0, 1.0);
             self.delivered - u
         } else {
@@ -204,6 +211,12 @@ impl RotorEstimate {
     /// stopped, weak or healthy one.
     pub fn stuck_thrust(&self, out_below: f64) -> Option<f64> {
         (self.out(out_below) && self.over).then_some(self.delivered)
+    }
+
+    /// What an out rotor still delivers (a fraction of full, whatever it
+    /// is commanded; nothing for a stopped one): `None` unless out.
+    pub fn out_thrust(&self, out_below: f64) -> Option<f64> {
+        self.out(out_below).then_some(self.delivered)
     }
 
     /// The failed rotor is out: no thrust to fly on.
@@ -305,7 +318,7 @@ mod tests {
     }
 
     #[test]
-    fn nothing_is_learned_before_a_detection_and_a_stopped_rotor_is_out() {
+    fn nothing_is_learned_before_a_detection_and_an_out_rotor_only_from_plans_without_it() {
         let b = body();
         let mut e = RotorEstimate::default();
         let d = Vector6::from_element(1.0);
@@ -322,21 +335,40 @@ mod tests {
         assert!(e.out(0.2));
         assert_eq!(e.command(&Input::from_element(0.5), 0.2)[2], 0.0);
         assert_eq!(e.rotor_bounds(0.2).1[2], STUCK_BOX);
-        // Out and never seen over its command: nothing is learned.
-        let over: Vector6<f64> = Vector6::from_element(0.3);
-        assert_eq!(e.learn(&b, &over, &Input::zeros(), 0.2), Vector6::zeros());
-        // Seen over it, then out: it still delivers 0.4 (stuck), learned.
-        e.over = true;
-        let lost: Vector6<f64> = Vector6::from_iterator(
-            b.thrust_force
-                .column(2)
-                .iter()
-                .chain(b.thrust_torque.column(2).iter())
-                .map(|v| v * 0.4),
+        let column = |k: f64| -> Vector6<f64> {
+            Vector6::from_iterator(
+                b.thrust_force
+                    .column(2)
+                    .iter()
+                    .chain(b.thrust_torque.column(2).iter())
+                    .map(|v| v * k),
+            )
+        };
+        // Out for a loss: the plan that still had it in (0.5) teaches
+        // nothing, whatever the observer holds (a stopped rotor's loss
+        // is still being learned there).
+        let lagging = column(-0.3);
+        assert_eq!(
+            e.learn(&b, &lagging, &Input::from_element(0.5), 0.2),
+            Vector6::zeros()
         );
-        let taken = e.learn(&b, &lost, &Input::zeros(), 0.2);
-        assert!((taken - lost).norm() < 1e-9);
+        assert_eq!(e.out_thrust(0.2), Some(0.0));
+        // Planned out, a loss left in the observer: it gives nothing.
+        e.learn(&b, &lagging, &Input::zeros(), 0.2);
+        assert_eq!(e.out_thrust(0.2), Some(0.0));
+        // Planned out, the observer sees it deliver 0.4: stuck below what
+        // was asked (it looked weak), learned; not named stuck.
+        let given = column(0.4);
+        let taken = e.learn(&b, &given, &Input::zeros(), 0.2);
+        assert!((taken - given).norm() < 1e-9);
+        assert!((e.out_thrust(0.2).unwrap() - 0.4).abs() < 1e-9);
+        assert_eq!(e.stuck_thrust(0.2), None);
         let (lo, hi) = e.rotor_bounds(0.2);
         assert!((lo[2] - 0.39).abs() < 1e-9 && (hi[2] - 0.41).abs() < 1e-9);
+        // Seen over its command, out: learned from any plan (named stuck).
+        let mut stuck = RotorEstimate::default();
+        stuck.start(2, true);
+        stuck.learn(&b, &column(-0.1), &Input::from_element(0.5), 0.2);
+        assert!((stuck.stuck_thrust(0.2).unwrap() - 0.4).abs() < 1e-9);
     }
 }

@@ -120,7 +120,7 @@ impl FlightStack {
         self.rotor.rotor()?;
         let out_below = self.settings.monitor.rotor_out_effectiveness;
         let e = if self.rotor_out() {
-            self.rotor.stuck_thrust(out_below).unwrap_or(0.0)
+            self.rotor.out_thrust(out_below).unwrap_or(0.0)
         } else {
             self.rotor.effectiveness()
         };

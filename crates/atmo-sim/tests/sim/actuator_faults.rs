@@ -253,9 +253,10 @@ fn a_rotor_stuck_in_flight_is_detected_and_the_robot_not_turned_over() {
         }
     }
     // Folded (before the landing tilt), all 8 came down on the body; now
-    // seed 0's rotors 3 and 4 and 7_300_001's 3 and 4 are named stuck in
-    // time to tilt (the others are seen as a loss: `docs/faults.md`).
-    assert!(on_the_wheels >= 4, "{on_the_wheels} of 8 on the wheels");
+    // seed 0's rotors 3 and 4 and 7_300_001's 2, 3 and 4 reach the tilt
+    // (7_300_001's rotor 2 named lost, its stuck thrust learned out); the
+    // others are seen too late (`docs/faults.md`).
+    assert!(on_the_wheels >= 5, "{on_the_wheels} of 8 on the wheels");
 }
 
 /// The rotor-out descent's landing tilt (`monitor.rotor_out_landing_tilt_deg`)
