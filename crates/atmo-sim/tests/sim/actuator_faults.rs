@@ -574,9 +574,10 @@ fn rotor_fault_outcomes() {
                         .iter()
                         .rfind(|t| t.outputs.status.mode == Mode::Failsafe)
                         .map(|t| t.outputs.status.tilt_limit.to_degrees().round());
+                    let end = f.ticks.last().map(|t| (t.truth_height, t.truth[idx::VZ]));
                     let s = &f.summary;
                     println!(
-                        "seed {seed} {onset:>22} rotor {n} {what:>12}: seen {seen:?} modes {:?} tilt {:?} impact {:?} crash {:?} tipped {tipped:.0} deg spin {spin:.1} rad/s descent tilt {descent_tilt:?} landed {}",
+                        "seed {seed} {onset:>22} rotor {n} {what:>12}: seen {seen:?} modes {:?} tilt {:?} impact {:?} crash {:?} tipped {tipped:.0} deg spin {spin:.1} rad/s descent tilt {descent_tilt:?} end (height, vz) {end:.2?} landed {}",
                         f.modes(),
                         s.touchdown_tilt_deg.map(|v| (v * 10.0).round() / 10.0),
                         s.impact_speed_mps.map(|v| (v * 100.0).round() / 100.0),
