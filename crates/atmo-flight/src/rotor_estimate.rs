@@ -206,13 +206,6 @@ impl RotorEstimate {
         (lo, hi)
     }
 
-    /// What an out rotor seen to give more than commanded still delivers
-    /// (a fraction of full, whatever it is commanded): `None` for a
-    /// stopped, weak or healthy one.
-    pub fn stuck_thrust(&self, out_below: f64) -> Option<f64> {
-        (self.out(out_below) && self.over).then_some(self.delivered)
-    }
-
     /// What an out rotor still delivers (a fraction of full, whatever it
     /// is commanded; nothing for a stopped one): `None` unless out.
     pub fn out_thrust(&self, out_below: f64) -> Option<f64> {
@@ -268,7 +261,7 @@ mod tests {
         let bt = b.thrust_torque.column(2);
         let d = Vector6::new(0.0, 0.0, 0.0, bt[0] * 0.5, bt[1] * 0.5, bt[2] * 0.5);
         let taken = e.learn(&b, &d, &planned, 0.5);
-        assert!((e.stuck_thrust(0.5).unwrap() - 0.7).abs() < 1e-9);
+        assert!((e.out_thrust(0.5).unwrap() - 0.7).abs() < 1e-9);
         assert!(
             (taken[3] - d[3]).abs() < 1e-9,
             "what it explains leaves the observer"
@@ -277,10 +270,10 @@ mod tests {
         assert_eq!(e.command(&planned, 0.5)[2], 0.0);
         let (lo, hi) = e.rotor_bounds(0.5);
         assert!(lo[2] < 0.7 && hi[2] > 0.7 && hi[2] - lo[2] < 0.05);
-        // A rotor named for a loss is not stuck.
+        // A rotor named for a loss is not out at once.
         let mut lost = RotorEstimate::default();
         lost.start(2, false);
-        assert_eq!(lost.stuck_thrust(0.5), None);
+        assert_eq!(lost.out_thrust(0.5), None);
     }
 
     #[test]
@@ -357,18 +350,17 @@ mod tests {
         e.learn(&b, &lagging, &Input::zeros(), 0.2);
         assert_eq!(e.out_thrust(0.2), Some(0.0));
         // Planned out, the observer sees it deliver 0.4: stuck below what
-        // was asked (it looked weak), learned; not named stuck.
+        // was asked (it looked weak), learned.
         let given = column(0.4);
         let taken = e.learn(&b, &given, &Input::zeros(), 0.2);
         assert!((taken - given).norm() < 1e-9);
         assert!((e.out_thrust(0.2).unwrap() - 0.4).abs() < 1e-9);
-        assert_eq!(e.stuck_thrust(0.2), None);
         let (lo, hi) = e.rotor_bounds(0.2);
         assert!((lo[2] - 0.39).abs() < 1e-9 && (hi[2] - 0.41).abs() < 1e-9);
         // Seen over its command, out: learned from any plan (named stuck).
         let mut stuck = RotorEstimate::default();
         stuck.start(2, true);
         stuck.learn(&b, &column(-0.1), &Input::from_element(0.5), 0.2);
-        assert!((stuck.stuck_thrust(0.2).unwrap() - 0.4).abs() < 1e-9);
+        assert!((stuck.out_thrust(0.2).unwrap() - 0.4).abs() < 1e-9);
     }
 }

@@ -83,21 +83,21 @@ impl FlightStack {
     }
 
     /// The MPC's rotor bounds and yaw cost for what the rotors can do: a
-    /// failed rotor bounded by its effectiveness (zero once out), the yaw
-    /// angle free (three rotors cannot hold the heading and the thrust
-    /// direction both: Mueller and D'Andrea's relaxed hover) in the
-    /// rotor-out descent. A reduced rotor is allocated around with the
-    /// heading kept, and so is one out in the transition: there the wheels
-    /// meet the ground, and a free heading spun the robot onto them at
-    /// 8 rad/s.
+    /// failed rotor bounded by its effectiveness (around what it still
+    /// delivers once out), the yaw angle free (three rotors cannot hold the
+    /// heading and the thrust direction both: Mueller and D'Andrea's
+    /// relaxed hover) in the rotor-out descent. A reduced rotor is
+    /// allocated around with the heading kept, and so is one out in the
+    /// transition, stuck or stopped: there the wheels meet the ground, a
+    /// free heading spun the robot onto them at 8 rad/s, and a stuck
+    /// rotor's spin (to 18 rad/s) lifted it away.
     pub(super) fn configure_rotors(&mut self) {
         let out_below = self.settings.monitor.rotor_out_effectiveness;
         // In [0, 1] by construction: refused only if not, keeping the old.
         let (min, max) = self.rotor.rotor_bounds(out_below);
         let _ = self.mpc.set_rotor_bounds(&min, &max);
-        let stuck = self.rotor.stuck_thrust(out_below).is_some();
         self.mpc
-            .set_yaw_free(self.rotor_out() && (self.mode == Mode::Failsafe || stuck));
+            .set_yaw_free(self.rotor_out() && self.mode == Mode::Failsafe);
     }
 
     /// The commands sent for the delivered thrust `planned`.
