@@ -623,6 +623,15 @@ impl TiltedBody {
     /// critical angle; +inf in every entry when no trim exists (a singular
     /// allocation: never a panic on the control path).
     pub fn hover_trim(&self) -> Input {
+        self.commands_for(-self.mass * self.gravity, &Vector3::zeros())
+    }
+
+    /// The rotor commands whose thrust gives the body z force `force_z`
+    /// (N, body frame: negative is up) and, with gravity's torque about B
+    /// at a level attitude and the disturbance wrench, the net torque
+    /// `torque` about B (N m). Unclamped; +inf in every entry when no
+    /// allocation exists (as [`Self::hover_trim`]).
+    pub fn commands_for(&self, force_z: f64, torque: &Vector3<f64>) -> Input {
         // Rows F_z, tau_x, tau_y, tau_z; F_x and F_y vanish by symmetry.
         let mut a = nalgebra::Matrix4::zeros();
         a.set_row(0, &self.thrust_force.row(2));
@@ -633,10 +642,10 @@ impl TiltedBody {
         let gravity_torque = self.first_moment.cross(&g_b);
         let d = &self.disturbance;
         let rhs = Vector4::new(
-            -self.mass * self.gravity - d[2],
-            -gravity_torque.x - d[3],
-            -gravity_torque.y - d[4],
-            -gravity_torque.z - d[5],
+            force_z - d[2],
+            torque.x - gravity_torque.x - d[3],
+            torque.y - gravity_torque.y - d[4],
+            torque.z - gravity_torque.z - d[5],
         );
         // Singular only when no command moves one of the four rows (no
         // vertical thrust, no yaw authority): no trim exists, and every

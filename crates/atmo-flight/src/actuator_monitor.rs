@@ -68,7 +68,9 @@ atmo_core::params! {
         pub rotor_out_effectiveness: f64 = ROTOR_OUT_EFFECTIVENESS, range 0.0..=1.0;
         /// With a rotor out: the descent speed to the ground.
         pub rotor_out_descent_speed: f64 = ROTOR_OUT_DESCENT_SPEED, range 0.05..=2.0, unit "m/s";
-        /// With a rotor out: the arms' tilt in the descent when the thrust
+        /// With a rotor out (and in the backup controller's descent,
+        /// `failsafe.backup_attitude_bandwidth`): the arms' tilt in the
+        /// descent when the thrust
         /// left holds the weight there (level, four rotors' hover trim at
         /// that tilt within the balanced thrust left), else folded (0).
         /// Tilted past the tilt where the wheels' rims pass under the base

@@ -19,6 +19,7 @@ use nalgebra::Vector3;
 
 use crate::actuator_monitor::{ActuatorMonitor, Detected};
 use crate::arming::ArmingCheck;
+use crate::backup_control::LevelDescent;
 use crate::error::{FlightError, Result};
 use crate::flare::{Flare, FlareSettings, Touchdown};
 use crate::ground_model::{Surface, ground_surface};
@@ -117,6 +118,8 @@ pub struct FlightStack {
     /// The failed rotor and what it delivers (`last_thrust` and the MPC's
     /// plan are in delivered thrust; the commands sent are over it).
     rotor: RotorEstimate,
+    /// The backup controller's memory (`backup_control`).
+    backup: LevelDescent,
     /// The rotors' mean hover trim at `monitor.rotor_out_landing_tilt_deg`
     /// (a fraction of four full rotors), frozen at start-up.
     rotor_out_landing_trim: f64,
@@ -233,6 +236,7 @@ impl FlightStack {
             encoder_tilt: 0.0,
             tilt_sent: 0.0,
             rotor: RotorEstimate::default(),
+            backup: LevelDescent::default(),
             rotor_out_landing_trim: model
                 .at_tilt(settings.monitor.rotor_out_landing_tilt_deg.to_radians())
                 .hover_trim()
@@ -499,6 +503,7 @@ impl FlightStack {
         }
         self.transition_limit = self.flight_limit();
         self.flare.reset();
+        self.backup.reset();
         if !mode.is_airborne_mode() {
             self.mpc_warm = false;
         }
@@ -537,6 +542,25 @@ impl FlightStack {
                 // tilt, slightly under, for a slow level descent.
                 let trim = self.model.at_tilt(tilt).hover_trim();
                 (trim * self.settings.failsafe.open_loop_thrust_scale).map(|u| u.clamp(0.0, 1.0))
+            }
+            Mode::Failsafe => {
+                // The MPC still runs (its solves may come back: recovery),
+                // but once it has failed past its grace its stale plan is
+                // not flown: the backup's level descent is.
+                let planned = self.mpc_feedback(state, status);
+                if !self.backup_flies() {
+                    return planned;
+                }
+                let bandwidth = self.settings.failsafe.backup_attitude_bandwidth;
+                let body = self
+                    .model
+                    .at_tilt(tilt)
+                    .with_disturbance(self.observer.wrench());
+                let speed = self.settings.failsafe.backup_descent_speed;
+                let dt = self.period();
+                self.backup
+                    .command(&body, state, dt, bandwidth, speed)
+                    .unwrap_or(planned)
             }
             _ => self.mpc_feedback(state, status),
         }

@@ -37,6 +37,7 @@
 
 pub mod actuator_monitor;
 pub mod arming;
+pub mod backup_control;
 pub mod control_loop;
 pub mod error;
 pub mod flare;

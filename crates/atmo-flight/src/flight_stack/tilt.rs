@@ -10,7 +10,7 @@ impl FlightStack {
         match mode {
             Mode::Transition if self.plans_tilt => self.transition_tilt_max,
             Mode::Transition => self.transition_limit,
-            Mode::Failsafe if self.rotor_out() => self.rotor_out_tilt(),
+            Mode::Failsafe if self.failsafe_descends() => self.descent_tilt(),
             Mode::Takeoff | Mode::Flight | Mode::Morphing | Mode::Failsafe => self.flight_limit(),
             Mode::Disarmed | Mode::Drive | Mode::Touchdown => self.tilt_max,
         }
@@ -42,8 +42,8 @@ impl FlightStack {
             Mode::Disarmed => self.tilt_lever * v,
             Mode::Drive | Mode::Touchdown => 0.0,
             Mode::Takeoff if grounded && tilt <= takeoff_tilt => 0.0,
-            // The rotor-out descent: to its tilt (the limit), from either side.
-            Mode::Failsafe if self.rotor_out() => v,
+            // A failsafe descent: to its tilt (the limit), from either side.
+            Mode::Failsafe if self.failsafe_descends() => v,
             Mode::Takeoff | Mode::Flight | Mode::Failsafe => -v,
             // Held until the MPC's plan says otherwise (see `step`).
             Mode::Transition if self.plans_tilt => 0.0,

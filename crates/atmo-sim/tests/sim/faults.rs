@@ -409,6 +409,51 @@ fn solver_time_limit_hit_repeatedly_cuts_counted_then_failsafe_past_the_grace() 
     );
 }
 
+/// The MPC fails for good in the morph (every solve cut, with the Clarabel
+/// feedback, from 1.5 s to the end): past the grace the failsafe flies the
+/// backup controller's level descent, not the failed MPC's last plan
+/// (which hovered and then climbed away to 7 m and turned over), tilts to
+/// the landing tilt that puts the wheels under the base, and comes down
+/// level and slowly on its wheels.
+#[test]
+fn the_mpc_failed_for_good_the_backup_lands_level_on_the_wheels() {
+    let overrun = "[[faults.solver_overrun]]\nt = 1.5\nduration = 30.0\niteration = 1";
+    let mut controller = ControllerConfig::atmo().unwrap().deterministic();
+    controller.mpc.feedback.method = FeedbackMethod::Clarabel;
+    let mut ticks = Vec::new();
+    let summary = fly(&scenario(overrun), &controller, |r| ticks.push(*r)).unwrap();
+    let f = Flight { summary, ticks };
+    let failsafe = f.first_in(Mode::Failsafe, 1.5).expect("no failsafe");
+    let airborne: Vec<&TickRecord> = f
+        .ticks
+        .iter()
+        .filter(|t| t.time >= failsafe.time && t.outputs.status.mode == Mode::Failsafe)
+        .collect();
+    assert!(
+        airborne
+            .iter()
+            .all(|t| t.outputs.status.solver == SolverStatus::Failed),
+        "the solves came back"
+    );
+    let highest = airborne.iter().map(|t| t.truth_height).fold(0.0, f64::max);
+    assert!(
+        highest < failsafe.truth_height + 0.05,
+        "climbed from {:.2} to {highest:.2} m",
+        failsafe.truth_height
+    );
+    use atmo_core::model::idx;
+    let leaned = airborne
+        .iter()
+        .map(|t| t.truth[idx::ROLL].abs().max(t.truth[idx::PITCH].abs()))
+        .fold(0.0, f64::max);
+    assert!(leaned.to_degrees() < 5.0, "{:.1} deg", leaned.to_degrees());
+    let s = &f.summary;
+    assert!(s.crash_reason.is_none(), "{s:?}");
+    assert!(s.touchdown_tilt_deg.unwrap() > 30.0, "{s:?}");
+    assert!(s.impact_speed_mps.unwrap() < 0.35, "{s:?}");
+    println!("the MPC failed for good: {s:?}");
+}
+
 /// The log's disk is full (`/dev/full`: every write fails with ENOSPC):
 /// the flight is the clean one bit for bit (logging never blocks the
 /// control path), every record after the failure is dropped and counted,

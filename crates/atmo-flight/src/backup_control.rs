@@ -1,0 +1,203 @@
+//! The backup controller: a level descent for when the MPC has failed past
+//! its grace (`Mode::Failsafe` with `SolverStatus::Failed`) while the
+//! estimate is still good.
+//!
+//! Without it the failed MPC's last plan was flown on (its first command,
+//! held): a robot whose solves never came back hovered or climbed away on
+//! a stale collective with nothing holding its attitude (atmo-sim's
+//! `the_mpc_failed_for_good_the_backup_lands_level_on_the_wheels` fails
+//! with the backup off). This is the cascade every
+//! autopilot keeps under its main controller: the roll and pitch held level
+//! and every body rate damped by a critically damped PD at
+//! `failsafe.backup_attitude_bandwidth` (the heading is let go: the yaw
+//! rate is damped, not the angle), the horizontal velocity damped by
+//! leaning against it (at most [`MAX_LEAN`]), and the vertical speed held at
+//! `failsafe.backup_descent_speed` down by a proportional loop
+//! [`VERTICAL_SEPARATION`] times slower than the attitude's, the thrust
+//! divided by the tilt of the body so that leaning costs no height. The
+//! wrench is allocated to the four rotors through the model at the tilt
+//! flown, with the observer's learned wrench (`TiltedBody::commands_for`),
+//! and each command clamped to [0, 1]. The arms meanwhile go to the
+//! failsafe descent's landing tilt (`monitor.rotor_out_landing_tilt_deg`),
+//! so that it comes down on its wheels, not its base.
+//!
+//! Limits: it allocates over the four rotors as the robot file has them
+//! (a rotor fault learned by `rotor_estimate` is not flown around), it
+//! knows no ground effect (the vertical loop's integral takes it up) and
+//! it damps the velocity, it does not hold a position: it lands where its
+//! velocity at the failure carries it to.
+//!
+//! Pure, fixed-size, no allocation: it runs on the control path.
+
+use atmo_core::model::{Input, State, TiltedBody, idx};
+use nalgebra::Vector3;
+
+/// How much slower the vertical speed loop is than the attitude loop: a
+/// cascade's outer loop a factor of several below the inner one does not
+/// fight it (the usual rule of thumb; 5).
+pub const VERTICAL_SEPARATION: f64 = 5.0;
+
+/// The most the backup leans to brake a horizontal velocity, rad (about
+/// 10 deg: a tenth of the thrust to the side).
+const MAX_LEAN: f64 = 0.175;
+
+/// The body's tilt from level below which the thrust is no longer divided
+/// by it (cos 60 deg): a robot rolled past that gets the level thrust, not
+/// twice it.
+const MIN_TILT_COSINE: f64 = 0.5;
+
+/// The level descent's memory: the vertical loop's integral.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct LevelDescent {
+    /// The integral of the vertical speed error, m/s^2 of acceleration.
+    integral: f64,
+}
+
+impl LevelDescent {
+    /// Forgets the integral (a new failsafe).
+    pub fn reset(&mut self) {
+        self.integral = 0.0;
+    }
+
+    /// The rotor commands of the level descent at `state` for `body` (the
+    /// model at the tilt flown, with the wrench the observer learned),
+    /// `dt` after the last call: attitude bandwidth `bandwidth` (rad/s),
+    /// descent speed `descent_speed` (m/s, down). The vertical loop is a
+    /// critically damped PI: the model has no ground effect, whose lift
+    /// near the ground a proportional loop alone would hover on. `None`
+    /// when the model has no allocation there (the caller falls back).
+    pub fn command(
+        &mut self,
+        body: &TiltedBody,
+        state: &State,
+        dt: f64,
+        bandwidth: f64,
+        descent_speed: f64,
+    ) -> Option<Input> {
+        // The horizontal velocity damped by leaning against it (FRD body,
+        // NED world: nose up brakes forward, right wing down pushes right),
+        // at the vertical loop's gain, the lean bounded.
+        let gain = bandwidth / VERTICAL_SEPARATION;
+        let (sin_yaw, cos_yaw) = state[idx::YAW].sin_cos();
+        let forward = cos_yaw * state[idx::VX] + sin_yaw * state[idx::VY];
+        let right = -sin_yaw * state[idx::VX] + cos_yaw * state[idx::VY];
+        let lean = |a: f64| (a / body.gravity).clamp(-MAX_LEAN, MAX_LEAN);
+        let pitch_wanted = lean(gain * forward);
+        let roll_wanted = lean(-gain * right);
+        let angle_error = Vector3::new(
+            state[idx::ROLL] - roll_wanted,
+            state[idx::PITCH] - pitch_wanted,
+            0.0,
+        );
+        let rates = Vector3::new(state[idx::WX], state[idx::WY], state[idx::WZ]);
+        let angular_acceleration =
+            -angle_error * (bandwidth * bandwidth) - rates * (2.0 * bandwidth);
+        let torque = body.inertia * angular_acceleration;
+        // NED: z down, the velocity in the world frame.
+        let error = descent_speed - state[idx::VZ];
+        // Critically damped: s^2 + k s + k^2 / 4. The integral is bounded
+        // by half of gravity (no wind-up on the ground).
+        let limit = 0.5 * body.gravity;
+        self.integral = (self.integral + 0.25 * gain * gain * error * dt).clamp(-limit, limit);
+        let acceleration_down = gain * error + self.integral;
+        let tilt_cosine = (state[idx::ROLL].cos() * state[idx::PITCH].cos()).max(MIN_TILT_COSINE);
+        let force_z = body.mass * (acceleration_down - body.gravity) / tilt_cosine;
+        let u = body.commands_for(force_z, &torque);
+        u.iter()
+            .all(|v| v.is_finite())
+            .then(|| u.map(|v| v.clamp(0.0, 1.0)))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use atmo_core::{Model, RobotConfig};
+
+    fn body() -> TiltedBody {
+        Model::new(&RobotConfig::atmo()).at_tilt(0.0)
+    }
+
+    #[test]
+    fn level_and_at_the_descent_speed_it_commands_the_hover_trim() {
+        let b = body();
+        let mut x = State::zeros();
+        x[idx::VZ] = 0.3;
+        let u = LevelDescent::default()
+            .command(&b, &x, 0.01, 10.0, 0.3)
+            .unwrap();
+        assert!((u - b.hover_trim()).norm() < 1e-12, "{u}");
+    }
+
+    #[test]
+    fn it_rights_a_rolled_robot_and_brakes_a_fall() {
+        let b = body();
+        let mut x = State::zeros();
+        x[idx::ROLL] = 0.2;
+        x[idx::VZ] = 0.3;
+        let u = LevelDescent::default()
+            .command(&b, &x, 0.01, 10.0, 0.3)
+            .unwrap();
+        let torque = b.thrust_torque * u + b.first_moment.cross(&Vector3::new(0.0, 0.0, b.gravity));
+        assert!(torque.x < -0.1, "rolled right, it rolls left: {torque}");
+        x[idx::ROLL] = 0.0;
+        x[idx::VZ] = 2.0;
+        let fast = LevelDescent::default()
+            .command(&b, &x, 0.01, 10.0, 0.3)
+            .unwrap();
+        assert!(fast.sum() > b.hover_trim().sum() + 0.1, "{fast}");
+        x[idx::VZ] = -2.0;
+        let climbing = LevelDescent::default()
+            .command(&b, &x, 0.01, 10.0, 0.3)
+            .unwrap();
+        assert!(climbing.sum() < b.hover_trim().sum() - 0.1, "{climbing}");
+        assert!(climbing.iter().all(|v| (0.0..=1.0).contains(v)));
+    }
+
+    #[test]
+    fn it_leans_against_a_horizontal_velocity_whatever_the_heading() {
+        let b = body();
+        let gravity_torque = b.first_moment.cross(&Vector3::new(0.0, 0.0, b.gravity));
+        let torque = |x: &State| {
+            let u = LevelDescent::default()
+                .command(&b, x, 0.01, 10.0, 0.3)
+                .unwrap();
+            b.thrust_torque * u + gravity_torque
+        };
+        let mut x = State::zeros();
+        x[idx::VZ] = 0.3;
+        // Flying forward (north, heading north): nose up.
+        x[idx::VX] = 1.0;
+        assert!(torque(&x).y > 0.1, "{}", torque(&x));
+        // Flying east, heading east: forward again, nose up.
+        x[idx::VX] = 0.0;
+        x[idx::VY] = 1.0;
+        x[idx::YAW] = std::f64::consts::FRAC_PI_2;
+        assert!(torque(&x).y > 0.1, "{}", torque(&x));
+        // Flying east, heading north: to the right, left wing down.
+        x[idx::YAW] = 0.0;
+        assert!(torque(&x).x < -0.1, "{}", torque(&x));
+        // Leaned as far as it leans, it holds there.
+        x[idx::VY] = 100.0;
+        x[idx::ROLL] = -MAX_LEAN;
+        assert!(torque(&x).norm() < 1e-9, "{}", torque(&x));
+    }
+
+    #[test]
+    fn held_above_its_descent_speed_the_integral_adds_thrust_until_bounded() {
+        // Hovering (a lift the model lacks holds it up): the integral asks
+        // for less thrust each tick, down to half of gravity.
+        let b = body();
+        let x = State::zeros();
+        let mut descent = LevelDescent::default();
+        let first = descent.command(&b, &x, 0.01, 10.0, 0.3).unwrap().sum();
+        let mut last = first;
+        for _ in 0..2000 {
+            last = descent.command(&b, &x, 0.01, 10.0, 0.3).unwrap().sum();
+        }
+        assert!(last < first - 0.1, "{first} -> {last}");
+        assert!((descent.integral - 0.5 * b.gravity).abs() < 1e-9);
+        descent.reset();
+        assert_eq!(descent, LevelDescent::default());
+    }
+}
