@@ -1,6 +1,7 @@
 //! The backup controller: a level descent for when the MPC has failed past
-//! its grace (`Mode::Failsafe` with `SolverStatus::Failed`) while the
-//! estimate is still good.
+//! its grace (`Mode::Failsafe` with `SolverStatus::Failed`) or the pilot
+//! has switched it off, while the estimate is still good (without one,
+//! the failsafe's open-loop trim).
 //!
 //! Without it the failed MPC's last plan was flown on (its first command,
 //! held): a robot whose solves never came back hovered or climbed away on

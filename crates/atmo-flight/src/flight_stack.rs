@@ -27,8 +27,10 @@ use crate::modes::{Conditions, Mode, Thresholds, next_mode};
 use crate::observer::{DisturbanceObserver, ObserverSettings};
 use crate::rotor_estimate::RotorEstimate;
 use crate::settings::FlightSettings;
+use failsafe::FailsafeControl;
 
 mod drive;
+mod failsafe;
 mod landing;
 mod monitoring;
 mod tilt;
@@ -120,6 +122,8 @@ pub struct FlightStack {
     rotor: RotorEstimate,
     /// The backup controller's memory (`backup_control`).
     backup: LevelDescent,
+    /// Who flies the thrusters in failsafe this tick.
+    failsafe_control: FailsafeControl,
     /// The rotors' mean hover trim at `monitor.rotor_out_landing_tilt_deg`
     /// (a fraction of four full rotors), frozen at start-up.
     rotor_out_landing_trim: f64,
@@ -237,6 +241,7 @@ impl FlightStack {
             tilt_sent: 0.0,
             rotor: RotorEstimate::default(),
             backup: LevelDescent::default(),
+            failsafe_control: FailsafeControl::OpenLoop,
             rotor_out_landing_trim: model
                 .at_tilt(settings.monitor.rotor_out_landing_tilt_deg.to_radians())
                 .hover_trim()
@@ -379,6 +384,7 @@ impl FlightStack {
         if mode != self.mode {
             self.enter(mode, now, &state);
         }
+        self.failsafe_control = self.failsafe_control(estimate_fresh, conditions.mpc_failed);
 
         if mode == Mode::Transition {
             self.transition_limit = self.transition_limit.max(self.transition_schedule(height));
@@ -426,7 +432,7 @@ impl FlightStack {
         self.learn_rotor(tilt);
         status.disturbance = self.observer.wrench().into();
 
-        let thrust = self.thrust(mode, &state, estimate_fresh, pilot, tilt, &mut status);
+        let thrust = self.thrust(mode, &state, pilot, tilt, &mut status);
         let tilt_velocity = match self.mpc_tilt_rate.take() {
             // In the transition the MPC's plan decides, within the same limits.
             Some(rate) if mode == Mode::Transition && self.plans_tilt => {
@@ -517,7 +523,6 @@ impl FlightStack {
         &mut self,
         mode: Mode,
         state: &State,
-        estimate_fresh: bool,
         pilot: PilotInput,
         tilt: f64,
         status: &mut Status,
@@ -537,30 +542,15 @@ impl FlightStack {
             Mode::Takeoff if tilt > self.settings.modes.takeoff_max_tilt_deg.to_radians() => {
                 Input::zeros()
             }
-            Mode::Failsafe if !estimate_fresh || !pilot.mpc_enabled => {
-                // No state to fly on: open-loop hover trim at the current
-                // tilt, slightly under, for a slow level descent.
+            Mode::Failsafe if self.failsafe_control == FailsafeControl::Backup => {
+                self.backup_thrust(state, pilot, tilt, status)
+            }
+            Mode::Failsafe if self.failsafe_control == FailsafeControl::OpenLoop => {
+                // No state to fly on (or no backup): open-loop hover trim
+                // at the current tilt, slightly under, a descent with
+                // nothing holding the attitude.
                 let trim = self.model.at_tilt(tilt).hover_trim();
                 (trim * self.settings.failsafe.open_loop_thrust_scale).map(|u| u.clamp(0.0, 1.0))
-            }
-            Mode::Failsafe => {
-                // The MPC still runs (its solves may come back: recovery),
-                // but once it has failed past its grace its stale plan is
-                // not flown: the backup's level descent is.
-                let planned = self.mpc_feedback(state, status);
-                if !self.backup_flies() {
-                    return planned;
-                }
-                let bandwidth = self.settings.failsafe.backup_attitude_bandwidth;
-                let body = self
-                    .model
-                    .at_tilt(tilt)
-                    .with_disturbance(self.observer.wrench());
-                let speed = self.settings.failsafe.backup_descent_speed;
-                let dt = self.period();
-                self.backup
-                    .command(&body, state, dt, bandwidth, speed)
-                    .unwrap_or(planned)
             }
             _ => self.mpc_feedback(state, status),
         }

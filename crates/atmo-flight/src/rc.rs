@@ -124,7 +124,8 @@ atmo_core::params! {
     pub struct Switches: Default {
         /// Offboard: the daemon flies (with the kill switch off, this is arming).
         pub offboard: Switch = switch_high(9);
-        /// MPC on: off in the air is a failsafe (open-loop hover trim).
+        /// MPC on: off in the air is a failsafe (the backup controller's
+        /// level descent, `backup_control`).
         pub mpc: Switch = switch_high(8);
         /// Kill: disarmed at once, latched until the offboard switch is off.
         pub kill: Switch = switch_high(5);

@@ -93,9 +93,9 @@ atmo_core::params! {
         /// descent).
         pub open_loop_thrust_scale: f64, range 0.0..=1.5;
         /// The backup controller's attitude bandwidth (`backup_control`),
-        /// flown in failsafe once the MPC has failed past its grace; 0
-        /// flies the failed MPC's last plan on, as logs written before the
-        /// key did.
+        /// flown in failsafe once the MPC has failed past its grace or is
+        /// switched off; 0 flies the failed MPC's last plan on (switched
+        /// off: the open-loop trim), as logs written before the key did.
         pub backup_attitude_bandwidth: f64 = 0.0, range 0.0..=100.0, unit "rad/s";
         /// ... and its descent speed.
         pub backup_descent_speed: f64 = 0.3, range 0.0..=5.0, unit "m/s";

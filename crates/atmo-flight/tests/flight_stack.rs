@@ -286,13 +286,22 @@ fn velocity_commands_are_limited_to_one_metre_per_second() {
     assert!(vx < 1.1, "flies at {vx} m/s");
 }
 
+/// Switched off in the air, the MPC hands over to the backup controller:
+/// a level descent at `failsafe.backup_descent_speed` (0.3 m/s).
 #[test]
-fn mpc_switch_off_in_flight_is_a_failsafe() {
+fn mpc_switch_off_in_flight_is_a_failsafe_descending_level() {
     let mut lp = Loop::new(1.5);
     lp.run(0.2);
     lp.pilot.mpc_enabled = false;
     let out = lp.tick();
     assert_eq!(out.status.mode, Mode::Failsafe);
+    let outs = lp.run(3.0);
+    assert!(outs.iter().all(|o| o.status.mode == Mode::Failsafe));
+    let vz = lp.x[idx::VZ];
+    assert!((vz - 0.3).abs() < 0.03, "descends at {vz} m/s");
+    let lean = lp.x[idx::ROLL].abs().max(lp.x[idx::PITCH].abs());
+    assert!(lean.to_degrees() < 1.0, "{} deg", lean.to_degrees());
+    assert!(lp.height() < 1.5 - 0.5, "at {} m", lp.height());
 }
 
 #[test]

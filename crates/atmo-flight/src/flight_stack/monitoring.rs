@@ -127,37 +127,6 @@ impl FlightStack {
         Some(0.5 * (1.0 + e))
     }
 
-    /// The arms' tilt in a failsafe descent (a rotor out, or the backup
-    /// controller flying), rad: the landing tilt
-    /// (`monitor.rotor_out_landing_tilt_deg`, the wheels under the base)
-    /// if the balanced thrust left (all four rotors' without a rotor
-    /// fault) holds the weight there, else folded (all the lift there
-    /// is). A stuck rotor gives what it is stuck at and tilts; a stopped
-    /// one leaves two full rotors, about the weight folded, and folds.
-    pub(super) fn descent_tilt(&self) -> f64 {
-        if self.rotor_out_landing_trim <= self.thrust_left().unwrap_or(1.0) {
-            self.settings
-                .monitor
-                .rotor_out_landing_tilt_deg
-                .to_radians()
-        } else {
-            0.0
-        }
-    }
-
-    /// In failsafe the MPC has failed past its grace and the backup
-    /// controller flies (`backup_control`; off with a zero bandwidth).
-    pub(super) fn backup_flies(&self) -> bool {
-        self.mode == Mode::Failsafe
-            && self.settings.failsafe.backup_attitude_bandwidth > 0.0
-            && self.mpc.failed_ticks() > self.mpc.settings().failure.grace_ticks
-    }
-
-    /// A failsafe that lands: the rotor-out descent or the backup's.
-    pub(super) fn failsafe_descends(&self) -> bool {
-        self.mode == Mode::Failsafe && (self.rotor_out() || self.backup_flies())
-    }
-
     /// The flight tilt limit for the thrust left, rad: the robot file's
     /// keeps its thrust reserve with four full rotors (4 kT cos phi_max
     /// over m g); the same reserve with a fraction `left` of them holds at

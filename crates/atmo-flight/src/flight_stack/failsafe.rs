@@ -1,0 +1,97 @@
+//! The failsafe's flying: who commands the thrusters (the MPC, the backup
+//! controller or the open-loop trim) and the tilt of a failsafe that lands.
+
+use atmo_core::model::{Input, State};
+
+use super::FlightStack;
+use crate::modes::Mode;
+use crate::step_io::{PilotInput, Status};
+
+/// Who flies the thrusters in failsafe (`FlightStack::failsafe_control`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(super) enum FailsafeControl {
+    /// The MPC, holding position (or the rotor-out descent).
+    Mpc,
+    /// The backup controller's level descent (`backup_control`).
+    Backup,
+    /// The hover trim, open loop: no estimate to fly on.
+    OpenLoop,
+}
+
+impl FlightStack {
+    /// The arms' tilt in a failsafe descent (a rotor out, or the backup
+    /// controller flying), rad: the landing tilt
+    /// (`monitor.rotor_out_landing_tilt_deg`, the wheels under the base)
+    /// if the balanced thrust left (all four rotors' without a rotor
+    /// fault) holds the weight there, else folded (all the lift there
+    /// is). A stuck rotor gives what it is stuck at and tilts; a stopped
+    /// one leaves two full rotors, about the weight folded, and folds.
+    pub(super) fn descent_tilt(&self) -> f64 {
+        if self.rotor_out_landing_trim <= self.thrust_left().unwrap_or(1.0) {
+            self.settings
+                .monitor
+                .rotor_out_landing_tilt_deg
+                .to_radians()
+        } else {
+            0.0
+        }
+    }
+
+    /// Who would fly a failsafe now: without an estimate the open-loop
+    /// trim; with one, the MPC switched off or failed past its grace
+    /// (`mpc_failed`), the backup controller (`backup_control`; with a
+    /// zero bandwidth the failed MPC's held command, or switched off the
+    /// open-loop trim, as logs written before the key flew); else the MPC.
+    pub(super) fn failsafe_control(
+        &self,
+        estimate_fresh: bool,
+        mpc_failed: bool,
+    ) -> FailsafeControl {
+        let backup = self.settings.failsafe.backup_attitude_bandwidth > 0.0;
+        let switched_off = !self.last_pilot.mpc_enabled;
+        if !estimate_fresh || (switched_off && !backup) {
+            FailsafeControl::OpenLoop
+        } else if mpc_failed && backup {
+            FailsafeControl::Backup
+        } else {
+            FailsafeControl::Mpc
+        }
+    }
+
+    /// In failsafe the backup controller flies.
+    pub(super) fn backup_flies(&self) -> bool {
+        self.mode == Mode::Failsafe && self.failsafe_control == FailsafeControl::Backup
+    }
+
+    /// A failsafe that lands: the rotor-out descent or the backup's.
+    pub(super) fn failsafe_descends(&self) -> bool {
+        self.mode == Mode::Failsafe && (self.rotor_out() || self.backup_flies())
+    }
+
+    /// The backup's level descent. A failed MPC still runs (its solves may
+    /// come back: recovery), its stale plan unflown; switched off, it does
+    /// not run.
+    pub(super) fn backup_thrust(
+        &mut self,
+        state: &State,
+        pilot: PilotInput,
+        tilt: f64,
+        status: &mut Status,
+    ) -> Input {
+        let planned = if pilot.mpc_enabled {
+            self.mpc_feedback(state, status)
+        } else {
+            self.last_thrust
+        };
+        let bandwidth = self.settings.failsafe.backup_attitude_bandwidth;
+        let body = self
+            .model
+            .at_tilt(tilt)
+            .with_disturbance(self.observer.wrench());
+        let speed = self.settings.failsafe.backup_descent_speed;
+        let dt = self.period();
+        self.backup
+            .command(&body, state, dt, bandwidth, speed)
+            .unwrap_or(planned)
+    }
+}
