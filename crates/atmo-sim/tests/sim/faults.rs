@@ -441,10 +441,14 @@ fn the_mpc_failed_for_good_the_backup_lands_level_on_the_wheels() {
         "climbed from {:.2} to {highest:.2} m",
         failsafe.truth_height
     );
-    use atmo_core::model::idx;
     let leaned = airborne
         .iter()
-        .map(|t| t.truth[idx::ROLL].abs().max(t.truth[idx::PITCH].abs()))
+        .map(|t| {
+            let s = &t.truth;
+            s[atmo_core::model::idx::ROLL]
+                .abs()
+                .max(s[atmo_core::model::idx::PITCH].abs())
+        })
         .fold(0.0, f64::max);
     assert!(leaned.to_degrees() < 5.0, "{:.1} deg", leaned.to_degrees());
     let s = &f.summary;
