@@ -40,7 +40,7 @@ pub const VERTICAL_SEPARATION: f64 = 5.0;
 
 /// The most the backup leans to brake a horizontal velocity, rad (about
 /// 10 deg: a tenth of the thrust to the side).
-const MAX_LEAN: f64 = 0.175;
+pub const MAX_LEAN: f64 = 0.175;
 
 /// The body's tilt from level below which the thrust is no longer divided
 /// by it (cos 60 deg): a robot rolled past that gets the level thrust, not
