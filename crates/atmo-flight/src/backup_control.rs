@@ -13,7 +13,7 @@
 //! `failsafe.backup_attitude_bandwidth` (the heading is let go: the yaw
 //! rate is damped, not the angle), the horizontal velocity damped by
 //! leaning against it (at most [`MAX_LEAN`]), and the vertical speed held at
-//! `failsafe.backup_descent_speed` down by a proportional loop
+//! `failsafe.backup_descent_speed` down by a PI loop
 //! [`VERTICAL_SEPARATION`] times slower than the attitude's, the thrust
 //! divided by the tilt of the body so that leaning costs no height. The
 //! wrench is allocated to the four rotors through the model at the tilt
@@ -185,7 +185,7 @@ mod tests {
     }
 
     #[test]
-    fn held_above_its_descent_speed_the_integral_adds_thrust_until_bounded() {
+    fn held_above_its_descent_speed_the_integral_takes_thrust_off_until_bounded() {
         // Hovering (a lift the model lacks holds it up): the integral asks
         // for less thrust each tick, down to half of gravity.
         let b = body();
