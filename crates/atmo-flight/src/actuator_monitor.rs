@@ -63,19 +63,18 @@ atmo_core::params! {
         /// A failed rotor that delivers less than this of its command is out:
         /// below half, two full rotors and two at this fraction (roll and
         /// pitch balanced) cannot hold the robot at the flight tilt limit
-        /// (50 deg), so no wheel landing can be flown; the robot descends
-        /// folded.
+        /// (50 deg), so the transition cannot be flown; the robot descends
+        /// with its arms at `rotor_out_landing_tilt_deg`.
         pub rotor_out_effectiveness: f64 = ROTOR_OUT_EFFECTIVENESS, range 0.0..=1.0;
         /// With a rotor out: the descent speed to the ground.
         pub rotor_out_descent_speed: f64 = ROTOR_OUT_DESCENT_SPEED, range 0.05..=2.0, unit "m/s";
         /// With a rotor out (and in the backup controller's descent,
         /// `failsafe.backup_attitude_bandwidth`): the arms' tilt in the
-        /// descent when the thrust
-        /// left holds the weight there (level, four rotors' hover trim at
-        /// that tilt within the balanced thrust left), else folded (0).
-        /// Tilted past the tilt where the wheels' rims pass under the base
-        /// box, the robot comes down on its wheels, not its body (for ATMO
-        /// from about 33 deg: atmo-sim's `the_rotor_out_landing_tilt_puts_the_wheels_under_the_base`).
+        /// descent, whatever the thrust left (folded, every touchdown is
+        /// on the base box). Tilted past the tilt where the wheels' rims
+        /// pass under the base box, the robot comes down on its wheels, not
+        /// its body (for ATMO from about 33 deg: atmo-sim's
+        /// `the_rotor_out_landing_tilt_puts_the_wheels_under_the_base`).
         pub rotor_out_landing_tilt_deg: f64 = ROTOR_OUT_LANDING_TILT_DEG, range 0.0..=90.0, unit "deg";
     }
 }

@@ -124,9 +124,6 @@ pub struct FlightStack {
     backup: LevelDescent,
     /// Who flies the thrusters in failsafe this tick.
     failsafe_control: FailsafeControl,
-    /// The rotors' mean hover trim at `monitor.rotor_out_landing_tilt_deg`
-    /// (a fraction of four full rotors), frozen at start-up.
-    rotor_out_landing_trim: f64,
 }
 
 impl FlightStack {
@@ -242,10 +239,6 @@ impl FlightStack {
             rotor: RotorEstimate::default(),
             backup: LevelDescent::default(),
             failsafe_control: FailsafeControl::OpenLoop,
-            rotor_out_landing_trim: model
-                .at_tilt(settings.monitor.rotor_out_landing_tilt_deg.to_radians())
-                .hover_trim()
-                .mean(),
             model,
             settings,
         })

@@ -118,9 +118,8 @@ pub const TRANSITIONS: &[Transition] = &[
     },
     Transition {
         // Out (too little thrust left for the wheel landing's tilts) above
-        // z*: down at a set speed, the heading let go, the arms folded or,
-        // where the thrust left holds the weight there, tilted to put the
-        // wheels under the base. A transition under way is already
+        // z*: down at a set speed, the heading let go, the arms tilted to
+        // put the wheels under the base. A transition under way is already
         // landing and lands.
         from: &[Mode::Takeoff, Mode::Flight, Mode::Morphing],
         to: Mode::Failsafe,

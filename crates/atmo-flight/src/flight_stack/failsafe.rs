@@ -21,20 +21,18 @@ pub(super) enum FailsafeControl {
 impl FlightStack {
     /// The arms' tilt in a failsafe descent (a rotor out, or the backup
     /// controller flying), rad: the landing tilt
-    /// (`monitor.rotor_out_landing_tilt_deg`, the wheels under the base)
-    /// if the balanced thrust left (all four rotors' without a rotor
-    /// fault) holds the weight there, else folded (all the lift there
-    /// is). A stuck rotor gives what it is stuck at and tilts; a stopped
-    /// one leaves two full rotors, about the weight folded, and folds.
+    /// (`monitor.rotor_out_landing_tilt_deg`), where the wheels' rims are
+    /// under the base box. Whatever the thrust left: folded, the base box
+    /// is the lowest point and every touchdown is a body contact, and an
+    /// out rotor's thrust is not known when it goes out (a stuck rotor
+    /// named lost is believed to give nothing until the observer sees
+    /// what it gives), so folding for lift landed stuck rotors on their
+    /// base (docs/decisions/2026-12-06-stuck-rotor-in-flight.md).
     pub(super) fn descent_tilt(&self) -> f64 {
-        if self.rotor_out_landing_trim <= self.thrust_left().unwrap_or(1.0) {
-            self.settings
-                .monitor
-                .rotor_out_landing_tilt_deg
-                .to_radians()
-        } else {
-            0.0
-        }
+        self.settings
+            .monitor
+            .rotor_out_landing_tilt_deg
+            .to_radians()
     }
 
     /// Who would fly a failsafe now: without an estimate the open-loop
