@@ -34,6 +34,9 @@
 //!    approach goes down (both predictions fall as the commit is delayed).
 //!    A robot predicted to land steeply waits for a soft landing; one
 //!    predicted near `tilt_min` commits with the speed margin it has.
+//!    When the approach is over (the hold reached, or the final approach
+//!    no lower for a time constant) the flare commits too: waiting lowers
+//!    neither risk.
 //!
 //! Then the flight stack commands the tilt at full speed to the transition
 //! limit whatever the MPC's plan says, and the wheels meet the ground a few
@@ -246,11 +249,19 @@ pub struct Decision {
     pub clearance: f64,
 }
 
+/// The final approach: the flare predicts (and may decide) while the
+/// wheels are within this of the ground at the transition's tilt limit, m.
+pub const PREDICTION_RANGE: f64 = 0.17;
+
 /// Where the flare is.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct Flare {
     /// The tilt-up has begun (it is never taken back in this transition).
     decision: Option<Decision>,
+    /// The lowest clearance of the final approach so far (m) and when it
+    /// was reached (ns): the approach has stalled when it has not gone
+    /// lower for a time constant.
+    lowest: Option<(f64, u64)>,
 }
 
 impl Flare {
@@ -272,8 +283,11 @@ impl Flare {
     /// One tick of the approach: commits when `predicted` (a tilt-up begun
     /// at the last preparation, [`predict_touchdown`]), expected with the
     /// prediction's mean error, says so ([`FlareSettings::commits`]), or
-    /// when the wheels' `clearance` (m, at the tilt limit) has reached the
-    /// hold: there the approach stops descending, and waiting longer
+    /// when the approach has stopped descending: the wheels' `clearance`
+    /// (m, at the tilt limit) has reached the hold, or in the final
+    /// approach ([`PREDICTION_RANGE`]) it has not gone lower for the
+    /// approach's time constant (a robot whose MPC holds it a little above
+    /// the hold, short of thrust to tilt further). There waiting longer
     /// lowers neither risk. Returns whether the tilt-up has begun.
     pub fn update(
         &mut self,
@@ -287,7 +301,13 @@ impl Flare {
             return true;
         }
         let expected = predicted.map(|p| s.expected(&p));
-        if expected.is_some_and(|e| s.commits(&e)) || clearance <= s.hold_clearance {
+        if clearance < PREDICTION_RANGE && self.lowest.is_none_or(|(c, _)| clearance < c) {
+            self.lowest = Some((clearance, now_ns));
+        }
+        let stalled = self.lowest.is_some_and(|(_, since)| {
+            now_ns.saturating_sub(since) as f64 * 1e-9 >= s.time_constant
+        });
+        if expected.is_some_and(|e| s.commits(&e)) || clearance <= s.hold_clearance || stalled {
             self.decision = Some(Decision {
                 now_ns,
                 predicted: expected,
@@ -438,6 +458,34 @@ mod tests {
         let mut f = Flare::default();
         assert!(f.update(&S, 9, 1.0, 0.02, None));
         assert_eq!(f.decision().unwrap().predicted, None);
+    }
+
+    #[test]
+    fn a_final_approach_that_stops_going_lower_for_a_time_constant_commits() {
+        let ms = |t: f64| (t * 1e9) as u64;
+        // Held 2-4 cm above the hold (0.03 m), no touchdown predicted: the
+        // lowest clearance (0.05 m at 0.05 s) is not beaten for tau = 0.2 s.
+        let mut f = Flare::default();
+        let held = [0.06, 0.05, 0.07, 0.06, 0.055];
+        for (k, c) in (0u32..).zip(held) {
+            assert!(!f.update(&S, ms(0.05 * f64::from(k)), 1.0, c, None), "{k}");
+        }
+        assert!(!f.update(&S, ms(0.24), 1.0, 0.06, None));
+        assert!(f.update(&S, ms(0.25), 1.0, 0.06, None));
+        assert_eq!(f.decision().unwrap().predicted, None);
+        // Still descending, however slowly: no commit.
+        let mut f = Flare::default();
+        for k in 0..100 {
+            let c = 0.1 - 0.0005 * f64::from(k);
+            assert!(!f.update(&S, ms(0.01 * f64::from(k)), 1.0, c, None), "{k}");
+        }
+        // Stalled above the final approach (the prediction's range): no
+        // tilt-up from there.
+        let mut f = Flare::default();
+        for k in 0..100 {
+            let c = PREDICTION_RANGE + 0.01;
+            assert!(!f.update(&S, ms(0.01 * f64::from(k)), 1.0, c, None), "{k}");
+        }
     }
 
     #[test]

@@ -9,13 +9,10 @@ use atmo_mpc::wheel_clearance;
 
 use super::FlightStack;
 use crate::flare::{
-    COMMITTED_THRUST_MAX, Decision, TouchdownModel, predict_touchdown, predicted_vertical_force,
+    COMMITTED_THRUST_MAX, Decision, PREDICTION_RANGE, TouchdownModel, predict_touchdown,
+    predicted_vertical_force,
 };
 use crate::modes::Mode;
-
-/// The flare predicts its touchdown while the wheels are within this of
-/// the ground at the transition's tilt limit, m.
-const PREDICTION_RANGE: f64 = 0.17;
 
 /// Below this model ground-effect gain the observer's force counts as
 /// learned aloft (the flare's force floor).

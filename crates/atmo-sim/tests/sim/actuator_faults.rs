@@ -153,6 +153,21 @@ fn a_rotor_at_60_percent_in_flight_touches_down_on_its_wheels() {
     }
 }
 
+/// A rotor at 60 % whose MPC holds the robot a few centimetres above the
+/// flare's hold (the weak rotor at its bound, no tilt-up at full thrust
+/// predicted to come down): the flare commits once the final approach
+/// has not gone lower for its time constant, and the robot touches down
+/// slowly on its wheels. On seed 8_000_002 every rotor's flight held in
+/// the air until the scenario ended before that rule (named before it
+/// was flown: docs/decisions/2026-12-06-flare-stalled-approach.md).
+#[test]
+fn a_rotor_at_60_percent_held_above_the_hold_still_lands() {
+    for n in 1..=4 {
+        let f = rotor("t = 1.0", n, "scale = 0.6", 8_000_002);
+        touches_down_slowly_on_its_wheels(&f, &format!("rotor {n}"));
+    }
+}
+
 /// The same fault on the weakest robot the Monte Carlo draws (its rotors
 /// 5 % short of the robot file's thrust: 2.7 N of lift), each rotor: it
 /// touches down on its wheels, without a crash (on seed 7_300_002 two
