@@ -462,29 +462,29 @@ mod tests {
 
     #[test]
     fn a_final_approach_that_stops_going_lower_for_a_time_constant_commits() {
-        let ms = |t: f64| (t * 1e9) as u64;
+        let ns = |seconds: f64| (seconds * 1e9) as u64;
         // Held 2-4 cm above the hold (0.03 m), no touchdown predicted: the
         // lowest clearance (0.05 m at 0.05 s) is not beaten for tau = 0.2 s.
         let mut f = Flare::default();
         let held = [0.06, 0.05, 0.07, 0.06, 0.055];
         for (k, c) in (0u32..).zip(held) {
-            assert!(!f.update(&S, ms(0.05 * f64::from(k)), 1.0, c, None), "{k}");
+            assert!(!f.update(&S, ns(0.05 * f64::from(k)), 1.0, c, None), "{k}");
         }
-        assert!(!f.update(&S, ms(0.24), 1.0, 0.06, None));
-        assert!(f.update(&S, ms(0.25), 1.0, 0.06, None));
+        assert!(!f.update(&S, ns(0.24), 1.0, 0.06, None));
+        assert!(f.update(&S, ns(0.25), 1.0, 0.06, None));
         assert_eq!(f.decision().unwrap().predicted, None);
         // Still descending, however slowly: no commit.
         let mut f = Flare::default();
         for k in 0..100 {
             let c = 0.1 - 0.0005 * f64::from(k);
-            assert!(!f.update(&S, ms(0.01 * f64::from(k)), 1.0, c, None), "{k}");
+            assert!(!f.update(&S, ns(0.01 * f64::from(k)), 1.0, c, None), "{k}");
         }
         // Stalled above the final approach (the prediction's range): no
         // tilt-up from there.
         let mut f = Flare::default();
         for k in 0..100 {
             let c = PREDICTION_RANGE + 0.01;
-            assert!(!f.update(&S, ms(0.01 * f64::from(k)), 1.0, c, None), "{k}");
+            assert!(!f.update(&S, ns(0.01 * f64::from(k)), 1.0, c, None), "{k}");
         }
     }
 
