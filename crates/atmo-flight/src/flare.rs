@@ -301,12 +301,15 @@ impl Flare {
             return true;
         }
         let expected = predicted.map(|p| s.expected(&p));
-        if clearance < PREDICTION_RANGE && self.lowest.is_none_or(|(c, _)| clearance < c) {
+        let final_approach = clearance < PREDICTION_RANGE;
+        if final_approach && self.lowest.is_none_or(|(c, _)| clearance < c) {
             self.lowest = Some((clearance, now_ns));
         }
-        let stalled = self.lowest.is_some_and(|(_, since)| {
-            now_ns.saturating_sub(since) as f64 * 1e-9 >= s.time_constant
-        });
+        // Risen out of the final approach, it is no stall to tilt up from.
+        let stalled = final_approach
+            && self.lowest.is_some_and(|(_, since)| {
+                now_ns.saturating_sub(since) as f64 * 1e-9 >= s.time_constant
+            });
         if expected.is_some_and(|e| s.commits(&e)) || clearance <= s.hold_clearance || stalled {
             self.decision = Some(Decision {
                 now_ns,
@@ -480,10 +483,17 @@ mod tests {
             assert!(!f.update(&S, ns(0.01 * f64::from(k)), 1.0, c, None), "{k}");
         }
         // Stalled above the final approach (the prediction's range): no
-        // tilt-up from there.
+        // tilt-up from there ...
         let mut f = Flare::default();
         for k in 0..100 {
             let c = PREDICTION_RANGE + 0.01;
+            assert!(!f.update(&S, ns(0.01 * f64::from(k)), 1.0, c, None), "{k}");
+        }
+        // ... nor after it entered the final approach and rose out of it.
+        let mut f = Flare::default();
+        assert!(!f.update(&S, 0, 1.0, PREDICTION_RANGE - 0.01, None));
+        for k in 1..100 {
+            let c = PREDICTION_RANGE + 0.05;
             assert!(!f.update(&S, ns(0.01 * f64::from(k)), 1.0, c, None), "{k}");
         }
     }
