@@ -135,8 +135,8 @@ pub mod tilt_model;
 
 pub use controller::{
     AlphaSchedule, DegradedCause, FailureCause, FeedbackPath, HomotopyFallback, Mpc, Outcome,
-    SqpReport, TickOutput, TickTimings, TiltPlan, wheel_clearance, wheel_clearance_at_attitude,
-    wrap_angle,
+    SqpReport, TickOutput, TickTimings, TiltPlan, YawCost, wheel_clearance,
+    wheel_clearance_at_attitude, wrap_angle,
 };
 pub use error::{MpcError, Result};
 pub use homotopy::{Bound, BoxHomotopy, HomotopyStop};

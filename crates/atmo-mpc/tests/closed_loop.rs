@@ -163,3 +163,47 @@ fn known_disturbance_removes_the_steady_state_offset() {
     assert!(uncompensated > 0.05, "{uncompensated}");
     assert!(compensated < 1e-3, "{compensated}");
 }
+
+/// The yaw cost. From a hover 20 deg off the reference heading: held, it
+/// turns back; rate-only or free, it keeps the heading it has (no torque
+/// spent on the angle). From a hover spinning at 1 rad/s: rate-only, the
+/// spin is stopped; free, it is left to run. The position is held in
+/// every case.
+#[test]
+fn a_heading_held_turns_back_and_a_rate_only_one_stops_spinning_where_it_is() {
+    use atmo_mpc::YawCost;
+    let reference = hover_at(0.0, 0.0, 1.0);
+    let fly = |yaw: YawCost, start: State| {
+        let mut mpc = controller(Formulation::Condensed);
+        mpc.set_yaw_cost(yaw);
+        let trace = run(&mut mpc, start, 2 * TICKS_PER_SECOND, |m, _, _| {
+            m.set_reference_constant(&reference).unwrap();
+            m.set_alpha(1.0).unwrap();
+            m.set_tilt_ramp(0.0, 0.0, 0.0, 0.0).unwrap();
+            0.0
+        });
+        let x = *trace.last();
+        let pos_err = (x.fixed_rows::<3>(idx::X) - reference.fixed_rows::<3>(idx::X)).norm();
+        eprintln!(
+            "{yaw:?}: heading {:.2} deg, yaw rate {:.3} rad/s after 2 s, position error {pos_err:.4} m",
+            x[idx::YAW].to_degrees(),
+            x[idx::WZ]
+        );
+        assert!(pos_err < 0.02, "{yaw:?}: {pos_err} m");
+        (x[idx::YAW].to_degrees(), x[idx::WZ])
+    };
+    let mut turned = reference;
+    turned[idx::YAW] = 20f64.to_radians();
+    let held = fly(YawCost::Held, turned);
+    assert!(held.0.abs() < 5.0, "held: {held:?}");
+    for yaw in [YawCost::RateOnly, YawCost::Free] {
+        let (heading, rate) = fly(yaw, turned);
+        assert!((heading - 20.0).abs() < 0.5 && rate.abs() < 0.01, "{yaw:?}");
+    }
+    let mut spinning = reference;
+    spinning[idx::WZ] = 1.0;
+    let rate_only = fly(YawCost::RateOnly, spinning);
+    assert!(rate_only.1.abs() < 0.05, "rate only: {rate_only:?}");
+    let free = fly(YawCost::Free, spinning);
+    assert!(free.1 > 0.5, "free: {free:?}");
+}

@@ -2,7 +2,7 @@
 //! (`crate::actuator_monitor` decides what they show).
 
 use atmo_core::model::{Input, State, idx};
-use atmo_mpc::wheel_clearance;
+use atmo_mpc::{YawCost, wheel_clearance};
 
 use super::FlightStack;
 use crate::actuator_monitor::{Detected, MonitorInputs};
@@ -84,20 +84,30 @@ impl FlightStack {
 
     /// The MPC's rotor bounds and yaw cost for what the rotors can do: a
     /// failed rotor bounded by its effectiveness (around what it still
-    /// delivers once out), the yaw angle free (three rotors cannot hold the
-    /// heading and the thrust direction both: Mueller and D'Andrea's
-    /// relaxed hover) in the rotor-out descent. A reduced rotor is
-    /// allocated around with the heading kept, and so is one out in the
-    /// transition, stuck or stopped: there the wheels meet the ground, a
-    /// free heading spun the robot onto them at 8 rad/s, and a stuck
-    /// rotor's spin (to 18 rad/s) lifted it away.
+    /// delivers once out). With a rotor bounded under full thrust the
+    /// heading is not held, its rate still is ([`YawCost::RateOnly`]):
+    /// the rotors left cannot hold the heading and the lift both, and
+    /// near the ground, where the cost weighs the rates and not the
+    /// height, the MPC cut a diagonal pair for 0.1 s to turn the heading
+    /// back and came down on the base (docs/decisions/
+    /// 2026-12-06-heading-with-a-failed-rotor.md). In the rotor-out
+    /// descent the rate goes too ([`YawCost::Free`]: Mueller and
+    /// D'Andrea's relaxed hover); not in the transition, where the wheels
+    /// meet the ground: a free heading spun the robot onto them at 8
+    /// rad/s, and a stuck rotor's spin (to 18 rad/s) lifted it away.
     pub(super) fn configure_rotors(&mut self) {
         let out_below = self.settings.monitor.rotor_out_effectiveness;
         // In [0, 1] by construction: refused only if not, keeping the old.
         let (min, max) = self.rotor.rotor_bounds(out_below);
         let _ = self.mpc.set_rotor_bounds(&min, &max);
-        self.mpc
-            .set_yaw_free(self.rotor_out() && self.mode == Mode::Failsafe);
+        let yaw = if self.rotor_out() && self.mode == Mode::Failsafe {
+            YawCost::Free
+        } else if max.iter().any(|m| *m < 1.0) {
+            YawCost::RateOnly
+        } else {
+            YawCost::Held
+        };
+        self.mpc.set_yaw_cost(yaw);
     }
 
     /// The commands sent for the delivered thrust `planned`.

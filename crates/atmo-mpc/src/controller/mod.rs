@@ -31,6 +31,25 @@ pub use outcome::{
     TickOutput, TickTimings,
 };
 
+/// How much of the heading the cost holds
+/// ([`Mpc::set_yaw_cost`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum YawCost {
+    /// The yaw angle and rate weighted as the presets say.
+    #[default]
+    Held,
+    /// The yaw angle out of the cost, its rate kept: the heading goes
+    /// where the rotors leave it, without spinning up. With a rotor short
+    /// of thrust the rotors cannot hold the heading and the lift both;
+    /// near the ground the cost weighs the rates and not the height
+    /// (`q2`), and a heading held there was paid for in lift.
+    RateOnly,
+    /// The yaw angle and rate out of the cost (three rotors hold the
+    /// thrust direction only if the heading turns freely: Mueller and
+    /// D'Andrea's relaxed hover).
+    Free,
+}
+
 /// Wraps an angle to (-pi, pi].
 pub fn wrap_angle(a: f64) -> f64 {
     let w = a.rem_euclid(TAU);
@@ -95,10 +114,8 @@ pub struct Mpc {
     /// deliver, so that the optimizer redistributes).
     rotor_max: Input,
     rotor_min: Input,
-    /// Scale of the yaw angle's and rate's weights: 1, or 0 when the
-    /// heading is let go (a robot that cannot hold it flies its thrust
-    /// direction).
-    yaw_weight: f64,
+    /// How much of the heading the cost holds.
+    yaw_cost: YawCost,
 }
 
 impl Mpc {
@@ -153,7 +170,7 @@ impl Mpc {
             ground: atmo_core::GroundPlane::level(0.0),
             rotor_max: Input::from_element(1.0),
             rotor_min: Input::zeros(),
-            yaw_weight: 1.0,
+            yaw_cost: YawCost::Held,
             settings,
         })
     }
@@ -410,19 +427,22 @@ impl Mpc {
         (self.rotor_min, self.rotor_max)
     }
 
-    /// Leaves the yaw angle and rate out of the cost from the next
-    /// preparation: three rotors hold the thrust direction only if the
-    /// heading turns freely (Mueller and D'Andrea's relaxed hover).
-    pub fn set_yaw_free(&mut self, free: bool) {
-        self.yaw_weight = if free { 0.0 } else { 1.0 };
+    /// How much of the heading the cost holds, from the next preparation.
+    pub fn set_yaw_cost(&mut self, yaw: YawCost) {
+        self.yaw_cost = yaw;
     }
 
-    /// The state weights at `alpha` with the yaw left out when it is free.
+    /// The state weights at `alpha` with the yaw left out as
+    /// [`YawCost`] says.
     pub(crate) fn state_weight_now(&self) -> State {
         let mut q = self.settings.weights.state_weight(self.alpha);
-        if self.yaw_weight != 1.0 {
-            q[idx::YAW] *= self.yaw_weight;
-            q[idx::WZ] *= self.yaw_weight;
+        match self.yaw_cost {
+            YawCost::Held => {}
+            YawCost::RateOnly => q[idx::YAW] = 0.0,
+            YawCost::Free => {
+                q[idx::YAW] = 0.0;
+                q[idx::WZ] = 0.0;
+            }
         }
         q
     }

@@ -168,6 +168,22 @@ fn a_rotor_at_60_percent_held_above_the_hold_still_lands() {
     }
 }
 
+/// A rotor at 60 % in flight does not cost lift for the heading. With the
+/// heading held, three flights came down on the base at 33 deg (seed
+/// 7_300_002 rotors 3 and 4, seed 7_600_001 rotor 2): the rotors left
+/// could not hold the heading, and in the morph, 0.3 m up, where the cost
+/// weighs the rates and not the height, the MPC cut a diagonal pair for
+/// 0.1 s to turn it back. With the yaw angle out of the cost once the
+/// rotor is bounded (`atmo_mpc::YawCost::RateOnly`) each touches down
+/// slowly on its wheels (docs/decisions/2026-12-06-heading-with-a-failed-rotor.md).
+#[test]
+fn a_rotor_at_60_percent_does_not_cost_lift_for_the_heading() {
+    for (seed, n) in [(7_300_002, 3), (7_300_002, 4), (7_600_001, 2)] {
+        let f = rotor("t = 1.0", n, "scale = 0.6", seed);
+        touches_down_slowly_on_its_wheels(&f, &format!("seed {seed} rotor {n}"));
+    }
+}
+
 /// The same fault on the weakest robot the Monte Carlo draws (its rotors
 /// 5 % short of the robot file's thrust: 2.7 N of lift), each rotor: it
 /// touches down on its wheels, without a crash (on seed 7_300_002 two
@@ -318,9 +334,10 @@ fn the_rotor_out_landing_tilt_puts_the_wheels_under_the_base() {
 /// A rotor stuck from the transition's first tick: seen or not (a stuck
 /// rotor may stay under the observer's limit; shipped with the partner
 /// named lost, each tipped over at 60 deg), the robot touches down on its
-/// wheels without a crash, and with the heading held it does not spin up
-/// (let go, rotor 4 of this seed spun to 15 rad/s; on others a spinning
-/// robot rose out of the transition to 2 m: docs/faults.md).
+/// wheels without a crash, and with the yaw rate held it does not spin up
+/// (with the rate let go too, rotor 4 of this seed spun to 15 rad/s; on
+/// others a spinning robot rose out of the transition to 2 m:
+/// docs/faults.md).
 #[test]
 fn a_rotor_stuck_in_the_transition_touches_down_on_the_wheels() {
     for n in 1..=4 {
@@ -372,8 +389,8 @@ fn a_rotor_failed_in_the_transition_is_detected_and_landed_on_the_wheels() {
         }
     }
     // Stuck: the clean landing's modes and criteria but the impact speed;
-    // with the heading held it touches at 0.51 m/s, past the criteria's
-    // 0.5 (0.40 with the heading let go, which lifted other flights away:
+    // with the yaw rate held it touches at 0.51 m/s, past the criteria's
+    // 0.5 (0.40 with the rate let go too, which lifted other flights away:
     // docs/faults.md).
     let f = rotor("mode = \"transition\"", 1, "stuck = true", 0);
     assert_flown_through(&f, "stuck in the transition");
