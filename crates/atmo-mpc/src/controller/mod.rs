@@ -39,10 +39,8 @@ pub enum YawCost {
     #[default]
     Held,
     /// The yaw angle out of the cost, its rate kept: the heading goes
-    /// where the rotors leave it, without spinning up. With a rotor short
-    /// of thrust the rotors cannot hold the heading and the lift both;
-    /// near the ground the cost weighs the rates and not the height
-    /// (`q2`), and a heading held there was paid for in lift.
+    /// where the rotors leave it, without spinning up (for rotors that
+    /// cannot hold the heading and the lift both).
     RateOnly,
     /// The yaw angle and rate out of the cost (three rotors hold the
     /// thrust direction only if the heading turns freely: Mueller and
