@@ -162,32 +162,46 @@ impl Drop for Process {
     }
 }
 
+/// `source` with each `(from, to)` replaced, written to `out`. Each `from`
+/// must occur exactly once in `source`: a shipped file that moved fails
+/// here, not as a test flying something it did not mean to.
+pub(crate) fn patched_copy(source: &Path, out: &Path, replacements: &[(&str, &str)]) {
+    let mut text = std::fs::read_to_string(source).unwrap();
+    for (from, to) in replacements {
+        assert_eq!(
+            text.matches(from).count(),
+            1,
+            "{}: `{from}` should occur once",
+            source.display()
+        );
+        text = text.replace(from, to);
+    }
+    std::fs::write(out, text).unwrap();
+}
+
 /// A daemon config for this run: the shipped one with loopback-only DDS,
 /// an iceoryx2 prefix of its own and absolute config paths.
 pub(crate) fn daemon_config(dir: &Path, tag: &str) -> PathBuf {
-    let shipped = std::fs::read_to_string(repo().join("config/daemon.toml")).unwrap();
     let config = repo().join("config").canonicalize().unwrap();
-    let text = shipped
-        .replace(
-            "robot = \"atmo.toml\"",
-            &format!("robot = \"{}\"", config.join("atmo.toml").display()),
-        )
-        .replace(
-            "flight = \"flight.toml\"",
-            &format!("flight = \"{}\"", config.join("flight.toml").display()),
-        )
-        .replace(
-            "mpc = \"mpc.toml\"",
-            &format!("mpc = \"{}\"", config.join("mpc.toml").display()),
-        )
-        .replace("loopback_only = false", "loopback_only = true")
-        .replace(
-            "iceoryx_prefix = \"\"",
-            &format!("iceoryx_prefix = \"{tag}_\""),
-        );
-    assert_ne!(text, shipped);
+    let absolute = |key: &str, file: &str| format!("{key} = \"{}\"", config.join(file).display());
     let path = dir.join("daemon.toml");
-    std::fs::write(&path, text).unwrap();
+    patched_copy(
+        &config.join("daemon.toml"),
+        &path,
+        &[
+            ("robot = \"atmo.toml\"", &absolute("robot", "atmo.toml")),
+            (
+                "flight = \"flight.toml\"",
+                &absolute("flight", "flight.toml"),
+            ),
+            ("mpc = \"mpc.toml\"", &absolute("mpc", "mpc.toml")),
+            ("loopback_only = false", "loopback_only = true"),
+            (
+                "iceoryx_prefix = \"\"",
+                &format!("iceoryx_prefix = \"{tag}_\""),
+            ),
+        ],
+    );
     path
 }
 
@@ -197,26 +211,19 @@ pub(crate) fn daemon_config(dir: &Path, tag: &str) -> PathBuf {
 /// 5.5 s, so 11 s still drives on for more than 2 m (the tests ask for
 /// 1 m) and logs more than the 10 s of ticks they count.
 fn scenario(dir: &Path) -> PathBuf {
-    let scenarios = repo().join("config/scenarios");
-    let shipped = std::fs::read_to_string(scenarios.join("wheel_landing.toml")).unwrap();
-    let plant = scenarios.join("../plant.toml").canonicalize().unwrap();
-    let text = shipped
-        .replace(
-            "plant = \"../plant.toml\"",
-            &format!("plant = \"{}\"", plant.display()),
-        )
-        .replace("duration = 14.0", "duration = 11.0");
-    assert_eq!(
-        text.matches(".toml\"").count(),
-        1,
-        "one file path: the plant"
-    );
-    assert!(
-        text.contains("duration = 11.0"),
-        "the shipped duration moved"
-    );
+    let plant = repo().join("config/plant.toml").canonicalize().unwrap();
     let path = dir.join("wheel_landing.toml");
-    std::fs::write(&path, text).unwrap();
+    patched_copy(
+        &repo().join("config/scenarios/wheel_landing.toml"),
+        &path,
+        &[
+            (
+                "plant = \"../plant.toml\"",
+                &format!("plant = \"{}\"", plant.display()),
+            ),
+            ("duration = 14.0", "duration = 11.0"),
+        ],
+    );
     path
 }
 

@@ -24,7 +24,7 @@ use atmo_io::mcap_log::read_topic;
 use atmo_io::msg::MpcStatus;
 
 use crate::sitl::{
-    assert_drivers_alive_while_served, daemon_config, domain, repo, run_dir, serial,
+    assert_drivers_alive_while_served, daemon_config, domain, patched_copy, repo, run_dir, serial,
     sibling_binary, spawn_pair_with,
 };
 
@@ -39,10 +39,11 @@ fn land(name: &str, serve_args: &[OsString]) -> (serde_json::Value, Vec<(u64, Mp
     // timing measurement, not what this test compares. A driver that stops
     // (a dead process, a broken serial link) is still dead within 1 s, and
     // the test asserts none is.
-    let text = std::fs::read_to_string(&config).unwrap();
-    let relaxed = text.replace("liveness_timeout_ms = 100 ", "liveness_timeout_ms = 1000 ");
-    assert_ne!(text, relaxed, "the shipped liveness timeout moved");
-    std::fs::write(&config, relaxed).unwrap();
+    patched_copy(
+        &config,
+        &config,
+        &[("liveness_timeout_ms = 100 ", "liveness_timeout_ms = 1000 ")],
+    );
     let log = dir.join("flight.mcap");
     let (mut daemon, mut server) = spawn_pair_with(&dir, &config, &log, &domain(), serve_args);
     let served = server.wait(Duration::from_secs(150));
