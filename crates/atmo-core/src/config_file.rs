@@ -22,6 +22,7 @@ use nalgebra::Matrix3;
 use serde::de::DeserializeOwned;
 
 use crate::error::{CoreError, Result};
+use crate::input_file;
 
 /// A TOML config file: strictly parsed, then validated.
 ///
@@ -137,12 +138,13 @@ fn check_shape<T: DeserializeOwned>(text: &str, file: &Path) -> Result<()> {
     })
 }
 
-/// Reads a whole file for a config loader, naming it on failure.
+/// Reads a whole file for a config loader, naming it on failure: a
+/// regular file of UTF-8 text within [`input_file::CONFIGURATION`]'s limit.
 ///
 /// # Errors
 /// [`CoreError::ConfigRead`].
 pub fn read_config_file(path: &Path) -> Result<String> {
-    std::fs::read_to_string(path).map_err(|source| CoreError::ConfigRead {
+    input_file::read_text(path, input_file::CONFIGURATION).map_err(|source| CoreError::ConfigRead {
         file: path.to_path_buf(),
         source,
     })

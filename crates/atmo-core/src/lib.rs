@@ -32,6 +32,7 @@ pub mod control;
 pub mod error;
 pub mod ground_effect;
 pub mod ground_plane;
+pub mod input_file;
 pub mod limits;
 pub mod linkage;
 pub mod model;

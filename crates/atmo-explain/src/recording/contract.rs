@@ -3,7 +3,8 @@
 //!
 //! docs/input-contract.md states it for users. In order:
 //!
-//! 1. **Input file** ([`read_input`]): a regular file (not a device, FIFO or
+//! 1. **Input file** ([`read_input`], the rule of every input:
+//!    [`atmo_core::input_file`]): a regular file (not a device, FIFO or
 //!    folder), at most [`super::MAX_FILE_BYTES`], checked before reading and
 //!    read through a bounded reader.
 //! 2. **Time base** ([`order_rows`], [`check_time_axis`]): rows whose time
@@ -26,10 +27,10 @@
 //! Nothing downstream (the figures, the replay) sizes anything from the
 //! time axis before these checks pass.
 
-use std::io::Read as _;
 use std::path::Path;
 
 use atmo_core::RobotConfig;
+use atmo_core::input_file::{self, InputKind};
 use atmo_core::model::Model;
 
 use super::plausible::{ColumnOutliers, Outliers};
@@ -48,47 +49,36 @@ pub const VELOCITY_NOISE: f64 = 1.0;
 /// Allowance for measurement noise between two samples: body rate, rad/s.
 pub const RATE_NOISE: f64 = 3.0;
 
-/// Reads an input file whole, after checking that it is a regular file of
-/// at most [`MAX_FILE_BYTES`]; the read itself is bounded too (a file that
-/// grows while read). Errors are messages for the caller to put the path on.
+/// A recording as an input file ([`atmo_core::input_file`]).
+pub const RECORDING: InputKind = InputKind {
+    name: "a recording",
+    max_bytes: MAX_FILE_BYTES,
+    advice: "split the recording, or decimate it",
+};
+
+/// Reads an input file whole: a regular file of at most
+/// [`MAX_FILE_BYTES`], the read itself bounded too (a file that grows while
+/// read). Errors are messages for the caller to put the path on.
 pub fn read_input(path: &Path) -> Result<Vec<u8>, String> {
-    let meta = std::fs::metadata(path).map_err(|e| format!("cannot read the file: {e}"))?;
-    check_regular(&meta)?;
-    if meta.len() > MAX_FILE_BYTES {
-        return Err(format!(
-            "{} bytes, over the {MAX_FILE_BYTES}-byte limit of a recording \
-             ({} rows at most): split the recording, or decimate it",
-            meta.len(),
-            super::MAX_ROWS
-        ));
-    }
-    let file = std::fs::File::open(path).map_err(|e| format!("cannot read the file: {e}"))?;
-    let mut bytes = Vec::with_capacity(usize::try_from(meta.len()).unwrap_or(0));
-    file.take(MAX_FILE_BYTES + 1)
-        .read_to_end(&mut bytes)
-        .map_err(|e| format!("cannot read the file: {e}"))?;
-    if bytes.len() as u64 > MAX_FILE_BYTES {
-        return Err(format!(
-            "grew past the {MAX_FILE_BYTES}-byte limit of a recording while being read"
-        ));
-    }
-    Ok(bytes)
+    input_file::read(path, RECORDING).map_err(|e| input_error(&e))
 }
 
-/// Refuses anything but a regular file (a device, a FIFO, a socket, a
-/// folder): `/dev/zero` would be read until memory runs out.
-pub fn check_regular(meta: &std::fs::Metadata) -> Result<(), String> {
-    if meta.is_file() {
-        return Ok(());
-    }
-    let kind = if meta.is_dir() {
-        "a folder"
+/// Checks that `path` is a regular file of at most [`MAX_FILE_BYTES`]
+/// without reading it (a reader of its own reads it next).
+pub fn check_input(path: &Path) -> Result<(), String> {
+    input_file::check(path, RECORDING)
+        .map(|_| ())
+        .map_err(|e| input_error(&e))
+}
+
+/// A refusal is its own message; the operating system's errors say they
+/// are a failed read.
+fn input_error(e: &std::io::Error) -> String {
+    if e.kind() == std::io::ErrorKind::InvalidInput {
+        e.to_string()
     } else {
-        "a device, FIFO or socket"
-    };
-    Err(format!(
-        "{kind}, not a regular file: a recording is read from a file"
-    ))
+        format!("cannot read the file: {e}")
+    }
 }
 
 /// Refuses a CSV file holding a NUL byte (binary data, not text).

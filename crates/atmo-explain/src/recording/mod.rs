@@ -140,14 +140,7 @@ impl Recording {
             message,
         };
         if ext == "mcap" {
-            let meta = std::fs::metadata(path).map_err(|e| fail(format!("cannot read: {e}")))?;
-            contract::check_regular(&meta).map_err(&fail)?;
-            if meta.len() > MAX_FILE_BYTES {
-                return Err(fail(format!(
-                    "{} bytes, over the {MAX_FILE_BYTES}-byte limit of a recording",
-                    meta.len()
-                )));
-            }
+            contract::check_input(path).map_err(&fail)?;
             return Self::from_mcap(path);
         }
         let bytes = contract::read_input(path).map_err(&fail)?;

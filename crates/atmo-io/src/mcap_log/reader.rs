@@ -44,38 +44,20 @@ pub struct LoggedMessage {
 /// before reading.
 pub const MAX_LOG_BYTES: u64 = 4 << 30;
 
-/// Reads a log whole: a regular file (a device such as `/dev/zero` would
-/// be read until memory runs out) of at most [`MAX_LOG_BYTES`].
+/// A flight log as an input file: read whole, so bounded.
+const LOG: atmo_core::input_file::InputKind = atmo_core::input_file::InputKind {
+    name: "a log",
+    max_bytes: MAX_LOG_BYTES,
+    advice: "",
+};
+
+/// Reads a log whole: a regular file of at most [`MAX_LOG_BYTES`]
+/// ([`atmo_core::input_file`]).
 pub(super) fn read_file(path: &Path) -> Result<Vec<u8>> {
-    use std::io::Read as _;
-    let fail = |source: std::io::Error| IoError::File {
+    atmo_core::input_file::read(path, LOG).map_err(|source| IoError::File {
         file: path.to_path_buf(),
         source,
-    };
-    let refuse = |what: String| fail(std::io::Error::new(std::io::ErrorKind::InvalidInput, what));
-    let meta = std::fs::metadata(path).map_err(fail)?;
-    if !meta.is_file() {
-        return Err(refuse(
-            "not a regular file (a folder, device, FIFO or socket): a log is read from a file"
-                .into(),
-        ));
-    }
-    if meta.len() > MAX_LOG_BYTES {
-        return Err(refuse(format!(
-            "{} bytes, over the {MAX_LOG_BYTES}-byte limit of a log",
-            meta.len()
-        )));
-    }
-    let mut bytes = Vec::with_capacity(usize::try_from(meta.len()).unwrap_or(0));
-    std::fs::File::open(path)
-        .and_then(|f| f.take(MAX_LOG_BYTES + 1).read_to_end(&mut bytes))
-        .map_err(fail)?;
-    if bytes.len() as u64 > MAX_LOG_BYTES {
-        return Err(refuse(format!(
-            "grew past the {MAX_LOG_BYTES}-byte limit of a log while being read"
-        )));
-    }
-    Ok(bytes)
+    })
 }
 
 fn decode_any(topic: &str, type_name: &str, data: &[u8]) -> Result<Option<AnyMessage>> {

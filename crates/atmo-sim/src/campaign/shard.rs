@@ -13,6 +13,7 @@ use std::fmt::{self, Write as _};
 use std::path::{Path, PathBuf};
 use std::str::FromStr;
 
+use atmo_core::input_file::{self, InputKind};
 use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
 
@@ -182,17 +183,21 @@ pub struct Merged {
     pub shard_wall_time_s: f64,
 }
 
+/// A shard file as an input ([`atmo_core::input_file`]): one cell's runs
+/// are a few hundred bytes each, so this is far above any campaign's.
+const SHARD: InputKind = InputKind {
+    name: "a shard file",
+    max_bytes: 1 << 30,
+    advice: "",
+};
+
 /// Reads a shard file.
 pub fn read_shard(path: &Path) -> Result<ShardFile, MergeError> {
     let read = |message: String| MergeError::Read {
         path: path.to_path_buf(),
         message,
     };
-    let meta = std::fs::metadata(path).map_err(|e| read(e.to_string()))?;
-    if !meta.is_file() {
-        return Err(read("not a regular file".to_string()));
-    }
-    let text = std::fs::read_to_string(path).map_err(|e| read(e.to_string()))?;
+    let text = input_file::read_text(path, SHARD).map_err(|e| read(e.to_string()))?;
     let format: serde_json::Value =
         serde_json::from_str(&text).map_err(|e| read(format!("not JSON: {e}")))?;
     let found = format.get("format").and_then(serde_json::Value::as_u64);
@@ -462,6 +467,26 @@ mod tests {
         );
         for bad in ["8/8", "1", "a/2", "0/0", "-1/3"] {
             assert!(bad.parse::<ShardSpec>().is_err(), "{bad}");
+        }
+    }
+
+    /// A shard is read through the one input rule: a device or a folder
+    /// is refused before reading, naming the path.
+    #[test]
+    fn a_device_or_a_folder_is_refused_as_a_shard() {
+        let mut paths = vec![std::env::temp_dir()];
+        paths.extend(
+            ["/dev/zero", "/dev/null"]
+                .map(PathBuf::from)
+                .into_iter()
+                .filter(|p| p.exists()),
+        );
+        for path in paths {
+            let err = read_shard(&path).unwrap_err().to_string();
+            assert!(
+                err.starts_with(&path.display().to_string()) && err.contains("not a regular file"),
+                "{err}"
+            );
         }
     }
 }

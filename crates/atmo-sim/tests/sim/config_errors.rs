@@ -227,3 +227,37 @@ fn a_missing_plant_file_is_named() {
     );
     assert!(err.to_string().contains("no_such_plant.toml"), "{err}");
 }
+
+/// A device named as a configuration (`atmo-sim fly /dev/zero`) was read
+/// until memory ran out: every configuration file is read through the one
+/// input rule (`atmo_core::input_file`), refused before reading, naming
+/// the file.
+#[test]
+fn a_device_or_a_folder_named_as_a_configuration_is_refused_before_reading() {
+    let folder = std::env::temp_dir();
+    let mut paths = vec![folder.clone()];
+    paths.extend(
+        ["/dev/zero", "/dev/null"]
+            .map(std::path::PathBuf::from)
+            .into_iter()
+            .filter(|p| p.exists()),
+    );
+    for path in paths {
+        let scenario = Scenario::load(&path).unwrap_err().to_string();
+        let robot = atmo_core::RobotConfig::load(&path).unwrap_err().to_string();
+        for msg in [scenario, robot] {
+            assert!(
+                msg.contains(&path.display().to_string()) && msg.contains("not a regular file"),
+                "{msg}"
+            );
+        }
+    }
+    let latin1 = folder.join(format!("atmo-latin1-{}.toml", std::process::id()));
+    std::fs::write(&latin1, b"name = \"caf\xe9\"\n").unwrap();
+    let msg = PlantConfig::load(&latin1).unwrap_err().to_string();
+    std::fs::remove_file(&latin1).unwrap();
+    assert!(
+        msg.contains("atmo-latin1") && msg.contains("not UTF-8 text"),
+        "{msg}"
+    );
+}
