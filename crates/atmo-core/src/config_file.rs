@@ -144,9 +144,9 @@ fn check_shape<T: DeserializeOwned>(text: &str, file: &Path) -> Result<()> {
 /// # Errors
 /// [`CoreError::ConfigRead`].
 pub fn read_config_file(path: &Path) -> Result<String> {
-    input_file::read_text(path, input_file::CONFIGURATION).map_err(|source| CoreError::ConfigRead {
+    input_file::read_text(path, input_file::CONFIGURATION).map_err(|cause| CoreError::ConfigRead {
         file: path.to_path_buf(),
-        source,
+        cause,
     })
 }
 

@@ -6,11 +6,12 @@ use std::path::PathBuf;
 #[derive(Debug, thiserror::Error)]
 pub enum CoreError {
     /// The configuration file could not be read.
-    #[error("{file}: cannot read: {source}")]
+    #[error("{file}: cannot read: {cause}")]
     ConfigRead {
         file: PathBuf,
-        #[source]
-        source: std::io::Error,
+        /// Said in the message, so not also a `source()` (an error says its
+        /// cause or returns it, never both: a chain printed it twice).
+        cause: std::io::Error,
     },
     /// The configuration is not valid TOML or does not have the expected
     /// shape (unknown key, missing key, wrong type).

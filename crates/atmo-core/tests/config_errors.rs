@@ -31,6 +31,10 @@ fn missing_file_names_the_path() {
     let err = RobotConfig::load("/nonexistent/atmo.toml").unwrap_err();
     assert!(matches!(err, CoreError::ConfigRead { .. }));
     assert!(err.to_string().contains("/nonexistent/atmo.toml"));
+    // The message says the cause, so the error does not also return it:
+    // a printed chain (`{:#}`, "Caused by") said it twice.
+    assert!(std::error::Error::source(&err).is_none());
+    assert_eq!(err.to_string().matches("No such file").count(), 1, "{err}");
 }
 
 #[test]

@@ -33,18 +33,19 @@ pub enum IoError {
         field_type: String,
     },
     /// Reading or writing a file failed.
-    #[error("{file}: {source}")]
+    #[error("{file}: {cause}")]
     File {
         file: PathBuf,
-        #[source]
-        source: std::io::Error,
+        /// Said in the message, so not also a `source()` (an error says its
+        /// cause or returns it, never both: a chain printed it twice).
+        cause: std::io::Error,
     },
     /// The MCAP library refused a file or a record.
-    #[error("{file}: MCAP: {source}")]
+    #[error("{file}: MCAP: {cause}")]
     Mcap {
         file: PathBuf,
-        #[source]
-        source: mcap::McapError,
+        /// Said in the message, not also a `source()`.
+        cause: mcap::McapError,
     },
     /// A record of a log cannot be read (truncated, claims more bytes than
     /// the file holds, does not parse): reading stops there.

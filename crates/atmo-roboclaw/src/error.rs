@@ -19,14 +19,23 @@ pub enum RoboclawError {
     SerialOpen(#[from] SerialOpenError),
     /// A transaction with the board failed (after its retries).
     #[error("board: {0}")]
-    Link(#[from] LinkError),
+    Link(LinkError),
     /// The simulated board's pseudo-terminal.
-    #[error("pseudo-terminal: {what}: {source}")]
+    #[error("pseudo-terminal: {what}: {cause}")]
     Pty {
         what: &'static str,
-        #[source]
-        source: std::io::Error,
+        /// Said in the message, so not also a `source()` (an error says its
+        /// cause or returns it, never both).
+        cause: std::io::Error,
     },
 }
 
 pub type Result<T> = std::result::Result<T, RoboclawError>;
+
+/// By hand, not `#[from]` (which would also return it as `source()`): the
+/// message says the link's error already.
+impl From<LinkError> for RoboclawError {
+    fn from(error: LinkError) -> Self {
+        Self::Link(error)
+    }
+}

@@ -23,7 +23,7 @@ const IDLE_POLL: Duration = Duration::from_millis(2);
 fn pty_err(what: &'static str) -> impl FnOnce(Errno) -> RoboclawError {
     move |e| RoboclawError::Pty {
         what,
-        source: e.into(),
+        cause: e.into(),
     }
 }
 
@@ -71,9 +71,9 @@ impl PtyServer {
             std::thread::Builder::new()
                 .name("roboclaw-sim".into())
                 .spawn(move || serve(&master, &board, clock.as_ref(), &stop))
-                .map_err(|source| RoboclawError::Pty {
+                .map_err(|cause| RoboclawError::Pty {
                     what: "thread",
-                    source,
+                    cause,
                 })?
         };
         Ok(Self {

@@ -86,9 +86,9 @@ pub(super) fn write_extras<W: std::io::Write + std::io::Seek>(
     extras: &LogExtras,
     file: &Path,
 ) -> Result<()> {
-    let err = |source| IoError::Mcap {
+    let err = |cause| IoError::Mcap {
         file: file.to_path_buf(),
-        source,
+        cause,
     };
     for a in &extras.attachments {
         writer

@@ -240,9 +240,9 @@ impl McapLogger {
                 options.flush_period
             )));
         }
-        let file = File::create(&path).map_err(|source| IoError::File {
+        let file = File::create(&path).map_err(|cause| IoError::File {
             file: path.clone(),
-            source,
+            cause,
         })?;
         let compression = match options.compression {
             Compression::Zstd => Some(mcap::Compression::Zstd),
@@ -256,9 +256,9 @@ impl McapLogger {
             .compression_threads(0)
             .chunk_size(Some(options.chunk_size))
             .create(BufWriter::new(file))
-            .map_err(|source| IoError::Mcap {
+            .map_err(|cause| IoError::Mcap {
                 file: path.clone(),
-                source,
+                cause,
             })?;
         let (tx, rx) = sync_channel(options.queue_capacity);
         let shared = Arc::new(Shared {
@@ -499,13 +499,13 @@ impl LoggerHandle {
 /// (`No space left on device`), not only as MCAP's generic I/O message.
 fn writer_error(file: &Path, source: mcap::McapError) -> IoError {
     match source {
-        mcap::McapError::Io(source) => IoError::File {
+        mcap::McapError::Io(cause) => IoError::File {
             file: file.to_path_buf(),
-            source,
+            cause,
         },
-        source => IoError::Mcap {
+        cause => IoError::Mcap {
             file: file.to_path_buf(),
-            source,
+            cause,
         },
     }
 }

@@ -54,9 +54,9 @@ const LOG: atmo_core::input_file::InputKind = atmo_core::input_file::InputKind {
 /// Reads a log whole: a regular file of at most [`MAX_LOG_BYTES`]
 /// ([`atmo_core::input_file`]).
 pub(super) fn read_file(path: &Path) -> Result<Vec<u8>> {
-    atmo_core::input_file::read(path, LOG).map_err(|source| IoError::File {
+    atmo_core::input_file::read(path, LOG).map_err(|cause| IoError::File {
         file: path.to_path_buf(),
-        source,
+        cause,
     })
 }
 

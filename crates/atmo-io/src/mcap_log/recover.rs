@@ -45,14 +45,14 @@ pub fn recover(input: impl AsRef<Path>, output: impl AsRef<Path>) -> Result<Reco
     }
     let file_err = |file: &Path| {
         let file = file.to_path_buf();
-        move |source| IoError::File { file, source }
+        move |cause| IoError::File { file, cause }
     };
     let bytes = super::reader::read_file(input)?;
     check_magic(input, &bytes)?;
     let out = File::create(output).map_err(file_err(output))?;
     let mcap_err = |file: &Path| {
         let file = file.to_path_buf();
-        move |source| IoError::Mcap { file, source }
+        move |cause| IoError::Mcap { file, cause }
     };
     let mut writer = mcap::WriteOptions::new()
         .profile(PROFILE)
