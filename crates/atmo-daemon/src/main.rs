@@ -114,6 +114,13 @@ fn main() {
         .with_writer(std::io::stderr)
         .init();
     let cli = Cli::parse();
+    if matches!(cli.command, Command::Check { .. } | Command::Replay { .. }) {
+        // The commands that only print end when their reader does
+        // (`| head`), as a C tool does, instead of panicking in println!.
+        // `run` and `preflight` drive the robot: a closed pipe must not
+        // kill them.
+        sigpipe::reset();
+    }
     let result = match cli.command {
         Command::Run {
             config,

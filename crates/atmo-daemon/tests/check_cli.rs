@@ -130,3 +130,21 @@ fn check_refuses_an_overlong_array_and_an_absurd_ground_height() {
         "{stderr}"
     );
 }
+
+/// `atmo-daemon check --params | head` panicked in println! once `head`
+/// had gone: a command that only prints ends by SIGPIPE, as a C tool does.
+#[cfg(unix)]
+#[test]
+fn check_ends_quietly_when_its_reader_is_gone() {
+    use std::os::unix::process::ExitStatusExt as _;
+    let (reader, writer) = std::io::pipe().unwrap();
+    drop(reader);
+    let out = Command::new(env!("CARGO_BIN_EXE_atmo-daemon"))
+        .args(["check", "--params"])
+        .stdout(writer)
+        .output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.signal(), Some(13), "{stderr}");
+    assert!(!stderr.contains("panicked"), "{stderr}");
+}

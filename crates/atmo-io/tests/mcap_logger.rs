@@ -376,6 +376,22 @@ fn the_recover_command_line() {
         .unwrap();
     assert!(info.status.success());
     assert!(String::from_utf8_lossy(&info.stdout).contains("atmo_msgs/msg/MpcStatus"));
+    // Its reader gone (`| head`): ended by SIGPIPE as a C tool is, no
+    // panic in println!.
+    #[cfg(unix)]
+    {
+        use std::os::unix::process::ExitStatusExt as _;
+        let (reader, writer) = std::io::pipe().unwrap();
+        drop(reader);
+        let closed = Command::new(exe)
+            .args(["info", out.to_str().unwrap()])
+            .stdout(writer)
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&closed.stderr);
+        assert_eq!(closed.status.signal(), Some(13), "{stderr}");
+        assert!(!stderr.contains("panicked"), "{stderr}");
+    }
     // Bad use: exit code 2; a missing file: 1 with the path named.
     assert_eq!(
         Command::new(exe).arg("nope").status().unwrap().code(),

@@ -169,7 +169,14 @@ struct ScenarioArg {
 }
 
 fn main() -> Result<()> {
-    match Cli::parse().command {
+    let cli = Cli::parse();
+    if !matches!(cli.command, Command::Serve { .. }) {
+        // A command that prints ends when its reader does (`| head`), as a
+        // C tool does, instead of panicking in println!. The SITL plant
+        // server is left to Rust's default: it serves a flight.
+        sigpipe::reset();
+    }
+    match cli.command {
         Command::Physics { robot } => physics(&robot),
         Command::Fly {
             scenario,

@@ -71,6 +71,9 @@ enum Command {
 }
 
 fn main() -> ExitCode {
+    // Ends when its reader does (`| head`), as a C tool does, instead of
+    // panicking in println!.
+    sigpipe::reset();
     let result = match Cli::parse().command {
         Command::Recover { input, output } => recover(&input, &output).map(|r| {
             println!(
