@@ -11,7 +11,10 @@
 pub const MAX_RUN_DURATION_S: f64 = 7.0 * 24.0 * 3600.0;
 /// Longest `explain --demo` recording, s (one hour: 432 000 rows at 120 Hz).
 pub const MAX_DEMO_DURATION_S: f64 = 3600.0;
-/// Highest `explain --demo` sample rate, Hz.
+/// Lowest estimate rate, Hz: the plant's sensors (`effects.sensors.rate_hz`)
+/// and `explain --demo --rate` take the same range.
+pub const MIN_SAMPLE_RATE_HZ: f64 = 1.0;
+/// Highest estimate rate, Hz (the same two).
 pub const MAX_SAMPLE_RATE_HZ: f64 = 1000.0;
 /// Most Monte Carlo runs of one `fly --runs`.
 pub const MAX_RUNS: usize = 100_000;
@@ -43,9 +46,15 @@ pub fn demo_duration_s(text: &str) -> Result<f64, String> {
     positive_up_to(text, "seconds", MAX_DEMO_DURATION_S)
 }
 
-/// `explain --demo --rate`: Hz in `(0, MAX_SAMPLE_RATE_HZ]`.
+/// `explain --demo --rate`: Hz in `[MIN_SAMPLE_RATE_HZ, MAX_SAMPLE_RATE_HZ]`.
 pub fn sample_rate_hz(text: &str) -> Result<f64, String> {
-    positive_up_to(text, "Hz", MAX_SAMPLE_RATE_HZ)
+    let value = positive_up_to(text, "Hz", MAX_SAMPLE_RATE_HZ)?;
+    if value < MIN_SAMPLE_RATE_HZ {
+        return Err(format!(
+            "{text} is not a finite number of Hz in [{MIN_SAMPLE_RATE_HZ}, {MAX_SAMPLE_RATE_HZ}]"
+        ));
+    }
+    Ok(value)
 }
 
 /// `explain --budget`: seconds in `(0, MAX_ANALYSIS_BUDGET_S]`.
@@ -75,9 +84,10 @@ mod tests {
         for text in ["inf", "1e9", "3600.5", "nan"] {
             assert!(demo_duration_s(text).is_err(), "{text}");
         }
-        for text in ["inf", "0", "1e6", "nan"] {
+        for text in ["inf", "0", "0.5", "1e6", "nan"] {
             assert!(sample_rate_hz(text).is_err(), "{text}");
         }
+        assert!(sample_rate_hz("0.5").unwrap_err().contains("[1, 1000]"));
         for text in ["0", "-3", "1e9", "100001", "18446744073709551616"] {
             assert!(run_count(text).is_err(), "{text}");
         }

@@ -129,10 +129,7 @@ pub fn demo_effects(list: &str) -> Result<EffectsConfig, ExplainError> {
 /// is not a folder this tool wrote (`atmo_io::output_dir`), a `--demo` whose
 /// `--duration` x `--rate` passes the row limit.
 pub fn run(args: &Args, progress: &mut dyn FnMut(Progress)) -> Result<String, ExplainError> {
-    let robot = RobotConfig::load(&args.robot).map_err(|e| ExplainError::Input {
-        file: args.robot.clone(),
-        message: e.to_string(),
-    })?;
+    let robot = RobotConfig::load(&args.robot)?;
     // Staged: a run that fails leaves an earlier run's folder as it was.
     let out = atmo_io::output_dir::StagedDir::new(&args.out)
         .map_err(|e| ExplainError::Output(e.to_string()))?;
@@ -380,5 +377,24 @@ mod tests {
             .unwrap_or_default();
         assert_eq!(left, [std::ffi::OsString::from("notes.txt")]);
         let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    /// A robot file that cannot be read is named once (it was named twice:
+    /// "/dev/zero: /dev/zero: cannot read ..."), and a `--rate` the plant's
+    /// sensors refuse is refused on the command line with the same range.
+    #[test]
+    fn a_bad_robot_file_is_named_once_and_the_rate_takes_the_sensors_range() {
+        let e = Explain::try_parse_from(["explain", "--robot", "/nonexistent/robot.toml"]);
+        let Ok(e) = e else { panic!("parse") };
+        let err = super::run(&e.args, &mut |_| {})
+            .map(|_| ())
+            .map_err(|e| e.to_string());
+        let Err(err) = err else { panic!("accepted") };
+        assert_eq!(err.matches("/nonexistent/robot.toml").count(), 1, "{err}");
+        let rate = Explain::try_parse_from(["explain", "--demo", "none", "--rate", "0.5"]);
+        let Err(rate) = rate else {
+            panic!("0.5 Hz accepted")
+        };
+        assert!(rate.to_string().contains("in [1, 1000]"), "{rate}");
     }
 }

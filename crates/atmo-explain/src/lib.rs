@@ -92,6 +92,10 @@ pub enum ExplainError {
     /// The synthetic recording's controller could not be built.
     #[error("synthetic flight: {0}")]
     Setup(String),
+    /// The robot file cannot be read or is not valid (the message names
+    /// the file, and the key or line).
+    #[error(transparent)]
+    Robot(#[from] atmo_core::CoreError),
 }
 
 /// Result alias for atmo-explain.

@@ -8,6 +8,7 @@
 
 use std::path::{Path, PathBuf};
 
+use atmo_core::cli_numbers::{MAX_SAMPLE_RATE_HZ, MIN_SAMPLE_RATE_HZ};
 use atmo_core::config::ArmInertiaConvention;
 use atmo_core::config_file::{Checker, ConfigFile};
 use serde::Deserialize;
@@ -274,7 +275,7 @@ atmo_core::params! {
         /// false).
         pub enabled: bool = true;
         /// Estimate rate.
-        pub rate_hz: f64 = 120.0, range 1.0..=1000.0, unit "Hz";
+        pub rate_hz: f64 = 120.0, range MIN_SAMPLE_RATE_HZ..=MAX_SAMPLE_RATE_HZ, unit "Hz";
         /// Age of each estimate.
         pub latency: f64 = 0.008, range 0.0..=0.5, unit "s";
         /// Position noise (standard deviation).
