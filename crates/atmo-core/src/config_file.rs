@@ -150,6 +150,18 @@ pub fn read_config_file(path: &Path) -> Result<String> {
     })
 }
 
+/// A number that `f64`'s `Display` writes out in hundreds of digits
+/// (`1e300`, `1e-300`) in exponent form; anything else as it is.
+fn readable_number(text: String) -> String {
+    // An integer of up to 128 bits has at most 40 characters.
+    if text.len() > 40
+        && let Ok(value) = text.parse::<f64>()
+    {
+        return format!("{value:e}");
+    }
+    text
+}
+
 /// Serde default of a switch that is on unless the file says otherwise
 /// (`#[serde(default = "atmo_core::config_file::default_true")]`).
 pub fn default_true() -> bool {
@@ -215,7 +227,7 @@ impl<'a> Checker<'a> {
             file: self.file.to_path_buf(),
             key: key.to_string(),
             expected: expected.into(),
-            got: got.to_string(),
+            got: readable_number(got.to_string()),
         }
     }
 
@@ -333,6 +345,10 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert_eq!(msg, "f.toml: key `x`: expected a value in [0, 1], got NaN");
+        for (value, shown) in [(1e300, "1e300"), (-1e-300, "-1e-300"), (0.25, "0.25")] {
+            let msg = c.range("x", value, 0.0..=0.2, "").unwrap_err().to_string();
+            assert!(msg.ends_with(&format!("got {shown}")), "{msg}");
+        }
         assert!(c.range("x", 1.0, 0.0..=1.0, "kg").is_ok());
     }
 

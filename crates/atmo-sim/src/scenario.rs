@@ -120,7 +120,10 @@ atmo_core::params! {
         pub yaw_rate: f64 = 0.0, range -3.0..=3.0, unit "rad/s";
     }
     check |pilot, c, prefix| {
-        let speed = Vector3::from(pilot.velocity).norm();
+        // hypot: a 1e300 component is reported as itself, not as an
+        // overflowed inf.
+        let [x, y, z] = pilot.velocity;
+        let speed = x.hypot(y).hypot(z);
         if speed > MAX_PILOT_SPEED + 1e-12 {
             return Err(c.fail(
                 &atmo_core::params::key(prefix, "velocity"),

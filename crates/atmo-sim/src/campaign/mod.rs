@@ -183,14 +183,10 @@ impl CampaignFile {
     pub fn from_toml_str(text: &str, path: &Path) -> Result<Self, CoreError> {
         let file: Self = atmo_core::config_file::parse_toml(text, path)?;
         // `message`: "<what was given>: <what is expected>".
+        let checker = atmo_core::config_file::Checker::new(path);
         let bad = |key: &str, message: String| {
             let (got, expected) = message.split_once(": ").unwrap_or(("", &message));
-            CoreError::ConfigValue {
-                file: path.to_path_buf(),
-                key: key.to_string(),
-                expected: expected.to_string(),
-                got: got.to_string(),
-            }
+            checker.fail(key, expected, got)
         };
         if file.name.is_empty() || file.name.contains(['/', '\\']) || file.name.starts_with('.') {
             return Err(bad("name", format!("{:?}: a folder name", file.name)));
@@ -426,5 +422,14 @@ steps = 3
                 .to_string();
             assert!(err.contains(key) && err.contains("c.toml"), "{key}: {err}");
         }
+        // A value out of range as the other keys give it: 1e300, not its
+        // 301 digits.
+        let err = CampaignFile::from_toml_str(
+            &FILE.replace("values = [0.9, 1.0]", "values = [0.9, 1e300]"),
+            Path::new("c.toml"),
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(err.ends_with("got 1e300"), "{err}");
     }
 }

@@ -186,6 +186,10 @@ fn a_scenario_effect_override_is_checked_too() {
 fn a_pilot_velocity_above_one_metre_per_second_is_an_error() {
     let (_, msg) = scenario_error("velocity = [0.5, 0.0, 0.0]", "velocity = [1.2, 0.0, 0.0]");
     assert!(msg.contains("pilot[1].velocity"), "{msg}");
+    // A huge component is reported as given (its squared norm overflowed:
+    // "got inf").
+    let (_, msg) = scenario_error("velocity = [0.5, 0.0, 0.0]", "velocity = [0.5, 0.0, 1e300]");
+    assert!(msg.ends_with("got 1e300"), "{msg}");
 }
 
 #[test]
