@@ -83,12 +83,41 @@ pub fn parse_toml<T: DeserializeOwned>(text: &str, file: &Path) -> Result<T> {
         CoreError::ConfigParse {
             file: file.to_path_buf(),
             line,
-            key: if key == "." { "(document)".into() } else { key },
+            key: if key == "." {
+                // The TOML parser's own errors (a number that does not fit,
+                // bad syntax) come without a path: the line's key says it.
+                key_at_line(text, line).unwrap_or_else(|| "(document)".into())
+            } else {
+                key
+            },
             message: inner.message().to_string(),
         }
     })?;
     check_shape::<T>(text, file)?;
     Ok(parsed)
+}
+
+/// The dotted key assigned on 1-based `line` of a TOML `text`: the table
+/// header above it (`[log]`, `[[pilot]]`) and the key left of its `=`.
+fn key_at_line(text: &str, line: usize) -> Option<String> {
+    let mut table = String::new();
+    for (i, l) in text.lines().enumerate().take(line) {
+        let l = l.trim();
+        if l.starts_with('[') {
+            let header = l.trim_start_matches('[');
+            table = header.split(']').next().unwrap_or("").trim().to_string();
+        } else if i + 1 == line {
+            let key = l.split_once('=')?.0.trim();
+            return (!key.is_empty() && !key.starts_with('#')).then(|| {
+                if table.is_empty() {
+                    key.to_string()
+                } else {
+                    format!("{table}.{key}")
+                }
+            });
+        }
+    }
+    None
 }
 
 /// The document's shape, strictly: the document deserializer above leaves
@@ -330,6 +359,30 @@ impl<'a> Checker<'a> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_parser_error_without_a_path_names_the_key_of_its_line() {
+        #[derive(Debug, serde::Deserialize)]
+        #[allow(dead_code)] // reason: only parsed
+        struct Log {
+            queue: u64,
+        }
+        #[derive(Debug, serde::Deserialize)]
+        #[allow(dead_code)] // reason: only parsed
+        struct File {
+            name: String,
+            log: Log,
+        }
+        let text = "name = \"x\"\n[log]  # the writer\nqueue = 18446744073709551615\n";
+        let err = parse_toml::<File>(text, Path::new("d.toml")).unwrap_err();
+        let msg = err.to_string();
+        assert!(msg.starts_with("d.toml:3: key `log.queue`: "), "{msg}");
+        // An empty document: no line with a key, the document is named.
+        let msg = parse_toml::<File>("", Path::new("d.toml"))
+            .unwrap_err()
+            .to_string();
+        assert!(msg.contains("key `(document)`: missing field"), "{msg}");
+    }
 
     #[test]
     fn range_names_key_bounds_unit_and_value() {

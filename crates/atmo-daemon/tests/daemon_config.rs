@@ -62,3 +62,29 @@ fn the_daemon_config_takes_one_pilot_source_and_names_a_bad_rc_key() {
         .to_string();
     assert!(err.contains("kill_channel"), "{err}");
 }
+
+/// Found by trying hostile files on this build: a driver named twice in
+/// `drivers.required` was accepted, and a number too large for TOML was
+/// reported at key `(document)`; both now name their key.
+#[test]
+fn a_driver_required_twice_and_an_overflowing_number_name_their_key() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../config");
+    let base = "robot = \"atmo.toml\"\nflight = \"flight.toml\"\nmpc = \"mpc.toml\"\n";
+    let file = dir.join("test.toml");
+    let twice = format!("{base}[drivers]\nrequired = [\"thrusters\", \"tilt\", \"thrusters\"]\n");
+    let err = DaemonConfig::from_toml_str(&twice, &file)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("drivers.required[2]") && err.contains("each driver named once"),
+        "{err}"
+    );
+    let huge = format!("{base}[log]\nqueue_capacity = 18446744073709551615\n");
+    let err = DaemonConfig::from_toml_str(&huge, &file)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains("test.toml:5: key `log.queue_capacity`"),
+        "{err}"
+    );
+}

@@ -138,13 +138,14 @@ impl DriverPortsConfig {
                 &self.iceoryx_prefix,
             ));
         }
-        for name in &self.required {
+        for (i, name) in self.required.iter().enumerate() {
+            let at = format!("{}[{i}]", key("required"));
             if !DriverId::ALL.iter().any(|d| d.name() == name) {
-                return Err(c.fail(
-                    &key("required"),
-                    "thrusters, tilt, wheels or ground_contact",
-                    name,
-                ));
+                return Err(c.fail(&at, "thrusters, tilt, wheels or ground_contact", name));
+            }
+            // A name twice is a slip (another driver meant?), not a stricter rule.
+            if self.required[..i].contains(name) {
+                return Err(c.fail(&at, "each driver named once", format!("{name} again")));
             }
         }
         Ok(())
