@@ -392,6 +392,31 @@ fn the_recover_command_line() {
         assert_eq!(closed.status.signal(), Some(13), "{stderr}");
         assert!(!stderr.contains("panicked"), "{stderr}");
     }
+    // The command line writes a new file: an existing output is refused,
+    // untouched. The library replaces its output, but never the input
+    // under another name (it overwrote the log it was recovering).
+    let keep = dir.join("keep.txt");
+    std::fs::write(&keep, b"keep me").unwrap();
+    let refused = Command::new(exe)
+        .args(["recover", cut.to_str().unwrap(), keep.to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert_eq!(refused.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&refused.stderr).contains("exists"));
+    assert_eq!(std::fs::read(&keep).unwrap(), b"keep me");
+    let cut_bytes = std::fs::read(&cut).unwrap();
+    let mut aliases = vec![dir.join(".").join("cut.mcap")];
+    #[cfg(unix)]
+    {
+        let link = dir.join("alias.mcap");
+        std::os::unix::fs::symlink(&cut, &link).unwrap();
+        aliases.push(link);
+    }
+    for alias in aliases {
+        let err = recover(&cut, &alias).unwrap_err().to_string();
+        assert!(err.contains("same file"), "{err}");
+        assert_eq!(std::fs::read(&cut).unwrap(), cut_bytes);
+    }
     // Bad use: exit code 2; a missing file: 1 with the path named.
     assert_eq!(
         Command::new(exe).arg("nope").status().unwrap().code(),

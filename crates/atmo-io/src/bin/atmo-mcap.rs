@@ -9,7 +9,7 @@
 //! Both check every chunk's CRC and report the corrupt chunks they skipped.
 
 use std::collections::BTreeMap;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 
 use atmo_io::mcap_log::{LoggedMessage, read_log_lossy, recover};
@@ -39,7 +39,8 @@ enum Command {
     Recover {
         /// The truncated log.
         input: PathBuf,
-        /// The valid copy to write (must differ from INPUT).
+        /// The valid copy to write: a new file (an existing path is refused,
+        /// nothing read or written); written whole, then renamed into place.
         output: PathBuf,
     },
     /// Messages per topic and the span of their log times.
@@ -75,21 +76,23 @@ fn main() -> ExitCode {
     // panicking in println!.
     sigpipe::reset();
     let result = match Cli::parse().command {
-        Command::Recover { input, output } => recover(&input, &output).map(|r| {
-            println!(
-                "{}: {} messages on {} channels, last log time {:.3} s{}",
-                r.output.display(),
-                r.messages,
-                r.channels,
-                r.last_log_time_ns as f64 * 1e-9,
-                r.stopped_by
-                    .map(|why| format!(" (input truncated: {why})"))
-                    .unwrap_or_default()
-            );
-            if !r.skipped.is_sound() {
-                eprintln!("atmo-mcap: skipped: {}", r.skipped);
-            }
-        }),
+        Command::Recover { input, output } => refuse_existing(&output)
+            .and_then(|()| recover(&input, &output))
+            .map(|r| {
+                println!(
+                    "{}: {} messages on {} channels, last log time {:.3} s{}",
+                    r.output.display(),
+                    r.messages,
+                    r.channels,
+                    r.last_log_time_ns as f64 * 1e-9,
+                    r.stopped_by
+                        .map(|why| format!(" (input truncated: {why})"))
+                        .unwrap_or_default()
+                );
+                if !r.skipped.is_sound() {
+                    eprintln!("atmo-mcap: skipped: {}", r.skipped);
+                }
+            }),
         Command::Info { log } => read_log_lossy(&log).map(|(messages, integrity)| {
             if !integrity.is_sound() {
                 eprintln!("atmo-mcap: {}: skipped: {integrity}", log.display());
@@ -194,6 +197,23 @@ fn print_topics(messages: &[LoggedMessage]) {
             last as f64 * 1e-9
         );
     }
+}
+
+/// The command line's `recover` writes a new file: an existing path (a
+/// file, a link, a device) is refused before anything is read, so that a
+/// slip of the arguments cannot replace a log (the library's `recover`
+/// replaces its output, atomically).
+fn refuse_existing(output: &Path) -> atmo_io::Result<()> {
+    if output.symlink_metadata().is_ok() {
+        return Err(atmo_io::IoError::File {
+            file: output.to_path_buf(),
+            cause: std::io::Error::new(
+                std::io::ErrorKind::AlreadyExists,
+                "exists: recover writes a new file and replaces none (remove it, or name another)",
+            ),
+        });
+    }
+    Ok(())
 }
 
 #[cfg(test)]

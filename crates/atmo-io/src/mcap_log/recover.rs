@@ -2,7 +2,7 @@
 
 use std::collections::BTreeMap;
 use std::fs::File;
-use std::io::BufWriter;
+use std::io::{BufWriter, Write as _};
 use std::path::{Path, PathBuf};
 
 use super::PROFILE;
@@ -34,13 +34,20 @@ pub struct RecoverReport {
 /// does not match is skipped and counted in [`RecoverReport::skipped`]. Input
 /// that does not start with the MCAP magic (random bytes, CSV, an empty file)
 /// is refused with [`IoError::NotMcap`] before anything is written.
+///
+/// The log is written to a temporary file next to `output` and renamed
+/// onto it once finished: a recovery that fails leaves `output` as it was,
+/// and one that succeeds replaces it (a symbolic link at `output` is
+/// replaced, not written through). An `output` that is the input file
+/// under another name (a link, `./`) is refused: the input would be lost.
 pub fn recover(input: impl AsRef<Path>, output: impl AsRef<Path>) -> Result<RecoverReport> {
     let input = input.as_ref();
     let output = output.as_ref();
-    if input == output {
+    if input == output || same_file(input, output) {
         return Err(IoError::Logger(format!(
-            "recover: {}: output must differ from the input",
-            input.display()
+            "recover: {}: output must differ from the input ({} is the same file)",
+            input.display(),
+            output.display()
         )));
     }
     let file_err = |file: &Path| {
@@ -49,7 +56,16 @@ pub fn recover(input: impl AsRef<Path>, output: impl AsRef<Path>) -> Result<Reco
     };
     let bytes = super::reader::read_file(input)?;
     check_magic(input, &bytes)?;
-    let out = File::create(output).map_err(file_err(output))?;
+    let folder = match output.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p,
+        _ => Path::new("."),
+    };
+    let staged = tempfile::Builder::new()
+        .prefix(".recover-")
+        .suffix(".mcap")
+        .tempfile_in(folder)
+        .map_err(file_err(output))?;
+    let out: File = staged.reopen().map_err(file_err(output))?;
     let mcap_err = |file: &Path| {
         let file = file.to_path_buf();
         move |cause| IoError::Mcap { file, cause }
@@ -113,6 +129,11 @@ pub fn recover(input: impl AsRef<Path>, output: impl AsRef<Path>) -> Result<Reco
         Ok::<(), IoError>(())
     })?;
     writer.finish().map_err(mcap_err(output))?;
+    // Written whole before it is renamed into place.
+    writer.into_inner().flush().map_err(file_err(output))?;
+    staged
+        .persist(output)
+        .map_err(|e| file_err(output)(e.error))?;
     Ok(RecoverReport {
         output: output.to_path_buf(),
         messages: copied,
@@ -121,4 +142,24 @@ pub fn recover(input: impl AsRef<Path>, output: impl AsRef<Path>) -> Result<Reco
         stopped_by: end.stopped_by.map(|e| e.to_string()),
         skipped: end.integrity,
     })
+}
+
+/// Whether `a` and `b` name one file (a hard or symbolic link, `./`): the
+/// same device and inode. A path that does not exist is no file's.
+fn same_file(a: &Path, b: &Path) -> bool {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::MetadataExt as _;
+        match (std::fs::metadata(a), std::fs::metadata(b)) {
+            (Ok(a), Ok(b)) => a.dev() == b.dev() && a.ino() == b.ino(),
+            _ => false,
+        }
+    }
+    #[cfg(not(unix))]
+    {
+        match (std::fs::canonicalize(a), std::fs::canonicalize(b)) {
+            (Ok(a), Ok(b)) => a == b,
+            _ => false,
+        }
+    }
 }
