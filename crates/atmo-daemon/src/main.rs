@@ -39,7 +39,9 @@ enum Command {
     Run {
         #[command(flatten)]
         config: DaemonConfigArg,
-        /// MCAP log file (overrides [log] path).
+        /// MCAP log file (overrides [log] path). An earlier flight's log
+        /// there is never overwritten: this flight logs to the first free
+        /// STEM.N.mcap beside it (flight.1.mcap, ...), and says so.
         #[arg(long)]
         log: Option<PathBuf>,
         /// Stop by itself after this many seconds (tests, bench runs; finite,
@@ -381,10 +383,19 @@ fn run(arg: &DaemonConfigArg, log_path: Option<PathBuf>, duration: Option<f64>) 
             .with_context(|| format!("installing the handler of signal {signal}"))?;
     }
 
-    let log_path = log_path.unwrap_or_else(|| l.config.log.path.clone());
-    if let Some(dir) = log_path.parent().filter(|d| !d.as_os_str().is_empty()) {
+    let named = log_path.unwrap_or_else(|| l.config.log.path.clone());
+    if let Some(dir) = named.parent().filter(|d| !d.as_os_str().is_empty()) {
         std::fs::create_dir_all(dir)
             .with_context(|| format!("creating the log folder {}", dir.display()))?;
+    }
+    // An earlier flight's log is never overwritten.
+    let log_path = atmo_io::mcap_log::unused_log_path(&named)?;
+    if log_path != named {
+        tracing::info!(
+            exists = %named.display(),
+            log = %log_path.display(),
+            "an earlier flight's log is there: this flight logs beside it"
+        );
     }
     let (log, log_thread) = McapLogger::spawn(&log_path, l.config.log.options())
         .with_context(|| format!("opening the log {}", log_path.display()))?;

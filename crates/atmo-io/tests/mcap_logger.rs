@@ -9,7 +9,8 @@ use std::process::Command;
 use std::time::{Duration, Instant};
 
 use atmo_io::mcap_log::{
-    AnyMessage, Compression, LOGGER_TOPIC, LoggerOptions, McapLogger, read_log, read_topic, recover,
+    AnyMessage, Compression, LOGGER_TOPIC, LoggerOptions, McapLogger, read_log, read_topic,
+    recover, unused_log_path,
 };
 use atmo_io::msg::{DiagnosticArray, MpcStatus};
 use support::*;
@@ -470,4 +471,28 @@ fn a_full_disk_fails_the_writer_and_every_record_is_counted_never_blocked() {
         "{sent} records offered before the failure; {}",
         log.dropped()
     );
+}
+
+/// A daemon started again with the same log path overwrote the earlier
+/// flight's log: the new log takes the first free numbered name beside it;
+/// a device (the full-disk test's `/dev/full`) is written as named.
+#[test]
+fn a_new_log_never_takes_the_name_of_an_earlier_one() {
+    let dir = std::path::Path::new(env!("CARGO_TARGET_TMPDIR"))
+        .join(format!("unused-log-path-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    let named = dir.join("flight.mcap");
+    assert_eq!(unused_log_path(&named).unwrap(), named);
+    std::fs::write(&named, b"first flight").unwrap();
+    let second = unused_log_path(&named).unwrap();
+    assert_eq!(second, dir.join("flight.1.mcap"));
+    std::fs::write(&second, b"second flight").unwrap();
+    assert_eq!(unused_log_path(&named).unwrap(), dir.join("flight.2.mcap"));
+    assert_eq!(std::fs::read(&named).unwrap(), b"first flight");
+    let full = std::path::Path::new("/dev/full");
+    if full.exists() {
+        assert_eq!(unused_log_path(full).unwrap(), full);
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
 }

@@ -224,6 +224,50 @@ impl LoggerThread {
 /// Entry point: [`McapLogger::spawn`].
 pub struct McapLogger;
 
+/// Most numbered names tried beside an existing log.
+const MAX_LOG_NUMBER: u32 = 9999;
+
+/// The path a new flight's log takes for `path`: `path` itself unless a
+/// regular file (an earlier flight's log) is there, then the first free
+/// `STEM.N.EXT` beside it (`flight.mcap` -> `flight.1.mcap`, ...), so that
+/// starting the daemon again never overwrites a flight. Anything else at
+/// `path` (a device such as `/dev/full`, a FIFO) is written as named; a
+/// folder fails when the log is created.
+///
+/// # Errors
+/// [`IoError::File`] when the names up to `STEM.9999.EXT` are all taken.
+pub fn unused_log_path(path: &Path) -> Result<PathBuf> {
+    let taken = |p: &Path| p.symlink_metadata().is_ok();
+    let is_log = path
+        .symlink_metadata()
+        .is_ok_and(|m| m.is_file() || m.file_type().is_symlink());
+    if !is_log {
+        return Ok(path.to_path_buf());
+    }
+    let stem = path.file_stem().map(|s| s.to_string_lossy().into_owned());
+    let ext = path.extension().map(|e| e.to_string_lossy().into_owned());
+    for n in 1..=MAX_LOG_NUMBER {
+        let name = match (&stem, &ext) {
+            (Some(stem), Some(ext)) => format!("{stem}.{n}.{ext}"),
+            (Some(stem), None) => format!("{stem}.{n}"),
+            _ => format!("log.{n}.mcap"),
+        };
+        let candidate = path.with_file_name(name);
+        if !taken(&candidate) {
+            return Ok(candidate);
+        }
+    }
+    Err(IoError::File {
+        file: path.to_path_buf(),
+        cause: std::io::Error::new(
+            std::io::ErrorKind::AlreadyExists,
+            format!(
+                "exists, and so do its numbered names up to {MAX_LOG_NUMBER}: move old logs away"
+            ),
+        ),
+    })
+}
+
 impl McapLogger {
     /// Creates `path` and starts the writer thread.
     pub fn spawn(

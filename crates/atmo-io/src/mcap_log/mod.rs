@@ -32,7 +32,7 @@ mod scan;
 pub use attachments::{LogAttachment, LogExtras, read_extras};
 pub use logger::{
     Channel, Compression, LOGGER_TOPIC, LogPayload, LogSummary, Loggable, LoggerHandle,
-    LoggerOptions, LoggerThread, McapLogger,
+    LoggerOptions, LoggerThread, McapLogger, unused_log_path,
 };
 pub use reader::{
     AnyMessage, LoggedMessage, read_log, read_log_lossy, read_topic, read_topic_lossy,
