@@ -178,6 +178,12 @@ fn replay_command(
     for change in &flight.files.migrated {
         println!("  migrated: {change}");
     }
+    // A what-if's folder is staged, refused up front if it is not one this
+    // tool may replace (a file, someone's folder), and moved into place
+    // whole at the end (atmo_io::output_dir).
+    let staged = what_if
+        .map(|_| atmo_io::output_dir::StagedDir::new(out))
+        .transpose()?;
     let mut files = flight.files.clone();
     if let Some(path) = what_if {
         for replaced in files.override_with(path)? {
@@ -233,14 +239,15 @@ fn replay_command(
             report.differing_ticks, report.ticks
         ),
     }
-    if what_if.is_some() {
-        table.write(out)?;
-        write_whatif_figure(&table, out)?;
+    if let Some(staged) = staged {
+        table.write(staged.path())?;
+        write_whatif_figure(&table, staged.path())?;
+        let written = staged.commit()?;
         println!("{}", atmo_flight::whatif::OPEN_LOOP_NOTE);
         for line in table.largest_differences() {
             println!("  {line}");
         }
-        println!("wrote {}", out.display());
+        println!("wrote {}", written.display());
     }
     Ok(report.identical())
 }

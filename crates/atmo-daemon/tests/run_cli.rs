@@ -4,6 +4,7 @@
 //! with that error. The logger's own reaction (every record counted, the
 //! control thread never blocked) is atmo-io's
 //! `a_full_disk_fails_the_writer_and_every_record_is_counted_never_blocked`.
+//! And `atmo-daemon replay`'s what-if folder, staged as every output folder.
 // Test code: an unwrap that fails is the failure report.
 #![allow(clippy::unwrap_used)]
 
@@ -40,4 +41,57 @@ fn a_full_log_disk_is_reported_at_once_and_in_the_exit_status() {
             && stderr.contains("/dev/full: No space left on device"),
         "the exit names the file and the OS error: {stderr}"
     );
+}
+
+/// `replay --config ... --out DIR` wrote its what-if files into DIR as it
+/// was (someone's folder: theirs overwritten, a half-written set on a
+/// failure). The folder is now staged like every output folder: a file
+/// or a folder this tool did not write is refused before the replay, and
+/// a new folder is written whole.
+#[test]
+fn a_what_if_replay_never_writes_into_what_it_did_not_make() {
+    let repo = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+    let log = repo.join("crates/atmo-flight/tests/data/sitl_estimate_burst.mcap");
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join(format!("whatif-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(dir.join("theirs")).unwrap();
+    std::fs::write(dir.join("theirs/whatif.csv"), b"their data").unwrap();
+    std::fs::write(dir.join("notes.txt"), b"keep me").unwrap();
+    let replay = |out: &str| {
+        Command::new(env!("CARGO_BIN_EXE_atmo-daemon"))
+            .arg("replay")
+            .arg(&log)
+            .arg("--config")
+            .arg(repo.join("config/mpc.toml"))
+            .arg("--out")
+            .arg(dir.join(out))
+            .output()
+            .unwrap()
+    };
+    for out in ["notes.txt", "theirs"] {
+        let run = replay(out);
+        let stderr = String::from_utf8_lossy(&run.stderr);
+        assert_eq!(run.status.code(), Some(2), "{out}: {stderr}");
+        assert!(stderr.contains("nothing was written or moved"), "{stderr}");
+        let stdout = String::from_utf8_lossy(&run.stdout);
+        assert!(
+            !stdout.contains("replayed in"),
+            "refused after the replay: {stdout}"
+        );
+    }
+    assert_eq!(std::fs::read(dir.join("notes.txt")).unwrap(), b"keep me");
+    assert_eq!(
+        std::fs::read(dir.join("theirs/whatif.csv")).unwrap(),
+        b"their data"
+    );
+    let run = replay("new");
+    assert!(
+        run.status.code().is_some_and(|c| c < 2),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    for file in ["whatif.csv", "whatif.txt", "whatif.png", ".atmo-output"] {
+        assert!(dir.join("new").join(file).is_file(), "{file}");
+    }
+    std::fs::remove_dir_all(&dir).unwrap();
 }
