@@ -405,6 +405,21 @@ fn the_recover_command_line() {
     assert_eq!(refused.status.code(), Some(1));
     assert!(String::from_utf8_lossy(&refused.stderr).contains("exists"));
     assert_eq!(std::fs::read(&keep).unwrap(), b"keep me");
+    // `summary --out` is an output folder like every other: a file there
+    // is refused, untouched (it was written into with create_dir_all).
+    let refused = Command::new(exe)
+        .args([
+            "summary",
+            out.to_str().unwrap(),
+            "--out",
+            keep.to_str().unwrap(),
+        ])
+        .output()
+        .unwrap();
+    assert_eq!(refused.status.code(), Some(1));
+    let stderr = String::from_utf8_lossy(&refused.stderr);
+    assert!(stderr.contains("nothing was written or moved"), "{stderr}");
+    assert_eq!(std::fs::read(&keep).unwrap(), b"keep me");
     let cut_bytes = std::fs::read(&cut).unwrap();
     let mut aliases = vec![dir.join(".").join("cut.mcap")];
     #[cfg(unix)]

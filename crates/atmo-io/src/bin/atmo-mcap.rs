@@ -122,9 +122,11 @@ fn summary(
 ) -> atmo_io::Result<()> {
     use atmo_io::review::figure::write_landing_figure;
     use atmo_io::review::log::{TruthSource, review_log};
-    let review = review_log(log, status_topic)?;
     let output = |e: String| atmo_io::IoError::Output(format!("{}: {e}", out.display()));
-    std::fs::create_dir_all(out).map_err(|e| output(e.to_string()))?;
+    // Staged as every output folder: a file or a folder this tool did not
+    // write is refused before the log is read; the folder lands whole.
+    let staged = atmo_io::output_dir::StagedDir::new(out).map_err(|e| output(e.to_string()))?;
+    let review = review_log(log, status_topic)?;
     let mut value = serde_json::to_value(&review.summary).map_err(|e| output(e.to_string()))?;
     if !review.missing.is_empty() {
         for hole in &review.missing {
@@ -143,10 +145,16 @@ fn summary(
         }
     }
     let json = serde_json::to_string_pretty(&value).map_err(|e| output(e.to_string()))?;
-    let summary_path = out.join("summary.json");
-    std::fs::write(&summary_path, json + "\n").map_err(|e| output(e.to_string()))?;
-    let figure_path = out.join("figure.png");
-    write_landing_figure(&figure_path, &review.trace, &review.markers, &review.title)?;
+    std::fs::write(staged.path().join("summary.json"), json + "\n")
+        .map_err(|e| output(e.to_string()))?;
+    write_landing_figure(
+        &staged.path().join("figure.png"),
+        &review.trace,
+        &review.markers,
+        &review.title,
+    )?;
+    let written = staged.commit().map_err(|e| output(e.to_string()))?;
+    let (summary_path, figure_path) = (written.join("summary.json"), written.join("figure.png"));
     let s = &review.summary;
     let fmt = |v: Option<f64>, unit: &str| v.map_or("-".to_string(), |v| format!("{v:.2} {unit}"));
     println!(
