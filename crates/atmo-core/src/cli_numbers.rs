@@ -18,6 +18,8 @@ pub const MIN_SAMPLE_RATE_HZ: f64 = 1.0;
 pub const MAX_SAMPLE_RATE_HZ: f64 = 1000.0;
 /// Most Monte Carlo runs of one `fly --runs`.
 pub const MAX_RUNS: usize = 100_000;
+/// Most threads of one `--jobs` (a thread per run, each a flight stack).
+pub const MAX_JOBS: usize = 1024;
 /// Largest `explain --budget`, s (one day).
 pub const MAX_ANALYSIS_BUDGET_S: f64 = 86_400.0;
 
@@ -70,6 +72,17 @@ pub fn run_count(text: &str) -> Result<usize, String> {
     }
 }
 
+/// `--jobs`: a thread count in `1..=MAX_JOBS` (0 was taken as 1; a
+/// hundred thousand threads would fail to spawn).
+pub fn job_count(text: &str) -> Result<usize, String> {
+    match text.trim().parse::<usize>() {
+        Ok(n) if (1..=MAX_JOBS).contains(&n) => Ok(n),
+        _ => Err(format!(
+            "{text} is not a number of threads in 1..={MAX_JOBS}"
+        )),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -91,6 +104,10 @@ mod tests {
         for text in ["0", "-3", "1e9", "100001", "18446744073709551616"] {
             assert!(run_count(text).is_err(), "{text}");
         }
+        for text in ["0", "-1", "1025", "100000", "two"] {
+            assert!(job_count(text).is_err(), "{text}");
+        }
+        assert_eq!(job_count("8"), Ok(8));
     }
 
     #[test]

@@ -43,8 +43,8 @@ pub enum CampaignCommand {
         /// G % runs_per_cell) and print its record: a failed run again.
         #[arg(long, conflicts_with = "shard")]
         run_index: Option<usize>,
-        /// Threads (default: all cores).
-        #[arg(long)]
+        /// Threads (default: all cores; at most 1024).
+        #[arg(long, value_parser = atmo_core::cli_numbers::job_count)]
         jobs: Option<usize>,
         #[arg(long, default_value = "out/campaign")]
         out: PathBuf,

@@ -64,8 +64,8 @@ enum Command {
         /// Seed of the first Monte Carlo run (run i uses seed + i).
         #[arg(long, default_value_t = 1)]
         seed: u64,
-        /// Threads for the Monte Carlo (default: all cores).
-        #[arg(long)]
+        /// Threads for the Monte Carlo (default: all cores; at most 1024).
+        #[arg(long, value_parser = atmo_core::cli_numbers::job_count)]
         jobs: Option<usize>,
         /// Fly only shard K of N (0-based) of the --runs Monte Carlo and
         /// write its partial result; `atmo-sim campaign merge` joins the N
