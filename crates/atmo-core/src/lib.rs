@@ -6,6 +6,8 @@
 //!
 //! - [`config_file`]: the loading layer of every config file of the project
 //!   ([`ConfigFile`]: strict TOML, errors with file, line and key; range checks).
+//! - [`closed_stdout`]: the tests' check that a printing binary ends by
+//!   SIGPIPE when its reader is gone.
 //! - [`config`]: the robot file's layout, as data; [`validate`]: its physical
 //!   checks (they build a linkage and a model).
 //! - [`linkage`]: screw displacement x, tilt varphi and encoder counts.
@@ -26,6 +28,7 @@
 
 pub mod alloc_counter;
 pub mod cli_numbers;
+pub mod closed_stdout;
 pub mod config;
 pub mod config_file;
 pub mod control;

@@ -512,11 +512,11 @@ fn runs_of(t: &[f64], usable: &[bool], dt: f64) -> (Vec<(usize, usize)>, usize) 
         if gap {
             gaps += 1;
         }
-        if let Some(s0) = start {
-            if gap || !usable[k] {
-                runs.push((s0, k));
-                start = None;
-            }
+        if let Some(s0) = start
+            && (gap || !usable[k])
+        {
+            runs.push((s0, k));
+            start = None;
         }
         if start.is_none() && usable[k] {
             start = Some(k);

@@ -240,7 +240,7 @@ pub fn record(robot: &RobotConfig, plant_cfg: &PlantConfig, flight: &Flight) -> 
             mpc.set_tilt_ramp(tilt, tilt_rate, lo, hi).map_err(setup)?;
             mpc.prepare().map_err(setup)?;
             let out = mpc.feedback(&est.state).map_err(setup)?;
-            if tick % 3 == 0 && flight.dither > 0.0 {
+            if tick.is_multiple_of(3) && flight.dither > 0.0 {
                 dither = Vector4::from_fn(|_, _| {
                     if rng.random::<bool>() {
                         flight.dither
@@ -262,23 +262,23 @@ pub fn record(robot: &RobotConfig, plant_cfg: &PlantConfig, flight: &Flight) -> 
         plant.step(&cmd)?;
         cmd_hist.push(u);
         tilt_hist.push(plant.tilt());
-        if let Some(est) = plant.estimate() {
-            if last_seq != Some(est.sequence) {
-                last_seq = Some(est.sequence);
-                let at = ((est.measured_at / dt).round().max(0.0) as usize).min(cmd_hist.len() - 1);
-                // The command applied over the step that starts at `at`.
-                let cmd_at = cmd_hist[(at + 1).min(cmd_hist.len() - 1)];
-                steps_at.push(at);
-                samples.push(Sample {
-                    t: est.measured_at,
-                    x: est.state,
-                    u: cmd_at,
-                    applied: cmd_at,
-                    varphi: tilt_hist[at],
-                    ground_z: 0.0,
-                    battery_v: None,
-                });
-            }
+        if let Some(est) = plant.estimate()
+            && last_seq != Some(est.sequence)
+        {
+            last_seq = Some(est.sequence);
+            let at = ((est.measured_at / dt).round().max(0.0) as usize).min(cmd_hist.len() - 1);
+            // The command applied over the step that starts at `at`.
+            let cmd_at = cmd_hist[(at + 1).min(cmd_hist.len() - 1)];
+            steps_at.push(at);
+            samples.push(Sample {
+                t: est.measured_at,
+                x: est.state,
+                u: cmd_at,
+                applied: cmd_at,
+                varphi: tilt_hist[at],
+                ground_z: 0.0,
+                battery_v: None,
+            });
         }
     }
     // The commands applied over each row's interval: the mean of the plant

@@ -65,9 +65,9 @@ fn pilot(k: u64) -> PilotInput {
         velocity: [0.1 * t, -0.2, 0.3 - 0.01 * t],
         yaw_rate: -0.1 + 0.001 * t,
         throttle: (0.5 + 0.01 * t).min(1.0),
-        arm: k % 2 == 0,
-        offboard: k % 3 == 0,
-        mpc_enabled: k % 5 != 0,
+        arm: k.is_multiple_of(2),
+        offboard: k.is_multiple_of(3),
+        mpc_enabled: !k.is_multiple_of(5),
     }
 }
 

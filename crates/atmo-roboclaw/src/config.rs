@@ -83,7 +83,7 @@ atmo_core::params! {
         pub health_check_period_ms: u64 = 500, range 10..=60_000, unit "ms";
     }
     check |timing, c, prefix| {
-        if timing.board_serial_timeout_ms % 100 != 0 {
+        if !timing.board_serial_timeout_ms.is_multiple_of(100) {
             return Err(c.fail(
                 &atmo_core::params::key(prefix, "board_serial_timeout_ms"),
                 "a multiple of 100 ms (the board counts tenths of a second)",

@@ -339,7 +339,7 @@ fn sim(mode: SimMode, start_counts: f64, link: Option<&PathBuf>) -> Result<()> {
     while !stop.load(Ordering::SeqCst) {
         std::thread::sleep(Duration::from_millis(50));
         ticks += 1;
-        if ticks % 20 == 0 {
+        if ticks.is_multiple_of(20) {
             server.with_board(|b| {
                 eprintln!(
                     "sim: M1 {} counts {:.0} counts/s, M2 {} counts {:.0} counts/s, home {}, serial timeout {} x 100 ms, {:?}",

@@ -364,7 +364,7 @@ pub fn serve(
         tracker.after_plant_step(&crate::closed_loop::truth_of(&plant), was_grounded);
         links.publish(&plant, &pilot_msg(scenario, plant.time()), stamp);
         step += 1;
-        if step % 50 == 0 {
+        if step.is_multiple_of(50) {
             progress(plant.time(), links.last_status.as_ref().and_then(mode_of));
         }
     }

@@ -118,20 +118,21 @@ fn best_tau(profile: &[(f64, f64)], smallest: f64) -> f64 {
         .min_by(|a, b| a.1.total_cmp(&b.1))
         .unwrap_or((0.0, 0.0));
     let mut tau_star = best.0;
-    if let Some(i) = profile.iter().position(|p| p.0 == best.0) {
-        if i >= 2 && i + 1 < profile.len() {
-            let (x0, x1, x2) = (
-                profile[i - 1].0.ln(),
-                profile[i].0.ln(),
-                profile[i + 1].0.ln(),
-            );
-            let (y0, y1, y2) = (profile[i - 1].1, profile[i].1, profile[i + 1].1);
-            let d = (x0 - x1) * (x0 - x2) * (x1 - x2);
-            let a = (x2 * (y1 - y0) + x1 * (y0 - y2) + x0 * (y2 - y1)) / d;
-            let b = (x2 * x2 * (y0 - y1) + x1 * x1 * (y2 - y0) + x0 * x0 * (y1 - y2)) / d;
-            if a > 0.0 {
-                tau_star = (-b / (2.0 * a)).clamp(x0, x2).exp();
-            }
+    if let Some(i) = profile.iter().position(|p| p.0 == best.0)
+        && i >= 2
+        && i + 1 < profile.len()
+    {
+        let (x0, x1, x2) = (
+            profile[i - 1].0.ln(),
+            profile[i].0.ln(),
+            profile[i + 1].0.ln(),
+        );
+        let (y0, y1, y2) = (profile[i - 1].1, profile[i].1, profile[i + 1].1);
+        let d = (x0 - x1) * (x0 - x2) * (x1 - x2);
+        let a = (x2 * (y1 - y0) + x1 * (y0 - y2) + x0 * (y2 - y1)) / d;
+        let b = (x2 * x2 * (y0 - y1) + x1 * x1 * (y2 - y0) + x0 * x0 * (y1 - y2)) / d;
+        if a > 0.0 {
+            tau_star = (-b / (2.0 * a)).clamp(x0, x2).exp();
         }
     }
     if tau_star == 0.0 {

@@ -57,7 +57,7 @@ pub fn status(k: u64) -> MpcStatus {
         ros_stamp_ns: 1_780_000_000_000_000_000 + k * 6_666_667,
         tick: k,
         mode: Mode::ALL[(k % 8) as usize],
-        transition: if k % 5 == 0 {
+        transition: if k.is_multiple_of(5) {
             Label::new("height below z*")
         } else {
             Label::EMPTY
@@ -75,7 +75,7 @@ pub fn status(k: u64) -> MpcStatus {
         drive_velocity: [0.5, -0.1],
         wheel_rates: [t * 0.01, -t * 0.01],
         height: 1.0 - 0.001 * t,
-        ground_contact: k % 2 == 0,
+        ground_contact: k.is_multiple_of(2),
         estimate_age: if k == 3 { -1.0 } else { 0.004 },
         feedback_time: 1.1e-3,
         preparation_time: 2.2e-3,
@@ -84,7 +84,7 @@ pub fn status(k: u64) -> MpcStatus {
             yaw_rate: -0.1,
             throttle: 0.55,
             arm: true,
-            offboard: k % 3 == 0,
+            offboard: k.is_multiple_of(3),
             mpc_enabled: true,
         },
         timing: TickTiming {
@@ -92,7 +92,7 @@ pub fn status(k: u64) -> MpcStatus {
             deadline_ns: k * 6_666_667,
             wake_latency: 2e-5,
             compute: 1.5e-3,
-            overrun: k % 7 == 0,
+            overrun: k.is_multiple_of(7),
             overruns_total: k / 7,
             skipped_total: 0,
         },
@@ -107,7 +107,7 @@ pub fn status(k: u64) -> MpcStatus {
             inputs_dropped: k + 3,
             publish_dropped: k + 4,
             log_dropped: k + 5,
-            drivers_alive: [k % 2 == 0, true, k % 3 == 0, true],
+            drivers_alive: [k.is_multiple_of(2), true, k.is_multiple_of(3), true],
             driver_deaths: [k, 0, 1, 2],
         },
         ..MpcStatus::default()
