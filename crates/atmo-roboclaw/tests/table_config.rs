@@ -128,7 +128,7 @@ fn the_driver_file_is_strict() {
         "{e}"
     );
     let e = load_error(|t| t.replace("required = [\"tilt\"]", "required = [\"tilts\"]"));
-    assert!(e.contains("tilt.toml: key `ports.required`"), "{e}");
+    assert!(e.contains("tilt.toml: key `ports.required[0]`"), "{e}");
     let e = load_error(|t| t.replace("address = 128", "address = 7"));
     assert!(e.contains("`serial.address`"), "{e}");
     let e = load_error(|t| t.replace("mode = \"tilt\"", "mode = \"wheels\""));
