@@ -1,11 +1,24 @@
 //! The daemon config's checks that need the whole `config/daemon.toml`:
 //! the configuration problem the arming checks report, and one pilot
 //! source.
+// Test code: an unwrap that fails is the failure report.
+#![allow(clippy::unwrap_used)]
 
 use std::path::Path;
 
 use atmo_core::ConfigFile as _;
 use atmo_daemon::onboard::DaemonConfig;
+
+/// The three file keys every daemon file names; the tests add tables.
+const BASE: &str = "robot = \"atmo.toml\"\nflight = \"flight.toml\"\nmpc = \"mpc.toml\"\n";
+
+/// The error of `BASE` + `tables` read as `config/test.toml`.
+fn refused(tables: &str) -> String {
+    let file = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../config/test.toml");
+    DaemonConfig::from_toml_str(&format!("{BASE}{tables}"), &file)
+        .unwrap_err()
+        .to_string()
+}
 
 #[test]
 fn the_configuration_check_finds_a_daemon_that_cannot_fly() {
@@ -14,7 +27,6 @@ fn the_configuration_check_finds_a_daemon_that_cannot_fly() {
         let config = DaemonConfig::load(dir.join(name)).unwrap();
         assert_eq!(config.flight_problem(), None, "{name}");
     }
-    let base = "robot = \"atmo.toml\"\nflight = \"flight.toml\"\nmpc = \"mpc.toml\"\n";
     let file = dir.join("test.toml");
     let cases = [
         (
@@ -25,7 +37,7 @@ fn the_configuration_check_finds_a_daemon_that_cannot_fly() {
         ("[drivers]\nrequired = [\"tilt\"]\n", "no thruster path"),
     ];
     for (text, problem) in cases {
-        let config = DaemonConfig::from_toml_str(&format!("{base}{text}"), &file).unwrap();
+        let config = DaemonConfig::from_toml_str(&format!("{BASE}{text}"), &file).unwrap();
         let found = config.flight_problem().unwrap_or_default();
         assert!(found.contains(problem), "{text}: {found}");
     }
@@ -39,27 +51,16 @@ fn the_daemon_config_takes_one_pilot_source_and_names_a_bad_rc_key() {
         let topics = &config.ros2.topics;
         assert!(topics.rc.enabled != topics.pilot.enabled, "{name}");
     }
-    let base = "robot = \"atmo.toml\"\nflight = \"flight.toml\"\nmpc = \"mpc.toml\"\n";
-    let file = dir.join("test.toml");
-    let both = format!(
-        "{base}[ros2.topics]\nrc = {{ name = \"/fmu/out/input_rc\", type = \"px4_msgs/msg/InputRc\" }}\n"
+    let err = refused(
+        "[ros2.topics]\nrc = { name = \"/fmu/out/input_rc\", type = \"px4_msgs/msg/InputRc\" }\n",
     );
-    let err = DaemonConfig::from_toml_str(&both, &file)
-        .unwrap_err()
-        .to_string();
     assert!(
         err.contains("ros2.topics.pilot.enabled") && err.contains("test.toml"),
         "{err}"
     );
-    let bad = format!("{base}[rc.sticks.yaw]\nchannel = 0\n");
-    let err = DaemonConfig::from_toml_str(&bad, &file)
-        .unwrap_err()
-        .to_string();
+    let err = refused("[rc.sticks.yaw]\nchannel = 0\n");
     assert!(err.contains("rc.sticks.yaw.channel"), "{err}");
-    let unknown = format!("{base}[rc]\nkill_channel = 5\n");
-    let err = DaemonConfig::from_toml_str(&unknown, &file)
-        .unwrap_err()
-        .to_string();
+    let err = refused("[rc]\nkill_channel = 5\n");
     assert!(err.contains("kill_channel"), "{err}");
 }
 
@@ -68,21 +69,12 @@ fn the_daemon_config_takes_one_pilot_source_and_names_a_bad_rc_key() {
 /// reported at key `(document)`; both now name their key.
 #[test]
 fn a_driver_required_twice_and_an_overflowing_number_name_their_key() {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../config");
-    let base = "robot = \"atmo.toml\"\nflight = \"flight.toml\"\nmpc = \"mpc.toml\"\n";
-    let file = dir.join("test.toml");
-    let twice = format!("{base}[drivers]\nrequired = [\"thrusters\", \"tilt\", \"thrusters\"]\n");
-    let err = DaemonConfig::from_toml_str(&twice, &file)
-        .unwrap_err()
-        .to_string();
+    let err = refused("[drivers]\nrequired = [\"thrusters\", \"tilt\", \"thrusters\"]\n");
     assert!(
         err.contains("drivers.required[2]") && err.contains("each driver named once"),
         "{err}"
     );
-    let huge = format!("{base}[log]\nqueue_capacity = 18446744073709551615\n");
-    let err = DaemonConfig::from_toml_str(&huge, &file)
-        .unwrap_err()
-        .to_string();
+    let err = refused("[log]\nqueue_capacity = 18446744073709551615\n");
     assert!(
         err.contains("test.toml:5: key `log.queue_capacity`"),
         "{err}"
