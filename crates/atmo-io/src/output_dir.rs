@@ -16,6 +16,12 @@
 //! marker. Anything else (a file, a device, a symlink, someone's folder) is
 //! refused by [`StagedDir::new`] before anything is written or moved, and
 //! checked again by [`StagedDir::commit`] before anything is renamed.
+//!
+//! A folder that several runs add to (a campaign's plan, the shards of an
+//! array job and their merge; a SITL server's board logs and summary)
+//! cannot be staged whole: [`open_shared`] applies the same rule to it and
+//! marks it, and [`StagedFiles`] writes each run's files into it all or
+//! none, each under a temporary name until every one is written.
 
 use std::io;
 use std::path::{Path, PathBuf};
@@ -64,6 +70,124 @@ pub fn check_replaceable(target: &Path) -> io::Result<()> {
     ))
 }
 
+/// Opens `target` as a folder several runs add files to: created with
+/// [`MARKER`] (and its parents) if absent, accepted if it is empty or holds
+/// the marker; anything else is refused as [`check_replaceable`] refuses
+/// it, before anything is written. Safe to call from processes that start
+/// together (the shards of an array job).
+///
+/// # Errors
+/// The target may not be used, or cannot be created; the message names it.
+pub fn open_shared(target: &Path) -> io::Result<()> {
+    check_replaceable(target)?;
+    std::fs::create_dir_all(target).map_err(|e| context("creating", target, &e))?;
+    let marker = target.join(MARKER);
+    match std::fs::OpenOptions::new()
+        .write(true)
+        .create_new(true)
+        .open(&marker)
+    {
+        Ok(mut file) => io::Write::write_all(&mut file, MARKER_TEXT)
+            .map_err(|e| context("writing", &marker, &e)),
+        Err(e) if e.kind() == io::ErrorKind::AlreadyExists => Ok(()),
+        Err(e) => Err(context("writing", &marker, &e)),
+    }
+}
+
+const MARKER_TEXT: &[u8] = b"written by an ATMO tool, which may replace it or add to it\n";
+
+/// Files written into one folder all or none: each is written under a
+/// hidden temporary name beside its own (same file system, same extension,
+/// so a writer that picks its format by the extension still can), and
+/// [`StagedFiles::commit`] renames them into place once every one is
+/// written. Dropped without a commit (an error, a panic), the temporary
+/// files are removed and the folder is as it was.
+#[derive(Debug)]
+pub struct StagedFiles {
+    dir: PathBuf,
+    staged: Vec<(tempfile::TempPath, PathBuf)>,
+}
+
+impl StagedFiles {
+    /// Files for the existing folder `dir`.
+    pub fn new(dir: impl Into<PathBuf>) -> Self {
+        Self {
+            dir: dir.into(),
+            staged: Vec::new(),
+        }
+    }
+
+    /// The temporary path to write the file `name` to.
+    ///
+    /// # Errors
+    /// The temporary file cannot be created; the message names the folder.
+    pub fn stage(&mut self, name: impl AsRef<std::ffi::OsStr>) -> io::Result<&Path> {
+        let name = Path::new(name.as_ref());
+        let suffix = name
+            .extension()
+            .map_or_else(String::new, |e| format!(".{}", e.to_string_lossy()));
+        let mut builder = tempfile::Builder::new();
+        // A temporary file is the owner's alone by default; the outputs are
+        // created as any file is (0666 less the umask).
+        #[cfg(unix)]
+        builder.permissions(std::os::unix::fs::PermissionsExt::from_mode(0o666));
+        let temp = builder
+            .prefix(&format!(".{}.partial-", name.to_string_lossy()))
+            .suffix(&suffix)
+            .tempfile_in(&self.dir)
+            .map_err(|e| context("creating a temporary file in", &self.dir, &e))?
+            .into_temp_path();
+        self.staged.push((temp, self.dir.join(name)));
+        Ok(&self.staged[self.staged.len() - 1].0)
+    }
+
+    /// Writes the file `name` (under its temporary name until the commit).
+    ///
+    /// # Errors
+    /// As [`StagedFiles::stage`], or the write fails; the message names the file.
+    pub fn write(
+        &mut self,
+        name: impl AsRef<std::ffi::OsStr>,
+        contents: impl AsRef<[u8]>,
+    ) -> io::Result<()> {
+        let path = self.stage(name)?.to_path_buf();
+        std::fs::write(&path, contents).map_err(|e| context("writing", &path, &e))
+    }
+
+    /// Renames every staged file to its name, replacing an earlier file (or
+    /// symbolic link) of that name; returns the final paths. A name taken
+    /// by anything else (a folder, a device) is refused before any rename.
+    ///
+    /// # Errors
+    /// A name is taken by something that is not a file, or a rename fails;
+    /// the message names the file. After a failed rename the files renamed
+    /// before it stay renamed, the others are removed.
+    pub fn commit(self) -> io::Result<Vec<PathBuf>> {
+        for (_, path) in &self.staged {
+            if let Ok(meta) = std::fs::symlink_metadata(path) {
+                let kind = meta.file_type();
+                if !kind.is_file() && !kind.is_symlink() {
+                    return Err(io::Error::new(
+                        io::ErrorKind::AlreadyExists,
+                        format!(
+                            "{}: exists and is not a file (a folder, a device, a FIFO or a \
+                             socket); nothing was replaced",
+                            path.display()
+                        ),
+                    ));
+                }
+            }
+        }
+        let mut written = Vec::with_capacity(self.staged.len());
+        for (temp, path) in self.staged {
+            temp.persist(&path)
+                .map_err(|e| context("renaming into", &path, &e.error))?;
+            written.push(path);
+        }
+        Ok(written)
+    }
+}
+
 /// A run's output folder, staged until [`StagedDir::commit`].
 #[derive(Debug)]
 pub struct StagedDir {
@@ -104,11 +228,7 @@ impl StagedDir {
             .tempdir_in(&parent)
             .map_err(|e| context("creating a staging folder in", &parent, &e))?;
         let marker = staging.path().join(MARKER);
-        std::fs::write(
-            &marker,
-            b"written by an ATMO tool; replaced whole by its next run\n",
-        )
-        .map_err(|e| context("writing", &marker, &e))?;
+        std::fs::write(&marker, MARKER_TEXT).map_err(|e| context("writing", &marker, &e))?;
         Ok(Self { staging, target })
     }
 
@@ -156,7 +276,7 @@ impl StagedDir {
 mod tests {
     #![allow(clippy::unwrap_used)] // test code: an unwrap that fails is the failure report
 
-    use super::{MARKER, StagedDir};
+    use super::{MARKER, StagedDir, StagedFiles, open_shared};
 
     fn scratch(tag: &str) -> std::path::PathBuf {
         let dir = std::env::temp_dir().join(format!("atmo-staged-{tag}-{}", std::process::id()));
@@ -284,5 +404,112 @@ mod tests {
         again.commit().unwrap();
         assert_eq!(names(&empty), [MARKER, "b"]);
         std::fs::remove_dir_all(root).unwrap();
+    }
+
+    /// A folder runs add to: created and marked, opened again by the next
+    /// run with what it holds, and refused as [`StagedDir`] refuses.
+    #[test]
+    fn a_shared_folder_is_marked_reopened_and_refused_like_a_staged_one() {
+        let root = scratch("shared");
+        let out = root.join("a/campaign");
+        open_shared(&out).unwrap();
+        std::fs::write(out.join("plan.json"), b"{}").unwrap();
+        open_shared(&out).unwrap();
+        assert_eq!(names(&out), [MARKER, "plan.json"], "kept, not replaced");
+        let theirs = root.join("theirs");
+        std::fs::create_dir_all(&theirs).unwrap();
+        std::fs::write(theirs.join("thesis.tex"), b"keep me").unwrap();
+        let file = root.join("notes.txt");
+        std::fs::write(&file, b"keep me").unwrap();
+        let link = root.join("link");
+        std::os::unix::fs::symlink(&out, &link).unwrap();
+        for (target, what) in [
+            (&theirs, "a folder this tool did not write"),
+            (&file, "is a file"),
+            (&link, "a symbolic link"),
+        ] {
+            let err = open_shared(target).unwrap_err().to_string();
+            assert!(err.contains(what), "{err}");
+        }
+        assert_eq!(names(&theirs), ["thesis.tex"]);
+        assert_eq!(std::fs::read(&file).unwrap(), b"keep me");
+        std::fs::remove_dir_all(root).unwrap();
+    }
+
+    /// Files staged together appear together, each replacing an earlier
+    /// one; a run that stops before the commit leaves the folder as it was.
+    #[test]
+    fn staged_files_appear_together_or_not_at_all() {
+        let root = scratch("files");
+        std::fs::write(root.join("cells.md"), b"old").unwrap();
+        std::fs::write(root.join("map.png"), b"old").unwrap();
+        {
+            let mut files = StagedFiles::new(&root);
+            files.write("cells.md", b"new").unwrap();
+            let map = files.stage("map.png").unwrap();
+            assert_eq!(
+                map.extension().unwrap(),
+                "png",
+                "a writer may pick the format by it"
+            );
+            // dropped without commit: the map failed
+        }
+        assert_eq!(names(&root), ["cells.md", "map.png"], "no temporary left");
+        assert_eq!(std::fs::read(root.join("cells.md")).unwrap(), b"old");
+        let mut files = StagedFiles::new(&root);
+        files.write("cells.md", b"new").unwrap();
+        let map = files.stage("map.png").unwrap().to_path_buf();
+        std::fs::write(&map, b"new").unwrap();
+        assert_eq!(std::fs::read(root.join("map.png")).unwrap(), b"old");
+        let written = files.commit().unwrap();
+        assert_eq!(written, [root.join("cells.md"), root.join("map.png")]);
+        assert_eq!(names(&root), ["cells.md", "map.png"]);
+        assert_eq!(std::fs::read(root.join("map.png")).unwrap(), b"new");
+        // A name taken by a folder: nothing is replaced, not even the
+        // files staged before it.
+        std::fs::create_dir(root.join("campaign.json")).unwrap();
+        let mut files = StagedFiles::new(&root);
+        files.write("cells.md", b"newer").unwrap();
+        files.write("campaign.json", b"{}").unwrap();
+        let err = files.commit().unwrap_err().to_string();
+        assert!(
+            err.contains("campaign.json") && err.contains("not a file"),
+            "{err}"
+        );
+        assert_eq!(std::fs::read(root.join("cells.md")).unwrap(), b"new");
+        std::fs::remove_dir(root.join("campaign.json")).unwrap();
+        #[cfg(unix)]
+        {
+            use std::os::unix::fs::PermissionsExt;
+            let mode = std::fs::metadata(root.join("cells.md"))
+                .unwrap()
+                .permissions()
+                .mode();
+            assert_ne!(mode & 0o600, 0, "the owner reads and writes it");
+            assert_eq!(
+                mode & 0o044,
+                0o044 & !umask(),
+                "readable by others as the umask allows, not the owner's alone"
+            );
+        }
+        std::fs::remove_dir_all(root).unwrap();
+    }
+
+    /// The process's umask, read back by creating a file with mode 0o777
+    /// in a scratch folder.
+    #[cfg(unix)]
+    fn umask() -> u32 {
+        use std::os::unix::fs::{OpenOptionsExt, PermissionsExt};
+        let dir = scratch("umask");
+        let probe = dir.join("probe");
+        std::fs::OpenOptions::new()
+            .write(true)
+            .create_new(true)
+            .mode(0o777)
+            .open(&probe)
+            .unwrap();
+        let mode = std::fs::metadata(&probe).unwrap().permissions().mode() & 0o777;
+        std::fs::remove_dir_all(dir).unwrap();
+        0o777 & !mode
     }
 }

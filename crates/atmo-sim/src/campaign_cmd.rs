@@ -7,6 +7,7 @@ use std::sync::Mutex;
 use std::time::Instant;
 
 use anyhow::{Context, Result, bail};
+use atmo_io::output_dir::{StagedFiles, open_shared};
 use atmo_io::review::success_map::{MapAxis, MapCell, write_success_map};
 use atmo_sim::campaign::shard::{self, BuildIdentity, Merged, ShardFile, ShardSpec};
 use atmo_sim::campaign::{CampaignFile, Plan, Target, slurm};
@@ -25,8 +26,8 @@ pub enum CampaignCommand {
         campaign: PathBuf,
         #[command(flatten)]
         controller: ControllerOverride,
-        #[arg(long, default_value = "out/campaign")]
-        out: PathBuf,
+        #[command(flatten)]
+        out: CampaignFolder,
     },
     /// Fly a campaign: one shard (--shard K/N, writes
     /// OUT/shards/shard-K-of-N.json for `merge`), or all of it in this
@@ -46,8 +47,8 @@ pub enum CampaignCommand {
         /// Threads (default: all cores; at most 1024).
         #[arg(long, value_parser = atmo_core::cli_numbers::job_count)]
         jobs: Option<usize>,
-        #[arg(long, default_value = "out/campaign")]
-        out: PathBuf,
+        #[command(flatten)]
+        out: CampaignFolder,
     },
     /// Merge shards (shard files or folders of them) into OUT: a plain
     /// Monte Carlo's monte_carlo.json (the one `fly --runs N` writes, byte
@@ -56,8 +57,8 @@ pub enum CampaignCommand {
     Merge {
         #[arg(required = true)]
         shards: Vec<PathBuf>,
-        #[arg(long, default_value = "out/campaign")]
-        out: PathBuf,
+        #[command(flatten)]
+        out: CampaignFolder,
     },
     /// Write OUT/campaign.sbatch: a Slurm array job, one task per shard of
     /// the campaign file's `shards`, with its `[slurm]` resources; submit
@@ -66,13 +67,26 @@ pub enum CampaignCommand {
         campaign: PathBuf,
         #[command(flatten)]
         controller: ControllerOverride,
-        #[arg(long, default_value = "out/campaign")]
-        out: PathBuf,
+        #[command(flatten)]
+        out: CampaignFolder,
         /// The atmo-sim each task runs (default: this one). It must be
         /// reachable at this path from every node.
         #[arg(long)]
         binary: Option<PathBuf>,
     },
+}
+
+/// `--out`: the folder every command of one campaign shares.
+#[derive(clap::Args, Clone)]
+pub struct CampaignFolder {
+    /// The campaign folder: created with its marker file (.atmo-output) if
+    /// absent, and used again only if this tool made it (or it is empty);
+    /// a file, a symbolic link, a device or a folder this tool did not
+    /// write is refused before anything is written or flown. Each command
+    /// adds its files whole: written under temporary names, renamed into
+    /// place together.
+    #[arg(long = "out", value_name = "OUT", default_value = "out/campaign")]
+    path: PathBuf,
 }
 
 /// `--controller`: fly the campaign with another controller than its file
@@ -89,7 +103,7 @@ pub fn run(command: CampaignCommand) -> Result<()> {
             campaign,
             controller,
             out,
-        } => plan(&campaign, controller, &out),
+        } => plan(&campaign, controller, &out.path),
         CampaignCommand::Run {
             campaign,
             controller,
@@ -97,14 +111,14 @@ pub fn run(command: CampaignCommand) -> Result<()> {
             run_index,
             jobs,
             out,
-        } => run_campaign(&campaign, controller, shard, run_index, jobs, &out),
-        CampaignCommand::Merge { shards, out } => merge(&shards, &out),
+        } => run_campaign(&campaign, controller, shard, run_index, jobs, &out.path),
+        CampaignCommand::Merge { shards, out } => merge(&shards, &out.path),
         CampaignCommand::Slurm {
             campaign,
             controller,
             out,
             binary,
-        } => write_slurm(&campaign, controller, &out, binary),
+        } => write_slurm(&campaign, controller, &out.path, binary),
     }
 }
 
@@ -152,32 +166,45 @@ fn build_identity(scenario: &Scenario, controller: &ControllerConfig) -> Result<
     Ok(BuildIdentity::of(&binary, &config))
 }
 
-/// Writes `value` as pretty JSON to `path` through a temporary file, so a
-/// reader never sees half a file.
+/// Writes `value` as pretty JSON to `path` in a folder [`open_shared`]
+/// opened, through a temporary file, so a reader never sees half a file.
 fn write_json(path: &Path, value: &impl Serialize) -> Result<()> {
-    let dir = path.parent().unwrap_or_else(|| Path::new("."));
-    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-    let tmp = dir.join(format!(
-        ".{}.tmp-{}",
-        path.file_name().and_then(|n| n.to_str()).unwrap_or("out"),
-        std::process::id()
-    ));
-    std::fs::write(&tmp, serde_json::to_string_pretty(value)? + "\n")
-        .with_context(|| format!("writing {}", tmp.display()))?;
-    std::fs::rename(&tmp, path).with_context(|| format!("writing {}", path.display()))?;
+    let (dir, name) = dir_and_name(path)?;
+    let mut files = StagedFiles::new(dir);
+    files.write(name, serde_json::to_string_pretty(value)? + "\n")?;
+    files.commit()?;
     Ok(())
 }
 
-/// Flies `shard` of `plan` and writes it into `dir`, with progress lines
-/// on stderr (a batch job's log: at most one per 5 % or per 30 s).
+fn dir_and_name(path: &Path) -> Result<(&Path, &str)> {
+    let name = path
+        .file_name()
+        .and_then(|n| n.to_str())
+        .with_context(|| format!("{}: not a file name", path.display()))?;
+    Ok((path.parent().unwrap_or_else(|| Path::new(".")), name))
+}
+
+/// Opens the campaign folder `out` ([`open_shared`]: created and marked,
+/// or one this tool wrote) and its `shards/` folder, before any run flies.
+pub fn open_campaign_folder(out: &Path) -> Result<PathBuf> {
+    open_shared(out)?;
+    let shards = out.join("shards");
+    std::fs::create_dir_all(&shards).with_context(|| format!("creating {}", shards.display()))?;
+    Ok(shards)
+}
+
+/// Flies `shard` of `plan` and writes it into the campaign folder `out`'s
+/// `shards/`, with progress lines on stderr (a batch job's log: at most
+/// one per 5 % or per 30 s). The folder is checked before the first run.
 pub fn fly_and_write_shard(
     plan: &Plan,
     scenario: &Scenario,
     controller: &ControllerConfig,
     shard: ShardSpec,
     jobs: Option<usize>,
-    dir: &Path,
+    out: &Path,
 ) -> Result<()> {
+    let dir = open_campaign_folder(out)?;
     let build = build_identity(scenario, controller)?;
     let start = Instant::now();
     let last = Mutex::new((0usize, Instant::now()));
@@ -256,6 +283,7 @@ fn plan(campaign: &Path, controller: ControllerOverride, out: &Path) -> Result<(
         file.shards,
         out.display()
     );
+    open_shared(out)?;
     let path = out.join("plan.json");
     write_json(&path, &plan)?;
     println!("wrote             {}", path.display());
@@ -294,12 +322,14 @@ fn run_campaign(
         println!("{}", serde_json::to_string_pretty(&record)?);
         return Ok(());
     }
-    let dir = out.join("shards");
     if let Some(shard) = shard {
-        return fly_and_write_shard(&plan, &scenario, &controller, shard, jobs, &dir);
+        return fly_and_write_shard(&plan, &scenario, &controller, shard, jobs, out);
     }
-    fly_and_write_shard(&plan, &scenario, &controller, ShardSpec::WHOLE, jobs, &dir)?;
-    merge(&[dir.join(ShardSpec::WHOLE.file_name())], out)
+    fly_and_write_shard(&plan, &scenario, &controller, ShardSpec::WHOLE, jobs, out)?;
+    merge(
+        &[out.join("shards").join(ShardSpec::WHOLE.file_name())],
+        out,
+    )
 }
 
 /// `campaign.json`: the plan and each cell's report.
@@ -334,6 +364,7 @@ fn in_target(report: &MonteCarloReport, target: &Target) -> Count {
 }
 
 fn merge(paths: &[PathBuf], out: &Path) -> Result<()> {
+    open_shared(out)?;
     let files = shard::shard_paths(paths)?;
     let shards: Vec<(PathBuf, ShardFile)> = files
         .into_iter()
@@ -341,7 +372,6 @@ fn merge(paths: &[PathBuf], out: &Path) -> Result<()> {
         .collect::<std::result::Result<_, _>>()?;
     let n = shards.len();
     let merged = shard::merge(shards)?;
-    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     println!(
         "merged            {n} shards, {} runs, {:.0} s of shard time",
         merged.plan.total_runs(),
@@ -379,27 +409,33 @@ fn write_campaign(merged: &Merged, out: &Path) -> Result<()> {
         .collect();
     let table = cell_table(plan, &cells);
     print!("{table}");
-    let md = out.join("cells.md");
-    std::fs::write(&md, &table).with_context(|| format!("writing {}", md.display()))?;
-    let json = out.join("campaign.json");
-    write_json(
-        &json,
-        &CampaignReport {
-            plan,
-            build: &merged.build,
-            cells,
-        },
+    // The table, the report and the map replace an earlier merge's together.
+    let mut files = StagedFiles::new(out);
+    files.write("cells.md", &table)?;
+    let report = CampaignReport {
+        plan,
+        build: &merged.build,
+        cells,
+    };
+    files.write(
+        "campaign.json",
+        serde_json::to_string_pretty(&report)? + "\n",
     )?;
-    println!("wrote             {}, {}", json.display(), md.display());
-    if plan.parameters.len() <= 2 {
-        let map = out.join("map.png");
-        write_map(merged, &map)?;
-        println!("map               {}", map.display());
-    } else {
-        println!(
+    let map = (plan.parameters.len() <= 2)
+        .then(|| -> Result<()> { write_map(merged, files.stage("map.png")?) })
+        .transpose()?;
+    files.commit()?;
+    println!(
+        "wrote             {}, {}",
+        out.join("campaign.json").display(),
+        out.join("cells.md").display()
+    );
+    match map {
+        Some(()) => println!("map               {}", out.join("map.png").display()),
+        None => println!(
             "map               none: {} swept parameters (a map has two axes)",
             plan.parameters.len()
-        );
+        ),
     }
     Ok(())
 }
@@ -515,8 +551,9 @@ fn write_slurm(
         None => std::env::current_exe().context("locating this executable")?,
     };
     let out = absolute(out)?;
+    open_shared(&out)?;
     std::fs::create_dir_all(out.join("logs"))
-        .with_context(|| format!("creating {}", out.display()))?;
+        .with_context(|| format!("creating {}", out.join("logs").display()))?;
     let script = slurm::sbatch_script(&slurm::ArrayJob {
         name: &plan.name,
         shards: file.shards,
@@ -527,7 +564,9 @@ fn write_slurm(
         out: &out,
     });
     let path = out.join("campaign.sbatch");
-    std::fs::write(&path, script).with_context(|| format!("writing {}", path.display()))?;
+    let mut files = StagedFiles::new(&out);
+    files.write("campaign.sbatch", script)?;
+    files.commit()?;
     println!("wrote             {}", path.display());
     println!("submit            sbatch {}", path.display());
     println!(

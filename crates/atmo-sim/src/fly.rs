@@ -98,14 +98,13 @@ pub fn run(
             bail!("--shard needs --runs and one controller (not `both` or `all`)");
         };
         let plan = Plan::monte_carlo(&scenario, *preset, count, runs.seed);
-        let dir = out.join(&scenario.file.name).join("shards");
         return crate::campaign_cmd::fly_and_write_shard(
             &plan,
             &scenario,
             &controllers[0].1,
             shard,
             runs.jobs,
-            &dir,
+            &out.join(&scenario.file.name),
         );
     }
     let dir: PathBuf = out.join(&scenario.file.name);

@@ -123,7 +123,11 @@ enum Command {
         /// the ones served.
         #[command(flatten)]
         config: DaemonConfigArg,
-        /// Output folder.
+        /// Output folder (summary.json, and the boards' logs while the
+        /// flight runs): created with its marker file (.atmo-output) if
+        /// absent, used again only if this tool made it (or it is empty); a
+        /// file, a symbolic link, a device or a folder this tool did not
+        /// write is refused before the plant starts.
         #[arg(long, default_value = "out/sitl")]
         out: PathBuf,
         /// Longest wait for the daemon to arm, s.
@@ -292,7 +296,9 @@ fn serve(
         .context("serve's topics")?;
     let mut options = ServeOptions::new(daemon.ros2, daemon.drivers);
     options.start_timeout = std::time::Duration::from_secs_f64(start_timeout.max(0.0));
-    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    // The boards' logs are written while the flight runs and kept whatever
+    // its outcome, so the folder is added to, not staged whole.
+    atmo_io::output_dir::open_shared(out)?;
     options.boards = roboclaw.map(
         |(tilt, wheels, driver_binary)| atmo_sim::boards::BoardFiles {
             tilt,
@@ -326,8 +332,9 @@ fn serve(
         "server": counters,
     });
     let path = out.join("summary.json");
-    std::fs::write(&path, serde_json::to_string_pretty(&json)? + "\n")
-        .with_context(|| format!("writing {}", path.display()))?;
+    let mut files = atmo_io::output_dir::StagedFiles::new(out);
+    files.write("summary.json", serde_json::to_string_pretty(&json)? + "\n")?;
+    files.commit()?;
     println!("{}", serde_json::to_string_pretty(&json)?);
     if !ok {
         anyhow::bail!(

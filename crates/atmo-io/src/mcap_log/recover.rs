@@ -60,12 +60,14 @@ pub fn recover(input: impl AsRef<Path>, output: impl AsRef<Path>) -> Result<Reco
         Some(p) if !p.as_os_str().is_empty() => p,
         _ => Path::new("."),
     };
-    let staged = tempfile::Builder::new()
-        .prefix(".recover-")
-        .suffix(".mcap")
-        .tempfile_in(folder)
+    let name = output.file_name().ok_or_else(|| {
+        IoError::Logger(format!("recover: {}: not a file name", output.display()))
+    })?;
+    let mut staged = crate::output_dir::StagedFiles::new(folder);
+    let out: File = staged
+        .stage(name)
+        .and_then(File::create)
         .map_err(file_err(output))?;
-    let out: File = staged.reopen().map_err(file_err(output))?;
     let mcap_err = |file: &Path| {
         let file = file.to_path_buf();
         move |cause| IoError::Mcap { file, cause }
@@ -131,9 +133,7 @@ pub fn recover(input: impl AsRef<Path>, output: impl AsRef<Path>) -> Result<Reco
     writer.finish().map_err(mcap_err(output))?;
     // Written whole before it is renamed into place.
     writer.into_inner().flush().map_err(file_err(output))?;
-    staged
-        .persist(output)
-        .map_err(|e| file_err(output)(e.error))?;
+    staged.commit().map_err(file_err(output))?;
     Ok(RecoverReport {
         output: output.to_path_buf(),
         messages: copied,

@@ -142,3 +142,81 @@ fn a_command_ends_quietly_when_its_reader_is_gone() {
     physics.current_dir(repo()).arg("physics");
     atmo_core::closed_stdout::ends_by_sigpipe(&mut physics).unwrap();
 }
+
+/// `campaign plan --out FILE` said only "File exists (os error 17)", and a
+/// campaign, a shard or the SITL server wrote into any folder it was
+/// given, through a symbolic link too. Every command that adds to a
+/// shared output folder refuses a file, a symbolic link and a folder this
+/// tool did not write, names it, and writes nothing.
+#[cfg(unix)]
+#[test]
+fn a_shared_output_folder_that_is_not_ours_is_refused_and_nothing_is_written() {
+    let root = scratch("shared_out");
+    let file = root.join("notes.txt");
+    std::fs::write(&file, b"keep me").unwrap();
+    let theirs = root.join("theirs");
+    std::fs::create_dir_all(theirs.join("wheel_landing")).unwrap();
+    std::fs::write(theirs.join("wheel_landing/data.csv"), b"keep me").unwrap();
+    let link = root.join("link");
+    std::os::unix::fs::symlink(&theirs, &link).unwrap();
+    let before = walk(&root);
+    let refused = |args: &[&str], what: &str| {
+        let output = std::process::Command::new(env!("CARGO_BIN_EXE_atmo-sim"))
+            .current_dir(repo())
+            .env("RUST_BACKTRACE", "0")
+            .args(args)
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&output.stderr);
+        assert!(!output.status.success(), "{args:?} accepted");
+        assert!(
+            stderr.contains(what) && stderr.contains("nothing was written or moved"),
+            "{args:?}: {stderr}"
+        );
+    };
+    let campaign = "config/campaigns/ground_effect_x_thrust.toml";
+    for (target, what) in [
+        (&file, "a file"),
+        (&theirs, "a folder this tool did not write"),
+        (&link, "a symbolic link"),
+    ] {
+        let t = target.to_str().unwrap();
+        refused(&["campaign", "plan", campaign, "--out", t], what);
+        refused(
+            &["campaign", "run", campaign, "--shard", "0/8", "--out", t],
+            what,
+        );
+        refused(&["campaign", "merge", "no/such/shards", "--out", t], what);
+        refused(&["campaign", "slurm", campaign, "--out", t], what);
+        refused(&["serve", "--quiet", "--out", t], what);
+    }
+    // `fly --shard` adds to OUT/<scenario name>: here theirs/wheel_landing.
+    refused(
+        &[
+            "fly",
+            "--runs",
+            "2",
+            "--shard",
+            "0/2",
+            "--out",
+            theirs.to_str().unwrap(),
+        ],
+        "a folder this tool did not write",
+    );
+    assert_eq!(walk(&root), before, "nothing written or moved");
+    assert_eq!(std::fs::read(&file).unwrap(), b"keep me");
+}
+
+/// Every path under `dir` (symbolic links not followed), sorted.
+fn walk(dir: &Path) -> Vec<PathBuf> {
+    let mut out = Vec::new();
+    for entry in std::fs::read_dir(dir).unwrap() {
+        let path = entry.unwrap().path();
+        if std::fs::symlink_metadata(&path).unwrap().is_dir() {
+            out.extend(walk(&path));
+        }
+        out.push(path);
+    }
+    out.sort();
+    out
+}
