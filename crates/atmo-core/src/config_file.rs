@@ -97,27 +97,85 @@ pub fn parse_toml<T: DeserializeOwned>(text: &str, file: &Path) -> Result<T> {
     Ok(parsed)
 }
 
-/// The dotted key assigned on 1-based `line` of a TOML `text`: the table
-/// header above it (`[log]`, `[[pilot]]`) and the key left of its `=`.
+/// The dotted key whose value is on 1-based `line` of a TOML `text`: the
+/// table header above it (`[log]`, `[[pilot]]`) and the key left of its
+/// `=`, on that line or, for a value that spans lines (an array or an
+/// inline table left open, `x = [1, 2` up to the end of the file), on the
+/// line that opened it.
 fn key_at_line(text: &str, line: usize) -> Option<String> {
     let mut table = String::new();
+    // The key whose array or inline table is still open, and how deep.
+    let mut open: Option<(String, i64)> = None;
     for (i, l) in text.lines().enumerate().take(line) {
         let l = l.trim();
+        let on_error_line = i + 1 == line;
+        if let Some((key, depth)) = open.as_mut() {
+            if on_error_line {
+                return Some(key.clone());
+            }
+            *depth += bracket_depth(l);
+            if *depth <= 0 {
+                open = None;
+            }
+            continue;
+        }
         if l.starts_with('[') {
             let header = l.trim_start_matches('[');
             table = header.split(']').next().unwrap_or("").trim().to_string();
-        } else if i + 1 == line {
-            let key = l.split_once('=')?.0.trim();
-            return (!key.is_empty() && !key.starts_with('#')).then(|| {
-                if table.is_empty() {
-                    key.to_string()
-                } else {
-                    format!("{table}.{key}")
-                }
-            });
+            continue;
+        }
+        let Some((key, value)) = l.split_once('=') else {
+            continue;
+        };
+        let key = key.trim();
+        if key.is_empty() || key.starts_with('#') {
+            continue;
+        }
+        let key = if table.is_empty() {
+            key.to_string()
+        } else {
+            format!("{table}.{key}")
+        };
+        if on_error_line {
+            return Some(key);
+        }
+        let depth = bracket_depth(value);
+        if depth > 0 {
+            open = Some((key, depth));
         }
     }
-    None
+    // The error is past the last line (the end of the file): in the value
+    // still open there, if any.
+    open.map(|(key, _)| key)
+}
+
+/// How many more `[` / `{` than `]` / `}` a line of TOML opens, outside its
+/// strings and its comment.
+fn bracket_depth(line: &str) -> i64 {
+    let mut depth = 0;
+    let mut quote: Option<char> = None;
+    let mut escaped = false;
+    for c in line.chars() {
+        match quote {
+            Some(q) => {
+                if escaped {
+                    escaped = false;
+                } else if c == '\\' && q == '"' {
+                    escaped = true;
+                } else if c == q {
+                    quote = None;
+                }
+            }
+            None => match c {
+                '"' | '\'' => quote = Some(c),
+                '#' => break,
+                '[' | '{' => depth += 1,
+                ']' | '}' => depth -= 1,
+                _ => {}
+            },
+        }
+    }
+    depth
 }
 
 /// The document's shape, strictly: the document deserializer above leaves
@@ -382,6 +440,22 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(msg.contains("key `(document)`: missing field"), "{msg}");
+        // An array left open: the error is at the end of the file, the key
+        // is the one that opened it ("key `(document)`" before).
+        for text in [
+            "name = \"x\"\n[log]\nqueue = [1,\n  2\n",
+            "[log]\nqueue = [1, \"]\", # ]\n 2,\n",
+        ] {
+            let msg = parse_toml::<File>(text, Path::new("d.toml"))
+                .unwrap_err()
+                .to_string();
+            assert!(msg.contains("key `log.queue`"), "{text:?}: {msg}");
+        }
+        // A line that is no key's value after a closed one names none.
+        let msg = parse_toml::<File>("name = \"x\"\nlog\n", Path::new("d.toml"))
+            .unwrap_err()
+            .to_string();
+        assert!(msg.starts_with("d.toml:2: key `(document)`"), "{msg}");
     }
 
     #[test]
