@@ -2,6 +2,7 @@
 //! flight simulated without the flight stack.
 
 use std::path::PathBuf;
+use std::process::ExitCode;
 
 use clap::Parser;
 
@@ -28,14 +29,14 @@ struct Args {
     /// The control law flying the flight.
     #[arg(long, value_enum, default_value_t = ControllerKind::Pid)]
     controller: ControllerKind,
-    /// Fixed tilt of the flight (deg).
-    #[arg(long, default_value_t = 0.0)]
+    /// Fixed tilt of the flight, deg in [0, 90].
+    #[arg(long, default_value_t = 0.0, value_parser = |t: &str| within(t, "deg", 0.0, 90.0))]
     tilt_deg: f64,
-    /// Length (s).
-    #[arg(long, default_value_t = 48.0)]
+    /// Length, s in [0.01, 3600].
+    #[arg(long, default_value_t = 48.0, value_parser = |t: &str| within(t, "s", 0.01, 3600.0))]
     duration: f64,
-    /// Recording and control rate (Hz).
-    #[arg(long, default_value_t = 150.0)]
+    /// Recording and control rate, Hz in [1, 1000].
+    #[arg(long, default_value_t = 150.0, value_parser = |t: &str| within(t, "Hz", 1.0, 1000.0))]
     rate: f64,
     #[arg(long, default_value_t = 1)]
     seed: u64,
@@ -44,8 +45,28 @@ struct Args {
     out: PathBuf,
 }
 
-fn main() -> Result<(), GenError> {
-    let args = Args::parse();
+/// A finite number of `unit` in `[lo, hi]`: `1e300` s of flight sized a
+/// buffer past memory (a panic), a rate of 0 wrote an empty file.
+fn within(text: &str, unit: &str, lo: f64, hi: f64) -> Result<f64, String> {
+    match text.trim().parse::<f64>() {
+        Ok(v) if v.is_finite() && (lo..=hi).contains(&v) => Ok(v),
+        _ => Err(format!(
+            "{text} is not a finite number of {unit} in [{lo}, {hi}]"
+        )),
+    }
+}
+
+fn main() -> ExitCode {
+    match generate(&Args::parse()) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("atmo-testgen: {e}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+fn generate(args: &Args) -> Result<(), GenError> {
     let robot = RobotFile::load(&args.robot)?;
     let body = RigidBody::at_tilt(&robot, args.tilt_deg.to_radians());
     let plan = FlightPlan {

@@ -94,15 +94,42 @@ pub struct RobotFile {
 impl RobotFile {
     /// Reads a robot file (TOML).
     pub fn load(path: &Path) -> Result<Self, GenError> {
-        let text = std::fs::read_to_string(path).map_err(|e| GenError::Robot {
+        let text = read_robot_file(path).map_err(|message| GenError::Robot {
             file: path.display().to_string(),
-            message: e.to_string(),
+            message,
         })?;
         toml::from_str(&text).map_err(|e| GenError::Robot {
             file: path.display().to_string(),
             message: e.to_string(),
         })
     }
+}
+
+/// Largest robot file read, bytes.
+const ROBOT_FILE_MAX_BYTES: u64 = 1 << 20;
+
+/// The robot file's text: a regular file of at most
+/// [`ROBOT_FILE_MAX_BYTES`], checked before it is read (`--robot
+/// /dev/zero` was read until the kernel killed the process). The same rule
+/// as atmo-core's `input_file`, kept apart: this crate shares no code with
+/// the flight stack.
+fn read_robot_file(path: &Path) -> Result<String, String> {
+    use std::io::Read as _;
+    let file = std::fs::File::open(path).map_err(|e| format!("cannot read: {e}"))?;
+    let meta = file.metadata().map_err(|e| format!("cannot read: {e}"))?;
+    if !meta.is_file() {
+        return Err("not a regular file (a folder, a device, a FIFO or a socket)".into());
+    }
+    let mut text = String::new();
+    file.take(ROBOT_FILE_MAX_BYTES + 1)
+        .read_to_string(&mut text)
+        .map_err(|e| format!("cannot read: {e}"))?;
+    if text.len() as u64 > ROBOT_FILE_MAX_BYTES {
+        return Err(format!(
+            "larger than {ROBOT_FILE_MAX_BYTES} bytes: not a robot file"
+        ));
+    }
+    Ok(text)
 }
 
 /// One rigid body: ATMO frozen at a tilt.
