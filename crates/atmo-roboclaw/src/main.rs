@@ -8,7 +8,7 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
-use anyhow::{Context, Result};
+use anyhow::{Context, Result, bail};
 use atmo_core::ConfigFile;
 use atmo_io::drivers::{DriverEndpoint, DriverId, monotonic_ns};
 use atmo_roboclaw::config::{Mode, RoboclawConfig};
@@ -62,10 +62,13 @@ enum Command {
     Sim {
         #[arg(long, value_enum, default_value = "tilt")]
         mode: SimMode,
-        /// Tilt board: counts between the start position and the home switch.
-        #[arg(long, default_value_t = 3000.0)]
+        /// Tilt board: counts between the start position and the home
+        /// switch, in [0, 2147483647] (the board's 32-bit encoder).
+        #[arg(long, default_value_t = 3000.0, value_parser = encoder_counts)]
         start_counts: f64,
-        /// Also make this path a symbolic link to the pty.
+        /// Also make this path a symbolic link to the pty (a stale link is
+        /// replaced; a file, folder or device there is refused). Removed
+        /// on exit if it still points to this board's pty.
         #[arg(long)]
         link: Option<PathBuf>,
     },
@@ -326,14 +329,26 @@ fn sim(mode: SimMode, start_counts: f64, link: Option<&PathBuf>) -> Result<()> {
         SimMode::Tilt => SimConfig::tilt(start_counts),
         SimMode::Wheels => SimConfig::wheels(),
     };
+    // Refused before the board starts: only a stale link is replaced.
+    if let Some(link) = link
+        && std::fs::symlink_metadata(link).is_ok_and(|m| !m.file_type().is_symlink())
+    {
+        bail!(
+            "--link {}: exists and is not a symbolic link; nothing was replaced (name a new path)",
+            link.display()
+        );
+    }
     let stop = stop_flag()?;
     let server = PtyServer::spawn(SimBoard::new(config), Arc::new(MonotonicClock))?;
     println!("{}", server.path().display());
     std::io::stdout().flush()?;
     if let Some(link) = link {
-        let _ = std::fs::remove_file(link);
+        if std::fs::symlink_metadata(link).is_ok() {
+            std::fs::remove_file(link)
+                .with_context(|| format!("--link {}: removing the stale link", link.display()))?;
+        }
         std::os::unix::fs::symlink(server.path(), link)
-            .with_context(|| format!("linking {} to the pty", link.display()))?;
+            .with_context(|| format!("--link {}: linking it to the pty", link.display()))?;
     }
     let mut ticks = 0u64;
     while !stop.load(Ordering::SeqCst) {
@@ -342,7 +357,7 @@ fn sim(mode: SimMode, start_counts: f64, link: Option<&PathBuf>) -> Result<()> {
         if ticks.is_multiple_of(20) {
             server.with_board(|b| {
                 eprintln!(
-                    "sim: M1 {} counts {:.0} counts/s, M2 {} counts {:.0} counts/s, home {}, serial timeout {} x 100 ms, {:?}",
+                    "sim: M1 {} counts {:.0} counts/s, M2 {} counts {:.0} counts/s, home {}, serial timeout {} x 100 ms, {}",
                     b.encoder(atmo_roboclaw::protocol::Motor::M1),
                     b.speed(atmo_roboclaw::protocol::Motor::M1),
                     b.encoder(atmo_roboclaw::protocol::Motor::M2),
@@ -354,8 +369,20 @@ fn sim(mode: SimMode, start_counts: f64, link: Option<&PathBuf>) -> Result<()> {
             });
         }
     }
-    if let Some(link) = link {
+    // Only our own link: another board may have taken the name since.
+    if let Some(link) = link.filter(|l| std::fs::read_link(l).is_ok_and(|t| t == server.path())) {
         let _ = std::fs::remove_file(link);
     }
     Ok(())
+}
+
+/// `--start-counts`: a finite count the board's 32-bit encoder can hold.
+fn encoder_counts(text: &str) -> std::result::Result<f64, String> {
+    match text.trim().parse::<f64>() {
+        Ok(v) if v.is_finite() && (0.0..=f64::from(i32::MAX)).contains(&v) => Ok(v),
+        _ => Err(format!(
+            "{text} is not a finite number of counts in [0, {}]",
+            i32::MAX
+        )),
+    }
 }

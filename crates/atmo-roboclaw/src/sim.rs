@@ -163,6 +163,25 @@ pub struct SimStats {
     pub home_triggers: u64,
 }
 
+impl std::fmt::Display for SimStats {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "packets {}, answers {}, dropped bytes {}, bad CRC {}, corrupted answers {}, \
+             silenced answers {}, serial timeouts {}, resets {}, home triggers {}",
+            self.packets,
+            self.answers,
+            self.dropped_bytes,
+            self.bad_crc,
+            self.corrupted_answers,
+            self.silenced_answers,
+            self.serial_timeouts,
+            self.resets,
+            self.home_triggers
+        )
+    }
+}
+
 /// Faults to inject.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct Faults {

@@ -182,3 +182,75 @@ fn sim_and_run_processes_on_the_driver_ports() {
     drop(sim);
     remove_prefix_files(&prefix);
 }
+
+/// `sim --link PATH` removed whatever was at PATH to put its link there,
+/// and removed it again on exit: a user's file named by mistake was lost.
+/// A file there is refused before the board starts; a stale link (an
+/// earlier board's) is replaced, and removed on a clean stop.
+#[test]
+fn sim_link_replaces_a_stale_link_and_refuses_anything_else() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("notes.txt");
+    std::fs::write(&file, b"keep me").unwrap();
+    let mut refused = Kill(
+        Command::new(BIN)
+            .env("RUST_BACKTRACE", "0")
+            .args(["sim", "--link"])
+            .arg(&file)
+            .stdout(Stdio::piped())
+            .stderr(Stdio::piped())
+            .spawn()
+            .unwrap(),
+    );
+    let deadline = Instant::now() + Duration::from_secs(10);
+    while refused.0.try_wait().unwrap().is_none() {
+        assert!(
+            Instant::now() < deadline,
+            "the board started on a file's name"
+        );
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    let output = std::mem::replace(&mut refused.0, Command::new("true").spawn().unwrap())
+        .wait_with_output()
+        .unwrap();
+    let stderr = String::from_utf8_lossy(&output.stderr);
+    assert_eq!(output.status.code(), Some(1), "{stderr}");
+    assert!(
+        stderr.contains("exists and is not a symbolic link"),
+        "{stderr}"
+    );
+    assert!(output.stdout.is_empty(), "no board started");
+    assert_eq!(std::fs::read(&file).unwrap(), b"keep me");
+
+    let link = dir.path().join("roboclaw-tilt");
+    std::os::unix::fs::symlink("/dev/pts/no-such-board", &link).unwrap();
+    let mut sim = Kill(
+        Command::new(BIN)
+            .args(["sim", "--link"])
+            .arg(&link)
+            .stdout(Stdio::piped())
+            .stderr(Stdio::null())
+            .spawn()
+            .unwrap(),
+    );
+    let mut line = String::new();
+    BufReader::new(sim.0.stdout.take().unwrap())
+        .read_line(&mut line)
+        .unwrap();
+    let pty = line.trim();
+    let deadline = Instant::now() + Duration::from_secs(10);
+    while std::fs::read_link(&link).ok().as_deref() != Some(std::path::Path::new(pty)) {
+        assert!(Instant::now() < deadline, "the stale link was not replaced");
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    let status = Command::new("kill")
+        .args(["-TERM", &sim.0.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(status.success());
+    assert!(sim.0.wait().unwrap().success());
+    assert!(
+        std::fs::symlink_metadata(&link).is_err(),
+        "its link removed on exit"
+    );
+}
