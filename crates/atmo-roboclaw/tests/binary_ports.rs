@@ -43,12 +43,12 @@ fn remove_prefix_files(prefix: &str) {
     }
 }
 
-#[test]
-fn sim_and_run_processes_on_the_driver_ports() {
-    let prefix = format!("atmorc{}_", std::process::id());
+/// `atmo-roboclaw sim ARGS`, and the pty it prints on its first line.
+fn start_sim(args: &[&str]) -> (Kill, String) {
     let mut sim = Kill(
         Command::new(BIN)
-            .args(["sim", "--mode", "tilt", "--start-counts", "400"])
+            .arg("sim")
+            .args(args)
             .stdout(Stdio::piped())
             .stderr(Stdio::null())
             .spawn()
@@ -60,6 +60,13 @@ fn sim_and_run_processes_on_the_driver_ports() {
         .unwrap();
     let pty = line.trim().to_string();
     assert!(pty.starts_with("/dev/pts/"), "{pty}");
+    (sim, pty)
+}
+
+#[test]
+fn sim_and_run_processes_on_the_driver_ports() {
+    let prefix = format!("atmorc{}_", std::process::id());
+    let (sim, pty) = start_sim(&["--mode", "tilt", "--start-counts", "400"]);
 
     let dir = tempfile::tempdir().unwrap();
     let robot = common::repo_config("atmo.toml");
@@ -224,22 +231,9 @@ fn sim_link_replaces_a_stale_link_and_refuses_anything_else() {
 
     let link = dir.path().join("roboclaw-tilt");
     std::os::unix::fs::symlink("/dev/pts/no-such-board", &link).unwrap();
-    let mut sim = Kill(
-        Command::new(BIN)
-            .args(["sim", "--link"])
-            .arg(&link)
-            .stdout(Stdio::piped())
-            .stderr(Stdio::null())
-            .spawn()
-            .unwrap(),
-    );
-    let mut line = String::new();
-    BufReader::new(sim.0.stdout.take().unwrap())
-        .read_line(&mut line)
-        .unwrap();
-    let pty = line.trim();
+    let (mut sim, pty) = start_sim(&["--link", link.to_str().unwrap()]);
     let deadline = Instant::now() + Duration::from_secs(10);
-    while std::fs::read_link(&link).ok().as_deref() != Some(std::path::Path::new(pty)) {
+    while std::fs::read_link(&link).ok().as_deref() != Some(std::path::Path::new(&pty)) {
         assert!(Instant::now() < deadline, "the stale link was not replaced");
         std::thread::sleep(Duration::from_millis(10));
     }
