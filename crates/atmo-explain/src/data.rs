@@ -229,7 +229,9 @@ impl Prepared {
             return Err(ExplainError::Input {
                 file: rec.source.clone(),
                 message: format!(
-                    "too short to analyse: {n} usable rows (at least 50, about 1 s, are needed)"
+                    "too short to analyse: {n} usable rows (at least 50, about 1 s, are needed){}",
+                    rec.dropped_rows()
+                        .map_or_else(String::new, |d| format!("; {d}"))
                 ),
             });
         }

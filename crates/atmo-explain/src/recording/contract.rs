@@ -377,6 +377,7 @@ pub fn drop_jumps(rec: &mut Recording, bounds: &JumpBounds) {
 
 /// The checks every reader runs after parsing (time base, then ranges);
 /// the error is the message for the caller to put the file on.
+/// A recording left without a row is refused with what was dropped.
 pub fn finish(rec: &mut Recording) -> Result<(), String> {
     order_rows(rec);
     check_time_axis(rec)?;
@@ -386,5 +387,11 @@ pub fn finish(rec: &mut Recording) -> Result<(), String> {
     }
     rec.outliers.rows += outliers.rows;
     rec.outliers.columns.extend(outliers.columns);
+    if rec.samples.is_empty() {
+        return Err(rec.dropped_rows().map_or_else(
+            || "no usable rows: the file holds no data rows".into(),
+            |dropped| format!("no usable rows ({dropped})"),
+        ));
+    }
     Ok(())
 }

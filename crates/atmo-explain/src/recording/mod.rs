@@ -116,6 +116,30 @@ pub struct Recording {
 }
 
 impl Recording {
+    /// What the readers dropped, for messages (`dropped 1200 not advancing
+    /// in time, 2 with a non-finite or missing value`); `None` if nothing.
+    pub fn dropped_rows(&self) -> Option<String> {
+        let counts = [
+            (self.skipped_nonfinite, "with a non-finite or missing value"),
+            (self.skipped_time, "not advancing in time"),
+            (
+                self.skipped_rotation,
+                "whose rotation matrix is not a rotation",
+            ),
+            (
+                self.outliers.rows,
+                "with a cell outside its plausible range",
+            ),
+            (self.jumps.rows, "jumping from their neighbours"),
+        ];
+        let dropped: Vec<String> = counts
+            .iter()
+            .filter(|(n, _)| *n > 0)
+            .map(|(n, what)| format!("{n} {what}"))
+            .collect();
+        (!dropped.is_empty()).then(|| format!("dropped {}", dropped.join(", ")))
+    }
+
     /// From samples in memory (tests, generators).
     pub fn from_samples(source: impl Into<PathBuf>, samples: Vec<Sample>) -> Self {
         Self {
@@ -260,12 +284,6 @@ impl Recording {
             ticks.iter().map(|&(_, t, m)| (t, m)).collect();
         mean_tick_commands(&mut rec.samples, &stream);
         contract::finish(&mut rec).map_err(&fail)?;
-        if rec.samples.is_empty() {
-            return Err(fail(format!(
-                "no usable rows on {STATUS_TOPIC}: {} non-finite, {} out of order",
-                rec.skipped_nonfinite, rec.skipped_time
-            )));
-        }
         Ok(rec)
     }
 
@@ -355,13 +373,6 @@ impl Recording {
             });
         }
         contract::finish(&mut rec).map_err(&fail)?;
-        if rec.samples.is_empty() {
-            return Err(fail(format!(
-                "no usable rows: the header is there but {} row(s) had non-finite or missing \
-                 values and {} did not advance in time",
-                rec.skipped_nonfinite, rec.skipped_time
-            )));
-        }
         Ok(rec)
     }
 

@@ -207,13 +207,6 @@ pub fn from_neural_fly_str(
         rec.samples.push(convert(t[0], &p, &v, &r, &w, &pwm));
     }
     super::contract::finish(&mut rec).map_err(&fail)?;
-    if rec.samples.is_empty() {
-        return Err(fail(format!(
-            "no usable Neural-Fly rows ({} malformed or non-finite, {} with an R that is not \
-             a rotation, {} not advancing in time)",
-            rec.skipped_nonfinite, rec.skipped_rotation, rec.skipped_time
-        )));
-    }
     Ok(rec)
 }
 

@@ -90,9 +90,41 @@ fn missing_columns_are_named() {
 fn header_only_is_an_error() {
     let err = Recording::from_csv_str(&format!("{}\n", header()), "h.csv").unwrap_err();
     assert!(
-        message(&err).contains("no usable rows"),
+        message(&err).contains("no usable rows: the file holds no data rows"),
         "{}",
         message(&err)
+    );
+}
+
+/// A recording whose time runs backwards kept one row and said only "too
+/// short to analyse: 1 usable rows": the refusal says where the others went.
+#[test]
+fn a_recording_left_too_short_says_what_was_dropped() {
+    let mut text = format!("{}\n", header());
+    for k in (0..200).rev() {
+        text += &(row(f64::from(k) / 100.0) + "\n");
+    }
+    let rec = Recording::from_csv_str(&text, "backwards.csv").unwrap();
+    assert_eq!((rec.samples.len(), rec.skipped_time), (1, 199));
+    let robot = RobotConfig::from_toml_str(
+        include_str!("../../../../config/atmo.toml"),
+        std::path::Path::new("atmo.toml"),
+    )
+    .unwrap();
+    let Err(err) = atmo_explain::data::Prepared::new(&rec, &robot) else {
+        panic!("1 row prepared for the analysis")
+    };
+    let msg = message(&err);
+    assert!(
+        msg.contains("too short to analyse: 1 usable rows")
+            && msg.contains("dropped 199 not advancing in time"),
+        "{msg}"
+    );
+    let nan = format!("{}\n{}\n", header(), row(f64::NAN));
+    let msg = message(&Recording::from_csv_str(&nan, "nan.csv").unwrap_err());
+    assert!(
+        msg.contains("no usable rows (dropped 1 with a non-finite or missing value)"),
+        "{msg}"
     );
 }
 
