@@ -409,7 +409,8 @@ fn write_campaign(merged: &Merged, out: &Path) -> Result<()> {
         .collect();
     let table = cell_table(plan, &cells);
     print!("{table}");
-    // The table, the report and the map replace an earlier merge's together.
+    // The table and the report replace an earlier merge's together, before
+    // the map is drawn: a figure that fails loses no result.
     let mut files = StagedFiles::new(out);
     files.write("cells.md", &table)?;
     let report = CampaignReport {
@@ -421,22 +422,35 @@ fn write_campaign(merged: &Merged, out: &Path) -> Result<()> {
         "campaign.json",
         serde_json::to_string_pretty(&report)? + "\n",
     )?;
-    let map = (plan.parameters.len() <= 2)
-        .then(|| -> Result<()> { write_map(merged, files.stage("map.png")?) })
-        .transpose()?;
     files.commit()?;
     println!(
         "wrote             {}, {}",
         out.join("campaign.json").display(),
         out.join("cells.md").display()
     );
-    match map {
-        Some(()) => println!("map               {}", out.join("map.png").display()),
-        None => println!(
+    let map = out.join("map.png");
+    if plan.parameters.len() > 2 {
+        println!(
             "map               none: {} swept parameters (a map has two axes)",
             plan.parameters.len()
-        ),
+        );
+        return Ok(());
     }
+    let mut figure = StagedFiles::new(out);
+    let drawn = figure
+        .stage("map.png")
+        .map_err(anyhow::Error::from)
+        .and_then(|path| write_map(merged, path))
+        .and_then(|()| Ok(figure.commit()?));
+    if let Err(e) = drawn {
+        // An earlier merge's map does not show these results.
+        let _ = std::fs::remove_file(&map);
+        return Err(e.context(format!(
+            "drawing {} (campaign.json and cells.md are written)",
+            map.display()
+        )));
+    }
+    println!("map               {}", map.display());
     Ok(())
 }
 

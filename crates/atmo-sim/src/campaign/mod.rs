@@ -218,6 +218,24 @@ impl CampaignFile {
                     ),
                 ));
             }
+            // Two equal values fly one cell twice and leave the map a
+            // column short of its cells.
+            let mut sorted = values.clone();
+            sorted.sort_by(f64::total_cmp);
+            if let Some(twice) = sorted
+                .windows(2)
+                .find_map(|w| (w[0] == w[1]).then_some(w[0]))
+            {
+                let at = if axis.values.is_some() {
+                    "values"
+                } else {
+                    "to"
+                };
+                return Err(bad(
+                    &key(at),
+                    format!("{twice} twice: each value of a sweep once"),
+                ));
+            }
         }
         let cells: usize = file
             .sweep
@@ -403,6 +421,11 @@ steps = 3
                 "sweep[0].values",
             ),
             (FILE.replace("steps = 3", "steps = 1"), "sweep[1].steps"),
+            (
+                FILE.replace("values = [0.9, 1.0]", "values = [1.0, 0.9, 1.0]"),
+                "sweep[0].values",
+            ),
+            (FILE.replace("to = 1.5", "to = 0.5"), "sweep[1].to"),
             (
                 FILE.replace("\"ground_effect_scale\"", "\"thrust_scale\""),
                 "sweep[1].parameter",
