@@ -154,11 +154,11 @@ crate::params! {
     #[derive(Debug, Clone, PartialEq)]
     pub struct Wheels {
         /// Wheel radius.
-        pub radius: f64, range Positive, unit "m";
+        pub radius: f64, range 1e-3..=10.0, unit "m";
         /// Half the distance between the left and right wheels.
-        pub half_track: f64, range Positive, unit "m";
+        pub half_track: f64, range 1e-3..=10.0, unit "m";
         /// Wheel motor limit.
-        pub max_rate: f64, range Positive, unit "rad/s";
+        pub max_rate: f64, range 1e-2..=1e4, unit "rad/s";
     }
 }
 
@@ -168,17 +168,17 @@ crate::params! {
     #[derive(Debug, Clone, PartialEq)]
     pub struct LinkageConfig {
         /// Linkage offset h.
-        pub h: f64, range Positive, unit "m";
+        pub h: f64, range 1e-4..=10.0, unit "m";
         /// Link length d1.
-        pub d1: f64, range Positive, unit "m";
+        pub d1: f64, range 1e-4..=10.0, unit "m";
         /// Link length d2.
-        pub d2: f64, range Positive, unit "m";
+        pub d2: f64, range 1e-4..=10.0, unit "m";
         /// The fixed pivot D = (Dx, Dy).
         pub d: [f64; 2], range Finite, unit "m";
         /// Screw travel per revolution.
-        pub thread_pitch: f64, range Positive, unit "m";
+        pub thread_pitch: f64, range 1e-5..=1.0, unit "m";
         /// Encoder counts per output revolution.
-        pub counts_per_rev: f64, range Positive;
+        pub counts_per_rev: f64, range 1.0..=1e9, unit "counts";
     }
 }
 
@@ -187,7 +187,7 @@ crate::params! {
     #[derive(Debug, Clone, PartialEq)]
     pub struct Limits {
         /// The tilt mechanism's speed.
-        pub tilt_rate_max: f64, range Positive, unit "rad/s";
+        pub tilt_rate_max: f64, range 1e-3..=100.0, unit "rad/s";
         /// Mechanical end stop (the drive configuration).
         pub tilt_max_deg: f64, range 1.0..=90.0, unit "deg";
         /// Tilt limit in free flight.
@@ -197,7 +197,7 @@ crate::params! {
         /// Full thrust over the weight the robot must keep.
         pub thrust_reserve: f64, range 1.0..=10.0;
         /// z* (> 0).
-        pub transition_height: f64, range Positive, unit "m";
+        pub transition_height: f64, range 1e-2..=100.0, unit "m";
         /// z_varphi, above `transition_height`.
         pub morph_height: f64, unit "m";
     }

@@ -260,20 +260,12 @@ pub trait Bounded: PartialOrd + Display + Copy {
     /// How the expected value is described: "a value" or "an integer".
     const KIND: &'static str;
     fn is_number(self) -> bool;
-    /// How a number above zero is described.
-    const POSITIVE: &'static str;
-    /// A number above zero.
-    fn is_positive(self) -> bool;
 }
 
 impl Bounded for f64 {
     const KIND: &'static str = "a value";
-    const POSITIVE: &'static str = "a finite value > 0";
     fn is_number(self) -> bool {
         self.is_finite()
-    }
-    fn is_positive(self) -> bool {
-        self.is_finite() && self > 0.0
     }
 }
 
@@ -281,12 +273,8 @@ macro_rules! bounded_integer {
     ($($t:ty),*) => {$(
         impl Bounded for $t {
             const KIND: &'static str = "an integer";
-            const POSITIVE: &'static str = "an integer > 0";
             fn is_number(self) -> bool {
                 true
-            }
-            fn is_positive(self) -> bool {
-                self > 0
             }
         }
     )*};
@@ -340,18 +328,6 @@ impl<'a> Checker<'a> {
         };
         let (min, max) = range.into_inner();
         Err(self.fail(key, format!("{} in [{min}, {max}]{unit}", T::KIND), value))
-    }
-
-    /// `value` must be finite and strictly positive.
-    ///
-    /// # Errors
-    /// [`CoreError::ConfigValue`] naming `key`.
-    pub fn positive(&self, key: &str, value: f64) -> Result<()> {
-        if value.is_finite() && value > 0.0 {
-            Ok(())
-        } else {
-            Err(self.fail(key, "a finite value > 0", value))
-        }
     }
 
     /// `value` must be finite and within `[min, max]`.

@@ -39,7 +39,7 @@
 //!   it, so that every older flight log still replays. Unlike serde's
 //!   derive, an `Option` field is required unless declared `= None`.
 //! - `key "loop"`: the key's name in the file when it is not the field's.
-//! - `range a..=b`, `range Positive` or `range Finite`: checked by
+//! - `range a..=b` or `range Finite`: checked by
 //!   [`CheckRange`]; an array or `Vec` checks each element (its index in
 //!   the key), an `Option` its value when present. The bounds may name
 //!   fields declared before (bound by reference: `range 0.0..=*max_speed`),
@@ -207,19 +207,14 @@ pub fn key(prefix: &str, name: &str) -> String {
     }
 }
 
-/// What a declared `range` allows: `a..=b`, [`Positive`] or [`Finite`].
+/// What a declared `range` allows: `a..=b` or [`Finite`]. A quantity with
+/// a physical scale declares its bounds; only a coordinate is `Finite`.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Span<B> {
     Within(RangeInclusive<B>),
-    /// Finite and above zero.
-    Positive,
     /// Any finite number.
     Finite,
 }
-
-/// `range Positive`: finite and above zero.
-#[derive(Debug, Clone, Copy)]
-pub struct Positive;
 
 /// `range Finite`: any finite number.
 #[derive(Debug, Clone, Copy)]
@@ -228,12 +223,6 @@ pub struct Finite;
 impl<B> From<RangeInclusive<B>> for Span<B> {
     fn from(range: RangeInclusive<B>) -> Self {
         Self::Within(range)
-    }
-}
-
-impl<B> From<Positive> for Span<B> {
-    fn from(_: Positive) -> Self {
-        Self::Positive
     }
 }
 
@@ -249,8 +238,6 @@ impl<B: Bounded> Span<B> {
     pub fn check(&self, c: &Checker, key: &str, value: B, unit: &str) -> Result<()> {
         match self {
             Self::Within(range) => c.range(key, value, range.clone(), unit),
-            Self::Positive if value.is_positive() => Ok(()),
-            Self::Positive => Err(c.fail(key, B::POSITIVE, value)),
             Self::Finite if value.is_number() => Ok(()),
             Self::Finite => Err(c.fail(key, "a finite number", value)),
         }
@@ -568,7 +555,7 @@ macro_rules! __param_check {
     ($c:ident, $key:expr, $field:ident, [$range:expr], [$($unit:literal)?]) => {
         {
             #[allow(unused_imports, reason = "for ranges that name them")]
-            use $crate::params::{Finite, Positive};
+            use $crate::params::Finite;
             $crate::params::CheckRange::check_range(
                 $field,
                 $c,

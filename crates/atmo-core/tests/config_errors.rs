@@ -124,6 +124,37 @@ fn an_absurd_mass_is_refused_at_its_own_key() {
     );
 }
 
+/// "Positive" let a wheel of 1e9 m and an encoder of 1e-300 counts per
+/// revolution (0 counts over the whole tilt) through: every length, rate
+/// and count has a physical range now.
+#[test]
+fn absurd_geometry_and_encoder_values_are_refused_at_their_keys() {
+    for (from, to, key, range) in [
+        (
+            "radius = 0.125",
+            "radius = 1e9",
+            "wheels.radius",
+            "[0.001, 10] m",
+        ),
+        (
+            "counts_per_rev = 1632.67",
+            "counts_per_rev = 1e-300",
+            "linkage.counts_per_rev",
+            "[1, 1000000000] counts",
+        ),
+        ("d1 = 0.052", "d1 = 1e300", "linkage.d1", "[0.0001, 10] m"),
+        (
+            "transition_height = 0.45",
+            "transition_height = 1e-9",
+            "limits.transition_height",
+            "[0.01, 100] m",
+        ),
+    ] {
+        let msg = message(&load_with(from, to));
+        assert!(msg.contains(key) && msg.contains(range), "{to}: {msg}");
+    }
+}
+
 #[test]
 fn non_positive_definite_inertia_is_refused() {
     let err = load_with("xx = 0.0067, yy = 0.011", "xx = -0.0067, yy = 0.011");

@@ -50,7 +50,7 @@ atmo_core::params! {
         /// Thrusters start at or below this tilt.
         pub takeoff_max_tilt_deg: f64, range 0.0..=90.0, unit "deg";
         /// Airborne above this height: flight (> 0).
-        pub takeoff_height: f64, unit "m";
+        pub takeoff_height: f64, range 0.01..=100.0, unit "m";
         /// Climb target when the pilot gives no vertical command (above
         /// `takeoff_height`).
         pub takeoff_target_height: f64, unit "m";
@@ -67,7 +67,6 @@ atmo_core::params! {
     }
     check |_table, c, prefix| {
         let key = |name| atmo_core::params::key(prefix, name);
-        c.positive(&key("takeoff_height"), *takeoff_height)?;
         if !(takeoff_target_height.is_finite() && takeoff_target_height > takeoff_height) {
             return Err(c.fail(
                 &key("takeoff_target_height"),

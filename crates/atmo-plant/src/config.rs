@@ -131,7 +131,7 @@ atmo_core::params! {
         /// false).
         pub enabled: bool = true;
         /// The screw's largest tilt rate; absent: the robot file's limit.
-        pub rate_max: Option<f64> = None, range Positive, unit "rad/s";
+        pub rate_max: Option<f64> = None, range 1e-3..=100.0, unit "rad/s";
     }
 }
 
@@ -168,7 +168,7 @@ atmo_core::params! {
         /// Start.
         pub t: f64, range 0.0..=1e6, unit "s";
         /// Length of the pulse.
-        pub duration: f64, range Positive, unit "s";
+        pub duration: f64, range 1e-3..=1e6, unit "s";
         /// Peak wind of the pulse (NED).
         pub velocity: [f64; 3], range -50.0..=50.0, unit "m/s";
     }
@@ -190,7 +190,7 @@ atmo_core::params! {
         /// Turbulence's standard deviation per axis.
         pub turbulence_std: [f64; 3] = [0.3, 0.3, 0.1], range 0.0..=20.0, unit "m/s";
         /// Turbulence's correlation time.
-        pub turbulence_time: f64 = 1.0, range Positive, unit "s";
+        pub turbulence_time: f64 = 1.0, range 1e-3..=1e4, unit "s";
         /// Scripted gusts (`[[effects.wind.gusts]]`).
         pub gusts: Vec<GustConfig> = Vec::new();
     }
@@ -207,11 +207,11 @@ atmo_core::params! {
         /// false).
         pub enabled: bool = true;
         /// The battery's capacity.
-        pub capacity_wh: f64 = 110.0, range Positive, unit "Wh";
+        pub capacity_wh: f64 = 110.0, range 1e-3..=1e6, unit "Wh";
         /// Energy already used at the start.
         pub used_wh: f64 = 0.0, range 0.0..=*capacity_wh, unit "Wh";
         /// Electrical power of one rotor at full thrust.
-        pub full_power_w: f64 = 560.0, range Positive, unit "W";
+        pub full_power_w: f64 = 560.0, range 1e-3..=1e6, unit "W";
         /// Fraction of thrust lost when the battery is empty.
         pub sag: f64 = 0.15, range 0.0..=0.9;
     }

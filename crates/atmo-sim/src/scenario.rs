@@ -91,7 +91,7 @@ atmo_core::params! {
         /// Start (within the scenario's duration).
         pub t: f64, unit "s";
         /// Length.
-        pub duration: f64, range Positive, unit "s";
+        pub duration: f64, range 1e-3..=1e6, unit "s";
         /// Force at B, world frame.
         pub force: [f64; 3] = [0.0; 3], range -1000.0..=1000.0, unit "N";
         /// Torque, body frame.

@@ -69,7 +69,7 @@ crate::params! {
         /// applies, so a table from 0 deg has no classical law).
         pub classical_below_deg: f64 = 30.0, unit "deg";
         /// Correlation time of the thrust fluctuation.
-        pub correlation_time: f64 = 0.05, range Positive, unit "s";
+        pub correlation_time: f64 = 0.05, range 1e-4..=100.0, unit "s";
         /// Rotor hub heights of the table columns, increasing (two or more).
         pub heights: Vec<f64> = DEFAULT_HEIGHTS.to_vec(), range 0.0..=10.0, unit "m";
         /// Tilts of the table rows, increasing (two or more).

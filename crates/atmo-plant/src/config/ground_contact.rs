@@ -27,19 +27,19 @@ atmo_core::params! {
         /// Tangential damping per contact point.
         pub tangential_damping: f64 = 100.0, range 0.0..=1e6, unit "N s/m";
         /// Spin inertia of one side's drive (two wheels on a belt).
-        pub wheel_inertia: f64 = 0.01, range Positive, unit "kg m^2";
+        pub wheel_inertia: f64 = 0.01, range 1e-6..=100.0, unit "kg m^2";
         /// Proportional gain of each side's speed controller.
         pub wheel_kp: f64 = 0.5, range 0.0..=1e3, unit "N m s/rad";
         /// Integral gain of each side's speed controller.
         pub wheel_ki: f64 = 10.0, range 0.0..=1e4, unit "N m/rad";
         /// Torque limit of each side's drive motor.
-        pub wheel_torque_max: f64 = 3.0, range Positive, unit "N m";
+        pub wheel_torque_max: f64 = 3.0, range 1e-3..=1e4, unit "N m";
         /// The base box (body frame, relative to B): lower corner.
         pub base_box_min: [f64; 3] = [-0.10, -0.06, -0.05], range Finite, unit "m";
         /// The base box: upper corner, each entry above `base_box_min`'s.
         pub base_box_max: [f64; 3] = [0.10, 0.06, 0.06], range Finite, unit "m";
         /// A wheel hitting the ground faster than this is a crash.
-        pub crash_speed: f64 = 2.0, range Positive, unit "m/s";
+        pub crash_speed: f64 = 2.0, range 1e-2..=100.0, unit "m/s";
         /// Tilt of the body z axis from the ground normal, while touching
         /// the ground, beyond which the robot has tipped over.
         pub tip_over_deg: f64 = 60.0, range 1.0..=180.0, unit "deg";
