@@ -147,7 +147,10 @@ fn neural_fly_r_that_is_not_a_rotation_is_skipped_and_counted() {
 
     let all = neural_fly_edited("nf_all_zero_r.csv", |_, c| c[7] = bad[0].into());
     let err = Recording::load(&all).unwrap_err().to_string();
-    assert!(err.contains("R that is not a rotation"), "{err}");
+    assert!(
+        err.contains("no usable rows (dropped 600 whose rotation matrix is not a rotation)"),
+        "{err}"
+    );
 }
 
 /// One tick per sample of `rec`, the tick `wild` stamped `9e18` ns.
