@@ -82,9 +82,9 @@ pub struct CampaignFolder {
     /// The campaign folder: created with its marker file (.atmo-output) if
     /// absent, and used again only if this tool made it (or it is empty);
     /// a file, a symbolic link, a device or a folder this tool did not
-    /// write is refused before anything is written or flown. Each command
-    /// adds its files whole: written under temporary names, renamed into
-    /// place together.
+    /// write is refused before anything is written or flown. Each file a
+    /// command adds appears whole (written under a temporary name, then
+    /// renamed into place).
     #[arg(long = "out", value_name = "OUT", default_value = "out/campaign")]
     path: PathBuf,
 }
@@ -169,19 +169,13 @@ fn build_identity(scenario: &Scenario, controller: &ControllerConfig) -> Result<
 /// Writes `value` as pretty JSON to `path` in a folder [`open_shared`]
 /// opened, through a temporary file, so a reader never sees half a file.
 fn write_json(path: &Path, value: &impl Serialize) -> Result<()> {
-    let (dir, name) = dir_and_name(path)?;
-    let mut files = StagedFiles::new(dir);
+    let name = path
+        .file_name()
+        .with_context(|| format!("{}: not a file name", path.display()))?;
+    let mut files = StagedFiles::new(path.parent().unwrap_or_else(|| Path::new(".")));
     files.write(name, serde_json::to_string_pretty(value)? + "\n")?;
     files.commit()?;
     Ok(())
-}
-
-fn dir_and_name(path: &Path) -> Result<(&Path, &str)> {
-    let name = path
-        .file_name()
-        .and_then(|n| n.to_str())
-        .with_context(|| format!("{}: not a file name", path.display()))?;
-    Ok((path.parent().unwrap_or_else(|| Path::new(".")), name))
 }
 
 /// Opens the campaign folder `out` ([`open_shared`]: created and marked,
