@@ -124,6 +124,7 @@ fn onboard_tick_io_allocates_nothing_of_its_own() {
         arming_failures: 0,
         tilt_lever: 0.0,
         rehome_tilt: false,
+        autopilot_estimate: None,
     });
 
     let pilot = PilotInput {

@@ -69,6 +69,9 @@ pub struct FlightStack {
     mpc_warm: bool,
     mpc_failures_total: u64,
     last_estimate: Option<Estimate>,
+    /// The autopilot's own estimate, last good one
+    /// (`StepInputs::autopilot_estimate`).
+    last_autopilot_estimate: Option<Estimate>,
     last_tilt: f64,
     last_pilot: PilotInput,
     /// The pilot's manual tilt lever, -1..1 (0 if the last one was bad).
@@ -204,6 +207,7 @@ impl FlightStack {
             mpc_warm: false,
             mpc_failures_total: 0,
             last_estimate: None,
+            last_autopilot_estimate: None,
             last_tilt: 0.0,
             last_pilot: PilotInput::default(),
             tilt_lever: 0.0,
@@ -267,19 +271,14 @@ impl FlightStack {
 
     /// Accepts or rejects this tick's raw inputs; keeps the last good values.
     fn ingest(&mut self, inputs: &StepInputs) {
-        if let Some(est) = inputs.estimate {
-            let finite = est.state.iter().all(|v| v.is_finite());
-            let from_future = est.stamp_ns > inputs.now_ns;
-            let backwards = self
-                .last_estimate
-                .is_some_and(|last| est.stamp_ns < last.stamp_ns);
-            let repeated = self.last_estimate.is_some_and(|last| last == est);
-            if !repeated {
-                if finite && !from_future && !backwards {
-                    self.last_estimate = Some(est);
-                } else {
-                    self.rejected.estimate += 1;
-                }
+        for (given, last) in [
+            (inputs.estimate, &mut self.last_estimate),
+            (inputs.autopilot_estimate, &mut self.last_autopilot_estimate),
+        ] {
+            if let Some(est) = given
+                && !accept_estimate(last, est, inputs.now_ns)
+            {
+                self.rejected.estimate += 1;
             }
         }
         if let Some(counts) = inputs.tilt_counts {
@@ -377,7 +376,11 @@ impl FlightStack {
         if mode != self.mode {
             self.enter(mode, now, &state);
         }
-        self.failsafe_control = self.failsafe_control(estimate_fresh, conditions.mpc_failed);
+        let autopilot_fresh = self.last_autopilot_estimate.is_some_and(|e| {
+            now.saturating_sub(e.stamp_ns) as f64 * 1e-9 <= self.settings.failsafe.estimate_timeout
+        });
+        self.failsafe_control =
+            self.failsafe_control(estimate_fresh, autopilot_fresh, conditions.mpc_failed);
 
         if mode == Mode::Transition {
             self.transition_limit = self.transition_limit.max(self.transition_schedule(height));
@@ -535,9 +538,7 @@ impl FlightStack {
             Mode::Takeoff if tilt > self.settings.modes.takeoff_max_tilt_deg.to_radians() => {
                 Input::zeros()
             }
-            Mode::Failsafe if self.failsafe_control == FailsafeControl::Backup => {
-                self.backup_thrust(state, pilot, tilt, status)
-            }
+            Mode::Failsafe if self.backup_flies() => self.backup_thrust(state, pilot, tilt, status),
             Mode::Failsafe if self.failsafe_control == FailsafeControl::OpenLoop => {
                 // No state to fly on (or no backup): open-loop hover trim
                 // at the current tilt, slightly under, a descent with
@@ -766,4 +767,21 @@ impl FlightStack {
             self.thresholds.transition_height,
         )
     }
+}
+
+/// Takes `est` as the newest of an estimate stream whose last good one is
+/// `last`: finite, not stamped after `now_ns`, not older than `last`.
+/// Returns false for a rejected one (a repeat of `last` is neither).
+fn accept_estimate(last: &mut Option<Estimate>, est: Estimate, now_ns: u64) -> bool {
+    if *last == Some(est) {
+        return true;
+    }
+    let finite = est.state.iter().all(|v| v.is_finite());
+    let from_future = est.stamp_ns > now_ns;
+    let backwards = last.is_some_and(|l| est.stamp_ns < l.stamp_ns);
+    let ok = finite && !from_future && !backwards;
+    if ok {
+        *last = Some(est);
+    }
+    ok
 }

@@ -109,6 +109,7 @@ struct RadioLatch {
 pub struct InputLatch {
     settings: InputSettings,
     estimate: Option<Estimate>,
+    autopilot_estimate: Option<Estimate>,
     pilot: PilotInput,
     pilot_received_ns: Option<u64>,
     radio: RadioLatch,
@@ -151,6 +152,7 @@ impl InputLatch {
         Self {
             settings,
             estimate: None,
+            autopilot_estimate: None,
             pilot: PilotInput::default(),
             pilot_received_ns: None,
             radio: RadioLatch {
@@ -175,6 +177,11 @@ impl InputLatch {
     /// A state estimate arrived.
     pub fn estimate(&mut self, estimate: Estimate) {
         self.estimate = Some(estimate);
+    }
+
+    /// The autopilot's own estimate arrived (`StepInputs::autopilot_estimate`).
+    pub fn autopilot_estimate(&mut self, estimate: Estimate) {
+        self.autopilot_estimate = Some(estimate);
     }
 
     /// A pilot input arrived at `received_ns`.
@@ -293,6 +300,7 @@ impl InputLatch {
                     self.radio.tilt_lever
                 },
                 rehome_tilt: !pilot_stale && self.radio.rehome_tilt,
+                autopilot_estimate: self.autopilot_estimate,
             },
             pilot_stale,
             estimate_stale,

@@ -55,6 +55,13 @@ pub struct StepInputs {
     /// The pilot's encoder reset switch: home the tilt driver again
     /// (passed on only while disarmed).
     pub rehome_tilt: bool,
+    /// The autopilot's own estimate (PX4's, from its IMU and barometer),
+    /// when the daemon takes `estimate` from elsewhere (the motion capture
+    /// straight over ROS 2). Only its attitude, body rates and vertical
+    /// speed are flown on, and only in a failsafe whose `estimate` is
+    /// stale (the backup controller's level descent): without the motion
+    /// capture its horizontal position and velocity drift.
+    pub autopilot_estimate: Option<Estimate>,
 }
 
 /// Inputs rejected so far, by kind.

@@ -35,6 +35,11 @@ pub fn inputs_message(tick: u64, inputs: &StepInputs, cuts: &SolverCuts) -> Tick
         arming_failures: inputs.arming_failures,
         tilt_lever: inputs.tilt_lever,
         rehome_tilt: inputs.rehome_tilt,
+        has_autopilot_estimate: inputs.autopilot_estimate.is_some(),
+        autopilot_estimate_received_ns: inputs.autopilot_estimate.map_or(0, |e| e.stamp_ns),
+        autopilot_estimate: inputs
+            .autopilot_estimate
+            .map_or([0.0; 12], |e| MpcStatus::array(&e.state)),
     }
 }
 
@@ -67,6 +72,10 @@ pub fn inputs_from_message(m: &TickInputs) -> StepInputs {
         arming_failures: m.arming_failures,
         tilt_lever: m.tilt_lever,
         rehome_tilt: m.rehome_tilt,
+        autopilot_estimate: m.has_autopilot_estimate.then(|| Estimate {
+            stamp_ns: m.autopilot_estimate_received_ns,
+            state: State::from_column_slice(&m.autopilot_estimate),
+        }),
     }
 }
 

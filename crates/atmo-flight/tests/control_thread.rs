@@ -44,6 +44,7 @@ fn ticks_on_its_own_thread_and_drops_instead_of_blocking() {
             arming_failures: 0,
             tilt_lever: 0.0,
             rehome_tilt: false,
+            autopilot_estimate: None,
         })
         .unwrap();
     // Let it run without reading: the channel fills and reports are dropped.

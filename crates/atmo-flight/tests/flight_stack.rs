@@ -14,6 +14,7 @@ const NS: u64 = 1_000_000_000;
 
 /// A minimal closed loop: the nominal model integrated at 1 ms, a perfect
 /// estimate at the control rate, the tilt integrating its command.
+#[allow(clippy::struct_excessive_bools)] // independent signals, as in StepInputs
 struct Loop {
     stack: FlightStack,
     model: Model,
@@ -35,6 +36,8 @@ struct Loop {
     /// The radio's manual tilt lever and encoder reset switch.
     tilt_lever: f64,
     rehome_tilt: bool,
+    /// The autopilot's own estimate arrives every tick (the truth).
+    autopilot_alive: bool,
 }
 
 impl Loop {
@@ -71,6 +74,7 @@ impl Loop {
             arming_failures: 0,
             tilt_lever: 0.0,
             rehome_tilt: false,
+            autopilot_alive: false,
         }
     }
 
@@ -94,6 +98,10 @@ impl Loop {
             arming_failures: self.arming_failures,
             tilt_lever: self.tilt_lever,
             rehome_tilt: self.rehome_tilt,
+            autopilot_estimate: self.autopilot_alive.then_some(Estimate {
+                stamp_ns: self.now_ns,
+                state: self.x,
+            }),
         }
     }
 
@@ -195,6 +203,48 @@ fn stale_estimate_triggers_failsafe_with_open_loop_trim_and_tilt_back() {
     // The estimate comes back: after the recovery time and tilted back, flight again.
     lp.estimate_alive = true;
     let outs = lp.run(2.0);
+    assert!(outs.iter().any(|o| o.status.mode == Mode::Flight));
+}
+
+/// The estimate stops, the autopilot's does not: the failsafe flies the
+/// backup controller's level descent on it (commands unlike the open-loop
+/// trim, the arms to the landing tilt, the robot coming down), and the
+/// estimate's return ends it as the stale estimate's failsafe ends.
+#[test]
+fn a_stale_estimate_with_the_autopilots_fresh_descends_level_on_it() {
+    let mut lp = Loop::new(1.5);
+    lp.autopilot_alive = true;
+    lp.run(0.3);
+    lp.estimate_alive = false;
+    let outs = lp.run(2.0);
+    let first = outs
+        .iter()
+        .position(|o| o.status.mode == Mode::Failsafe)
+        .expect("no failsafe");
+    assert!((6..=8).contains(&first), "failsafe after {first} ticks");
+    let o = &outs[first];
+    let trim = Model::new(&RobotConfig::atmo())
+        .at_tilt(o.status.tilt)
+        .hover_trim();
+    assert!(
+        (0..4).any(|i| (o.thrust[i] - 0.95 * trim[i]).abs() > 1e-6),
+        "the open-loop trim: {:?}",
+        o.thrust
+    );
+    let landing_tilt = FlightSettings::atmo()
+        .monitor
+        .rotor_out_landing_tilt_deg
+        .to_radians();
+    assert!(o.tilt_velocity > 0.0, "towards the landing tilt");
+    assert!((lp.tilt - landing_tilt).abs() < 0.02, "{} rad", lp.tilt);
+    assert!(lp.x[idx::VZ] > 0.1, "descending: vz {}", lp.x[idx::VZ]);
+    assert!(
+        lp.x[idx::ROLL].abs() < 0.05 && lp.x[idx::PITCH].abs() < 0.05,
+        "level: {:?}",
+        lp.x
+    );
+    lp.estimate_alive = true;
+    let outs = lp.run(4.0);
     assert!(outs.iter().any(|o| o.status.mode == Mode::Flight));
 }
 

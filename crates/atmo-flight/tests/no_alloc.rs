@@ -110,6 +110,7 @@ fn flight_stack_allocations(ground_effect: GroundEffectSource, ground_normal: Op
             arming_failures: 0,
             tilt_lever: 0.0,
             rehome_tilt: false,
+            autopilot_estimate: None,
         };
         // The first ticks warm the MPC up (start-up); count from tick 20 on.
         let before = thread_allocations();
@@ -341,6 +342,7 @@ fn logging_a_tick_does_not_allocate() {
         arming_failures: 0,
         tilt_lever: 0.0,
         rehome_tilt: false,
+        autopilot_estimate: None,
     };
     let outputs = stack.step(&inputs);
     let timing = TickTiming::default();

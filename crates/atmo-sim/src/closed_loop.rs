@@ -323,7 +323,9 @@ fn fly_until(
         ground_z: terrain_z_below(plant.plane(), start[idx::X], start[idx::Y]),
         ..controller.inputs
     };
-    let io = SimIo::new(inputs, *plant.plane()).with_faults(&scenario.file.faults);
+    let io = SimIo::new(inputs, *plant.plane())
+        .with_faults(&scenario.file.faults)
+        .with_autopilot_estimate(scenario.file.autopilot_estimate);
     let mut control = SimControl::new(tick_period(stack.period()), io);
     control.io.sense(&plant, scenario);
     on_plant(&truth_of(&plant));

@@ -21,7 +21,10 @@
 //!
 //! - `[faults]`: faults injected on the closed loop's input path (estimate
 //!   dropouts, bursts, latency, duplicates, reordering, clock jumps, dead
-//!   drivers, solver overruns: [`crate::faults`], docs/faults.md).
+//!   drivers, solver overruns: [`crate::faults`], docs/faults.md);
+//! - `autopilot_estimate = true`: the autopilot's own estimate reaches the
+//!   flight stack too, untouched by the estimate faults (what a failsafe
+//!   flies on once the motion capture is lost).
 //!
 //! Loading is strict like every config of the project: unknown keys are
 //! errors naming the file, line and key; values are range-checked and
@@ -215,6 +218,11 @@ atmo_core::params! {
         pub success: SuccessConfig = SuccessConfig::default();
         /// Faults injected on the closed loop's input path ([`crate::faults`]).
         pub faults: FaultsConfig = FaultsConfig::default();
+        /// The autopilot's own estimate (PX4's, from its IMU and barometer)
+        /// reaches the flight stack beside the motion capture's, as the
+        /// daemon's `ros2.topics.autopilot_estimate` when enabled; the
+        /// estimate faults act on the motion capture's only.
+        pub autopilot_estimate: bool = false;
     }
 }
 

@@ -122,6 +122,9 @@ pub struct SimIo {
     now_ns: u64,
     estimate_sequence: Option<u64>,
     estimate: Option<Arrived<atmo_core::model::State>>,
+    /// The autopilot's own estimate is delivered (`with_autopilot_estimate`).
+    autopilot_enabled: bool,
+    autopilot_estimate: Option<Arrived<atmo_core::model::State>>,
     pilot: Option<Arrived<PilotInput>>,
     pilot_period_ns: u64,
     next_pilot_ns: u64,
@@ -154,6 +157,8 @@ impl SimIo {
             now_ns: 0,
             estimate_sequence: None,
             estimate: None,
+            autopilot_enabled: false,
+            autopilot_estimate: None,
             pilot: None,
             pilot_period_ns: time_ns(1.0 / PILOT_RATE_HZ),
             next_pilot_ns: 0,
@@ -179,6 +184,15 @@ impl SimIo {
         self
     }
 
+    /// Delivers the autopilot's own estimate too: the plant's estimate,
+    /// as the motion capture's before the estimate faults (its IMU and
+    /// barometer do not go through the motion capture's link).
+    #[must_use]
+    pub fn with_autopilot_estimate(mut self, enabled: bool) -> Self {
+        self.autopilot_enabled = enabled;
+        self
+    }
+
     pub fn counts(&self) -> SimIoCounts {
         SimIoCounts {
             estimates_out_of_order: self.estimate_order.out_of_order(),
@@ -198,6 +212,12 @@ impl SimIo {
             self.estimate_sequence = Some(e.sequence);
             self.faults
                 .publish(self.now_ns, time_ns(e.measured_at), e.state);
+            if self.autopilot_enabled {
+                self.autopilot_estimate = Some(Arrived {
+                    value: e.state,
+                    at_ns: self.now_ns,
+                });
+            }
         }
         while let Some(e) = self.faults.next_delivery(self.now_ns) {
             if self.estimate_order.accept(e.stamp_ns) {
@@ -266,6 +286,12 @@ impl TickIo for SimIo {
             let z = terrain_z_below(&self.plane, e.value[idx::X], e.value[idx::Y]);
             let stamp = self.stamp(deadline_ns, e.at_ns);
             self.latch.ground_plane(z, self.plane.normal.into(), stamp);
+        }
+        if let Some(e) = self.autopilot_estimate.take() {
+            self.latch.autopilot_estimate(Estimate {
+                stamp_ns: self.stamp(deadline_ns, e.at_ns),
+                state: e.value,
+            });
         }
         if let Some(p) = self.pilot.take() {
             let at = self.stamp(deadline_ns, p.at_ns);

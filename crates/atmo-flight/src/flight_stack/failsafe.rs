@@ -1,7 +1,7 @@
 //! The failsafe's flying: who commands the thrusters (the MPC, the backup
 //! controller or the open-loop trim) and the tilt of a failsafe that lands.
 
-use atmo_core::model::{Input, State};
+use atmo_core::model::{Input, State, idx};
 
 use super::FlightStack;
 use crate::modes::Mode;
@@ -14,6 +14,9 @@ pub(super) enum FailsafeControl {
     Mpc,
     /// The backup controller's level descent (`backup_control`).
     Backup,
+    /// The same descent on the autopilot's own estimate: the estimate is
+    /// stale, the autopilot's is not (`StepInputs::autopilot_estimate`).
+    AutopilotBackup,
     /// The hover trim, open loop: no estimate to fly on.
     OpenLoop,
 }
@@ -35,19 +38,27 @@ impl FlightStack {
             .to_radians()
     }
 
-    /// Who would fly a failsafe now: without an estimate the open-loop
-    /// trim; with one, the MPC switched off or failed past its grace
-    /// (`mpc_failed`), the backup controller (`backup_control`; with a
-    /// zero bandwidth the failed MPC's held command, or switched off the
+    /// Who would fly a failsafe now: without an estimate, the backup
+    /// controller on the autopilot's if that one is fresh, else the
+    /// open-loop trim; with one, the MPC switched off or failed past its
+    /// grace (`mpc_failed`), the backup controller (`backup_control`; with
+    /// a zero bandwidth the failed MPC's held command, or switched off the
     /// open-loop trim, as logs written before the key flew); else the MPC.
     pub(super) fn failsafe_control(
         &self,
         estimate_fresh: bool,
+        autopilot_fresh: bool,
         mpc_failed: bool,
     ) -> FailsafeControl {
         let backup = self.settings.failsafe.backup_attitude_bandwidth > 0.0;
         let switched_off = !self.last_pilot.mpc_enabled;
-        if !estimate_fresh || (switched_off && !backup) {
+        if !estimate_fresh {
+            if autopilot_fresh && backup {
+                FailsafeControl::AutopilotBackup
+            } else {
+                FailsafeControl::OpenLoop
+            }
+        } else if switched_off && !backup {
             FailsafeControl::OpenLoop
         } else if mpc_failed && backup {
             FailsafeControl::Backup
@@ -58,7 +69,11 @@ impl FlightStack {
 
     /// In failsafe the backup controller flies.
     pub(super) fn backup_flies(&self) -> bool {
-        self.mode == Mode::Failsafe && self.failsafe_control == FailsafeControl::Backup
+        self.mode == Mode::Failsafe
+            && matches!(
+                self.failsafe_control,
+                FailsafeControl::Backup | FailsafeControl::AutopilotBackup
+            )
     }
 
     /// A failsafe that lands: the rotor-out descent or the backup's.
@@ -66,9 +81,12 @@ impl FlightStack {
         self.mode == Mode::Failsafe && (self.rotor_out() || self.backup_flies())
     }
 
-    /// The backup's level descent. A failed MPC still runs (its solves may
-    /// come back: recovery), its stale plan unflown; switched off, it does
-    /// not run.
+    /// The backup's level descent. A failed MPC still runs on the estimate
+    /// (its solves may come back: recovery), its stale plan unflown;
+    /// switched off, or with the estimate stale, it does not run. On the
+    /// autopilot's estimate only its attitude, body rates and vertical
+    /// speed are flown: its horizontal velocity, drifting without the
+    /// motion capture, is not braked against.
     pub(super) fn backup_thrust(
         &mut self,
         state: &State,
@@ -76,7 +94,17 @@ impl FlightStack {
         tilt: f64,
         status: &mut Status,
     ) -> Input {
-        let planned = if pilot.mpc_enabled {
+        let autopilot = self.failsafe_control == FailsafeControl::AutopilotBackup;
+        let flown = match self.last_autopilot_estimate {
+            Some(e) if autopilot => {
+                let mut level_only = e.state;
+                level_only[idx::VX] = 0.0;
+                level_only[idx::VY] = 0.0;
+                level_only
+            }
+            _ => *state,
+        };
+        let planned = if pilot.mpc_enabled && !autopilot {
             self.mpc_feedback(state, status)
         } else {
             self.last_thrust
@@ -89,7 +117,7 @@ impl FlightStack {
         let speed = self.settings.failsafe.backup_descent_speed;
         let dt = self.period();
         self.backup
-            .command(&body, state, dt, bandwidth, speed)
+            .command(&body, &flown, dt, bandwidth, speed)
             .unwrap_or(planned)
     }
 }

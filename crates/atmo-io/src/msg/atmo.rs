@@ -163,7 +163,9 @@ pub struct TickTiming {
 /// `solver_cut_overflow`; they decode with `has_ground_normal = false`
 /// (level ground, what those flight stacks assumed), and logs written
 /// before `pilot_lost` end after the normal and decode with the radio
-/// present and every arming check passed, so that old flight logs still replay.
+/// present and every arming check passed; logs before the lever, or before
+/// the autopilot's estimate, decode with the lever at rest and without
+/// that estimate, so that old flight logs still replay.
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize)]
 #[allow(clippy::struct_excessive_bools)] // the wire layout: presence flags and two signals
 pub struct TickInputs {
@@ -200,6 +202,12 @@ pub struct TickInputs {
     /// The pilot asks the tilt driver to home again (the encoder reset
     /// switch).
     pub rehome_tilt: bool,
+    /// Whether the tick had the autopilot's own estimate.
+    pub has_autopilot_estimate: bool,
+    /// When the autopilot's estimate was accepted, ns on the tick's clock.
+    pub autopilot_estimate_received_ns: u64,
+    /// The autopilot's estimate, 12-state order.
+    pub autopilot_estimate: [f64; 12],
 }
 
 /// The fields of `TickInputs` in wire order (its .msg definition's, checked
@@ -226,6 +234,9 @@ pub(super) const TICK_INPUTS_FIELDS: &[&str] = &[
     "arming_failures",
     "tilt_lever",
     "rehome_tilt",
+    "has_autopilot_estimate",
+    "autopilot_estimate_received_ns",
+    "autopilot_estimate",
 ];
 
 impl<'de> Deserialize<'de> for TickInputs {
@@ -275,6 +286,9 @@ impl<'de> serde::de::Visitor<'de> for TickInputsVisitor {
             arming_failures: 0,
             tilt_lever: 0.0,
             rehome_tilt: false,
+            has_autopilot_estimate: false,
+            autopilot_estimate_received_ns: 0,
+            autopilot_estimate: [0.0; 12],
         };
         // A log before the ground normal ends here: the payload is used up,
         // reading on fails, and the message is the old one (level ground).
@@ -290,6 +304,13 @@ impl<'de> serde::de::Visitor<'de> for TickInputsVisitor {
                 if let Ok(Some(lever)) = seq.next_element::<f64>() {
                     m.tilt_lever = lever;
                     m.rehome_tilt = next(&mut seq, "rehome_tilt")?;
+                    // And a log before the autopilot's estimate after the lever.
+                    if let Ok(Some(has)) = seq.next_element::<bool>() {
+                        m.has_autopilot_estimate = has;
+                        m.autopilot_estimate_received_ns =
+                            next(&mut seq, "autopilot_estimate_received_ns")?;
+                        m.autopilot_estimate = next(&mut seq, "autopilot_estimate")?;
+                    }
                 }
             }
         }

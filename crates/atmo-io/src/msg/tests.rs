@@ -638,6 +638,20 @@ fn tick_inputs_and_sim_truth_layouts() {
     }
     body.extend(f64s(&[-0.5]));
     body.push(1);
+    // A log written before the autopilot's estimate ends here: none.
+    let mut before_autopilot = CDR_LE_HEADER.to_vec();
+    before_autopilot.extend(&body);
+    let decoded: TickInputs = decode("/before-autopilot", &before_autopilot).unwrap();
+    assert_eq!(decoded, m);
+    m.has_autopilot_estimate = true;
+    m.autopilot_estimate_received_ns = 18_000_000;
+    m.autopilot_estimate[3] = 0.25;
+    body.push(1);
+    while body.len() % 8 != 0 {
+        body.push(0);
+    }
+    body.extend(18_000_000u64.to_le_bytes());
+    body.extend(f64s(&m.autopilot_estimate));
     round_trip(&m, &body);
     // A payload cut inside the normal is refused, not read as an old one.
     let mut cut = CDR_LE_HEADER.to_vec();

@@ -653,3 +653,83 @@ fn the_tilt_planning_solves_are_in_the_window_and_their_cuts_replay() {
         "the cuts changed nothing"
     );
 }
+
+/// The motion capture lost for good at 1.5 s (in the morph, 1.1 m up),
+/// the autopilot's own estimate still arriving (`autopilot_estimate`):
+/// the failsafe flies the backup controller on that estimate's attitude,
+/// body rates and vertical speed, the arms to the landing tilt, and comes
+/// down level and slowly on its wheels; the log carries that estimate and
+/// replays bit for bit. Without it the open-loop trim tips over and
+/// crashes (docs/faults.md).
+#[test]
+fn the_estimate_lost_for_good_lands_on_the_autopilots_estimate() {
+    let lost = "[[faults.estimate_dropout]]\nt = 1.5\nduration = 60.0";
+    let controller = ControllerConfig::atmo().unwrap().deterministic();
+    let mut with_autopilot = scenario(lost);
+    with_autopilot.file.autopilot_estimate = true;
+    let dir = Path::new(env!("CARGO_TARGET_TMPDIR")).join("faults-autopilot");
+    std::fs::create_dir_all(&dir).unwrap();
+    let log = dir.join(format!("estimate_lost_{}.mcap", std::process::id()));
+    let mut ticks = Vec::new();
+    let (summary, _) = atmo_sim::closed_loop::fly_logged(&with_autopilot, &controller, &log, |r| {
+        ticks.push(*r);
+    })
+    .unwrap();
+    let f = Flight { summary, ticks };
+    let failsafe = f.first_in(Mode::Failsafe, 1.5).expect("no failsafe");
+    assert!(failsafe.time < 1.6, "failsafe at {:.3} s", failsafe.time);
+    let airborne: Vec<&TickRecord> = f
+        .ticks
+        .iter()
+        .filter(|t| t.time >= failsafe.time && t.outputs.status.mode == Mode::Failsafe)
+        .collect();
+    let highest = airborne.iter().map(|t| t.truth_height).fold(0.0, f64::max);
+    assert!(
+        highest < failsafe.truth_height + 0.05,
+        "climbed from {:.2} to {highest:.2} m",
+        failsafe.truth_height
+    );
+    let leaned = airborne
+        .iter()
+        .map(|t| {
+            let s = &t.truth;
+            s[atmo_core::model::idx::ROLL]
+                .abs()
+                .max(s[atmo_core::model::idx::PITCH].abs())
+        })
+        .fold(0.0, f64::max);
+    assert!(leaned.to_degrees() < 5.0, "{:.1} deg", leaned.to_degrees());
+    let s = &f.summary;
+    assert!(s.crash_reason.is_none(), "{s:?}");
+    assert!(s.touchdown_tilt_deg.unwrap() > 30.0, "{s:?}");
+    assert!(s.impact_speed_mps.unwrap() < 0.35, "{s:?}");
+
+    let mut flight =
+        atmo_flight::replay::RecordedFlight::read(&log, atmo_sim::closed_loop::STATUS_TOPIC)
+            .unwrap();
+    let config = atmo_flight::replay::RecordedFlight::config(&flight.files).unwrap();
+    let replay = |flight: &atmo_flight::replay::RecordedFlight| {
+        atmo_flight::replay::replay(
+            flight,
+            &config,
+            atmo_flight::replay::CutReplay::AsLogged,
+            |_| {},
+        )
+        .unwrap()
+    };
+    assert_eq!(replay(&flight).first_difference, None);
+    // Without the autopilot's estimate (a log before it) the failsafe
+    // flies the open-loop trim: the replay tells.
+    for i in &mut flight.inputs {
+        i.has_autopilot_estimate = false;
+    }
+    assert!(replay(&flight).first_difference.is_some());
+
+    let without = fly_with(lost);
+    assert!(
+        without.summary.crash_reason.is_some(),
+        "{:?}",
+        without.summary
+    );
+    println!("the estimate lost for good: {s:?}");
+}
