@@ -353,6 +353,12 @@ impl TickIo for OnboardIo {
                 state: e.state,
             });
         }
+        if let Some(e) = self.ros_in.latest_autopilot_estimate() {
+            self.latch.autopilot_estimate(Estimate {
+                stamp_ns: stamp_on_tick_clock(deadline_ns, e.received),
+                state: e.state,
+            });
+        }
         if let Some(g) = self.ros_in.latest_ground() {
             let received = stamp_on_tick_clock(deadline_ns, g.received);
             self.latch.ground_z(g.z, received);

@@ -1,7 +1,9 @@
 //! The backup controller: a level descent for when the MPC has failed past
 //! its grace (`Mode::Failsafe` with `SolverStatus::Failed`) or the pilot
-//! has switched it off, while the estimate is still good (without one,
-//! the failsafe's open-loop trim).
+//! has switched it off, while the estimate is still good, and for a stale
+//! estimate while the autopilot's own is fresh (flown on its attitude,
+//! rates and vertical speed, the horizontal velocity zeroed: not braked
+//! against). Without either, the failsafe's open-loop trim.
 //!
 //! Without it the failed MPC's last plan was flown on (its first command,
 //! held): a robot whose solves never came back hovered or climbed away on

@@ -399,6 +399,73 @@ fn px4_vehicle_odometry_as_the_estimate() {
     thread.stop().unwrap();
 }
 
+/// PX4's odometry beside a motion-capture estimate
+/// (`topics.autopilot_estimate`): it arrives as the autopilot's estimate,
+/// never as the estimate; an invalid one (a NaN quaternion) is counted in
+/// `autopilot_rejected` and never reaches the control thread.
+#[test]
+fn px4_vehicle_odometry_as_the_autopilots_estimate() {
+    let domain = domain() + 5;
+    let mut config = Ros2Config::default();
+    config.topics.autopilot_estimate.enabled = true;
+    let (_publisher, mut inputs, thread) = Ros2Node::start(
+        &config,
+        Ros2StartOptions {
+            domain_id: Some(domain),
+        },
+    )
+    .unwrap();
+    let (_peer_context, mut peer) = peer_node(domain, "px4");
+    let t = peer
+        .create_topic(
+            &topic_name("/fmu/out/vehicle_odometry"),
+            MessageTypeName::new("px4_msgs", "VehicleOdometry"),
+            &QosProfile::subscription_default(),
+        )
+        .unwrap();
+    let px4 = peer.create_publisher::<VehicleOdometry>(&t, None).unwrap();
+    let odometry = |k: u64, w: f32| VehicleOdometry {
+        timestamp: k * 1000,
+        timestamp_sample: k * 1000,
+        pose_frame: VehicleOdometry::POSE_FRAME_NED,
+        position: [1.0, 2.0, -3.0],
+        q: [w, 0.0, 0.0, 0.0],
+        velocity_frame: VehicleOdometry::VELOCITY_FRAME_NED,
+        velocity: [0.5, 0.0, -0.25],
+        angular_velocity: [0.0, 0.0, 0.125],
+        ..VehicleOdometry::default()
+    };
+    let mut k = 1u64;
+    let mut got = None;
+    wait_for("the autopilot's estimate", Duration::from_secs(10), || {
+        px4.publish(odometry(k, 1.0)).unwrap();
+        k += 1;
+        got = inputs.latest_autopilot_estimate();
+        got.is_some()
+    });
+    let want = [
+        1.0, 2.0, -3.0, 0.0, 0.0, 0.0, 0.5, 0.0, -0.25, 0.0, 0.0, 0.125,
+    ];
+    assert_eq!(got.unwrap().state.as_slice(), &want);
+    assert!(inputs.latest_estimate().is_none(), "not the estimate");
+    wait_for("an invalid one counted", Duration::from_secs(5), || {
+        px4.publish(odometry(k, f32::NAN)).unwrap();
+        k += 1;
+        inputs.counters().autopilot_rejected > 0
+    });
+    std::thread::sleep(Duration::from_millis(50));
+    assert!(
+        inputs
+            .latest_autopilot_estimate()
+            .is_none_or(|e| e.state.as_slice() == want),
+        "an invalid one never reaches the control thread"
+    );
+    let c = inputs.counters();
+    assert!(c.autopilot_received > c.autopilot_rejected);
+    assert_eq!(c.estimates_received, 0);
+    thread.stop().unwrap();
+}
+
 /// `use_sim_time`: ROS time is 0 until a `/clock` arrives, then the newest
 /// one (also when it jumps back); an invalid time is rejected and counted.
 /// The ground topic's heights (ENU, up) come out as NED z; a NaN height is

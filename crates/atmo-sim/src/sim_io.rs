@@ -10,6 +10,7 @@
 //! | input          | onboard (`OnboardIo`)              | simulation ([`SimIo`])                         |
 //! |----------------|------------------------------------|------------------------------------------------|
 //! | estimate       | ROS 2 odometry, age from acceptance | the plant's motion capture, age from publication |
+//! | autopilot's estimate | ROS 2 PX4 `VehicleOdometry`, enabled beside a motion-capture estimate | with the scenario's `autopilot_estimate`: the plant's estimate, before the estimate faults |
 //! | pilot          | ROS 2 `PilotInput`                 | the scenario's script at [`PILOT_RATE_HZ`]      |
 //! | encoder        | iceoryx2 driver port               | the plant's encoder                            |
 //! | contact        | iceoryx2 driver port               | the plant's contact signal                     |

@@ -130,6 +130,16 @@ atmo_core::params! {
             enabled: false,
             ..topic("/fmu/out/input_rc", InputRc::TYPE_NAME)
         };
+        /// In: the autopilot's own estimate (`px4_msgs/msg/VehicleOdometry`
+        /// from PX4's IMU and barometer) beside an `estimate` taken from
+        /// elsewhere (the motion capture straight over ROS 2): what the
+        /// failsafe flies on once that one is lost (its attitude, body
+        /// rates and vertical speed). Off unless enabled; with PX4's
+        /// odometry as the `estimate` it is that topic and not needed.
+        pub autopilot_estimate: TopicConfig = TopicConfig {
+            enabled: false,
+            ..topic("/fmu/out/vehicle_odometry", VehicleOdometry::TYPE_NAME)
+        };
     }
     check |topics, c, prefix| topics.check_roles(c, prefix)
 }
@@ -139,12 +149,17 @@ impl Topics {
     /// share a name; errors name `prefix.<role>.<key>`.
     fn check_roles(&self, c: &Checker<'_>, prefix: &str) -> atmo_core::Result<()> {
         let t = self;
-        let roles: [(&str, &TopicConfig, &[&str]); 11] = [
+        let roles: [(&str, &TopicConfig, &[&str]); 12] = [
             ("status", &t.status, &[MpcStatus::TYPE_NAME]),
             (
                 "estimate",
                 &t.estimate,
                 &[Odometry::TYPE_NAME, VehicleOdometry::TYPE_NAME],
+            ),
+            (
+                "autopilot_estimate",
+                &t.autopilot_estimate,
+                &[VehicleOdometry::TYPE_NAME],
             ),
             ("drive_command", &t.drive_command, &[Twist::TYPE_NAME]),
             ("pilot", &t.pilot, &[PilotInput::TYPE_NAME]),

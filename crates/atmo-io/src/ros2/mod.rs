@@ -193,6 +193,11 @@ pub struct Ros2Counters {
     /// Backward steps of the estimate stamps taken as a new estimator
     /// clock ([`crate::stamp_order`]).
     pub clock_jumps: u64,
+    /// The autopilot's estimates (`topics.autopilot_estimate`) that
+    /// decoded, whatever their values.
+    pub autopilot_received: u64,
+    /// The autopilot's estimates with a non-finite or invalid field.
+    pub autopilot_rejected: u64,
     pub drive_received: u64,
     pub drive_rejected: u64,
     /// Pilot inputs that decoded, whatever their values.
@@ -232,6 +237,8 @@ struct Counters {
     invalid: AtomicU64,
     stamp_backwards: AtomicU64,
     clock_jumps: AtomicU64,
+    autopilot_received: AtomicU64,
+    autopilot_rejected: AtomicU64,
     drive_received: AtomicU64,
     drive_rejected: AtomicU64,
     pilot_received: AtomicU64,
@@ -260,6 +267,8 @@ impl Counters {
             invalid: g(&self.invalid),
             stamp_backwards: g(&self.stamp_backwards),
             clock_jumps: g(&self.clock_jumps),
+            autopilot_received: g(&self.autopilot_received),
+            autopilot_rejected: g(&self.autopilot_rejected),
             drive_received: g(&self.drive_received),
             drive_rejected: g(&self.drive_rejected),
             pilot_received: g(&self.pilot_received),
@@ -329,6 +338,7 @@ impl Ros2Publisher {
 /// The control thread's receiving side (`Send`, one owner).
 pub struct Ros2Inputs {
     estimates: Receiver<RosEstimate>,
+    autopilot_estimates: Receiver<RosEstimate>,
     drive: Receiver<DriveCommand>,
     pilot: Receiver<PilotCommand>,
     rc: Receiver<RcFrame>,
@@ -342,6 +352,12 @@ impl Ros2Inputs {
     /// The newest estimate accepted since the last call, if any. Never blocks.
     pub fn latest_estimate(&mut self) -> Option<RosEstimate> {
         self.estimates.try_iter().last()
+    }
+
+    /// The newest autopilot's estimate accepted since the last call, if
+    /// any (`topics.autopilot_estimate`). Never blocks.
+    pub fn latest_autopilot_estimate(&mut self) -> Option<RosEstimate> {
+        self.autopilot_estimates.try_iter().last()
     }
 
     /// The newest drive command accepted since the last call, if any.

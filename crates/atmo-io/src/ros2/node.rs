@@ -49,6 +49,7 @@ struct NodeThread {
     offboard: Option<Publisher<OffboardControlMode>>,
     diagnostics: Option<Publisher<DiagnosticArray>>,
     estimate: Option<EstimateSub>,
+    autopilot_estimate: Option<Subscription<VehicleOdometry>>,
     drive: Option<Subscription<Twist>>,
     pilot: Option<Subscription<PilotInput>>,
     rc: Option<Subscription<InputRc>>,
@@ -58,6 +59,7 @@ struct NodeThread {
     clock_sub: Option<Subscription<Clock>>,
     out_rx: Receiver<Outgoing>,
     estimate_tx: SyncSender<RosEstimate>,
+    autopilot_tx: SyncSender<RosEstimate>,
     drive_tx: SyncSender<DriveCommand>,
     pilot_tx: SyncSender<PilotCommand>,
     rc_tx: SyncSender<RcFrame>,
@@ -90,6 +92,7 @@ fn topic_type_hashes(config: &Ros2Config) -> Result<Vec<KeyValue>> {
         &topics.ground,
         &topics.ground_normal,
         &topics.rc,
+        &topics.autopilot_estimate,
     ];
     let clock = config.use_sim_time.then_some(&topics.clock);
     all.into_iter()
@@ -118,6 +121,7 @@ impl Ros2Node {
         let stop = Arc::new(AtomicBool::new(false));
         let (out_tx, out_rx) = sync_channel(config.publish_queue);
         let (estimate_tx, estimate_rx) = sync_channel(16);
+        let (autopilot_tx, autopilot_rx) = sync_channel(16);
         let (drive_tx, drive_rx) = sync_channel(16);
         let (pilot_tx, pilot_rx) = sync_channel(16);
         let (rc_tx, rc_rx) = sync_channel(16);
@@ -130,6 +134,7 @@ impl Ros2Node {
         let channels = NodeChannels {
             out_rx,
             estimate_tx,
+            autopilot_tx,
             drive_tx,
             pilot_tx,
             rc_tx,
@@ -152,6 +157,7 @@ impl Ros2Node {
             },
             Ros2Inputs {
                 estimates: estimate_rx,
+                autopilot_estimates: autopilot_rx,
                 drive: drive_rx,
                 pilot: pilot_rx,
                 rc: rc_rx,
@@ -169,6 +175,7 @@ impl Ros2Node {
 struct NodeChannels {
     out_rx: Receiver<Outgoing>,
     estimate_tx: SyncSender<RosEstimate>,
+    autopilot_tx: SyncSender<RosEstimate>,
     drive_tx: SyncSender<DriveCommand>,
     pilot_tx: SyncSender<PilotCommand>,
     rc_tx: SyncSender<RcFrame>,
@@ -197,6 +204,7 @@ impl NodeThread {
         } else {
             subscription::<Odometry>(node, &t.estimate)?.map(EstimateSub::Odometry)
         };
+        let autopilot_estimate = subscription::<VehicleOdometry>(node, &t.autopilot_estimate)?;
         let drive = subscription::<Twist>(node, &t.drive_command)?;
         let pilot = subscription::<PilotInput>(node, &t.pilot)?;
         let rc = subscription::<InputRc>(node, &t.rc)?;
@@ -211,6 +219,7 @@ impl NodeThread {
         let NodeChannels {
             out_rx,
             estimate_tx,
+            autopilot_tx,
             drive_tx,
             pilot_tx,
             rc_tx,
@@ -225,6 +234,7 @@ impl NodeThread {
             offboard,
             diagnostics,
             estimate,
+            autopilot_estimate,
             drive,
             pilot,
             rc,
@@ -233,6 +243,7 @@ impl NodeThread {
             clock_sub,
             out_rx,
             estimate_tx,
+            autopilot_tx,
             drive_tx,
             pilot_tx,
             rc_tx,
@@ -254,6 +265,7 @@ impl NodeThread {
         while !self.stop.load(Ordering::Relaxed) {
             publish_queued(&self.out_rx, |m| self.publish(m));
             self.take_estimates();
+            self.take_autopilot_estimates();
             self.take_drive();
             self.take_pilot();
             self.take_rc();
@@ -271,6 +283,7 @@ impl NodeThread {
             offboard,
             diagnostics,
             estimate,
+            autopilot_estimate,
             drive,
             pilot,
             rc,
@@ -286,6 +299,7 @@ impl NodeThread {
             offboard,
             diagnostics,
             estimate,
+            autopilot_estimate,
             drive,
             pilot,
             rc,
@@ -325,14 +339,17 @@ impl NodeThread {
             + c.rc_rejected
             + c.ground_rejected
             + c.ground_normal_rejected
+            + c.autopilot_rejected
             + c.clock_rejected;
-        let pairs: [(&str, u64); 22] = [
+        let pairs: [(&str, u64); 24] = [
             ("estimates_received", c.estimates_received),
             ("estimates_accepted", c.estimates_accepted),
             ("malformed", c.malformed),
             ("invalid", c.invalid),
             ("stamp_backwards", c.stamp_backwards),
             ("clock_jumps", c.clock_jumps),
+            ("autopilot_received", c.autopilot_received),
+            ("autopilot_rejected", c.autopilot_rejected),
             ("drive_received", c.drive_received),
             ("drive_rejected", c.drive_rejected),
             ("pilot_received", c.pilot_received),
@@ -522,6 +539,30 @@ impl NodeThread {
                     z: -ground.point.z,
                     received: Instant::now(),
                 })
+            },
+        );
+    }
+
+    /// The autopilot's estimates: converted as PX4's odometry `estimate`
+    /// is, an invalid one counted in `autopilot_rejected`. No order rule:
+    /// the flight stack refuses one stamped before the last, and it ages
+    /// from acceptance here.
+    fn take_autopilot_estimates(&self) {
+        let c = &self.counters;
+        let topic = &self.config.topics.autopilot_estimate.name;
+        self.take_input(
+            self.autopilot_estimate.as_ref(),
+            &c.autopilot_received,
+            &c.autopilot_rejected,
+            &self.autopilot_tx,
+            |odom: VehicleOdometry| {
+                vehicle_odometry_to_state(topic, &odom)
+                    .ok()
+                    .map(|state| RosEstimate {
+                        stamp_ns: odom.timestamp_sample.saturating_mul(1000),
+                        received: Instant::now(),
+                        state,
+                    })
             },
         );
     }
