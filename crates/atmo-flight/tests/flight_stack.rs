@@ -174,6 +174,21 @@ fn descending_below_z_varphi_morphs_and_respects_the_flight_tilt_limit() {
     );
 }
 
+/// The first failsafe tick of `outs`, a stale estimate's (50 ms timeout
+/// at 150 Hz: within 8 ticks, not before 7), and the hover trim at its tilt.
+fn first_failsafe_and_trim(outs: &[StepOutputs]) -> (&StepOutputs, Input) {
+    let first = outs
+        .iter()
+        .position(|o| o.status.mode == Mode::Failsafe)
+        .expect("no failsafe");
+    assert!((6..=8).contains(&first), "failsafe after {first} ticks");
+    let o = &outs[first];
+    let trim = Model::new(&RobotConfig::atmo())
+        .at_tilt(o.status.tilt)
+        .hover_trim();
+    (o, trim)
+}
+
 #[test]
 fn stale_estimate_triggers_failsafe_with_open_loop_trim_and_tilt_back() {
     let mut lp = Loop::new(1.5);
@@ -181,18 +196,9 @@ fn stale_estimate_triggers_failsafe_with_open_loop_trim_and_tilt_back() {
     lp.tilt = 0.3; // as if it had morphed a little
     lp.estimate_alive = false;
     let outs = lp.run(0.2);
-    let first = outs
-        .iter()
-        .position(|o| o.status.mode == Mode::Failsafe)
-        .expect("no failsafe");
-    // 50 ms timeout at 150 Hz: within 8 ticks, not before 7.
-    assert!((6..=8).contains(&first), "failsafe after {first} ticks");
-    let o = &outs[first];
+    let (o, trim) = first_failsafe_and_trim(&outs);
     assert!(o.status.estimate_age > 0.05);
     assert!(o.tilt_velocity < 0.0, "tilts back to 0");
-    let trim = Model::new(&RobotConfig::atmo())
-        .at_tilt(o.status.tilt)
-        .hover_trim();
     for i in 0..4 {
         assert!(
             (o.thrust[i] - 0.95 * trim[i]).abs() < 1e-12,
@@ -217,15 +223,7 @@ fn a_stale_estimate_with_the_autopilots_fresh_descends_level_on_it() {
     lp.run(0.3);
     lp.estimate_alive = false;
     let outs = lp.run(2.0);
-    let first = outs
-        .iter()
-        .position(|o| o.status.mode == Mode::Failsafe)
-        .expect("no failsafe");
-    assert!((6..=8).contains(&first), "failsafe after {first} ticks");
-    let o = &outs[first];
-    let trim = Model::new(&RobotConfig::atmo())
-        .at_tilt(o.status.tilt)
-        .hover_trim();
+    let (o, trim) = first_failsafe_and_trim(&outs);
     assert!(
         (0..4).any(|i| (o.thrust[i] - 0.95 * trim[i]).abs() > 1e-6),
         "the open-loop trim: {:?}",

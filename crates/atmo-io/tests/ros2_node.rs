@@ -22,7 +22,9 @@ use atmo_io::ros2::{
     Ros2Config, Ros2Counters, Ros2Node, Ros2StartOptions, TopicConfig, domain_id_from_env,
 };
 use ros2_client::dds::rustdds::DomainParticipantBuilder;
-use ros2_client::{Context, MessageTypeName, Name, Node, NodeName, NodeOptions, QosProfile};
+use ros2_client::{
+    Context, MessageTypeName, Name, Node, NodeName, NodeOptions, Publisher, QosProfile,
+};
 use serde::{Deserialize, Serialize};
 use support::status;
 
@@ -346,6 +348,21 @@ fn config_errors_name_file_and_key() {
 }
 
 /// PX4's odometry (NED already) as the estimate source, through DDS.
+/// A peer publishing PX4's `/fmu/out/vehicle_odometry` on `domain` (keep
+/// its context and node alive while publishing).
+fn px4_odometry_publisher(domain: u16) -> (Context, Node, Publisher<VehicleOdometry>) {
+    let (context, mut peer) = peer_node(domain, "px4");
+    let t = peer
+        .create_topic(
+            &topic_name("/fmu/out/vehicle_odometry"),
+            MessageTypeName::new("px4_msgs", "VehicleOdometry"),
+            &QosProfile::subscription_default(),
+        )
+        .unwrap();
+    let px4 = peer.create_publisher::<VehicleOdometry>(&t, None).unwrap();
+    (context, peer, px4)
+}
+
 #[test]
 fn px4_vehicle_odometry_as_the_estimate() {
     let domain = domain() + 1;
@@ -362,15 +379,7 @@ fn px4_vehicle_odometry_as_the_estimate() {
         },
     )
     .unwrap();
-    let (_peer_context, mut peer) = peer_node(domain, "px4");
-    let t = peer
-        .create_topic(
-            &topic_name("/fmu/out/vehicle_odometry"),
-            MessageTypeName::new("px4_msgs", "VehicleOdometry"),
-            &QosProfile::subscription_default(),
-        )
-        .unwrap();
-    let px4 = peer.create_publisher::<VehicleOdometry>(&t, None).unwrap();
+    let (_peer_context, _peer, px4) = px4_odometry_publisher(domain);
     let mut k = 1u64;
     let mut got = None;
     wait_for("a PX4 estimate", Duration::from_secs(10), || {
@@ -415,15 +424,7 @@ fn px4_vehicle_odometry_as_the_autopilots_estimate() {
         },
     )
     .unwrap();
-    let (_peer_context, mut peer) = peer_node(domain, "px4");
-    let t = peer
-        .create_topic(
-            &topic_name("/fmu/out/vehicle_odometry"),
-            MessageTypeName::new("px4_msgs", "VehicleOdometry"),
-            &QosProfile::subscription_default(),
-        )
-        .unwrap();
-    let px4 = peer.create_publisher::<VehicleOdometry>(&t, None).unwrap();
+    let (_peer_context, _peer, px4) = px4_odometry_publisher(domain);
     let odometry = |k: u64, w: f32| VehicleOdometry {
         timestamp: k * 1000,
         timestamp_sample: k * 1000,

@@ -423,18 +423,26 @@ fn the_mpc_failed_for_good_the_backup_lands_level_on_the_wheels() {
     let mut ticks = Vec::new();
     let summary = fly(&scenario(overrun), &controller, |r| ticks.push(*r)).unwrap();
     let f = Flight { summary, ticks };
-    let failsafe = f.first_in(Mode::Failsafe, 1.5).expect("no failsafe");
-    let airborne: Vec<&TickRecord> = f
-        .ticks
-        .iter()
-        .filter(|t| t.time >= failsafe.time && t.outputs.status.mode == Mode::Failsafe)
-        .collect();
+    let airborne = assert_level_descent_onto_the_wheels(&f, 1.5);
     assert!(
         airborne
             .iter()
             .all(|t| t.outputs.status.solver == SolverStatus::Failed),
         "the solves came back"
     );
+    println!("the MPC failed for good: {:?}", f.summary);
+}
+
+/// The failsafe from `after` s on came down as the backup controller
+/// lands: never climbing, leaning under 5 deg, on the wheels (over 30 deg
+/// of tilt) under 0.35 m/s, no crash. Returns its airborne ticks.
+fn assert_level_descent_onto_the_wheels(f: &Flight, after: f64) -> Vec<&TickRecord> {
+    let failsafe = f.first_in(Mode::Failsafe, after).expect("no failsafe");
+    let airborne: Vec<&TickRecord> = f
+        .ticks
+        .iter()
+        .filter(|t| t.time >= failsafe.time && t.outputs.status.mode == Mode::Failsafe)
+        .collect();
     let highest = airborne.iter().map(|t| t.truth_height).fold(0.0, f64::max);
     assert!(
         highest < failsafe.truth_height + 0.05,
@@ -455,7 +463,7 @@ fn the_mpc_failed_for_good_the_backup_lands_level_on_the_wheels() {
     assert!(s.crash_reason.is_none(), "{s:?}");
     assert!(s.touchdown_tilt_deg.unwrap() > 30.0, "{s:?}");
     assert!(s.impact_speed_mps.unwrap() < 0.35, "{s:?}");
-    println!("the MPC failed for good: {s:?}");
+    airborne
 }
 
 /// The log's disk is full (`/dev/full`: every write fails with ENOSPC):
@@ -663,6 +671,8 @@ fn the_tilt_planning_solves_are_in_the_window_and_their_cuts_replay() {
 /// crashes (docs/faults.md).
 #[test]
 fn the_estimate_lost_for_good_lands_on_the_autopilots_estimate() {
+    use atmo_flight::replay::{CutReplay, RecordedFlight, replay};
+    use atmo_sim::closed_loop::{STATUS_TOPIC, fly_logged};
     let lost = "[[faults.estimate_dropout]]\nt = 1.5\nduration = 60.0";
     let controller = ControllerConfig::atmo().unwrap().deterministic();
     let mut with_autopilot = scenario(lost);
@@ -671,59 +681,27 @@ fn the_estimate_lost_for_good_lands_on_the_autopilots_estimate() {
     std::fs::create_dir_all(&dir).unwrap();
     let log = dir.join(format!("estimate_lost_{}.mcap", std::process::id()));
     let mut ticks = Vec::new();
-    let (summary, _) = atmo_sim::closed_loop::fly_logged(&with_autopilot, &controller, &log, |r| {
+    let (summary, _) = fly_logged(&with_autopilot, &controller, &log, |r| {
         ticks.push(*r);
     })
     .unwrap();
     let f = Flight { summary, ticks };
     let failsafe = f.first_in(Mode::Failsafe, 1.5).expect("no failsafe");
     assert!(failsafe.time < 1.6, "failsafe at {:.3} s", failsafe.time);
-    let airborne: Vec<&TickRecord> = f
-        .ticks
-        .iter()
-        .filter(|t| t.time >= failsafe.time && t.outputs.status.mode == Mode::Failsafe)
-        .collect();
-    let highest = airborne.iter().map(|t| t.truth_height).fold(0.0, f64::max);
-    assert!(
-        highest < failsafe.truth_height + 0.05,
-        "climbed from {:.2} to {highest:.2} m",
-        failsafe.truth_height
-    );
-    let leaned = airborne
-        .iter()
-        .map(|t| {
-            let s = &t.truth;
-            s[atmo_core::model::idx::ROLL]
-                .abs()
-                .max(s[atmo_core::model::idx::PITCH].abs())
-        })
-        .fold(0.0, f64::max);
-    assert!(leaned.to_degrees() < 5.0, "{:.1} deg", leaned.to_degrees());
+    assert_level_descent_onto_the_wheels(&f, 1.5);
     let s = &f.summary;
-    assert!(s.crash_reason.is_none(), "{s:?}");
-    assert!(s.touchdown_tilt_deg.unwrap() > 30.0, "{s:?}");
-    assert!(s.impact_speed_mps.unwrap() < 0.35, "{s:?}");
 
-    let mut flight =
-        atmo_flight::replay::RecordedFlight::read(&log, atmo_sim::closed_loop::STATUS_TOPIC)
-            .unwrap();
-    let config = atmo_flight::replay::RecordedFlight::config(&flight.files).unwrap();
-    let replay = |flight: &atmo_flight::replay::RecordedFlight| {
-        atmo_flight::replay::replay(
-            flight,
-            &config,
-            atmo_flight::replay::CutReplay::AsLogged,
-            |_| {},
-        )
-        .unwrap()
-    };
-    assert_eq!(replay(&flight).first_difference, None);
+    let mut flight = RecordedFlight::read(&log, STATUS_TOPIC).unwrap();
+    let config = RecordedFlight::config(&flight.files).unwrap();
+    let replayed =
+        |flight: &RecordedFlight| replay(flight, &config, CutReplay::AsLogged, |_| {}).unwrap();
+    assert_eq!(replayed(&flight).first_difference, None);
     // Without the autopilot's estimate (a log before it) the failsafe
     // flies the open-loop trim: the replay tells.
     for i in &mut flight.inputs {
         i.has_autopilot_estimate = false;
     }
-    assert!(replay(&flight).first_difference.is_some());
+    assert!(replayed(&flight).first_difference.is_some());
 
     let without = fly_with(lost);
     assert!(
