@@ -13,6 +13,7 @@ use atmo_flight::control_loop::ControlThread;
 use atmo_flight::flight_log::{FlightConfig, FlightConfigFiles, TickChannels};
 use atmo_io::mcap_log::McapLogger;
 use atmo_io::msg::DiagnosticArray;
+use atmo_io::msg::{RosMessage as _, VehicleOdometry};
 use atmo_io::ros2::{Ros2Node, Ros2StartOptions};
 use clap::{Parser, Subcommand};
 
@@ -322,6 +323,17 @@ fn check(arg: &DaemonConfigArg) -> Result<()> {
         "  drivers prefix {}, liveness {} ms",
         l.config.drivers.prefix, l.config.drivers.liveness_timeout_ms
     );
+    // What a failsafe flies once the estimate is lost for good.
+    if t.autopilot_estimate.enabled {
+        println!(
+            "  estimate lost: level descent on the autopilot's estimate {}",
+            t.autopilot_estimate.name
+        );
+    } else if t.estimate.type_name != VehicleOdometry::TYPE_NAME {
+        println!(
+            "  estimate lost: open-loop trim, no attitude held (with PX4 on board, enable ros2.topics.autopilot_estimate; docs/faults.md)"
+        );
+    }
     if t.rc.enabled {
         let (rc, s) = (&l.config.rc, &l.config.rc.switches);
         println!(

@@ -140,3 +140,54 @@ fn check_ends_quietly_when_its_reader_is_gone() {
     check.args(["check", "--params"]);
     atmo_core::closed_stdout::ends_by_sigpipe(&mut check).unwrap();
 }
+
+/// `check` says what a failsafe flies once the estimate is lost for good:
+/// with the motion capture as the estimate, the open-loop trim unless the
+/// autopilot's estimate is enabled; PX4's odometry cannot be both.
+#[test]
+fn check_says_what_flies_an_estimate_lost_for_good() {
+    let stdout = |out: &Output| String::from_utf8_lossy(&out.stdout).into_owned();
+    let shipped = check(&config_dir());
+    assert!(
+        stdout(&shipped).contains("estimate lost: open-loop trim"),
+        "{}",
+        stdout(&shipped)
+    );
+    let dir = configs_with("autopilot", "", "");
+    let daemon = std::fs::read_to_string(dir.join("daemon.toml")).unwrap();
+    let enabled = "type = \"px4_msgs/msg/VehicleOdometry\", enabled = true }";
+    let daemon = daemon.replacen(
+        "type = \"px4_msgs/msg/VehicleOdometry\", enabled = false }",
+        enabled,
+        1,
+    );
+    assert!(
+        daemon.contains(enabled),
+        "test setup: the topic's line moved"
+    );
+    std::fs::write(dir.join("daemon.toml"), &daemon).unwrap();
+    let out = check(&dir);
+    assert!(
+        stdout(&out).contains(
+            "estimate lost: level descent on the autopilot's estimate /fmu/out/vehicle_odometry"
+        ),
+        "{}",
+        stdout(&out)
+    );
+    // PX4's odometry as the estimate too: one topic for two roles, refused.
+    let both = daemon.replacen(
+        "estimate = { name = \"/atmo/mocap/odom\", type = \"nav_msgs/msg/Odometry\" }",
+        "estimate = { name = \"/fmu/out/vehicle_odometry\", type = \"px4_msgs/msg/VehicleOdometry\" }",
+        1,
+    );
+    assert_ne!(both, daemon, "test setup: the estimate's line moved");
+    std::fs::write(dir.join("daemon.toml"), both).unwrap();
+    let out = check(&dir);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(2), "{stderr}");
+    assert!(
+        stderr.contains("key `ros2.topics.autopilot_estimate.name`"),
+        "{stderr}"
+    );
+    std::fs::remove_dir_all(dir).unwrap();
+}
