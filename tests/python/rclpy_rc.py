@@ -82,7 +82,11 @@ def rc_config(tmp: Path, tag: str) -> Path:
     text = text.replace(
         f'rc = {{ name = "{RC_TOPIC}", type = "px4_msgs/msg/InputRc", enabled = false }}',
         f'rc = {{ name = "{RC_TOPIC}", type = "px4_msgs/msg/InputRc" }}')
-    assert text.count(ODOM_TOPIC) == 1 and "enabled = false }" in text and text != shipped
+    # The estimate's own line (the disabled autopilot_estimate names the
+    # same topic and stays off).
+    estimate_lines = [line for line in text.splitlines()
+                      if line.startswith(f'estimate = {{ name = "{ODOM_TOPIC}"')]
+    assert len(estimate_lines) == 1 and "enabled = false }" in text and text != shipped
     path.write_text(text)
     return path
 
