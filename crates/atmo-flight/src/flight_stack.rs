@@ -332,9 +332,7 @@ impl FlightStack {
         self.ingest(inputs);
         let now = inputs.now_ns;
         let pilot = self.last_pilot;
-        let estimate_age = self.last_estimate.map_or(f64::INFINITY, |e| {
-            now.saturating_sub(e.stamp_ns) as f64 * 1e-9
-        });
+        let estimate_age = self.last_estimate.map_or(f64::INFINITY, |e| e.age(now));
         let estimate_fresh = estimate_age <= self.settings.failsafe.estimate_timeout;
         let state = self.last_estimate.map_or(State::zeros(), |e| e.state);
         let height = self.last_ground_z - state[idx::Z];
@@ -376,9 +374,9 @@ impl FlightStack {
         if mode != self.mode {
             self.enter(mode, now, &state);
         }
-        let autopilot_fresh = self.last_autopilot_estimate.is_some_and(|e| {
-            now.saturating_sub(e.stamp_ns) as f64 * 1e-9 <= self.settings.failsafe.estimate_timeout
-        });
+        let autopilot_fresh = self
+            .last_autopilot_estimate
+            .is_some_and(|e| e.age(now) <= self.settings.failsafe.estimate_timeout);
         self.failsafe_control =
             self.failsafe_control(estimate_fresh, autopilot_fresh, conditions.mpc_failed);
 

@@ -270,9 +270,9 @@ impl InputLatch {
             || self
                 .pilot_received_ns
                 .is_none_or(|at| now_ns.saturating_sub(at) > ns(self.settings.pilot_timeout));
-        let estimate_stale = !self.estimate.is_some_and(|e| {
-            now_ns.saturating_sub(e.stamp_ns) as f64 * 1e-9 <= self.settings.estimate_timeout
-        });
+        let estimate_stale = !self
+            .estimate
+            .is_some_and(|e| e.age(now_ns) <= self.settings.estimate_timeout);
         let yaw = self.estimate.map_or(0.0, |e| e.state[idx::YAW]);
         let ground_timeout = ns(self.settings.ground_timeout);
         let fresh_ground = self

@@ -15,6 +15,13 @@ pub struct Estimate {
     pub state: State,
 }
 
+impl Estimate {
+    /// Its age at `now_ns` on the same clock, s (0 if stamped later).
+    pub fn age(&self, now_ns: u64) -> f64 {
+        now_ns.saturating_sub(self.stamp_ns) as f64 * 1e-9
+    }
+}
+
 pub use atmo_io::msg::{PilotInput, SolverStatus};
 
 /// Everything one tick sees.
