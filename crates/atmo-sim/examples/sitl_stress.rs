@@ -7,7 +7,7 @@
 //!
 //! ```text
 //! cargo build -p atmo-daemon --bin atmo-daemon
-//! cargo build -p atmo-sim --bin atmo-sim --example sitl_stress
+//! cargo build -p atmo-sim --features sitl --bin atmo-sim --example sitl_stress
 //! target/debug/examples/sitl_stress --load 0
 //! target/debug/examples/sitl_stress --load 2
 //! target/debug/examples/sitl_stress --load 2 --fifo 50   # the daemon real-time (chrt)

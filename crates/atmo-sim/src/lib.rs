@@ -10,15 +10,16 @@
 //!   [`campaign`] sweeps them over conditions in shards that merge exactly.
 //! - [`faults`]: a scenario's `[faults]`, injected on the closed loop's
 //!   input path (docs/faults.md).
-//! - [`sitl`]: `atmo-sim serve`, the plant behind the daemon's real
-//!   transports (ROS 2 motion capture, iceoryx2 drivers) in real time;
-//!   [`boards`]: its tilt and wheels through `atmo-roboclaw` processes and
-//!   simulated Roboclaw boards on pseudo-terminals.
+//! - `sitl` (feature `sitl`): `atmo-sim serve`, the plant behind the
+//!   daemon's real transports (ROS 2 motion capture, iceoryx2 drivers) in
+//!   real time; `boards`: its tilt and wheels through `atmo-roboclaw`
+//!   processes and simulated Roboclaw boards on pseudo-terminals.
 //!
 //! The discrepancy finder is atmo-explain; the `atmo-sim explain`
 //! subcommand is its CLI.
 
 pub mod actuator_faults;
+#[cfg(feature = "sitl")]
 pub mod boards;
 pub mod campaign;
 pub mod closed_loop;
@@ -30,6 +31,7 @@ pub mod monte_carlo;
 pub mod scenario;
 pub mod sim_io;
 pub mod sim_time;
+#[cfg(feature = "sitl")]
 pub mod sitl;
 
 pub use error::{Result, SimError};

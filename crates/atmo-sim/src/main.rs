@@ -7,11 +7,12 @@ use atmo_core::limits::{
     critical_angle, max_tilt_for_reserve, thrust_to_weight, trim_saturation_angle,
 };
 use atmo_core::{ConfigFile, Linkage, Model, RobotConfig};
-use atmo_daemon::cli::DaemonConfigArg;
 use clap::{Parser, Subcommand};
 
 mod campaign_cmd;
 mod fly;
+#[cfg(feature = "sitl")]
+mod serve_cmd;
 
 /// ATMO simulator: the built-in plant, scenarios and analysis tools.
 #[derive(Parser)]
@@ -116,48 +117,18 @@ enum Command {
     /// OUT/summary.json (the landing judged on the plant's truth, and the
     /// server's counters). Exit status 0 when the scenario's success
     /// criteria are met.
+    #[cfg(feature = "sitl")]
+    Serve(serve_cmd::ServeArgs),
+    /// Software in the loop: not in this build (atmo-sim's `sitl` feature).
+    ///
+    /// `atmo-sim serve` links the daemon's transports (ROS 2, iceoryx2) and
+    /// the Roboclaw boards, which `fly`, `campaign` and `explain` do not
+    /// need. Build it with: cargo build --release -p atmo-sim --features sitl
+    #[cfg(not(feature = "sitl"))]
     Serve {
-        #[command(flatten)]
-        scenario: ScenarioArg,
-        /// The daemon's config: its [ros2] topics and [drivers] ports are
-        /// the ones served.
-        #[command(flatten)]
-        config: DaemonConfigArg,
-        /// Output folder (summary.json, and the boards' logs while the
-        /// flight runs): created with its marker file (.atmo-output) if
-        /// absent, used again only if this tool made it (or it is empty); a
-        /// file, a symbolic link, a device or a folder this tool did not
-        /// write is refused before the plant starts.
-        #[arg(long, default_value = "out/sitl")]
-        out: PathBuf,
-        /// Longest wait for the daemon to arm, s.
-        #[arg(long, default_value_t = 60.0)]
-        start_timeout: f64,
-        /// Publish the motion capture on this topic instead of the daemon's
-        /// estimate topic, for another ROS 2 node to play it to the daemon
-        /// (scripts/ros2-peer.sh sitl: an rclpy relay).
-        #[arg(long)]
-        estimate_topic: Option<String>,
-        /// Publish the pilot inputs on this topic instead of the daemon's
-        /// pilot topic (the same relay then plays them too).
-        #[arg(long)]
-        pilot_topic: Option<String>,
-        /// Fly the tilt through a real `atmo-roboclaw` process and a
-        /// simulated Roboclaw board on a pseudo-terminal (this driver file,
-        /// e.g. config/drivers/tilt.toml; its serial port is replaced by the
-        /// pty) instead of playing the tilt driver. Needs --roboclaw-wheels.
-        #[arg(long, requires = "roboclaw_wheels", value_name = "FILE")]
-        roboclaw_tilt: Option<PathBuf>,
-        /// The wheel board's driver file, likewise (config/drivers/wheels.toml).
-        #[arg(long, requires = "roboclaw_tilt", value_name = "FILE")]
-        roboclaw_wheels: Option<PathBuf>,
-        /// The `atmo-roboclaw` binary (default: beside this one). The
-        /// drivers' stderr goes to OUT/roboclaw-{tilt,wheels}.log.
-        #[arg(long, value_name = "FILE")]
-        roboclaw_bin: Option<PathBuf>,
-        /// No progress bar.
-        #[arg(long)]
-        quiet: bool,
+        /// Ignored: this build has no `serve`.
+        #[arg(trailing_var_arg = true, allow_hyphen_values = true, hide = true)]
+        args: Vec<std::ffi::OsString>,
     },
 }
 
@@ -208,31 +179,12 @@ fn main() -> Result<()> {
             },
         ),
         Command::Campaign { command } => campaign_cmd::run(command),
-        Command::Serve {
-            scenario,
-            config,
-            out,
-            start_timeout,
-            estimate_topic,
-            pilot_topic,
-            roboclaw_tilt,
-            roboclaw_wheels,
-            roboclaw_bin,
-            quiet,
-        } => serve(
-            &scenario.scenario,
-            &config,
-            &out,
-            start_timeout,
-            [estimate_topic, pilot_topic],
-            roboclaw_tilt.zip(roboclaw_wheels).map(|(tilt, wheels)| {
-                (
-                    tilt,
-                    wheels,
-                    roboclaw_bin.unwrap_or_else(|| beside_this_binary("atmo-roboclaw")),
-                )
-            }),
-            quiet,
+        #[cfg(feature = "sitl")]
+        Command::Serve(args) => serve_cmd::run(args),
+        #[cfg(not(feature = "sitl"))]
+        Command::Serve { .. } => anyhow::bail!(
+            "this atmo-sim was built without its `sitl` feature, which `serve` needs: \
+             cargo build --release -p atmo-sim --features sitl"
         ),
         Command::Explain(args) => explain(&args),
     }
@@ -256,93 +208,6 @@ fn explain(args: &atmo_explain::cli::Args) -> Result<()> {
     let summary = atmo_explain::cli::run(args, &mut progress);
     bar.finish_and_clear();
     print!("{}", summary?);
-    Ok(())
-}
-
-/// `name` in the folder of the running binary (as cargo builds them).
-fn beside_this_binary(name: &str) -> PathBuf {
-    let file = format!("{name}{}", std::env::consts::EXE_SUFFIX);
-    std::env::current_exe()
-        .ok()
-        .and_then(|exe| exe.parent().map(|dir| dir.join(&file)))
-        .unwrap_or_else(|| PathBuf::from(file))
-}
-
-fn serve(
-    scenario_path: &std::path::Path,
-    config: &DaemonConfigArg,
-    out: &std::path::Path,
-    start_timeout: f64,
-    [estimate_topic, pilot_topic]: [Option<String>; 2],
-    roboclaw: Option<(PathBuf, PathBuf, PathBuf)>,
-    quiet: bool,
-) -> Result<()> {
-    use atmo_sim::sitl::{ServeOptions, serve};
-    let scenario = atmo_sim::Scenario::load(scenario_path)?;
-    let mut daemon = config.load()?;
-    let topics = &mut daemon.ros2.topics;
-    if let Some(topic) = estimate_topic {
-        topics.estimate.name = topic;
-    }
-    if let Some(topic) = pilot_topic {
-        // Played to the daemon by another node (an RC relay, too, when the
-        // daemon's own pilot topic is off): published whatever the file says.
-        topics.pilot.name = topic;
-        topics.pilot.enabled = true;
-    }
-    daemon
-        .ros2
-        .validate(std::path::Path::new("--estimate-topic/--pilot-topic"))
-        .context("serve's topics")?;
-    let mut options = ServeOptions::new(daemon.ros2, daemon.drivers);
-    options.start_timeout = std::time::Duration::from_secs_f64(start_timeout.max(0.0));
-    // The boards' logs are written while the flight runs and kept whatever
-    // its outcome, so the folder is added to, not staged whole.
-    atmo_io::output_dir::open_shared(out)?;
-    options.boards = roboclaw.map(
-        |(tilt, wheels, driver_binary)| atmo_sim::boards::BoardFiles {
-            tilt,
-            wheels,
-            driver_binary,
-            log_dir: Some(out.to_path_buf()),
-        },
-    );
-    let bar = if quiet {
-        indicatif::ProgressBar::hidden()
-    } else {
-        indicatif::ProgressBar::new((scenario.file.duration * 1000.0) as u64)
-    };
-    bar.set_style(
-        indicatif::ProgressStyle::with_template(
-            "{spinner} sim {pos:>6}/{len} ms [{bar:30}] daemon: {msg}",
-        )?
-        .progress_chars("=> "),
-    );
-    bar.set_message("waiting for the daemon to arm");
-    let mut progress = |t: f64, mode: Option<atmo_flight::Mode>| {
-        bar.set_position((t * 1000.0) as u64);
-        bar.set_message(mode.map_or("no status yet", atmo_flight::Mode::name));
-    };
-    let (summary, counters) = serve(&scenario, &options, &mut progress)?;
-    bar.finish_and_clear();
-    let ok = scenario.file.success.met_by(&summary);
-    let json = serde_json::json!({
-        "summary": summary,
-        "succeeded": ok,
-        "server": counters,
-    });
-    let path = out.join("summary.json");
-    let mut files = atmo_io::output_dir::StagedFiles::new(out);
-    files.write("summary.json", serde_json::to_string_pretty(&json)? + "\n")?;
-    files.commit()?;
-    println!("{}", serde_json::to_string_pretty(&json)?);
-    if !ok {
-        anyhow::bail!(
-            "the flight did not meet the success criteria of {} (see {})",
-            scenario_path.display(),
-            path.display()
-        );
-    }
     Ok(())
 }
 
