@@ -1,7 +1,8 @@
 //! SITL over ROS 2: a `SitlNode` (the plant server's side) and a `Ros2Node`
 //! (the daemon's side) in one process, both from the same `Ros2Config`, on
 //! loopback and their own domain id: estimates and pilot inputs from the
-//! plant arrive at the daemon unchanged, the daemon's status arrives at the
+//! plant arrive at the daemon unchanged (on the autopilot's estimate topic
+//! too when it is enabled), the daemon's status arrives at the
 //! plant unchanged, bad pilot inputs are rejected and counted, and the
 //! pilot topic's type is checked in the config.
 // Test, bench and example code: an unwrap that fails is the failure report.
@@ -254,6 +255,40 @@ fn sitl_publishes_px4_odometry_when_the_estimate_is_px4() {
     let j = e.stamp_ns / 1_000_000;
     let err = (e.state - plant_state(j)).abs().max();
     assert!(err < 1e-5, "float32 odometry off by {err}");
+    sitl.stop();
+}
+
+/// With the autopilot's estimate topic enabled (PX4 `VehicleOdometry`,
+/// the shipped name), each plant state goes out on both estimate topics:
+/// the daemon's node has it as the estimate (`nav_msgs/Odometry`) and as
+/// the autopilot's.
+#[test]
+fn sitl_publishes_the_autopilots_estimate_too_when_it_is_enabled() {
+    let mut config = Ros2Config::default();
+    config.topics.autopilot_estimate.enabled = true;
+    assert_eq!(
+        config.topics.autopilot_estimate.type_name,
+        VehicleOdometry::TYPE_NAME
+    );
+    let mut sitl = Sitl::start(&config, domain(3));
+    let (plant_out, daemon_in) = (&sitl.plant_out, &mut sitl.daemon_in);
+    let mut k = 1u64;
+    let (mut estimate, mut autopilot) = (None, None);
+    wait_for("both estimates", Duration::from_secs(15), || {
+        plant_out.try_publish_estimate(&plant_state(k), k * 1_000_000);
+        k += 1;
+        estimate = daemon_in.latest_estimate().or(estimate);
+        autopilot = daemon_in.latest_autopilot_estimate().or(autopilot);
+        estimate.is_some() && autopilot.is_some()
+    });
+    for (what, e, tolerance) in [
+        ("estimate", estimate.unwrap(), 1e-12),
+        ("autopilot's estimate (float32)", autopilot.unwrap(), 1e-5),
+    ] {
+        let j = e.stamp_ns / 1_000_000;
+        let err = (e.state - plant_state(j)).abs().max();
+        assert!(err < tolerance, "{what} off by {err}");
+    }
     sitl.stop();
 }
 

@@ -7,10 +7,13 @@
 //! | topic | SITL side | daemon side |
 //! | --- | --- | --- |
 //! | `topics.estimate` | publishes the plant's state | [`Ros2Inputs::latest_estimate`](super::Ros2Inputs::latest_estimate) |
+//! | `topics.autopilot_estimate` (when enabled) | publishes the same state, as the autopilot's own estimate | [`Ros2Inputs::latest_autopilot_estimate`](super::Ros2Inputs::latest_autopilot_estimate) |
 //! | `topics.pilot` | publishes pilot inputs | [`Ros2Inputs::latest_pilot`](super::Ros2Inputs::latest_pilot) |
 //! | `topics.status` | [`SitlInputs::latest_status`] | publishes one status per tick |
 //!
-//! The estimate goes out as the type the config names: `nav_msgs/Odometry`
+//! Each estimate goes out on both estimate topics (the autopilot's is the
+//! flight stack's fallback when the first is lost: a test cuts the first
+//! and the daemon lands on the second), each as the type the config names: `nav_msgs/Odometry`
 //! (converted to ENU/FLU by [`state_to_odometry`]; the daemon converts it
 //! back to NED/FRD) or `px4_msgs/VehicleOdometry` (NED/FRD, float32, by
 //! [`state_to_vehicle_odometry`]; the stamp is sent in whole microseconds,
@@ -33,13 +36,13 @@ use std::sync::mpsc::{Receiver, SyncSender, sync_channel};
 
 use atmo_core::ConfigFile;
 use atmo_core::model::State;
-use ros2_client::{Publisher, Subscription};
+use ros2_client::{Node, Publisher, QosProfile, Subscription};
 
 use super::dds::{
     DdsNode, count_publish, dds_node, domain_id, publish_queued, publisher, spawn_node_thread,
     stream_qos, subscription, take_burst, try_queue,
 };
-use super::{Ros2Config, Ros2StartOptions, Ros2Thread};
+use super::{Ros2Config, Ros2StartOptions, Ros2Thread, TopicConfig};
 use crate::error::Result;
 use crate::msg::frames::{state_to_odometry, state_to_vehicle_odometry};
 use crate::msg::{MpcStatus, Odometry, PilotInput, RosMessage, VehicleOdometry};
@@ -202,8 +205,30 @@ enum EstimatePub {
     Px4(Publisher<VehicleOdometry>),
 }
 
+impl EstimatePub {
+    /// The publisher of `topic` (None when disabled), of the type it names.
+    fn new(node: &mut Node, topic: &TopicConfig, qos: &QosProfile) -> Result<Option<Self>> {
+        Ok(if topic.type_name == VehicleOdometry::TYPE_NAME {
+            publisher::<VehicleOdometry>(node, topic, qos)?.map(Self::Px4)
+        } else {
+            publisher::<Odometry>(node, topic, qos)?.map(Self::Odometry)
+        })
+    }
+
+    /// Publishes `state` (see the module docs for the conversions).
+    fn publish(&self, state: &State, stamp_ns: u64) -> bool {
+        match self {
+            Self::Odometry(p) => p.publish(state_to_odometry(state, stamp_ns)).is_ok(),
+            Self::Px4(p) => p
+                .publish(state_to_vehicle_odometry(state, stamp_ns / 1000))
+                .is_ok(),
+        }
+    }
+}
+
 struct SitlThread {
     estimate: Option<EstimatePub>,
+    autopilot_estimate: Option<EstimatePub>,
     pilot: Option<Publisher<PilotInput>>,
     status: Option<Subscription<MpcStatus>>,
     out_rx: Receiver<Outgoing>,
@@ -228,15 +253,13 @@ impl SitlThread {
         let t = &config.topics;
         // Sensor-style streams, as a motion-capture system and a radio send.
         let qos = stream_qos();
-        let estimate = if t.estimate.type_name == VehicleOdometry::TYPE_NAME {
-            publisher::<VehicleOdometry>(node, &t.estimate, &qos)?.map(EstimatePub::Px4)
-        } else {
-            publisher::<Odometry>(node, &t.estimate, &qos)?.map(EstimatePub::Odometry)
-        };
+        let estimate = EstimatePub::new(node, &t.estimate, &qos)?;
+        let autopilot_estimate = EstimatePub::new(node, &t.autopilot_estimate, &qos)?;
         let pilot = publisher::<PilotInput>(node, &t.pilot, &qos)?;
         let status = subscription::<MpcStatus>(node, &t.status)?;
         Ok(Self {
             estimate,
+            autopilot_estimate,
             pilot,
             status,
             out_rx,
@@ -254,33 +277,31 @@ impl SitlThread {
         }
         let Self {
             estimate,
+            autopilot_estimate,
             pilot,
             status,
             _dds: dds,
             ..
         } = self;
-        dds.shut_down((estimate, pilot, status))
+        dds.shut_down((estimate, autopilot_estimate, pilot, status))
     }
 
     fn publish(&self, message: Outgoing) {
-        let result = match message {
-            Outgoing::Estimate { state, stamp_ns } => match &self.estimate {
-                None => None,
-                Some(EstimatePub::Odometry(p)) => {
-                    Some(p.publish(state_to_odometry(&state, stamp_ns)).is_ok())
-                }
-                Some(EstimatePub::Px4(p)) => Some(
-                    p.publish(state_to_vehicle_odometry(&state, stamp_ns / 1000))
-                        .is_ok(),
-                ),
-            },
-            Outgoing::Pilot(m) => self.pilot.as_ref().map(|p| p.publish(m).is_ok()),
+        let count = |result| {
+            count_publish(
+                result,
+                &self.counters.published,
+                &self.counters.publish_errors,
+            );
         };
-        count_publish(
-            result,
-            &self.counters.published,
-            &self.counters.publish_errors,
-        );
+        match message {
+            Outgoing::Estimate { state, stamp_ns } => {
+                for topic in [&self.estimate, &self.autopilot_estimate] {
+                    count(topic.as_ref().map(|p| p.publish(&state, stamp_ns)));
+                }
+            }
+            Outgoing::Pilot(m) => count(self.pilot.as_ref().map(|p| p.publish(m).is_ok())),
+        }
     }
 
     fn take_status(&self) {
