@@ -96,6 +96,20 @@ def daemon_config(tmp: Path, tag: str) -> Path:
     return path
 
 
+def sitl_arguments(doc: str, name: str):
+    """The SITL tests' command line (--daemon, --sim, --scenario), the two
+    binaries checked to exist."""
+    ap = argparse.ArgumentParser(description=doc.splitlines()[0])
+    ap.add_argument("--daemon", required=True)
+    ap.add_argument("--sim", required=True)
+    ap.add_argument("--scenario", default=str(REPO / "config/scenarios/wheel_landing.toml"))
+    args = ap.parse_args()
+    for binary in (args.daemon, args.sim):
+        if not Path(binary).exists():
+            sys.exit(f"{name}: {binary} does not exist: build it (cargo build)")
+    return args
+
+
 def odom_now(Odometry, yaw_enu):
     """The test's odometry: ENU position (1, 2, 3), yaw `yaw_enu`, stamped now."""
     odom = Odometry()

@@ -27,7 +27,6 @@ test's px4_msgs):
 Prints PASS/FAIL lines and `N passed, M failed`; exit 1 on any failure.
 """
 
-import argparse
 import os
 import random
 import signal
@@ -38,7 +37,7 @@ import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from rclpy_peer import REPO, Checks, daemon_config  # noqa: E402
+from rclpy_peer import Checks, daemon_config, sitl_arguments  # noqa: E402
 
 ODOM_SIDE = "/atmo/sim/odom"
 PILOT_SIDE = "/atmo/sim/pilot"
@@ -92,14 +91,7 @@ def rc_config(tmp: Path, tag: str) -> Path:
 
 
 def main():
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--daemon", required=True)
-    ap.add_argument("--sim", required=True)
-    ap.add_argument("--scenario", default=str(REPO / "config/scenarios/wheel_landing.toml"))
-    args = ap.parse_args()
-    for binary in (args.daemon, args.sim):
-        if not Path(binary).exists():
-            sys.exit(f"rclpy_rc: {binary} does not exist: build it (cargo build)")
+    args = sitl_arguments(__doc__, "rclpy_rc")
 
     import rclpy
     from rclpy.executors import SingleThreadedExecutor

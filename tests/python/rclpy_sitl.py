@@ -26,7 +26,6 @@ Run by scripts/ros2-peer.sh (which builds the venv):
 Prints PASS/FAIL lines and `N passed, M failed`; exit 1 on any failure.
 """
 
-import argparse
 import json
 import os
 import random
@@ -38,7 +37,7 @@ import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from rclpy_peer import REPO, Checks, daemon_config  # noqa: E402
+from rclpy_peer import Checks, daemon_config, sitl_arguments  # noqa: E402
 
 SIDE_TOPIC = "/atmo/sim/odom"
 ESTIMATE_TOPIC = "/atmo/mocap/odom"
@@ -189,14 +188,7 @@ def fly(args, c, lose_estimate):
 
 
 def main():
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--daemon", required=True)
-    ap.add_argument("--sim", required=True)
-    ap.add_argument("--scenario", default=str(REPO / "config/scenarios/wheel_landing.toml"))
-    args = ap.parse_args()
-    for binary in (args.daemon, args.sim):
-        if not Path(binary).exists():
-            sys.exit(f"rclpy_sitl: {binary} does not exist: build it (cargo build)")
+    args = sitl_arguments(__doc__, "rclpy_sitl")
     c = Checks()
     runs = [fly(args, c, lose_estimate) for lose_estimate in (False, True)]
     print(f"{c.passed} passed, {c.failed} failed", flush=True)
