@@ -115,10 +115,9 @@ enum Command {
     /// iceoryx2 prefix are read from the daemon's config file so both sides
     /// agree; ROS_DOMAIN_ID must match too. The plant waits, frozen at its
     /// initial state, until the daemon arms; then it runs the scenario's
-    /// duration and writes
-    /// OUT/summary.json (the landing judged on the plant's truth, and the
-    /// server's counters). Exit status 0 when the scenario's success
-    /// criteria are met.
+    /// duration and writes OUT/summary.json (the landing judged on the
+    /// plant's truth, and the server's counters). Exit status 0 when the
+    /// scenario's success criteria are met.
     #[cfg(feature = "sitl")]
     Serve(serve_cmd::ServeArgs),
     /// Software in the loop: not in this build (atmo-sim's `sitl` feature).

@@ -54,63 +54,18 @@ pub struct ServeArgs {
     quiet: bool,
 }
 
-/// Serves one flight: the roboclaw options resolved, then [`serve`].
+/// Serves one flight to the daemon and writes OUT/summary.json.
 pub fn run(args: ServeArgs) -> Result<()> {
-    let ServeArgs {
-        scenario,
-        config,
-        out,
-        start_timeout,
-        estimate_topic,
-        pilot_topic,
-        roboclaw_tilt,
-        roboclaw_wheels,
-        roboclaw_bin,
-        quiet,
-    } = args;
-    serve(
-        &scenario.scenario,
-        &config,
-        &out,
-        start_timeout,
-        [estimate_topic, pilot_topic],
-        roboclaw_tilt.zip(roboclaw_wheels).map(|(tilt, wheels)| {
-            (
-                tilt,
-                wheels,
-                roboclaw_bin.unwrap_or_else(|| beside_this_binary("atmo-roboclaw")),
-            )
-        }),
-        quiet,
-    )
-}
-
-/// `name` in the folder of the running binary (as cargo builds them).
-fn beside_this_binary(name: &str) -> PathBuf {
-    let file = format!("{name}{}", std::env::consts::EXE_SUFFIX);
-    std::env::current_exe()
-        .ok()
-        .and_then(|exe| exe.parent().map(|dir| dir.join(&file)))
-        .unwrap_or_else(|| PathBuf::from(file))
-}
-
-fn serve(
-    scenario_path: &Path,
-    config: &DaemonConfigArg,
-    out: &Path,
-    start_timeout: f64,
-    [estimate_topic, pilot_topic]: [Option<String>; 2],
-    roboclaw: Option<(PathBuf, PathBuf, PathBuf)>,
-    quiet: bool,
-) -> Result<()> {
     use atmo_sim::sitl::{ServeOptions, serve};
+    let scenario_path = &args.scenario.scenario;
+    let out = args.out.as_path();
     let scenario = atmo_sim::Scenario::load(scenario_path)?;
-    let mut daemon = config.load()?;
+    let mut daemon = args.config.load()?;
     let topics = &mut daemon.ros2.topics;
-    if let Some(topic) = estimate_topic {
+    if let Some(topic) = args.estimate_topic {
         topics.estimate.name = topic;
     }
-    if let Some(topic) = pilot_topic {
+    if let Some(topic) = args.pilot_topic {
         // Played to the daemon by another node (an RC relay, too, when the
         // daemon's own pilot topic is off): published whatever the file says.
         topics.pilot.name = topic;
@@ -121,19 +76,22 @@ fn serve(
         .validate(Path::new("--estimate-topic/--pilot-topic"))
         .context("serve's topics")?;
     let mut options = ServeOptions::new(daemon.ros2, daemon.drivers);
-    options.start_timeout = std::time::Duration::from_secs_f64(start_timeout.max(0.0));
+    options.start_timeout = std::time::Duration::from_secs_f64(args.start_timeout.max(0.0));
     // The boards' logs are written while the flight runs and kept whatever
     // its outcome, so the folder is added to, not staged whole.
     atmo_io::output_dir::open_shared(out)?;
-    options.boards = roboclaw.map(
-        |(tilt, wheels, driver_binary)| atmo_sim::boards::BoardFiles {
+    options.boards = args
+        .roboclaw_tilt
+        .zip(args.roboclaw_wheels)
+        .map(|(tilt, wheels)| atmo_sim::boards::BoardFiles {
             tilt,
             wheels,
-            driver_binary,
+            driver_binary: args
+                .roboclaw_bin
+                .unwrap_or_else(|| beside_this_binary("atmo-roboclaw")),
             log_dir: Some(out.to_path_buf()),
-        },
-    );
-    let bar = if quiet {
+        });
+    let bar = if args.quiet {
         indicatif::ProgressBar::hidden()
     } else {
         indicatif::ProgressBar::new((scenario.file.duration * 1000.0) as u64)
@@ -170,4 +128,13 @@ fn serve(
         );
     }
     Ok(())
+}
+
+/// `name` in the folder of the running binary (as cargo builds them).
+fn beside_this_binary(name: &str) -> PathBuf {
+    let file = format!("{name}{}", std::env::consts::EXE_SUFFIX);
+    std::env::current_exe()
+        .ok()
+        .and_then(|exe| exe.parent().map(|dir| dir.join(&file)))
+        .unwrap_or_else(|| PathBuf::from(file))
 }

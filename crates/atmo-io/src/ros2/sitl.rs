@@ -13,12 +13,14 @@
 //!
 //! Each estimate goes out on both estimate topics (the autopilot's is the
 //! flight stack's fallback when the first is lost: a test cuts the first
-//! and the daemon lands on the second), each as the type the config names: `nav_msgs/Odometry`
-//! (converted to ENU/FLU by [`state_to_odometry`]; the daemon converts it
-//! back to NED/FRD) or `px4_msgs/VehicleOdometry` (NED/FRD, float32, by
+//! and the daemon lands on the second), each as the type the config
+//! names: `nav_msgs/Odometry` (converted to ENU/FLU by
+//! [`state_to_odometry`]; the daemon converts it back to NED/FRD) or
+//! `px4_msgs/VehicleOdometry` (NED/FRD, float32, by
 //! [`state_to_vehicle_odometry`]; the stamp is sent in whole microseconds,
-//! so the daemon sees `stamp_ns` rounded down to a microsecond). The daemon
-//! drops estimates whose stamp does not increase: send increasing stamps.
+//! so the daemon sees `stamp_ns` rounded down to a microsecond). The
+//! daemon drops estimates whose stamp does not increase: send increasing
+//! stamps.
 //!
 //! As on the daemon side, a dedicated thread owns the DDS entities; the
 //! plant's loop only touches bounded queues and never waits (a full queue
