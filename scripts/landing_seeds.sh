@@ -31,12 +31,9 @@ for s in "${seeds[@]}"; do
 done
 python3 - "${files[@]}" <<'PY'
 import json, math, sys
+sys.path.insert(0, "scripts")
+from wilson import wilson
 # The pooled row's interval (each seed set's comes from its monte_carlo.json).
-def wilson(k, n, z=1.959963984540054):
-    p = k / n; d = 1 + z * z / n
-    c = (p + z * z / (2 * n)) / d
-    h = z / d * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n))
-    return max(0.0, c - h), min(1.0, c + h)
 rows = []
 print("| base seed | runs | target (>= 64 deg, <= 0.4 m/s) | Wilson 95 % | low | fast | success | crashes | prediction bias (m/s, deg) | spread (m/s, deg) |")
 print("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |")

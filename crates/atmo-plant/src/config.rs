@@ -266,7 +266,9 @@ atmo_core::params! {
     /// `[effects.sensors]`: what the controller sees.
     ///
     /// A motion-capture estimate of the full state at `rate_hz`, each sample the
-    /// true state `latency` s old plus white Gaussian noise; and a ground-contact
+    /// true state `latency` s old plus white Gaussian noise; the autopilot's
+    /// own estimate, the same sample with a correlated vertical-velocity
+    /// error; and a ground-contact
     /// signal, true while the wheels carry more than `contact_threshold` N.
     /// Off: the estimate is the true state at every plant step.
     #[derive(Debug, Clone, PartialEq)]
@@ -289,6 +291,15 @@ atmo_core::params! {
         /// Total wheel normal force above which the robot reports ground
         /// contact.
         pub contact_threshold: f64 = 5.0, range 0.0..=1000.0, unit "N";
+        /// The autopilot's own estimate (PX4's EKF on its IMU and
+        /// barometer, the flight stack's fallback when the motion capture
+        /// is lost) is each motion-capture sample with an error on its
+        /// vertical velocity: a first-order Gauss-Markov process of this
+        /// standard deviation (the barometer's drift, the rotors' wash on
+        /// its pressure). 0: the motion capture's sample as it is.
+        pub autopilot_vz_error_std: f64 = 0.0, range 0.0..=2.0, unit "m/s";
+        /// The correlation time of that error.
+        pub autopilot_vz_error_time: f64 = 1.0, range 0.01..=1000.0, unit "s";
     }
 }
 

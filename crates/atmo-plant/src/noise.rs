@@ -12,6 +12,7 @@ pub mod stream {
     pub const GROUND_EFFECT: u64 = 1;
     pub const WIND: u64 = 2;
     pub const SENSORS: u64 = 3;
+    pub const AUTOPILOT_ESTIMATE: u64 = 4;
 }
 
 /// The random stream `id` of `seed`.

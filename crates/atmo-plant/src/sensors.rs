@@ -1,17 +1,21 @@
 //! What the controller sees: a motion-capture state estimate (rate, latency,
-//! noise) and a ground-contact signal.
+//! noise), the autopilot's own estimate, and a ground-contact signal.
 //!
 //! The plant keeps the true state of the last `latency / dt` steps in a ring
 //! buffer allocated once. At each sample instant `k / rate` it publishes the
 //! true state from `latency` earlier plus white Gaussian noise (position,
 //! Euler angles, velocity, body rates, each with its own standard
-//! deviation). With sensors off the estimate is the true state at every step.
+//! deviation). The autopilot's estimate is that sample with a Gauss-Markov
+//! error on its vertical velocity, advanced once per sample and drawn from
+//! its own random stream (the motion capture's noise is the same with it
+//! or without it). With sensors off both estimates are the true state at
+//! every step.
 
-use atmo_core::model::{NX, State};
+use atmo_core::model::{NX, State, idx};
 use rand_chacha::ChaCha8Rng;
 
 use crate::config::SensorsConfig;
-use crate::noise::{normal, rng, stream};
+use crate::noise::{GaussMarkov, normal, rng, stream};
 
 /// One state estimate.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -36,7 +40,11 @@ pub(crate) struct Mocap {
     filled: usize,
     next_sample: u64,
     rng: ChaCha8Rng,
+    /// The autopilot's vertical-velocity error (unit variance), if any.
+    autopilot_error: Option<(GaussMarkov, ChaCha8Rng)>,
     pub latest: Option<Estimate>,
+    /// The autopilot's estimate of the same instant.
+    pub autopilot: Option<Estimate>,
 }
 
 impl Mocap {
@@ -45,6 +53,15 @@ impl Mocap {
         let delay_steps = config
             .as_ref()
             .map_or(0, |c| (c.latency / dt).round() as usize);
+        let autopilot_error = config
+            .as_ref()
+            .filter(|c| c.autopilot_vz_error_std > 0.0)
+            .map(|c| {
+                let mut rng = rng(seed, stream::AUTOPILOT_ESTIMATE);
+                let process =
+                    GaussMarkov::new(c.autopilot_vz_error_time, 1.0 / c.rate_hz, &mut rng);
+                (process, rng)
+            });
         Self {
             config,
             dt,
@@ -54,7 +71,9 @@ impl Mocap {
             filled: 0,
             next_sample: 0,
             rng: rng(seed, stream::SENSORS),
+            autopilot_error,
             latest: None,
+            autopilot: None,
         }
     }
 
@@ -70,6 +89,7 @@ impl Mocap {
                 state: *x,
                 sequence: step,
             });
+            self.autopilot = self.latest;
             return;
         };
         self.head = (self.head + 1) % self.ring.len();
@@ -92,12 +112,18 @@ impl Mocap {
         for i in 0..NX {
             state[i] += std[i / 3] * normal(&mut self.rng);
         }
-        self.latest = Some(Estimate {
+        let sample = Estimate {
             time,
             measured_at: time - delay as f64 * self.dt,
             state,
             sequence: self.next_sample,
-        });
+        };
+        let mut autopilot = sample;
+        if let Some((process, rng)) = &mut self.autopilot_error {
+            autopilot.state[idx::VZ] += cfg.autopilot_vz_error_std * process.advance(rng);
+        }
+        self.latest = Some(sample);
+        self.autopilot = Some(autopilot);
         self.next_sample += 1;
     }
 

@@ -97,6 +97,55 @@ fn motion_capture_has_its_rate_latency_and_noise() {
     assert!((std - 0.0005).abs() < 0.05 * 0.0005, "position noise {std}");
 }
 
+/// The autopilot's estimate is the motion capture's sample of the same
+/// instant with a Gauss-Markov error on its vertical velocity: of the
+/// configured spread, correlated over the configured time, and drawn from
+/// its own stream (the motion capture's samples do not change with it).
+#[test]
+fn the_autopilots_estimate_has_its_vertical_velocity_error() {
+    let sensors = |std: f64| EffectsConfig {
+        sensors: Some(SensorsConfig {
+            autopilot_vz_error_std: std,
+            autopilot_vz_error_time: 0.5,
+            ..SensorsConfig::default()
+        }),
+        ..EffectsConfig::none()
+    };
+    let hover = truth_model().at_tilt(0.0).hover_trim();
+    let mut with = plant(sensors(0.2), level_at(5.0), 0.0);
+    let mut without = plant(sensors(0.0), level_at(5.0), 0.0);
+    let mut errors = Vec::new();
+    let mut last_seq = u64::MAX;
+    for _ in 0..60_000 {
+        with.step(&Command::rotors(hover)).unwrap();
+        without.step(&Command::rotors(hover)).unwrap();
+        let (e, a) = (with.estimate().unwrap(), with.autopilot_estimate().unwrap());
+        assert_eq!(e, without.estimate().unwrap());
+        assert_eq!(without.autopilot_estimate().unwrap(), e);
+        if e.sequence != last_seq {
+            last_seq = e.sequence;
+            assert_eq!(
+                (a.sequence, a.time, a.measured_at),
+                (e.sequence, e.time, e.measured_at)
+            );
+            for i in (0..12).filter(|i| *i != idx::VZ) {
+                assert_eq!(a.state[i], e.state[i], "component {i}");
+            }
+            errors.push(a.state[idx::VZ] - e.state[idx::VZ]);
+        }
+    }
+    // 7200 samples over 60 s, 120 correlation times: the spread within
+    // +-20 %, and one sample apart (1/120 s) the correlation exp(-1/60).
+    let n = errors.len() as f64;
+    let var = errors.iter().map(|x| x * x).sum::<f64>() / n;
+    assert!((var.sqrt() - 0.2).abs() < 0.04, "spread {}", var.sqrt());
+    let lag1 = errors.windows(2).map(|w| w[0] * w[1]).sum::<f64>() / (n - 1.0) / var;
+    assert!(
+        (lag1 - (-1.0_f64 / 60.0).exp()).abs() < 0.01,
+        "correlation {lag1}"
+    );
+}
+
 /// A steady 4 m/s wind along x and the default body drag alone (no rotor
 /// drag): on a robot at rest, the body drag force is
 /// `1/2 rho CdA_x 16` along +x.

@@ -111,8 +111,10 @@ enum Command {
     /// ground contact and heartbeats) and the motion-capture system and
     /// pilot on ROS 2 (nav_msgs/Odometry, atmo_msgs/PilotInput from the
     /// scenario), and PX4's estimate when the config enables
-    /// `autopilot_estimate` (the same state). Topics, services and the
-    /// iceoryx2 prefix are read from the daemon's config file so both sides
+    /// `autopilot_estimate` (the plant's autopilot estimate: the motion
+    /// capture's sample with its vertical-velocity error). Topics,
+    /// services and the iceoryx2 prefix are read from the daemon's config
+    /// file so both sides
     /// agree; ROS_DOMAIN_ID must match too. The plant waits, frozen at its
     /// initial state, until the daemon arms; then it runs the scenario's
     /// duration and writes OUT/summary.json (the landing judged on the

@@ -218,10 +218,11 @@ atmo_core::params! {
         pub success: SuccessConfig = SuccessConfig::default();
         /// Faults injected on the closed loop's input path ([`crate::faults`]).
         pub faults: FaultsConfig = FaultsConfig::default();
-        /// The autopilot's own estimate (PX4's, from its IMU and barometer)
-        /// reaches the flight stack beside the motion capture's, as the
-        /// daemon's `ros2.topics.autopilot_estimate` when enabled; the
-        /// estimate faults act on the motion capture's only.
+        /// The autopilot's own estimate (PX4's, from its IMU and barometer;
+        /// the plant's `[effects.sensors] autopilot_vz_error_std`) reaches
+        /// the flight stack beside the motion capture's, as the daemon's
+        /// `ros2.topics.autopilot_estimate` when enabled; the estimate
+        /// faults act on the motion capture's only.
         pub autopilot_estimate: bool = false;
     }
 }

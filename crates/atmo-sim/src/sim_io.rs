@@ -10,7 +10,7 @@
 //! | input          | onboard (`OnboardIo`)              | simulation ([`SimIo`])                         |
 //! |----------------|------------------------------------|------------------------------------------------|
 //! | estimate       | ROS 2 odometry, age from acceptance | the plant's motion capture, age from publication |
-//! | autopilot's estimate | ROS 2 PX4 `VehicleOdometry`, enabled beside a motion-capture estimate | with the scenario's `autopilot_estimate`: the plant's estimate, before the estimate faults |
+//! | autopilot's estimate | ROS 2 PX4 `VehicleOdometry`, enabled beside a motion-capture estimate | with the scenario's `autopilot_estimate`: the plant's autopilot estimate (the motion capture's sample with its vertical-velocity error), not through the estimate faults |
 //! | pilot          | ROS 2 `PilotInput`                 | the scenario's script at [`PILOT_RATE_HZ`]      |
 //! | encoder        | iceoryx2 driver port               | the plant's encoder                            |
 //! | contact        | iceoryx2 driver port               | the plant's contact signal                     |
@@ -185,9 +185,10 @@ impl SimIo {
         self
     }
 
-    /// Delivers the autopilot's own estimate too: the plant's estimate,
-    /// as the motion capture's before the estimate faults (its IMU and
-    /// barometer do not go through the motion capture's link).
+    /// Delivers the autopilot's own estimate too: the plant's
+    /// ([`atmo_plant::Plant::autopilot_estimate`]), not through the
+    /// estimate faults (its IMU and barometer do not go through the motion
+    /// capture's link).
     #[must_use]
     pub fn with_autopilot_estimate(mut self, enabled: bool) -> Self {
         self.autopilot_enabled = enabled;
@@ -213,9 +214,11 @@ impl SimIo {
             self.estimate_sequence = Some(e.sequence);
             self.faults
                 .publish(self.now_ns, time_ns(e.measured_at), e.state);
-            if self.autopilot_enabled {
+            if self.autopilot_enabled
+                && let Some(a) = plant.autopilot_estimate()
+            {
                 self.autopilot_estimate = Some(Arrived {
-                    value: e.state,
+                    value: a.state,
                     at_ns: self.now_ns,
                 });
             }

@@ -161,9 +161,10 @@ impl Links {
             && self.last_estimate != Some(e.sequence)
         {
             self.last_estimate = Some(e.sequence);
-            let ok = self
-                .ros_out
-                .try_publish_estimate(&e.state, stamp_ns(e.measured_at));
+            let autopilot = plant.autopilot_estimate().map_or(e.state, |a| a.state);
+            let ok =
+                self.ros_out
+                    .try_publish_estimates(&e.state, &autopilot, stamp_ns(e.measured_at));
             self.count(ok);
             self.counters.estimates_published += u64::from(ok);
         }

@@ -7,7 +7,7 @@
 //! | topic | SITL side | daemon side |
 //! | --- | --- | --- |
 //! | `topics.estimate` | publishes the plant's state | [`Ros2Inputs::latest_estimate`](super::Ros2Inputs::latest_estimate) |
-//! | `topics.autopilot_estimate` (when enabled) | publishes the same state, as the autopilot's own estimate | [`Ros2Inputs::latest_autopilot_estimate`](super::Ros2Inputs::latest_autopilot_estimate) |
+//! | `topics.autopilot_estimate` (when enabled) | publishes the autopilot's own estimate of the same instant (the same state unless given apart) | [`Ros2Inputs::latest_autopilot_estimate`](super::Ros2Inputs::latest_autopilot_estimate) |
 //! | `topics.pilot` | publishes pilot inputs | [`Ros2Inputs::latest_pilot`](super::Ros2Inputs::latest_pilot) |
 //! | `topics.status` | [`SitlInputs::latest_status`] | publishes one status per tick |
 //!
@@ -92,7 +92,11 @@ impl Counters {
 
 #[derive(Clone, Copy)]
 enum Outgoing {
-    Estimate { state: State, stamp_ns: u64 },
+    Estimate {
+        state: State,
+        autopilot: State,
+        stamp_ns: u64,
+    },
     Pilot(PilotInput),
 }
 
@@ -108,12 +112,21 @@ impl SitlPublisher {
         try_queue(&self.tx, message, &self.counters.publish_dropped)
     }
 
-    /// Queues the plant's state (NED/FRD 12-state) for `topics.estimate`,
-    /// stamped `stamp_ns`; false if dropped (counted). The node thread
-    /// converts it to the topic's type (see the module docs).
+    /// Queues the plant's state (NED/FRD 12-state) for `topics.estimate`
+    /// and, when enabled, `topics.autopilot_estimate`, stamped `stamp_ns`;
+    /// false if dropped (counted). The node thread converts it to each
+    /// topic's type (see the module docs).
     pub fn try_publish_estimate(&self, state: &State, stamp_ns: u64) -> bool {
+        self.try_publish_estimates(state, state, stamp_ns)
+    }
+
+    /// As [`Self::try_publish_estimate`], with the autopilot's own estimate
+    /// of the same instant (its errors differ from the motion capture's)
+    /// for `topics.autopilot_estimate`.
+    pub fn try_publish_estimates(&self, state: &State, autopilot: &State, stamp_ns: u64) -> bool {
         self.send(Outgoing::Estimate {
             state: *state,
+            autopilot: *autopilot,
             stamp_ns,
         })
     }
@@ -297,9 +310,16 @@ impl SitlThread {
             );
         };
         match message {
-            Outgoing::Estimate { state, stamp_ns } => {
-                for topic in [&self.estimate, &self.autopilot_estimate] {
-                    count(topic.as_ref().map(|p| p.publish(&state, stamp_ns)));
+            Outgoing::Estimate {
+                state,
+                autopilot,
+                stamp_ns,
+            } => {
+                for (topic, state) in [
+                    (&self.estimate, &state),
+                    (&self.autopilot_estimate, &autopilot),
+                ] {
+                    count(topic.as_ref().map(|p| p.publish(state, stamp_ns)));
                 }
             }
             Outgoing::Pilot(m) => count(self.pilot.as_ref().map(|p| p.publish(m).is_ok())),

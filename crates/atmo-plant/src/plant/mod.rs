@@ -596,6 +596,13 @@ impl Plant {
         self.mocap.latest.as_ref()
     }
 
+    /// The autopilot's own estimate of the same instant (same time and
+    /// sequence as [`Plant::estimate`]; `[effects.sensors]
+    /// autopilot_vz_error_std`).
+    pub fn autopilot_estimate(&self) -> Option<&Estimate> {
+        self.mocap.autopilot.as_ref()
+    }
+
     /// Contact state after the last step (wheels in rotor order, then corners).
     pub fn contacts(&self) -> &[ContactInfo; N_CONTACTS] {
         &self.contacts

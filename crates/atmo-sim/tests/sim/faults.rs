@@ -663,8 +663,9 @@ fn the_tilt_planning_solves_are_in_the_window_and_their_cuts_replay() {
 }
 
 /// The motion capture lost for good at 1.5 s (in the morph, 1.1 m up),
-/// the autopilot's own estimate still arriving (`autopilot_estimate`):
-/// the failsafe flies the backup controller on that estimate's attitude,
+/// the autopilot's own estimate still arriving (`autopilot_estimate`,
+/// with config/plant.toml's vertical-velocity error on it): the
+/// failsafe flies the backup controller on that estimate's attitude,
 /// body rates and vertical speed, the arms to the landing tilt, and comes
 /// down level and slowly on its wheels; the log carries that estimate and
 /// replays bit for bit. Without it the open-loop trim tips over and
