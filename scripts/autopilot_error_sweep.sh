@@ -56,14 +56,12 @@ print("| estimate lost at | vz error std (m/s) | runs | no crash, > 30 deg, < 0.
 print("| --- | --- | --- | --- | --- | --- | --- |")
 for t, std, path in zip(args[0::3], args[1::3], args[2::3]):
     runs = json.load(open(path))["per_run"]
-    def get(r, k):
-        return r.get(k, r.get("outcome", {}).get(k))
-    ok = sum(1 for r in runs if not get(r, "crashed")
-             and get(r, "impact_speed_mps") is not None
-             and get(r, "impact_speed_mps") < 0.35
-             and get(r, "touchdown_tilt_deg") > 30)
-    crashes = sum(1 for r in runs if get(r, "crashed"))
-    impacts = [get(r, "impact_speed_mps") for r in runs if get(r, "impact_speed_mps") is not None]
+    ok = sum(1 for r in runs if not r["crashed"]
+             and r["impact_speed_mps"] is not None
+             and r["impact_speed_mps"] < 0.35
+             and r["touchdown_tilt_deg"] > 30)
+    crashes = sum(1 for r in runs if r["crashed"])
+    impacts = [r["impact_speed_mps"] for r in runs if r["impact_speed_mps"] is not None]
     lo, hi = wilson(ok, len(runs))
     spread = f"{min(impacts):.2f}-{max(impacts):.2f}, {sum(impacts) / len(impacts):.2f}" if impacts else "none"
     print(f"| {t} s | {std} | {len(runs)} | {ok} | {100 * lo:.1f}-{100 * hi:.1f} % | {crashes} | {spread} |")

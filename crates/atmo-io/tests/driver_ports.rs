@@ -323,6 +323,7 @@ fn driver_process_round_trip_death_and_restart() {
         );
     }
     let c = ports.counters();
+    assert!(c.tilt_encoder.restarts >= 1, "{c:?}");
     assert_eq!(c.send_errors, 0);
     child.kill();
     drop(ports);

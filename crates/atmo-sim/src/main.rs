@@ -114,12 +114,11 @@ enum Command {
     /// `autopilot_estimate` (the plant's autopilot estimate: the motion
     /// capture's sample with its vertical-velocity error). Topics,
     /// services and the iceoryx2 prefix are read from the daemon's config
-    /// file so both sides
-    /// agree; ROS_DOMAIN_ID must match too. The plant waits, frozen at its
-    /// initial state, until the daemon arms; then it runs the scenario's
-    /// duration and writes OUT/summary.json (the landing judged on the
-    /// plant's truth, and the server's counters). Exit status 0 when the
-    /// scenario's success criteria are met.
+    /// file so both sides agree; ROS_DOMAIN_ID must match too. The plant
+    /// waits, frozen at its initial state, until the daemon arms; then it
+    /// runs the scenario's duration and writes OUT/summary.json (the
+    /// landing judged on the plant's truth, and the server's counters).
+    /// Exit status 0 when the scenario's success criteria are met.
     #[cfg(feature = "sitl")]
     Serve(serve_cmd::ServeArgs),
     /// Software in the loop: not in this build (atmo-sim's `sitl` feature).

@@ -11,10 +11,11 @@
 //! | `topics.pilot` | publishes pilot inputs | [`Ros2Inputs::latest_pilot`](super::Ros2Inputs::latest_pilot) |
 //! | `topics.status` | [`SitlInputs::latest_status`] | publishes one status per tick |
 //!
-//! Each estimate goes out on both estimate topics (the autopilot's is the
-//! flight stack's fallback when the first is lost: a test cuts the first
-//! and the daemon lands on the second), each as the type the config
-//! names: `nav_msgs/Odometry` (converted to ENU/FLU by
+//! Each estimate goes out on the estimate topic and, when enabled, the
+//! autopilot's ([`SitlPublisher::try_publish_estimates`] gives the latter
+//! its own state; it is the flight stack's fallback when the first is
+//! lost: a test cuts the first and the daemon lands on the second), each
+//! as the type the config names: `nav_msgs/Odometry` (converted to ENU/FLU by
 //! [`state_to_odometry`]; the daemon converts it back to NED/FRD) or
 //! `px4_msgs/VehicleOdometry` (NED/FRD, float32, by
 //! [`state_to_vehicle_odometry`]; the stamp is sent in whole microseconds,
