@@ -12,4 +12,5 @@ mod faults;
 mod hostile;
 mod monitor_margins;
 mod replay;
+mod rotor_out_bound;
 mod scenarios;
