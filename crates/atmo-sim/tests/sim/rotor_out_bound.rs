@@ -352,7 +352,7 @@ fn print_trace(start: &Plant, x: &[f64], failed: usize, tilt_rate_max: f64) {
     while p.time() - t0 < SEGMENT * SEGMENTS as f64 && p.crash().is_none() {
         let c = command(x, failed, p.time() - t0, tilt_rate_max);
         p.step(&c).unwrap();
-        if p.steps() % 20 == 0 {
+        if p.steps().is_multiple_of(20) {
             let s = p.state();
             let touching = p.contacts().iter().filter(|c| c.touching).count();
             println!(
