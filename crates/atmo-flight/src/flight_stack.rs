@@ -187,6 +187,7 @@ impl FlightStack {
             transition_height: lim.transition_height,
             transition_min_tilt: lim.tilt_flight_max() - TRANSITION_TILT_MARGIN_DEG.to_radians(),
             thrust_cut_time: settings.modes.thrust_cut_time,
+            touchdown_max_tip: settings.modes.touchdown_max_tip_deg.to_radians(),
             failsafe_recovery_time: settings.failsafe.recovery_time,
             failsafe_recovery_tilt: settings.failsafe.recovery_tilt_deg.to_radians(),
         };
@@ -362,6 +363,7 @@ impl FlightStack {
             tilt_unknown: detected.tilt_unknown(),
             rotor_failed: detected.rotor_failed(),
             rotor_out: self.rotor_out(),
+            body_tip: (state[idx::ROLL].cos() * state[idx::PITCH].cos()).acos(),
             tilt,
             time_in_mode: now.saturating_sub(self.mode_since_ns) as f64 * 1e-9,
         };

@@ -16,7 +16,10 @@
 //! MPC failure past its grace, a lost driver or a lost radio, or a tilt not
 //! where it is believed, or (but from Transition) a rotor out; back to
 //! Flight once healthy and tilted back (never with a rotor out); to
-//! Touchdown when grounded. Any mode -> Disarmed when the arm switch drops.
+//! Touchdown when grounded. With a rotor failed, a contact from
+//! Flight/Morphing/Transition is a touchdown only with the body level
+//! (`modes.touchdown_max_tip_deg`): touching on one wheel tipped, the
+//! flight goes on. Any mode -> Disarmed when the arm switch drops.
 //! ```
 //!
 //! Rows are checked in order; the first whose `from` contains the current
@@ -58,6 +61,9 @@ pub struct Conditions {
     /// ... and delivers too little to fly the wheel landing on
     /// (`monitor.rotor_out_effectiveness`): descend (`Mode::Failsafe`).
     pub rotor_out: bool,
+    /// The body's tilt from level (the angle between its z axis and the
+    /// vertical), rad.
+    pub body_tip: f64,
     /// Measured tilt, rad.
     pub tilt: f64,
     /// Seconds since the current mode was entered.
@@ -81,6 +87,9 @@ pub struct Thresholds {
     pub transition_min_tilt: f64,
     /// Seconds the thrust takes to ramp to zero after touchdown.
     pub thrust_cut_time: f64,
+    /// With a rotor failed, the most the body may be tipped from level at
+    /// a wheel contact for it to be a touchdown, rad.
+    pub touchdown_max_tip: f64,
     /// Minimum time in failsafe before recovering, s.
     pub failsafe_recovery_time: f64,
     /// Tilt below which a failsafe may hand back to flight, rad.
@@ -185,7 +194,9 @@ pub const TRANSITIONS: &[Transition] = &[
     Transition {
         from: &[Mode::Transition, Mode::Morphing, Mode::Flight],
         to: Mode::Touchdown,
-        guard: contact_believed,
+        guard: |c, t| {
+            contact_believed(c, t) && !(c.rotor_failed && c.body_tip > t.touchdown_max_tip)
+        },
         reason: "wheels on the ground",
     },
     Transition {

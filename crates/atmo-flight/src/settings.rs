@@ -64,6 +64,11 @@ atmo_core::params! {
         pub transition_full_tilt_height: f64, range 0.0..=2.0, unit "m";
         /// Thrust ramp to zero after touchdown.
         pub thrust_cut_time: f64, range 0.0..=5.0, unit "s";
+        /// With a rotor failed, a wheel contact with the body tipped further
+        /// from level than this is one wheel touching, not a landing: the
+        /// transition flies on until the body is level (the touchdown's
+        /// thrust ramp would drop it onto its other wheels).
+        pub touchdown_max_tip_deg: f64 = 10.0, range 0.0..=90.0, unit "deg";
     }
     check |_table, c, prefix| {
         let key = |name| atmo_core::params::key(prefix, name);

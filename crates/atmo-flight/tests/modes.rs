@@ -12,6 +12,7 @@ fn thresholds() -> Thresholds {
         transition_height: 0.45,
         transition_min_tilt: 45f64.to_radians(),
         thrust_cut_time: 0.3,
+        touchdown_max_tip: 10f64.to_radians(),
         failsafe_recovery_time: 0.5,
         failsafe_recovery_tilt: 2f64.to_radians(),
     }
@@ -33,6 +34,7 @@ fn flying() -> Conditions {
         tilt_unknown: false,
         rotor_failed: false,
         rotor_out: false,
+        body_tip: 0.0,
         tilt: 0.0,
         time_in_mode: 10.0,
     }
@@ -464,6 +466,34 @@ fn transition_to_touchdown_on_contact() {
         ),
         Mode::Transition
     );
+}
+
+/// With a rotor failed, a contact with the body tipped past
+/// `touchdown_max_tip` is one wheel touching: the flight goes on (the
+/// touchdown's thrust ramp would drop the body onto its other wheels); level
+/// it is a touchdown. Without a rotor fault a tipped contact is one too (a
+/// slope).
+#[test]
+fn with_a_rotor_failed_a_contact_is_a_touchdown_only_level() {
+    let tipped = 25f64.to_radians();
+    for mode in [Mode::Transition, Mode::Morphing, Mode::Flight] {
+        let failed = Conditions {
+            rotor_failed: true,
+            body_tip: tipped,
+            ..on_ground()
+        };
+        assert_ne!(step(mode, failed), Mode::Touchdown, "{mode:?} tipped");
+        let level = Conditions {
+            body_tip: 5f64.to_radians(),
+            ..failed
+        };
+        assert_eq!(step(mode, level), Mode::Touchdown, "{mode:?} level");
+        let healthy = Conditions {
+            body_tip: tipped,
+            ..on_ground()
+        };
+        assert_eq!(step(mode, healthy), Mode::Touchdown, "{mode:?} healthy");
+    }
 }
 
 /// A contact reported while the fresh estimate puts the robot 1.5 m up is
