@@ -66,6 +66,8 @@ pub struct FlightStack {
     tilt_max: f64,
     mode: Mode,
     mode_since_ns: u64,
+    /// When the ground contact began, while it lasts (ns).
+    contact_since_ns: Option<u64>,
     mpc_warm: bool,
     mpc_failures_total: u64,
     last_estimate: Option<Estimate>,
@@ -188,6 +190,7 @@ impl FlightStack {
             transition_min_tilt: lim.tilt_flight_max() - TRANSITION_TILT_MARGIN_DEG.to_radians(),
             thrust_cut_time: settings.modes.thrust_cut_time,
             touchdown_max_tip: settings.modes.touchdown_max_tip_deg.to_radians(),
+            touchdown_level_timeout: settings.modes.touchdown_level_timeout,
             failsafe_recovery_time: settings.failsafe.recovery_time,
             failsafe_recovery_tilt: settings.failsafe.recovery_tilt_deg.to_radians(),
         };
@@ -205,6 +208,7 @@ impl FlightStack {
             tilt_max: lim.tilt_max(),
             mode: Mode::Disarmed,
             mode_since_ns: 0,
+            contact_since_ns: None,
             mpc_warm: false,
             mpc_failures_total: 0,
             last_estimate: None,
@@ -348,10 +352,12 @@ impl FlightStack {
         self.last_tilt = self.monitor.tilt(self.encoder_tilt);
         let tilt = self.last_tilt;
         let mpc_failed_ticks = self.mpc.failed_ticks();
+        let grounded = inputs.ground_contact || detected.has(Detected::CONTACT_INFERRED);
+        self.contact_since_ns = grounded.then(|| self.contact_since_ns.unwrap_or(now));
         let conditions = Conditions {
             armed: pilot.arm && pilot.offboard,
             arming_ok: inputs.arming_failures == 0,
-            grounded: inputs.ground_contact || detected.has(Detected::CONTACT_INFERRED),
+            grounded,
             height,
             throttle: pilot.throttle,
             descent_commanded: pilot.velocity[2] > self.settings.pilot.descent_threshold,
@@ -364,6 +370,7 @@ impl FlightStack {
             rotor_failed: detected.rotor_failed(),
             rotor_out: self.rotor_out(),
             body_tip: (state[idx::ROLL].cos() * state[idx::PITCH].cos()).acos(),
+            time_grounded: now.saturating_sub(self.contact_since_ns.unwrap_or(now)) as f64 * 1e-9,
             tilt,
             time_in_mode: now.saturating_sub(self.mode_since_ns) as f64 * 1e-9,
         };

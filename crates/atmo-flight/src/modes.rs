@@ -19,7 +19,8 @@
 //! Touchdown when grounded. With a rotor failed, a contact from
 //! Flight/Morphing/Transition is a touchdown only with the body level
 //! (`modes.touchdown_max_tip_deg`): touching on one wheel tipped, the
-//! flight goes on. Any mode -> Disarmed when the arm switch drops.
+//! flight goes on, for at most `modes.touchdown_level_timeout` of contact.
+//! Any mode -> Disarmed when the arm switch drops.
 //! ```
 //!
 //! Rows are checked in order; the first whose `from` contains the current
@@ -64,6 +65,8 @@ pub struct Conditions {
     /// The body's tilt from level (the angle between its z axis and the
     /// vertical), rad.
     pub body_tip: f64,
+    /// Seconds the ground contact has lasted (0 without one).
+    pub time_grounded: f64,
     /// Measured tilt, rad.
     pub tilt: f64,
     /// Seconds since the current mode was entered.
@@ -90,6 +93,8 @@ pub struct Thresholds {
     /// With a rotor failed, the most the body may be tipped from level at
     /// a wheel contact for it to be a touchdown, rad.
     pub touchdown_max_tip: f64,
+    /// The longest the flight goes on tipped on a lasting contact, s.
+    pub touchdown_level_timeout: f64,
     /// Minimum time in failsafe before recovering, s.
     pub failsafe_recovery_time: f64,
     /// Tilt below which a failsafe may hand back to flight, rad.
@@ -195,7 +200,10 @@ pub const TRANSITIONS: &[Transition] = &[
         from: &[Mode::Transition, Mode::Morphing, Mode::Flight],
         to: Mode::Touchdown,
         guard: |c, t| {
-            contact_believed(c, t) && !(c.rotor_failed && c.body_tip > t.touchdown_max_tip)
+            contact_believed(c, t)
+                && !(c.rotor_failed
+                    && c.body_tip > t.touchdown_max_tip
+                    && c.time_grounded < t.touchdown_level_timeout)
         },
         reason: "wheels on the ground",
     },

@@ -69,6 +69,10 @@ atmo_core::params! {
         /// transition flies on until the body is level (the touchdown's
         /// thrust ramp would drop it onto its other wheels).
         pub touchdown_max_tip_deg: f64 = 10.0, range 0.0..=90.0, unit "deg";
+        /// ... and flies on at most this long with the contact lasting:
+        /// still tipped after it, the robot rests on something, and the
+        /// touchdown comes anyway.
+        pub touchdown_level_timeout: f64 = 1.0, range 0.0..=5.0, unit "s";
     }
     check |_table, c, prefix| {
         let key = |name| atmo_core::params::key(prefix, name);

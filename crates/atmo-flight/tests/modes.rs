@@ -13,6 +13,7 @@ fn thresholds() -> Thresholds {
         transition_min_tilt: 45f64.to_radians(),
         thrust_cut_time: 0.3,
         touchdown_max_tip: 10f64.to_radians(),
+        touchdown_level_timeout: 1.0,
         failsafe_recovery_time: 0.5,
         failsafe_recovery_tilt: 2f64.to_radians(),
     }
@@ -35,6 +36,7 @@ fn flying() -> Conditions {
         rotor_failed: false,
         rotor_out: false,
         body_tip: 0.0,
+        time_grounded: 0.0,
         tilt: 0.0,
         time_in_mode: 10.0,
     }
@@ -471,8 +473,9 @@ fn transition_to_touchdown_on_contact() {
 /// With a rotor failed, a contact with the body tipped past
 /// `touchdown_max_tip` is one wheel touching: the flight goes on (the
 /// touchdown's thrust ramp would drop the body onto its other wheels); level
-/// it is a touchdown. Without a rotor fault a tipped contact is one too (a
-/// slope).
+/// it is a touchdown, and tipped too once the contact has lasted
+/// `touchdown_level_timeout` (resting on something). Without a rotor fault
+/// a tipped contact is one too (a slope).
 #[test]
 fn with_a_rotor_failed_a_contact_is_a_touchdown_only_level() {
     let tipped = 25f64.to_radians();
@@ -483,6 +486,15 @@ fn with_a_rotor_failed_a_contact_is_a_touchdown_only_level() {
             ..on_ground()
         };
         assert_ne!(step(mode, failed), Mode::Touchdown, "{mode:?} tipped");
+        let resting = Conditions {
+            time_grounded: 1.0,
+            ..failed
+        };
+        assert_eq!(
+            step(mode, resting),
+            Mode::Touchdown,
+            "{mode:?} resting tipped"
+        );
         let level = Conditions {
             body_tip: 5f64.to_radians(),
             ..failed
