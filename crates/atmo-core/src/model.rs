@@ -79,6 +79,13 @@ pub fn rot_x(a: f64) -> Matrix3<f64> {
     Matrix3::new(1.0, 0.0, 0.0, 0.0, c, -s, 0.0, s, c)
 }
 
+/// How level the body of `state` is: the cosine of the angle between its
+/// z axis and the vertical, `cos(roll) cos(pitch)` (1 level, 0 on its
+/// side, negative upside down).
+pub fn level_cosine(state: &State) -> f64 {
+    state[idx::ROLL].cos() * state[idx::PITCH].cos()
+}
+
 /// Body-to-world rotation for Euler ZYX angles: `R = Rz(yaw) Ry(pitch) Rx(roll)`.
 pub fn rotation(yaw: f64, pitch: f64, roll: f64) -> Matrix3<f64> {
     rotation_of(sin_cos(yaw), sin_cos(pitch), sin_cos(roll))

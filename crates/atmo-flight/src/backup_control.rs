@@ -32,7 +32,7 @@
 //!
 //! Pure, fixed-size, no allocation: it runs on the control path.
 
-use atmo_core::model::{Input, State, TiltedBody, idx};
+use atmo_core::model::{Input, State, TiltedBody, idx, level_cosine};
 use nalgebra::Vector3;
 
 /// How much slower the vertical speed loop is than the attitude loop: a
@@ -103,7 +103,7 @@ impl LevelDescent {
         let limit = 0.5 * body.gravity;
         self.integral = (self.integral + 0.25 * gain * gain * error * dt).clamp(-limit, limit);
         let acceleration_down = gain * error + self.integral;
-        let tilt_cosine = (state[idx::ROLL].cos() * state[idx::PITCH].cos()).max(MIN_TILT_COSINE);
+        let tilt_cosine = level_cosine(state).max(MIN_TILT_COSINE);
         let force_z = body.mass * (acceleration_down - body.gravity) / tilt_cosine;
         let u = body.commands_for(force_z, &torque);
         u.iter()

@@ -12,7 +12,7 @@
 
 use atmo_core::control::{DiffDrive, blending_alpha};
 use atmo_core::ground_plane::{LEVEL_NORMAL, unit_ground_normal};
-use atmo_core::model::{Input, State, TiltedBody, idx};
+use atmo_core::model::{Input, State, TiltedBody, idx, level_cosine};
 use atmo_core::{GroundPlane, Linkage, Model, RobotConfig};
 use atmo_mpc::{AlphaSchedule, Mpc, MpcSettings, Outcome, SolverCuts, TiltPlan};
 use nalgebra::Vector3;
@@ -369,7 +369,7 @@ impl FlightStack {
             tilt_unknown: detected.tilt_unknown(),
             rotor_failed: detected.rotor_failed(),
             rotor_out: self.rotor_out(),
-            body_tip: (state[idx::ROLL].cos() * state[idx::PITCH].cos()).acos(),
+            body_tip: level_cosine(&state).acos(),
             time_grounded: now.saturating_sub(self.contact_since_ns.unwrap_or(now)) as f64 * 1e-9,
             tilt,
             time_in_mode: now.saturating_sub(self.mode_since_ns) as f64 * 1e-9,

@@ -5,10 +5,11 @@
 //! a safe failure where not).
 #![allow(clippy::unwrap_used, reason = "test")]
 
-use atmo_core::model::idx;
+use atmo_core::model::{idx, level_cosine};
 use atmo_flight::Mode;
 use atmo_flight::actuator_monitor::Detected;
 use atmo_sim::closed_loop::{ControllerConfig, TickRecord};
+use atmo_sim::scenario::Scenario;
 
 use super::faults::{
     Flight, assert_clean_landing, assert_flown_through, clean, fly_scenario, fly_with,
@@ -43,13 +44,18 @@ fn detected(f: &Flight, bit: u8) -> Option<&TickRecord> {
 /// (7_000_001 on) were named before any of them was flown and chose
 /// nothing: no rule or threshold was set on them.
 fn fly_seeded(faults: &str, seed: u64) -> Flight {
+    fly_scenario(&seeded_scenario(faults, seed))
+}
+
+/// The wheel landing with `faults` and the Monte Carlo's draws of `seed`
+/// (0: the scenario as it is).
+pub(super) fn seeded_scenario(faults: &str, seed: u64) -> Scenario {
     let base = super::faults::scenario(faults);
-    let flown = if seed == 0 {
+    if seed == 0 {
         base
     } else {
         atmo_sim::monte_carlo::randomized_with_draws(&base, seed).0
-    };
-    fly_scenario(&flown)
+    }
 }
 
 const SEEDS: [u64; 3] = [0, 7_000_001, 7_000_002];
@@ -67,12 +73,7 @@ fn tipped(f: &Flight, from: f64, above: f64) -> f64 {
     f.ticks
         .iter()
         .filter(|t| t.time >= from && t.truth_height > above)
-        .map(|t| {
-            let s = &t.truth;
-            (s[idx::ROLL].cos() * s[idx::PITCH].cos())
-                .acos()
-                .to_degrees()
-        })
+        .map(|t| level_cosine(&t.truth).acos().to_degrees())
         .fold(0.0, f64::max)
 }
 

@@ -2,10 +2,11 @@
 //! a check): from the plant's state at the fault's onset, with the rotor
 //! known stopped from that instant, a cross-entropy search over open-loop
 //! commands (the three rotors left and the tilt rate, piecewise constant)
-//! looks for the softest touchdown the plant allows. Started from the
-//! commands the flight stack flew, so what it finds is never worse than the
-//! shipped reaction; a search, not a proof: a command it does not find may
-//! exist (docs/decisions/2026-12-07-stopped-rotor-bound.md).
+//! looks for the softest touchdown the plant allows, from two starts: the
+//! commands the flight stack flew (replayed open loop they land harder
+//! than the flight did) and the stopped rotor's diagonal partner off. A
+//! search, not a proof: a command it does not find may exist
+//! (docs/decisions/2026-12-07-stopped-rotor-bound.md).
 //!
 //! `ROTOR_SEEDS=0,7000001 BOUND_ONSETS=flight,transition cargo test
 //! --release -p atmo-sim --test sim -- --ignored stopped_rotor_bound
@@ -13,7 +14,7 @@
 #![allow(clippy::unwrap_used, reason = "test")]
 
 use atmo_core::Input;
-use atmo_core::model::idx;
+use atmo_core::model::{idx, level_cosine};
 use atmo_flight::Mode;
 use atmo_plant::plant::N_CONTACTS;
 use atmo_plant::{Command, CrashKind, InitialState, Plant};
@@ -22,7 +23,8 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
 
-use super::faults::{fly_scenario, scenario};
+use super::actuator_faults::seeded_scenario;
+use super::faults::fly_scenario;
 
 /// Length of one piece of the open-loop command, s.
 const SEGMENT: f64 = 0.08;
@@ -72,7 +74,8 @@ fn command(x: &[f64], failed: usize, time: f64, tilt_rate_max: f64) -> Command {
 /// Flies `x` open loop from `start`. The score is the fastest approach
 /// speed of any contact as it touches (wheels and base corners, m/s) and
 /// the body's largest tilt from level while touching (per 30 deg), plus 10
-/// for a crash by the plant's rule and 20 if nothing touched by the end: a landing without a crash always scores under 10.
+/// for a crash by the plant's rule and 20 if nothing touched by the end: a
+/// landing without a crash always scores under 10.
 fn rollout(start: &Plant, x: &[f64], failed: usize, tilt_rate_max: f64) -> Outcome {
     let mut p = start.clone();
     let t0 = p.time();
@@ -83,7 +86,6 @@ fn rollout(start: &Plant, x: &[f64], failed: usize, tilt_rate_max: f64) -> Outco
     while p.time() - t0 < end && p.crash().is_none() {
         p.step(&command(x, failed, p.time() - t0, tilt_rate_max))
             .unwrap();
-        let s = p.state();
         let mut touching = false;
         for (i, c) in p.contacts().iter().enumerate() {
             if c.touching && !was[i] {
@@ -97,8 +99,7 @@ fn rollout(start: &Plant, x: &[f64], failed: usize, tilt_rate_max: f64) -> Outco
             was[i] = c.touching;
         }
         if touching {
-            let level = (s[idx::ROLL].cos() * s[idx::PITCH].cos()).acos();
-            tipped = tipped.max(level.to_degrees());
+            tipped = tipped.max(level_cosine(&p.state()).acos().to_degrees());
         }
     }
     let crash = p.crash().and_then(|e| match e.kind {
@@ -161,11 +162,14 @@ fn shipped_commands(
 }
 
 /// The other start of the search: after the first `fixed` pieces of `x0`,
-/// the stopped rotor's diagonal partner off and the other diagonal at full
-/// thrust (no roll or pitch torque: the robot falls level, turning about
-/// its z axis), the tilt rising at full speed.
-fn diagonal_left(x0: &[f64], fixed: usize, failed: usize) -> Vec<f64> {
-    let partner = [1, 0, 3, 2][failed];
+/// the stopped rotor's diagonal partner (the other rotor turning the same
+/// way, `yaw_sign`) off and the other diagonal at full thrust (no roll or
+/// pitch torque: the robot falls level, turning about its z axis), the
+/// tilt rising at full speed.
+fn diagonal_left(x0: &[f64], fixed: usize, failed: usize, yaw_sign: &[f64; 4]) -> Vec<f64> {
+    let partner = (0..4)
+        .find(|&r| r != failed && yaw_sign[r] == yaw_sign[failed])
+        .unwrap();
     let mut x = x0.to_vec();
     for k in fixed..SEGMENTS {
         let mut j = 0;
@@ -266,14 +270,10 @@ fn stopped_rotor_bound() {
                 "mode = \"transition\""
             };
             for &n in &rotors {
-                let base = scenario(&format!(
-                    "[[faults.actuators.rotor]]\n{spec}\nrotor = {n}\nscale = 0.0"
-                ));
-                let scenario = if seed == 0 {
-                    base
-                } else {
-                    atmo_sim::monte_carlo::randomized_with_draws(&base, seed).0
-                };
+                let scenario = seeded_scenario(
+                    &format!("[[faults.actuators.rotor]]\n{spec}\nrotor = {n}\nscale = 0.0"),
+                    seed,
+                );
                 let shipped = fly_scenario(&scenario);
                 let at = if onset == "flight" {
                     shipped.ticks.iter().find(|t| t.time >= 1.0)
@@ -306,7 +306,7 @@ fn stopped_rotor_bound() {
                 let failed = n - 1;
                 let x0 = shipped_commands(&shipped.ticks, at.time, failed, tilt_rate_max);
                 let replayed = rollout(&plant, &x0, failed, tilt_rate_max);
-                let pair = diagonal_left(&x0, fixed, failed);
+                let pair = diagonal_left(&x0, fixed, failed, &scenario.robot.rotor.yaw_sign);
                 let (x, best) = search(&plant, x0, fixed, failed, tilt_rate_max, seed ^ n as u64);
                 let (y, from_pair) =
                     search(&plant, pair, fixed, failed, tilt_rate_max, seed ^ n as u64);
