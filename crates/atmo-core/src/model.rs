@@ -33,6 +33,7 @@ use nalgebra::{
 
 use crate::config::{ArmInertiaConvention, RobotConfig};
 
+mod stopped_rotor;
 mod tilt_partial;
 pub use tilt_partial::TiltPartial;
 

@@ -7,7 +7,9 @@ use atmo_core::control::{
 use atmo_core::limits::{
     critical_angle, max_tilt_for_reserve, thrust_to_weight, trim_saturation_angle,
 };
+use atmo_core::model::Input;
 use atmo_core::{Model, RobotConfig};
+use nalgebra::Vector3;
 
 fn model() -> Model {
     Model::new(&RobotConfig::atmo())
@@ -96,4 +98,56 @@ fn diff_drive_round_trips_and_saturation_keeps_the_turn() {
         }),
         (0.0, 0.0)
     );
+}
+
+/// With a rotor stopped the three left give the lift asked and, with the
+/// partner pushing, the roll and pitch torque asked; with the torque only
+/// the partner's negative thrust could give, the partner is off and the
+/// pair on the other diagonal still gives the lift, the torque's component
+/// about the one axis it turns, and nothing about its own diagonal.
+#[test]
+fn a_stopped_rotor_is_flown_around_by_the_three_left_the_partner_only_pushing() {
+    let robot = RobotConfig::atmo();
+    let body = Model::new(&robot).at_tilt(0.3);
+    let wrench = |u: &Input| {
+        let g = body
+            .first_moment
+            .cross(&Vector3::new(0.0, 0.0, body.gravity));
+        (body.thrust_force * u, body.thrust_torque * u + g)
+    };
+    let lift = -body.mass * body.gravity;
+    for stopped in 0..4 {
+        let partner = (0..4)
+            .find(|&r| r != stopped && robot.rotor.yaw_sign[r] == robot.rotor.yaw_sign[stopped])
+            .unwrap();
+        let lever = body.thrust_torque.column(partner).xy();
+        // A torque the partner gives: met exactly, the partner on.
+        let asked = Vector3::new(lever.x, lever.y, 0.0) * 0.1;
+        let u = body.commands_without(stopped, 0.0, lift, &asked);
+        let (force, torque) = wrench(&u);
+        assert_eq!(u[stopped], 0.0);
+        assert!(u[partner] > 0.0, "{u}");
+        assert!((force.z - lift).abs() < 1e-9);
+        assert!((torque.xy() - asked.xy()).norm() < 1e-9, "{torque} {asked}");
+        // The opposite torque: the partner off, the lift still exact, and
+        // of the torque what the pair's differential thrust (at that lift)
+        // turns: the miss is square to it.
+        let u = body.commands_without(stopped, 0.0, lift, &-asked);
+        let (force, torque) = wrench(&u);
+        assert_eq!((u[stopped], u[partner]), (0.0, 0.0), "{u}");
+        assert!((force.z - lift).abs() < 1e-9);
+        let mut pair = (0..4).filter(|&r| r != stopped && r != partner);
+        let (a, b) = (pair.next().unwrap(), pair.next().unwrap());
+        let f = |r: usize| body.thrust_force[(2, r)];
+        let turn =
+            body.thrust_torque.column(a).xy() * f(b) - body.thrust_torque.column(b).xy() * f(a);
+        let miss = torque.xy() + asked.xy();
+        assert!(miss.dot(&turn).abs() < 1e-9, "{miss} {turn}");
+        assert!(miss.norm() > 1e-3, "a torque the pair cannot give: {miss}");
+        // A stopped rotor that still delivers: its thrust is counted.
+        let turning = body.commands_without(stopped, 0.2, lift, &asked);
+        let mut delivered = turning;
+        delivered[stopped] = 0.2;
+        assert!((wrench(&delivered).0.z - lift).abs() < 1e-9);
+    }
 }

@@ -125,6 +125,7 @@ fn onboard_tick_io_allocates_nothing_of_its_own() {
         tilt_lever: 0.0,
         rehome_tilt: false,
         autopilot_estimate: None,
+        rotor_speeds: None,
     });
 
     let pilot = PilotInput {

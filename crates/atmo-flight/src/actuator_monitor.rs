@@ -7,6 +7,7 @@
 //! | tilt encoder stuck | commanded tilt velocity, encoder | the commanded travel since the encoder last moved by `encoder_step` reaches `encoder_stuck_travel` |
 //! | tilt not where believed (motor slipping, linkage jammed) | the observer's body-z force | upward (more lift than predicted) at or above `tilt_force` for `tilt_force_time`, the wheels clear of the ground |
 //! | rotor fault | the observer's roll and pitch torque | either at the observer's limit (`observer.max_torque`: what is left it cannot take up) for `rotor_time`, the wheels clear of the ground |
+//! | rotor stopped | the ESCs' speeds, the rotor commands | the command a rotor's thrust (speed squared) followed since the last report, inverted through the motor's first-order lag (the robot file's `rotor.time_constant`), under `rotor_stopped_ratio` of the command sent, for `rotor_stopped_time`, flying (not in the take-off: a motor starting from rest is not a first-order lag) |
 //! | ground contact missed | the estimate | fresh, the wheels (at the tilt in use) within `contact_clearance` of the ground and the vertical speed within `contact_speed`, for `contact_time` |
 //!
 //! What each detection makes the stack do is `FlightStack::step`'s (and
@@ -76,6 +77,16 @@ atmo_core::params! {
         /// its body (for ATMO from about 33 deg: atmo-sim's
         /// `the_rotor_out_landing_tilt_puts_the_wheels_under_the_base`).
         pub rotor_out_landing_tilt_deg: f64 = ROTOR_OUT_LANDING_TILT_DEG, range 0.0..=90.0, unit "deg";
+        /// A rotor whose thrust (its ESC's speed squared) follows less than
+        /// this fraction of its command is stopped: the command it
+        /// followed since the last report is its thrust's change through
+        /// the motor's first-order lag, inverted (0: never, as a flight
+        /// log written before the key). Told from the first report after
+        /// a stop, not after the thrust has decayed: a rotor that stops
+        /// follows 0.
+        pub rotor_stopped_ratio: f64 = 0.0, range 0.0..=1.0;
+        /// ... for this long.
+        pub rotor_stopped_time: f64 = 0.0, range 0.0..=1.0, unit "s";
     }
 }
 
@@ -95,6 +106,8 @@ impl MonitorSettings {
             rotor_out_effectiveness: ROTOR_OUT_EFFECTIVENESS,
             rotor_out_descent_speed: ROTOR_OUT_DESCENT_SPEED,
             rotor_out_landing_tilt_deg: ROTOR_OUT_LANDING_TILT_DEG,
+            rotor_stopped_ratio: 0.0,
+            rotor_stopped_time: 0.0,
         }
     }
 }
@@ -114,6 +127,8 @@ impl Detected {
     pub const TILT_MISMATCH: u8 = 2;
     pub const ROTOR: u8 = 4;
     pub const CONTACT_INFERRED: u8 = 8;
+    /// A rotor's ESC reports it stopped (with [`Self::ROTOR`]).
+    pub const ROTOR_STOPPED: u8 = 16;
 
     pub fn bits(self) -> u8 {
         self.0
@@ -158,7 +173,15 @@ pub struct MonitorInputs {
     pub wheel_clearance: f64,
     /// Vertical speed of the estimate (NED), m/s.
     pub vertical_speed: f64,
+    /// The rotor commands the previous tick sent, each in [0, 1].
+    pub rotor_commands: [f64; 4],
+    /// The ESCs' rotor speeds, each a fraction of full (`StepInputs`).
+    pub rotor_speeds: Option<[f64; 4]>,
 }
+
+/// A rotor command this small says too little to tell a stopped rotor by
+/// (the rotor estimate's smallest informative command).
+const MIN_COMMAND: f64 = 0.05;
 
 /// The detectors' state.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -168,6 +191,8 @@ pub struct ActuatorMonitor {
     torque_limit: f64,
     /// The mechanism's range is [0, tilt_max], rad.
     tilt_max: f64,
+    /// The motors' thrust time constant (the robot file's), s.
+    motor_time_constant: f64,
     detected: Detected,
     last_ns: Option<u64>,
     /// Encoder tilt at its last movement, rad.
@@ -180,6 +205,11 @@ pub struct ActuatorMonitor {
     tilt_force_since: Option<u64>,
     rotor_since: Option<u64>,
     contact_since: Option<u64>,
+    /// Each rotor's thrust at the last ESC report (its speed squared).
+    last_thrust: Option<[f64; 4]>,
+    /// Since when a rotor has read stopped, and which (the lowest ratio).
+    stopped_since: Option<u64>,
+    stopped_rotor: Option<usize>,
 }
 
 fn held(since: &mut Option<u64>, now: u64, holds: bool, time: f64) -> bool {
@@ -195,11 +225,18 @@ impl ActuatorMonitor {
     /// `torque_limit`: the observer's (`observer.max_torque`): a torque held
     /// there is one the observer cannot take up.
     /// `tilt_max`: the mechanism's range is [0, tilt_max], rad.
-    pub fn new(settings: MonitorSettings, torque_limit: f64, tilt_max: f64) -> Self {
+    /// `motor_time_constant`: the robot file's `rotor.time_constant`, s.
+    pub fn new(
+        settings: MonitorSettings,
+        torque_limit: f64,
+        tilt_max: f64,
+        motor_time_constant: f64,
+    ) -> Self {
         Self {
             settings,
             torque_limit,
             tilt_max,
+            motor_time_constant,
             detected: Detected::default(),
             last_ns: None,
             anchor: 0.0,
@@ -207,7 +244,16 @@ impl ActuatorMonitor {
             tilt_force_since: None,
             rotor_since: None,
             contact_since: None,
+            last_thrust: None,
+            stopped_since: None,
+            stopped_rotor: None,
         }
+    }
+
+    /// The rotor its ESC reports stopped, once detected (latched).
+    pub fn stopped_rotor(&self) -> Option<usize> {
+        self.stopped_rotor
+            .filter(|_| self.detected.has(Detected::ROTOR_STOPPED))
     }
 
     pub fn detected(&self) -> Detected {
@@ -234,7 +280,12 @@ impl ActuatorMonitor {
             return self.detected;
         }
         if !i.armed {
-            *self = Self::new(s, self.torque_limit, self.tilt_max);
+            *self = Self::new(
+                s,
+                self.torque_limit,
+                self.tilt_max,
+                self.motor_time_constant,
+            );
             self.anchor = i.encoder_tilt;
             self.last_ns = Some(i.now_ns);
             return self.detected;
@@ -279,6 +330,7 @@ impl ActuatorMonitor {
         ) {
             self.detected.0 |= Detected::ROTOR;
         }
+        self.watch_rotor_speeds(i, dt);
         let rests = i.mode.is_airborne_mode()
             && i.estimate_fresh
             && i.wheel_clearance <= s.contact_clearance
@@ -289,6 +341,53 @@ impl ActuatorMonitor {
             self.detected.0 &= !Detected::CONTACT_INFERRED;
         }
         self.detected
+    }
+
+    /// The stopped-rotor detector. Over `dt` the motor's thrust `t` moves
+    /// towards the command it follows by `1 - exp(-dt / tau)` of the gap;
+    /// the command followed is so `t0 + (t1 - t0) / (1 - exp(-dt / tau))`
+    /// from two reports. A rotor that follows under `rotor_stopped_ratio`
+    /// of the command the previous tick sent is stopped. A rotor that
+    /// delivers a fraction of its command follows that fraction, so the
+    /// ratio is also the line between a weak rotor and a stopped one.
+    /// Without ESC speeds (or a first report) nothing is decided.
+    fn watch_rotor_speeds(&mut self, i: &MonitorInputs, dt: f64) {
+        let s = self.settings;
+        let thrust = i.rotor_speeds.map(|speeds| speeds.map(|v| v * v));
+        let last = std::mem::replace(&mut self.last_thrust, thrust);
+        if self.detected.has(Detected::ROTOR_STOPPED) {
+            return;
+        }
+        let follow = if self.motor_time_constant > 0.0 {
+            1.0 - (-dt / self.motor_time_constant).exp()
+        } else {
+            1.0
+        };
+        let flying = i.mode.is_airborne_mode() && i.mode != Mode::Takeoff;
+        let lowest = match (thrust, last) {
+            (Some(now), Some(before)) if flying && follow > 0.0 => (0..4)
+                .filter(|&r| i.rotor_commands[r] >= MIN_COMMAND)
+                .map(|r| {
+                    let followed = before[r] + (now[r] - before[r]) / follow;
+                    (r, followed / i.rotor_commands[r])
+                })
+                .min_by(|a, b| a.1.total_cmp(&b.1)),
+            _ => None,
+        };
+        let stopped = lowest.filter(|&(_, ratio)| ratio < s.rotor_stopped_ratio);
+        if stopped.is_some_and(|(r, _)| self.stopped_rotor != Some(r)) {
+            // Another rotor: its own time.
+            self.stopped_since = None;
+        }
+        self.stopped_rotor = stopped.map(|(r, _)| r);
+        if held(
+            &mut self.stopped_since,
+            i.now_ns,
+            stopped.is_some(),
+            s.rotor_stopped_time,
+        ) {
+            self.detected.0 |= Detected::ROTOR | Detected::ROTOR_STOPPED;
+        }
     }
 }
 
@@ -324,19 +423,21 @@ mod tests {
             estimate_fresh: true,
             wheel_clearance: 1.0,
             vertical_speed: 0.3,
+            rotor_commands: [0.5; 4],
+            rotor_speeds: None,
         }
     }
 
     #[test]
     fn an_encoder_that_follows_the_command_is_not_stuck_and_a_silent_one_is_dead_reckoned() {
         let rate = 0.39;
-        let mut m = ActuatorMonitor::new(settings(), 1.0, TILT_MAX);
+        let mut m = ActuatorMonitor::new(settings(), 1.0, TILT_MAX, 0.03);
         for k in 0..200 {
             let tilt = (k as f64 * 0.01 * rate).min(0.87);
             m.update(&inputs(k, tilt, rate));
         }
         assert_eq!(m.detected(), Detected::default());
-        let mut m = ActuatorMonitor::new(settings(), 1.0, TILT_MAX);
+        let mut m = ActuatorMonitor::new(settings(), 1.0, TILT_MAX, 0.03);
         let mut first = None;
         for k in 0..100 {
             let tilt = (k as f64 * 0.01 * rate).min(0.3);
@@ -360,7 +461,7 @@ mod tests {
         // second, the encoder stands still there, and the tilt flown is
         // the encoder's.
         let end = 0.8f64.to_radians();
-        let mut m = ActuatorMonitor::new(settings(), 1.0, TILT_MAX);
+        let mut m = ActuatorMonitor::new(settings(), 1.0, TILT_MAX, 0.03);
         for k in 0..100 {
             m.update(&inputs(k, end, -0.39));
         }
@@ -375,7 +476,7 @@ mod tests {
 
     #[test]
     fn a_torque_must_hold_its_time_and_a_detection_latches_until_disarmed() {
-        let mut m = ActuatorMonitor::new(settings(), 1.0, TILT_MAX);
+        let mut m = ActuatorMonitor::new(settings(), 1.0, TILT_MAX, 0.03);
         let mut i = inputs(0, 0.0, 0.0);
         i.disturbance[3] = 1.0;
         for k in 0..5 {
@@ -397,5 +498,58 @@ mod tests {
         i.armed = false;
         m.update(&i);
         assert_eq!(m.detected(), Detected::default());
+    }
+    /// Speeds of a rotor following `command` from `thrust` through the
+    /// 0.03 s lag over `dt`: its thrust after.
+    fn lagged(thrust: f64, command: f64, dt: f64) -> f64 {
+        command + (thrust - command) * (-dt / 0.03).exp()
+    }
+
+    #[test]
+    fn a_rotor_that_stops_is_told_in_two_reports_a_weak_one_or_a_lagging_one_never() {
+        let mut s = settings();
+        s.rotor_stopped_ratio = 0.1;
+        s.rotor_stopped_time = 0.005;
+        let dt = 1.0 / 150.0;
+        let tick = |k: u64| (k as f64 * dt * 1e9) as u64;
+        // Each case: the thrust each rotor's motor follows (a fraction of
+        // its command) from tick 10 on, while commanded `command`.
+        let fly = |follows: [f64; 4], command: [f64; 4]| {
+            let mut m = ActuatorMonitor::new(s, 1.0, TILT_MAX, 0.03);
+            let mut thrust = [0.5; 4];
+            let mut first = None;
+            for k in 0..60 {
+                let mut i = inputs(0, 0.0, 0.0);
+                i.now_ns = tick(k);
+                i.mode = Mode::Flight;
+                i.rotor_commands = if k > 10 { command } else { [0.5; 4] };
+                i.rotor_speeds = Some(thrust.map(f64::sqrt));
+                if m.update(&i).has(Detected::ROTOR_STOPPED) {
+                    first.get_or_insert((k, m.stopped_rotor()));
+                }
+                for r in 0..4 {
+                    let followed = if k >= 10 { follows[r] } else { 1.0 };
+                    thrust[r] = lagged(thrust[r], followed * i.rotor_commands[r], dt);
+                }
+            }
+            first
+        };
+        // Rotor 3 stops at tick 10: its next two reports tell it.
+        let stopped = fly([1.0, 1.0, 0.0, 1.0], [0.5; 4]);
+        assert_eq!(stopped, Some((12, Some(2))), "{stopped:?}");
+        // At 60 % it is weak (the observer's), not stopped.
+        assert_eq!(fly([1.0, 0.6, 1.0, 1.0], [0.5; 4]), None);
+        // Commanded from 0.5 to full and to 0.1 at once: the lag is the
+        // motor's, nothing stopped.
+        assert_eq!(fly([1.0; 4], [1.0, 0.1, 1.0, 0.1]), None);
+        // Without speeds nothing is decided.
+        let mut m = ActuatorMonitor::new(s, 1.0, TILT_MAX, 0.03);
+        for k in 0..60 {
+            let mut i = inputs(0, 0.0, 0.0);
+            i.now_ns = tick(k);
+            i.mode = Mode::Flight;
+            m.update(&i);
+        }
+        assert_eq!(m.stopped_rotor(), None);
     }
 }

@@ -49,6 +49,15 @@ pub const MAX_LEAN: f64 = 0.175;
 /// twice it.
 const MIN_TILT_COSINE: f64 = 0.5;
 
+/// A rotor its ESC reports stopped, and the thrust it still delivers (a
+/// fraction of full: its measured speed squared).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StoppedRotor {
+    /// 0-based.
+    pub rotor: usize,
+    pub delivered: f64,
+}
+
 /// The level descent's memory: the vertical loop's integral.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct LevelDescent {
@@ -69,6 +78,14 @@ impl LevelDescent {
     /// critically damped PI: the model has no ground effect, whose lift
     /// near the ground a proportional loop alone would hover on. `None`
     /// when the model has no allocation there (the caller falls back).
+    ///
+    /// With a rotor `stopped` (its ESC says so) the three rotors left fly
+    /// it (`TiltedBody::commands_without`): the heading let go, the body
+    /// spinning up on the pair's unopposed drag torque, of the levelling
+    /// torque the part the three can give (about the pair's own diagonal,
+    /// only the partner's push and the spin; what that leaves undone:
+    /// docs/faults.md, the stopped rotor in flight).
+    #[allow(clippy::too_many_arguments)] // the descent's inputs, each a number
     pub fn command(
         &mut self,
         body: &TiltedBody,
@@ -76,6 +93,7 @@ impl LevelDescent {
         dt: f64,
         bandwidth: f64,
         descent_speed: f64,
+        stopped: Option<StoppedRotor>,
     ) -> Option<Input> {
         // The horizontal velocity damped by leaning against it (FRD body,
         // NED world: nose up brakes forward, right wing down pushes right),
@@ -105,11 +123,43 @@ impl LevelDescent {
         let acceleration_down = gain * error + self.integral;
         let tilt_cosine = level_cosine(state).max(MIN_TILT_COSINE);
         let force_z = body.mass * (acceleration_down - body.gravity) / tilt_cosine;
-        let u = body.commands_for(force_z, &torque);
+        let allocate = |force_z: f64| match stopped {
+            Some(s) => body.commands_without(s.rotor, s.delivered, force_z, &torque),
+            None => body.commands_for(force_z, &torque),
+        };
+        let u = level_before_lift(allocate, force_z);
         u.iter()
             .all(|v| v.is_finite())
             .then(|| u.map(|v| v.clamp(0.0, 1.0)))
     }
+}
+
+/// Bisection steps of [`level_before_lift`]: the lift found to 2^-12 of
+/// what was asked.
+const DESATURATION_STEPS: usize = 12;
+
+/// The allocation `allocate` of the lift `force_z` (negative: up) and the
+/// torque it was built with, the lift cut where a rotor would have to
+/// give more than full thrust: a rotor clamped at full takes the torque
+/// away with it, and a robot that cannot hold level falls on its side
+/// however much lift it has (the usual mixer's desaturation). The lift
+/// kept is the largest fraction of `force_z` with no command past 1,
+/// found by bisection (the allocation is piecewise linear in the lift).
+fn level_before_lift(allocate: impl Fn(f64) -> Input, force_z: f64) -> Input {
+    let u = allocate(force_z);
+    if !u.iter().all(|v| v.is_finite()) || u.max() <= 1.0 {
+        return u;
+    }
+    let (mut fits, mut over) = (0.0, 1.0);
+    for _ in 0..DESATURATION_STEPS {
+        let k = 0.5 * (fits + over);
+        if allocate(k * force_z).max() <= 1.0 {
+            fits = k;
+        } else {
+            over = k;
+        }
+    }
+    allocate(fits * force_z)
 }
 
 #[cfg(test)]
@@ -127,7 +177,7 @@ mod tests {
         let mut x = State::zeros();
         x[idx::VZ] = 0.3;
         let u = LevelDescent::default()
-            .command(&b, &x, 0.01, 10.0, 0.3)
+            .command(&b, &x, 0.01, 10.0, 0.3, None)
             .unwrap();
         assert!((u - b.hover_trim()).norm() < 1e-12, "{u}");
     }
@@ -139,19 +189,19 @@ mod tests {
         x[idx::ROLL] = 0.2;
         x[idx::VZ] = 0.3;
         let u = LevelDescent::default()
-            .command(&b, &x, 0.01, 10.0, 0.3)
+            .command(&b, &x, 0.01, 10.0, 0.3, None)
             .unwrap();
         let torque = b.thrust_torque * u + b.first_moment.cross(&Vector3::new(0.0, 0.0, b.gravity));
         assert!(torque.x < -0.1, "rolled right, it rolls left: {torque}");
         x[idx::ROLL] = 0.0;
         x[idx::VZ] = 2.0;
         let fast = LevelDescent::default()
-            .command(&b, &x, 0.01, 10.0, 0.3)
+            .command(&b, &x, 0.01, 10.0, 0.3, None)
             .unwrap();
         assert!(fast.sum() > b.hover_trim().sum() + 0.1, "{fast}");
         x[idx::VZ] = -2.0;
         let climbing = LevelDescent::default()
-            .command(&b, &x, 0.01, 10.0, 0.3)
+            .command(&b, &x, 0.01, 10.0, 0.3, None)
             .unwrap();
         assert!(climbing.sum() < b.hover_trim().sum() - 0.1, "{climbing}");
         assert!(climbing.iter().all(|v| (0.0..=1.0).contains(v)));
@@ -163,7 +213,7 @@ mod tests {
         let gravity_torque = b.first_moment.cross(&Vector3::new(0.0, 0.0, b.gravity));
         let torque = |x: &State| {
             let u = LevelDescent::default()
-                .command(&b, x, 0.01, 10.0, 0.3)
+                .command(&b, x, 0.01, 10.0, 0.3, None)
                 .unwrap();
             b.thrust_torque * u + gravity_torque
         };
@@ -193,14 +243,39 @@ mod tests {
         let b = body();
         let x = State::zeros();
         let mut descent = LevelDescent::default();
-        let first = descent.command(&b, &x, 0.01, 10.0, 0.3).unwrap().sum();
+        let first = descent
+            .command(&b, &x, 0.01, 10.0, 0.3, None)
+            .unwrap()
+            .sum();
         let mut last = first;
         for _ in 0..2000 {
-            last = descent.command(&b, &x, 0.01, 10.0, 0.3).unwrap().sum();
+            last = descent
+                .command(&b, &x, 0.01, 10.0, 0.3, None)
+                .unwrap()
+                .sum();
         }
         assert!(last < first - 0.1, "{first} -> {last}");
         assert!((descent.integral - 0.5 * b.gravity).abs() < 1e-9);
         descent.reset();
         assert_eq!(descent, LevelDescent::default());
+    }
+    #[test]
+    fn asked_more_lift_than_the_rotors_have_it_keeps_the_torque_and_cuts_the_lift() {
+        // Rolled and falling fast: the lift wanted is past full thrust.
+        // Clamping each rotor at full would leave no roll torque; the cut
+        // lift leaves the asked torque exactly.
+        let b = body();
+        let mut x = State::zeros();
+        x[idx::ROLL] = 0.2;
+        x[idx::VZ] = 5.0;
+        let u = LevelDescent::default()
+            .command(&b, &x, 0.01, 10.0, 0.3, None)
+            .unwrap();
+        let gravity_torque = b.first_moment.cross(&Vector3::new(0.0, 0.0, b.gravity));
+        let torque = b.thrust_torque * u + gravity_torque;
+        let asked = b.inertia * Vector3::new(-100.0 * 0.2, 0.0, 0.0);
+        assert!((torque - asked).norm() < 1e-3, "{torque} {asked}");
+        assert!((u.max() - 1.0).abs() < 1e-3, "{u}");
+        assert!(u.sum() > b.hover_trim().sum(), "{u}");
     }
 }

@@ -125,6 +125,8 @@ pub struct FlightStack {
     /// The failed rotor and what it delivers (`last_thrust` and the MPC's
     /// plan are in delivered thrust; the commands sent are over it).
     rotor: RotorEstimate,
+    /// This tick's ESC speeds, if valid (`StepInputs::rotor_speeds`).
+    rotor_speeds: Option<[f64; 4]>,
     /// The backup controller's memory (`backup_control`).
     backup: LevelDescent,
     /// Who flies the thrusters in failsafe this tick.
@@ -242,7 +244,9 @@ impl FlightStack {
                 settings.monitor,
                 settings.observer.max_torque,
                 lim.tilt_max(),
+                robot.rotor.time_constant,
             ),
+            rotor_speeds: None,
             encoder_tilt: 0.0,
             tilt_sent: 0.0,
             rotor: RotorEstimate::default(),
@@ -347,6 +351,7 @@ impl FlightStack {
             estimate_fresh,
             &state,
             height,
+            inputs.rotor_speeds,
         );
         self.track_rotor(detected);
         self.last_tilt = self.monitor.tilt(self.encoder_tilt);

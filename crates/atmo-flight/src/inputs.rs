@@ -110,6 +110,8 @@ pub struct InputLatch {
     settings: InputSettings,
     estimate: Option<Estimate>,
     autopilot_estimate: Option<Estimate>,
+    /// The newest ESC speeds and when they arrived (tick clock).
+    rotor_speeds: Option<([f64; 4], u64)>,
     pilot: PilotInput,
     pilot_received_ns: Option<u64>,
     radio: RadioLatch,
@@ -153,6 +155,7 @@ impl InputLatch {
             settings,
             estimate: None,
             autopilot_estimate: None,
+            rotor_speeds: None,
             pilot: PilotInput::default(),
             pilot_received_ns: None,
             radio: RadioLatch {
@@ -216,6 +219,14 @@ impl InputLatch {
     /// A drive command arrived.
     pub fn drive(&mut self, drive: DriveCommand) {
         self.drive = Some(drive);
+    }
+
+    /// The rotors' speeds arrived at `received_ns` (their ESCs', each a
+    /// fraction of its speed at full command). Flown on while no older
+    /// than the estimate timeout: a stopped rotor is told by its speed
+    /// within ticks, a silent ESC telemetry must not look like one.
+    pub fn rotor_speeds(&mut self, speeds: [f64; 4], received_ns: u64) {
+        self.rotor_speeds = Some((speeds, received_ns));
     }
 
     /// A tilt encoder reading arrived (counts, continuous).
@@ -301,6 +312,12 @@ impl InputLatch {
                 },
                 rehome_tilt: !pilot_stale && self.radio.rehome_tilt,
                 autopilot_estimate: self.autopilot_estimate,
+                rotor_speeds: self
+                    .rotor_speeds
+                    .filter(|&(_, at)| {
+                        now_ns.saturating_sub(at) as f64 * 1e-9 <= self.settings.estimate_timeout
+                    })
+                    .map(|(speeds, _)| speeds),
             },
             pilot_stale,
             estimate_stale,

@@ -32,6 +32,8 @@
 //!   differences).
 //! - [`rc`]: the radio (PX4's `InputRc`) as a pilot source: channels,
 //!   ranges, switches, kill latch.
+//! - [`backup_control`]: the backup controller's level descent, on four
+//!   rotors or on the three left with one stopped.
 //! - [`telemetry`]: the tick's status as the `atmo_msgs/MpcStatus` message.
 //! - [`settings`], read from `config/flight.toml`.
 

@@ -96,6 +96,17 @@ impl RotorEstimate {
         }
     }
 
+    /// Rotor `rotor` is stopped (its ESC says so): out, delivering
+    /// nothing, whatever was learned of another.
+    pub fn stopped(&mut self, rotor: usize) {
+        if self.rotor != Some(rotor) || self.over || self.effectiveness > 0.0 {
+            *self = Self {
+                rotor: Some(rotor.min(3)),
+                ..Self::default()
+            };
+        }
+    }
+
     /// Forgets the fault (disarmed).
     pub fn reset(&mut self) {
         *self = Self::default();

@@ -69,6 +69,12 @@ pub struct StepInputs {
     /// stale (the backup controller's level descent): without the motion
     /// capture its horizontal position and velocity drift.
     pub autopilot_estimate: Option<Estimate>,
+    /// Each rotor's speed as its ESC reports it (PX4's `esc_status`), as a
+    /// fraction of its speed at full command (the thrust goes with its
+    /// square); `None`: no report young enough (no ESC telemetry, or older
+    /// than the estimate timeout). The actuator monitor tells a stopped
+    /// rotor by it within a few ticks.
+    pub rotor_speeds: Option<[f64; 4]>,
 }
 
 /// Inputs rejected so far, by kind.
@@ -83,6 +89,9 @@ pub struct RejectCounters {
     /// Ground planes: a non-finite height, or a normal that is not finite,
     /// shorter than 1e-6 or steeper than 35 deg (the last good plane holds).
     pub ground: u64,
+    /// ESC speed reports with a speed not finite or outside [0, 2] of full
+    /// (the tick flies without speeds).
+    pub rotor_speeds: u64,
 }
 
 /// The status record of one tick (fixed size, copied into logs).

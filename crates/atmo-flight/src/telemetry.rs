@@ -40,6 +40,8 @@ pub fn inputs_message(tick: u64, inputs: &StepInputs, cuts: &SolverCuts) -> Tick
         autopilot_estimate: inputs
             .autopilot_estimate
             .map_or([0.0; 12], |e| MpcStatus::array(&e.state)),
+        has_rotor_speeds: inputs.rotor_speeds.is_some(),
+        rotor_speeds: inputs.rotor_speeds.unwrap_or([0.0; 4]),
     }
 }
 
@@ -76,6 +78,7 @@ pub fn inputs_from_message(m: &TickInputs) -> StepInputs {
             stamp_ns: m.autopilot_estimate_received_ns,
             state: State::from_column_slice(&m.autopilot_estimate),
         }),
+        rotor_speeds: m.has_rotor_speeds.then_some(m.rotor_speeds),
     }
 }
 

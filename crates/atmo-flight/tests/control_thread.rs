@@ -45,6 +45,7 @@ fn ticks_on_its_own_thread_and_drops_instead_of_blocking() {
             tilt_lever: 0.0,
             rehome_tilt: false,
             autopilot_estimate: None,
+            rotor_speeds: None,
         })
         .unwrap();
     // Let it run without reading: the channel fills and reports are dropped.

@@ -102,6 +102,7 @@ impl Loop {
                 stamp_ns: self.now_ns,
                 state: self.x,
             }),
+            rotor_speeds: None,
         }
     }
 

@@ -12,7 +12,8 @@ use crate::step_io::{PilotInput, Status};
 pub(super) enum FailsafeControl {
     /// The MPC, holding position (or the rotor-out descent).
     Mpc,
-    /// The backup controller's level descent (`backup_control`).
+    /// The backup controller's level descent (`backup_control`), on three
+    /// rotors with one its ESC reports stopped.
     Backup,
     /// The same descent on the autopilot's own estimate: the estimate is
     /// stale, the autopilot's is not (`StepInputs::autopilot_estimate`).
@@ -41,9 +42,14 @@ impl FlightStack {
     /// Who would fly a failsafe now: without an estimate, the backup
     /// controller on the autopilot's if that one is fresh, else the
     /// open-loop trim; with one, the MPC switched off or failed past its
-    /// grace (`mpc_failed`), the backup controller (`backup_control`; with
-    /// a zero bandwidth the failed MPC's held command, or switched off the
-    /// open-loop trim, as logs written before the key flew); else the MPC.
+    /// grace (`mpc_failed`) or a rotor its ESC reports stopped, the backup
+    /// controller (`backup_control`; with a zero bandwidth the failed MPC's
+    /// held command, or switched off the open-loop trim, as logs written
+    /// before the key flew); else the MPC. A stopped rotor leaves three,
+    /// which cannot hold the heading, the lift and level together: the
+    /// backup lets the heading go and flies the spin that follows, which
+    /// the MPC's model, linearised about a hover that does not spin, does
+    /// not (decisions/2026-12-07-stopped-rotor-bound.md).
     pub(super) fn failsafe_control(
         &self,
         estimate_fresh: bool,
@@ -60,7 +66,7 @@ impl FlightStack {
             }
         } else if switched_off && !backup {
             FailsafeControl::OpenLoop
-        } else if mpc_failed && backup {
+        } else if (mpc_failed || self.monitor.stopped_rotor().is_some()) && backup {
             FailsafeControl::Backup
         } else {
             FailsafeControl::Mpc
@@ -114,10 +120,15 @@ impl FlightStack {
             .model
             .at_tilt(tilt)
             .with_disturbance(self.observer.wrench());
-        let speed = self.settings.failsafe.backup_descent_speed;
+        let stopped = self.stopped_rotor();
+        let speed = if stopped.is_some() {
+            self.settings.monitor.rotor_out_descent_speed
+        } else {
+            self.settings.failsafe.backup_descent_speed
+        };
         let dt = self.period();
         self.backup
-            .command(&body, &flown, dt, bandwidth, speed)
+            .command(&body, &flown, dt, bandwidth, speed, stopped)
             .unwrap_or(planned)
     }
 }

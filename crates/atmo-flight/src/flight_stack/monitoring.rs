@@ -6,8 +6,14 @@ use atmo_mpc::{YawCost, wheel_clearance};
 
 use super::FlightStack;
 use crate::actuator_monitor::{Detected, MonitorInputs};
+use crate::backup_control::StoppedRotor;
 use crate::modes::{Mode, Thresholds};
 use crate::rotor_estimate::RotorEstimate;
+
+/// The fastest rotor speed an ESC may report, as a fraction of the speed at
+/// full command (a rotor unloaded, or over-driven, may spin past it; no
+/// rotor spins at twice it).
+const MAX_ROTOR_SPEED: f64 = 2.0;
 
 impl FlightStack {
     /// Runs the actuator monitor on this tick's signals (the mode is the
@@ -19,7 +25,19 @@ impl FlightStack {
         estimate_fresh: bool,
         state: &State,
         height: f64,
+        rotor_speeds: Option<[f64; 4]>,
     ) -> Detected {
+        // A speed that is not a finite fraction of full is no reading (the
+        // tick's whole report goes, counted).
+        self.rotor_speeds = rotor_speeds.filter(|speeds| {
+            let valid = speeds
+                .iter()
+                .all(|v| v.is_finite() && (0.0..=MAX_ROTOR_SPEED).contains(v));
+            if !valid {
+                self.rejected.rotor_speeds += 1;
+            }
+            valid
+        });
         // The wheels' clearance matters only near the ground; the body at a
         // tilt costs a model evaluation.
         let clearance = if height <= self.thresholds.takeoff_height {
@@ -42,6 +60,8 @@ impl FlightStack {
             estimate_fresh,
             wheel_clearance: clearance,
             vertical_speed: state[idx::VZ],
+            rotor_commands: self.rotor_commands(&self.last_thrust),
+            rotor_speeds: self.rotor_speeds,
         })
     }
 }
@@ -53,6 +73,9 @@ impl FlightStack {
     pub(super) fn track_rotor(&mut self, detected: Detected) {
         if !detected.rotor_failed() {
             self.rotor.reset();
+        } else if let Some(stopped) = self.monitor.stopped_rotor() {
+            // Its ESC names it, whatever the torque said before.
+            self.rotor.stopped(stopped);
         } else if self.rotor.rotor().is_none() {
             let body = self.model.at_tilt(self.last_tilt);
             let (rotor, stuck) = RotorEstimate::name_rotor(&body, &self.observer.wrench());
@@ -74,6 +97,14 @@ impl FlightStack {
             self.settings.monitor.rotor_out_effectiveness,
         );
         self.observer.take(&explained);
+    }
+
+    /// The rotor its ESC reports stopped and the thrust it still gives
+    /// (its speed squared; nothing while its speed is not reported).
+    pub(super) fn stopped_rotor(&self) -> Option<StoppedRotor> {
+        let rotor = self.monitor.stopped_rotor()?;
+        let delivered = self.rotor_speeds.map_or(0.0, |s| s[rotor] * s[rotor]);
+        Some(StoppedRotor { rotor, delivered })
     }
 
     /// A failed rotor delivers too little to fly the wheel landing on.

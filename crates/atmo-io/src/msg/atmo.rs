@@ -208,6 +208,10 @@ pub struct TickInputs {
     pub autopilot_estimate_received_ns: u64,
     /// The autopilot's estimate, 12-state order.
     pub autopilot_estimate: [f64; 12],
+    /// Whether the tick had the rotors' ESC speeds.
+    pub has_rotor_speeds: bool,
+    /// Each rotor's speed, a fraction of its speed at full command.
+    pub rotor_speeds: [f64; 4],
 }
 
 /// The fields of `TickInputs` in wire order (its .msg definition's, checked
@@ -237,6 +241,8 @@ pub(super) const TICK_INPUTS_FIELDS: &[&str] = &[
     "has_autopilot_estimate",
     "autopilot_estimate_received_ns",
     "autopilot_estimate",
+    "has_rotor_speeds",
+    "rotor_speeds",
 ];
 
 impl<'de> Deserialize<'de> for TickInputs {
@@ -289,6 +295,8 @@ impl<'de> serde::de::Visitor<'de> for TickInputsVisitor {
             has_autopilot_estimate: false,
             autopilot_estimate_received_ns: 0,
             autopilot_estimate: [0.0; 12],
+            has_rotor_speeds: false,
+            rotor_speeds: [0.0; 4],
         };
         // A log before the ground normal ends here: the payload is used up,
         // reading on fails, and the message is the old one (level ground).
@@ -310,6 +318,11 @@ impl<'de> serde::de::Visitor<'de> for TickInputsVisitor {
                         m.autopilot_estimate_received_ns =
                             next(&mut seq, "autopilot_estimate_received_ns")?;
                         m.autopilot_estimate = next(&mut seq, "autopilot_estimate")?;
+                        // And a log before the ESC speeds after it.
+                        if let Ok(Some(has)) = seq.next_element::<bool>() {
+                            m.has_rotor_speeds = has;
+                            m.rotor_speeds = next(&mut seq, "rotor_speeds")?;
+                        }
                     }
                 }
             }

@@ -652,6 +652,18 @@ fn tick_inputs_and_sim_truth_layouts() {
     }
     body.extend(18_000_000u64.to_le_bytes());
     body.extend(f64s(&m.autopilot_estimate));
+    // A log written before the ESC speeds ends here: none.
+    let mut before_speeds = CDR_LE_HEADER.to_vec();
+    before_speeds.extend(&body);
+    let decoded: TickInputs = decode("/before-speeds", &before_speeds).unwrap();
+    assert_eq!(decoded, m);
+    m.has_rotor_speeds = true;
+    m.rotor_speeds = [0.5, 0.0, 0.75, 1.0];
+    body.push(1);
+    while body.len() % 8 != 0 {
+        body.push(0);
+    }
+    body.extend(f64s(&m.rotor_speeds));
     round_trip(&m, &body);
     // A payload cut inside the normal is refused, not read as an old one.
     let mut cut = CDR_LE_HEADER.to_vec();

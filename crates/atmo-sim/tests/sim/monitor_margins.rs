@@ -24,6 +24,9 @@ struct Run {
     force: f64,
     /// Largest commanded tilt travel without 0.5 deg of tilt movement, deg.
     travel: f64,
+    /// Smallest fraction of its command a rotor's thrust followed between
+    /// two speed reports (the stopped-rotor detector's signal), flying.
+    followed: f64,
     /// What was detected, and the first detection.
     detected: u8,
     first: String,
@@ -39,14 +42,34 @@ fn fly_one(seed: u64, controller: &ControllerConfig) -> Run {
         torque: 0.0,
         force: 0.0,
         travel: 0.0,
+        followed: f64::INFINITY,
         detected: 0,
         first: String::new(),
         landed: false,
     };
     let (mut anchor, mut travel) = (0.0f64, 0.0f64);
     let mut previous: Option<(f64, f64)> = None;
+    let tau = controller.robot.rotor.time_constant;
+    // The last tick's time, speeds and commands sent.
+    let mut last_report: Option<(f64, [f64; 4], [f64; 4])> = None;
     let summary = fly(&flown, controller, |r| {
         let s = &r.outputs.status;
+        if let (Some((t, before, sent)), Some(now)) = (last_report, r.inputs.rotor_speeds)
+            && matches!(
+                s.mode,
+                Mode::Flight | Mode::Morphing | Mode::Transition | Mode::Failsafe
+            )
+        {
+            let follow = 1.0 - (-(r.time - t) / tau).exp();
+            for k in (0..4).filter(|&k| sent[k] >= 0.05) {
+                let (t0, t1) = (before[k] * before[k], now[k] * now[k]);
+                run.followed = run.followed.min((t0 + (t1 - t0) / follow) / sent[k]);
+            }
+        }
+        last_report = r
+            .inputs
+            .rotor_speeds
+            .map(|speeds| (r.time, speeds, r.outputs.thrust));
         if matches!(s.mode, Mode::Flight | Mode::Morphing | Mode::Transition) {
             run.torque = run
                 .torque
@@ -129,6 +152,19 @@ fn monitor_margins() {
         largest(|r| r.force),
         percentile(|r| r.force, 99),
         largest(|r| r.travel)
+    );
+    let smallest = runs
+        .iter()
+        .map(|r| r.followed)
+        .fold(f64::INFINITY, f64::min);
+    println!(
+        "a rotor's thrust followed at least {smallest:.3} of its command (stopped under {}; p1 of the runs' smallest {:.3})",
+        controller.flight.monitor.rotor_stopped_ratio,
+        {
+            let mut v: Vec<f64> = runs.iter().map(|r| r.followed).collect();
+            v.sort_by(f64::total_cmp);
+            v[n / 100]
+        }
     );
     for r in runs.iter().filter(|r| r.detected != 0 || !r.landed) {
         println!(
