@@ -47,6 +47,7 @@ use atmo_io::ros2::{Ros2Config, Ros2Inputs, Ros2Publisher};
 use atmo_flight::arming::{ArmingMonitor, ArmingObservation, ArmingSettings};
 use atmo_flight::control_loop::{TickIo, TickTiming};
 use atmo_flight::error::{FlightError, Result};
+use atmo_flight::esc::EscConfig;
 use atmo_flight::flight_log::TickChannels;
 use atmo_flight::flight_stack::{Estimate, StepInputs, StepOutputs};
 use atmo_flight::inputs::{DriveCommand, InputLatch, InputSettings};
@@ -87,11 +88,21 @@ atmo_core::params! {
         pub drivers: DriverPortsConfig = DriverPortsConfig::default();
         /// The radio's mapping (used when `ros2.topics.rc` is enabled).
         pub rc: RcConfig = RcConfig::default();
+        /// The ESCs' speeds' scale (used when `ros2.topics.esc_status` is
+        /// enabled).
+        pub esc: EscConfig = EscConfig::default();
         /// The arming checks' rates, windows and tolerances.
         pub arming: ArmingSettings = ArmingSettings::default();
     }
     check |daemon, c, _prefix| {
         let topics = &daemon.ros2.topics;
+        if topics.esc_status.enabled && daemon.esc.full_speed_rpm <= 0.0 {
+            return Err(c.fail(
+                "esc.full_speed_rpm",
+                "the rotors' RPM at full command while ros2.topics.esc_status is enabled",
+                daemon.esc.full_speed_rpm,
+            ));
+        }
         if topics.rc.enabled && topics.pilot.enabled {
             return Err(c.fail(
                 "ros2.topics.pilot.enabled",
@@ -202,6 +213,8 @@ pub struct OnboardShared {
     /// Radio frames the mapping refused (a mapped channel missing or no
     /// servo pulse).
     pub rc_rejected: AtomicU64,
+    /// ESC reports that gave no speeds (a rotor's ESC missing or offline).
+    pub esc_rejected: AtomicU64,
     /// Ticks with no estimate fresh enough to fly on (age > timeout).
     pub estimates_stale_ticks: AtomicU64,
     /// Ticks on the configured ground height because the ground topic had
@@ -229,6 +242,8 @@ pub struct OnboardSettings {
     pub estimate_timeout: f64,
     /// The radio's mapping, when it is the pilot source.
     pub rc: Option<RcConfig>,
+    /// The ESCs' speeds' scale, when their telemetry is an input.
+    pub esc: Option<EscConfig>,
     pub arming: ArmingSettings,
     /// The configuration check's verdict ([`DaemonConfig::flight_problem`]
     /// is `None`).
@@ -257,6 +272,7 @@ impl OnboardSettings {
             px4_offboard: config.px4_offboard,
             estimate_timeout,
             rc: config.ros2.topics.rc.enabled.then_some(config.rc),
+            esc: config.ros2.topics.esc_status.enabled.then_some(config.esc),
             arming: config.arming,
             configuration_ok: config.flight_problem().is_none(),
         }
@@ -277,6 +293,8 @@ pub struct OnboardIo {
     latch: InputLatch,
     /// The radio's mapping, when it is the pilot source.
     rc: Option<RcPilot>,
+    /// The ESCs' speeds' scale, when their telemetry is an input.
+    esc: Option<EscConfig>,
     arming: ArmingMonitor,
     /// The last tick's measured tilt (if an encoder reading had arrived)
     /// and commanded tilt velocity, for the arming checks.
@@ -319,6 +337,7 @@ impl OnboardIo {
             started: Instant::now(),
             latch: InputLatch::new(settings.inputs()),
             rc: settings.rc.map(RcPilot::new),
+            esc: settings.esc,
             arming: ArmingMonitor::new(settings.arming, settings.configuration_ok),
             last_tilt: (None, 0.0),
             health: None,
@@ -381,6 +400,19 @@ impl TickIo for OnboardIo {
                 }
                 Err(_) => {
                     self.shared.rc_rejected.fetch_add(1, Ordering::Relaxed);
+                }
+            }
+        }
+        if let Some(frame) = self.ros_in.latest_esc()
+            && let Some(esc) = &self.esc
+        {
+            match esc.rotor_speeds(&frame.status) {
+                Ok(speeds) => {
+                    let received = stamp_on_tick_clock(deadline_ns, frame.received);
+                    self.latch.rotor_speeds(speeds, received);
+                }
+                Err(_) => {
+                    self.shared.esc_rejected.fetch_add(1, Ordering::Relaxed);
                 }
             }
         }

@@ -86,6 +86,7 @@ fn onboard_tick_io_allocates_nothing_of_its_own() {
         px4_offboard: true, // exercise every output
         estimate_timeout: 0.05,
         rc: None,
+        esc: None,
         arming: atmo_flight::arming::ArmingSettings::default(),
         configuration_ok: true,
     };

@@ -34,6 +34,7 @@
 //!   ranges, switches, kill latch.
 //! - [`backup_control`]: the backup controller's level descent, on four
 //!   rotors or on the three left with one stopped.
+//! - [`esc`]: the ESCs' telemetry (PX4's `EscStatus`) as the rotors' speeds.
 //! - [`telemetry`]: the tick's status as the `atmo_msgs/MpcStatus` message.
 //! - [`settings`], read from `config/flight.toml`.
 
@@ -42,6 +43,7 @@ pub mod arming;
 pub mod backup_control;
 pub mod control_loop;
 pub mod error;
+pub mod esc;
 pub mod flare;
 pub mod flight_log;
 pub mod flight_stack;

@@ -300,6 +300,12 @@ atmo_core::params! {
         pub autopilot_vz_error_std: f64 = 0.0, range 0.0..=2.0, unit "m/s";
         /// The correlation time of that error.
         pub autopilot_vz_error_time: f64 = 1.0, range 0.01..=1000.0, unit "s";
+        /// The ESCs' speed reports (what PX4's `esc_status` carries): each
+        /// rotor's speed (the square root of its thrust state, a fraction
+        /// of full) plus white noise of this standard deviation, one draw a
+        /// control tick; 0: exact. Drawn by the simulator's I/O
+        /// (`atmo_sim::sim_io`), not by the plant's step.
+        pub rotor_speed_std: f64 = 0.0, range 0.0..=0.5;
     }
 }
 

@@ -13,6 +13,8 @@ pub mod stream {
     pub const WIND: u64 = 2;
     pub const SENSORS: u64 = 3;
     pub const AUTOPILOT_ESTIMATE: u64 = 4;
+    /// The ESCs' speed reports (drawn by atmo-sim's I/O, not the step).
+    pub const ROTOR_SPEEDS: u64 = 5;
 }
 
 /// The random stream `id` of `seed`.

@@ -325,7 +325,17 @@ fn fly_until(
     };
     let io = SimIo::new(inputs, *plant.plane())
         .with_faults(&scenario.file.faults)
-        .with_autopilot_estimate(scenario.file.autopilot_estimate);
+        .with_autopilot_estimate(scenario.file.autopilot_estimate)
+        .with_rotor_speed_noise(
+            scenario
+                .plant
+                .effects
+                .sensors
+                .as_ref()
+                .filter(|s| s.enabled)
+                .map_or(0.0, |s| s.rotor_speed_std),
+            scenario.file.seed,
+        );
     let mut control = SimControl::new(tick_period(stack.period()), io);
     control.io.sense(&plant, scenario);
     on_plant(&truth_of(&plant));

@@ -75,7 +75,14 @@ pub fn run(args: ServeArgs) -> Result<()> {
         .ros2
         .validate(Path::new("--estimate-topic/--pilot-topic"))
         .context("serve's topics")?;
+    let esc = daemon
+        .ros2
+        .topics
+        .esc_status
+        .enabled
+        .then_some(daemon.esc.full_speed_rpm);
     let mut options = ServeOptions::new(daemon.ros2, daemon.drivers);
+    options.esc_full_speed_rpm = esc;
     options.start_timeout = std::time::Duration::from_secs_f64(args.start_timeout.max(0.0));
     // The boards' logs are written while the flight runs and kept whatever
     // its outcome, so the folder is added to, not staged whole.

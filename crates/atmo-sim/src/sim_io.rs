@@ -40,7 +40,9 @@ use atmo_flight::inputs::{InputLatch, InputSettings};
 use atmo_flight::rc::{RcConfig, RcReading};
 use atmo_flight::{Estimate, FlightStack, PilotInput, StepInputs, StepOutputs};
 use atmo_plant::contact::Plane;
+use atmo_plant::noise;
 use atmo_plant::plant::{Command, Plant};
+use rand_chacha::ChaCha8Rng;
 
 use atmo_io::stamp_order::StampOrder;
 use atmo_mpc::SolverCuts;
@@ -134,6 +136,10 @@ pub struct SimIo {
     faults: FaultInjector,
     actuators: ActuatorInjector,
     estimate_order: StampOrder,
+    /// The rotors' true speeds at the last plant step (a fraction of full).
+    rotor_speeds: [f64; 4],
+    /// The ESCs' speed noise, a fraction of full, and its random stream.
+    rotor_speed_noise: Option<(f64, ChaCha8Rng)>,
 }
 
 /// The simulated I/O's counters after a tick (what the onboard daemon
@@ -168,7 +174,19 @@ impl SimIo {
             faults: FaultInjector::new(&FaultsConfig::default()),
             actuators: ActuatorInjector::default(),
             estimate_order: StampOrder::default(),
+            rotor_speeds: [0.0; 4],
+            rotor_speed_noise: None,
         }
+    }
+
+    /// The ESCs' speed reports get white noise of `std` (a fraction of
+    /// full speed; `[effects.sensors] rotor_speed_std`), drawn from the
+    /// scenario `seed`'s own stream, one draw a rotor a tick.
+    #[must_use]
+    pub fn with_rotor_speed_noise(mut self, std: f64, seed: u64) -> Self {
+        self.rotor_speed_noise =
+            (std > 0.0).then(|| (std, noise::rng(seed, noise::stream::ROTOR_SPEEDS)));
+        self
     }
 
     /// Injects the scenario's `[faults]` (validated with the scenario).
@@ -262,8 +280,7 @@ impl SimIo {
         // The ESCs' speeds: each rotor's thrust after the motor's lag (and
         // any fault on it) goes with its speed squared.
         let speeds = plant.thrust().map(|t| t.max(0.0).sqrt());
-        self.latch
-            .rotor_speeds([speeds[0], speeds[1], speeds[2], speeds[3]], self.now_ns);
+        self.rotor_speeds = [speeds[0], speeds[1], speeds[2], speeds[3]];
     }
 
     /// The command the last tick left for the plant (held until the next).
@@ -316,6 +333,15 @@ impl TickIo for SimIo {
                 self.latch.pilot(p.value, at);
             }
         }
+        // The ESCs report through PX4, not the drivers: heard whatever the
+        // drivers do.
+        let mut speeds = self.rotor_speeds;
+        if let Some((std, rng)) = &mut self.rotor_speed_noise {
+            for s in &mut speeds {
+                *s = (*s + *std * noise::normal(rng)).max(0.0);
+            }
+        }
+        self.latch.rotor_speeds(speeds, deadline_ns);
         Some(self.latch.assemble(deadline_ns).inputs)
     }
 

@@ -52,6 +52,10 @@ pub struct ServeOptions {
     /// Fly the tilt and the wheels through `atmo-roboclaw` processes and
     /// simulated boards on pseudo-terminals instead of playing their drivers.
     pub boards: Option<BoardFiles>,
+    /// The rotors' RPM at full command (the daemon's `[esc]`), when
+    /// `topics.esc_status` is enabled: the server publishes each rotor's
+    /// speed at the sensor rate.
+    pub esc_full_speed_rpm: Option<f64>,
 }
 
 impl ServeOptions {
@@ -63,6 +67,7 @@ impl ServeOptions {
             sensor_rate_hz: 200.0,
             heartbeat_rate_hz: 50.0,
             boards: None,
+            esc_full_speed_rpm: None,
         }
     }
 }
@@ -139,6 +144,8 @@ struct Links {
     /// The tilt and wheel drivers are real processes (no tilt encoder and
     /// no heartbeat of theirs from the server).
     boards: bool,
+    /// The rotors' RPM at full command, when the ESCs are played.
+    esc_full_speed_rpm: Option<f64>,
 }
 
 impl Links {
@@ -177,6 +184,16 @@ impl Links {
             }
             let ok = self.drivers.publish_ground_contact(plant.contact_signal());
             self.count(ok);
+            if let Some(full) = self.esc_full_speed_rpm {
+                // Each rotor's speed goes with the square root of its thrust.
+                let rpm = plant
+                    .thrust()
+                    .map(|t| (t.max(0.0).sqrt() * full).round() as i32);
+                let ok = self
+                    .ros_out
+                    .try_publish_rotor_rpm([rpm[0], rpm[1], rpm[2], rpm[3]]);
+                self.count(ok);
+            }
         }
         if self.heartbeats.due(now) {
             for driver in DriverId::ALL {
@@ -286,6 +303,7 @@ pub fn serve(
         last_status: None,
         last_estimate: None,
         boards: options.boards.is_some(),
+        esc_full_speed_rpm: options.esc_full_speed_rpm,
     };
     let mut boards = match &options.boards {
         Some(files) => Some(SimBoards::start(files, &options.drivers)?),

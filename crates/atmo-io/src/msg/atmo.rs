@@ -408,8 +408,8 @@ pub struct MpcStatus {
     pub io: IoHealth,
     /// What the flight stack's actuator monitor has detected, bits (1:
     /// tilt encoder stuck, 2: tilt not where believed, 4: a rotor failed,
-    /// 8: contact inferred; 0: nothing). Logs written before it decode
-    /// with 0.
+    /// 8: contact inferred, 16: a rotor stopped by its ESC's speed; 0:
+    /// nothing). Logs written before it decode with 0.
     pub actuator_faults: u8,
 }
 

@@ -78,6 +78,14 @@ const DEFINITIONS: &[(&str, &str)] = &[
         include_str!("../../msg/px4_msgs/InputRc.msg"),
     ),
     (
+        "px4_msgs/EscReport",
+        include_str!("../../msg/px4_msgs/EscReport.msg"),
+    ),
+    (
+        "px4_msgs/EscStatus",
+        include_str!("../../msg/px4_msgs/EscStatus.msg"),
+    ),
+    (
         "px4_msgs/ActuatorMotors",
         include_str!("../../msg/px4_msgs/ActuatorMotors.msg"),
     ),

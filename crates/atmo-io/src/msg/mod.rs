@@ -28,7 +28,9 @@ pub use atmo::{
 };
 pub use definitions::{definition, schema_text};
 pub use label::Label;
-pub use px4::{ActuatorMotors, InputRc, OffboardControlMode, VehicleOdometry};
+pub use px4::{
+    ActuatorMotors, EscReport, EscStatus, InputRc, OffboardControlMode, VehicleOdometry,
+};
 pub use standard::{
     Clock, DiagnosticArray, DiagnosticStatus, Header, KeyValue, Odometry, Point, PointStamped,
     Pose, PoseWithCovariance, Quaternion, Time, Twist, TwistWithCovariance, Vector3,

@@ -137,3 +137,61 @@ impl InputRc {
 impl RosMessage for InputRc {
     const TYPE_NAME: &'static str = "px4_msgs/msg/InputRc";
 }
+
+/// `px4_msgs/msg/EscReport`: one ESC's telemetry, as in PX4's `EscStatus`.
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+pub struct EscReport {
+    /// us since PX4 boot.
+    pub timestamp: u64,
+    pub esc_errorcount: u32,
+    /// Motor speed, RPM (negative: reverse rotation).
+    pub esc_rpm: i32,
+    /// V.
+    pub esc_voltage: f32,
+    /// A.
+    pub esc_current: f32,
+    /// deg C.
+    pub esc_temperature: f32,
+    pub esc_address: u8,
+    pub esc_cmdcount: u8,
+    pub esc_state: u8,
+    /// The output function the ESC drives (PX4's Motor1 = 101, Motor2 =
+    /// 102, ...); 0: not set.
+    pub actuator_function: u8,
+    /// Bits of the ESC's own failures (over current, motor stuck, ...).
+    pub failures: u16,
+    /// Applied power, 0-100 %.
+    pub esc_power: i8,
+}
+
+/// `px4_msgs/msg/EscStatus`: the ESCs' telemetry as PX4 publishes it
+/// (`/fmu/out/esc_status` over uXRCE-DDS).
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+pub struct EscStatus {
+    /// us since PX4 boot.
+    pub timestamp: u64,
+    /// Incremented by PX4 at each new report.
+    pub counter: u16,
+    /// ESCs connected (the first `esc_count` of `esc`).
+    pub esc_count: u8,
+    pub esc_connectiontype: u8,
+    /// Bit i: ESC i is online.
+    pub esc_online_flags: u8,
+    /// Bit i: ESC i is armed.
+    pub esc_armed_flags: u8,
+    pub esc: [EscReport; 8],
+}
+
+impl EscStatus {
+    pub const CONNECTED_ESC_MAX: u8 = 8;
+    /// PX4's output function of motor 1 (`actuator_function`); motor k is
+    /// this plus k - 1.
+    pub const ACTUATOR_FUNCTION_MOTOR1: u8 = 101;
+}
+
+impl RosMessage for EscReport {
+    const TYPE_NAME: &'static str = "px4_msgs/msg/EscReport";
+}
+impl RosMessage for EscStatus {
+    const TYPE_NAME: &'static str = "px4_msgs/msg/EscStatus";
+}

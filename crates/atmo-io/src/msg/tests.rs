@@ -732,3 +732,61 @@ fn input_rc_layout() {
     schema_text(InputRc::TYPE_NAME).unwrap();
     type_hash(InputRc::TYPE_NAME).unwrap();
 }
+
+#[test]
+fn esc_status_layout() {
+    let mut status = EscStatus {
+        timestamp: 9,
+        counter: 300,
+        esc_count: 4,
+        esc_connectiontype: 5,
+        esc_online_flags: 0b1111,
+        esc_armed_flags: 0b1111,
+        ..EscStatus::default()
+    };
+    status.esc[1] = EscReport {
+        timestamp: 8,
+        esc_errorcount: 2,
+        esc_rpm: -12_000,
+        esc_voltage: 16.5,
+        esc_current: 3.25,
+        esc_temperature: 40.0,
+        esc_address: 2,
+        esc_cmdcount: 7,
+        esc_state: 1,
+        actuator_function: 102,
+        failures: 0b10_0000,
+        esc_power: -1,
+    };
+    let mut body = Vec::new();
+    body.extend(9u64.to_le_bytes());
+    body.extend(300u16.to_le_bytes());
+    body.extend([4, 5, 0b1111, 0b1111]);
+    body.extend([0; 2]); // to the first report's uint64
+    for (k, report) in status.esc.iter().enumerate() {
+        // Each report starts at a multiple of 8: 35 bytes and 5 of padding.
+        assert_eq!(body.len() % 8, 0, "report {k}");
+        body.extend(report.timestamp.to_le_bytes());
+        body.extend(report.esc_errorcount.to_le_bytes());
+        body.extend(report.esc_rpm.to_le_bytes());
+        body.extend(f32s(&[
+            report.esc_voltage,
+            report.esc_current,
+            report.esc_temperature,
+        ]));
+        body.extend([
+            report.esc_address,
+            report.esc_cmdcount,
+            report.esc_state,
+            report.actuator_function,
+        ]);
+        body.extend(report.failures.to_le_bytes());
+        body.extend(report.esc_power.to_le_bytes());
+        if k < 7 {
+            body.extend([0; 5]);
+        }
+    }
+    round_trip(&status, &body);
+    schema_text(EscStatus::TYPE_NAME).unwrap();
+    type_hash(EscStatus::TYPE_NAME).unwrap();
+}

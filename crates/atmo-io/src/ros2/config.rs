@@ -6,8 +6,9 @@ use atmo_core::config_file::{Checker, ConfigFile};
 
 use crate::error::{IoError, Result};
 use crate::msg::{
-    ActuatorMotors, Clock, DiagnosticArray, InputRc, MpcStatus, Odometry, OffboardControlMode,
-    PilotInput, PointStamped, RosMessage, Twist, Vector3Stamped, VehicleOdometry,
+    ActuatorMotors, Clock, DiagnosticArray, EscStatus, InputRc, MpcStatus, Odometry,
+    OffboardControlMode, PilotInput, PointStamped, RosMessage, Twist, Vector3Stamped,
+    VehicleOdometry,
 };
 
 fn topic(name: &str, type_name: &str) -> TopicConfig {
@@ -130,6 +131,13 @@ atmo_core::params! {
             enabled: false,
             ..topic("/fmu/out/input_rc", InputRc::TYPE_NAME)
         };
+        /// In: the ESCs' telemetry through PX4 (`px4_msgs/msg/EscStatus`,
+        /// each rotor's RPM); off unless enabled. The daemon's `[esc]`
+        /// table turns the RPM into the rotors' speeds.
+        pub esc_status: TopicConfig = TopicConfig {
+            enabled: false,
+            ..topic("/fmu/out/esc_status", EscStatus::TYPE_NAME)
+        };
         /// In: the autopilot's own estimate (`px4_msgs/msg/VehicleOdometry`
         /// from PX4's IMU and barometer) beside an `estimate` taken from
         /// elsewhere (the motion capture straight over ROS 2): what the
@@ -149,7 +157,7 @@ impl Topics {
     /// share a name; errors name `prefix.<role>.<key>`.
     fn check_roles(&self, c: &Checker<'_>, prefix: &str) -> atmo_core::Result<()> {
         let t = self;
-        let roles: [(&str, &TopicConfig, &[&str]); 12] = [
+        let roles: [(&str, &TopicConfig, &[&str]); 13] = [
             ("status", &t.status, &[MpcStatus::TYPE_NAME]),
             (
                 "estimate",
@@ -182,6 +190,7 @@ impl Topics {
             ),
             ("clock", &t.clock, &[Clock::TYPE_NAME]),
             ("rc", &t.rc, &[InputRc::TYPE_NAME]),
+            ("esc_status", &t.esc_status, &[EscStatus::TYPE_NAME]),
         ];
         let mut names: Vec<&str> = Vec::new();
         for (role, topic, types) in roles {

@@ -78,7 +78,7 @@ use atmo_core::model::State;
 
 use crate::error::{IoError, Result};
 use crate::msg::{
-    ActuatorMotors, DiagnosticArray, InputRc, MpcStatus, OffboardControlMode, PilotInput,
+    ActuatorMotors, DiagnosticArray, EscStatus, InputRc, MpcStatus, OffboardControlMode, PilotInput,
 };
 use dds::try_queue;
 
@@ -157,6 +157,16 @@ pub struct RcFrame {
     pub received: Instant,
 }
 
+/// An ESC report accepted from ROS 2 (`topics.esc_status`, PX4's
+/// `EscStatus`): at most 8 ESCs; the speeds as received (the daemon's
+/// `[esc]` reads them).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct EscFrame {
+    pub status: EscStatus,
+    /// When the node thread accepted it.
+    pub received: Instant,
+}
+
 /// ROS time as the node keeps it: the wall clock, or with `use_sim_time`
 /// the newest `/clock` (0 until one arrives, as ROS 2 does). Shared by the
 /// node thread (which writes `/clock`) and the control thread (which reads
@@ -208,6 +218,10 @@ pub struct Ros2Counters {
     pub rc_received: u64,
     /// RC frames with more than 18 channels.
     pub rc_rejected: u64,
+    /// ESC reports (`EscStatus`) that decoded, whatever their values.
+    pub esc_received: u64,
+    /// ESC reports with more than 8 ESCs.
+    pub esc_rejected: u64,
     /// Ground heights that decoded, whatever their values.
     pub ground_received: u64,
     /// Ground heights with a non-finite `point.z`.
@@ -245,6 +259,8 @@ struct Counters {
     pilot_rejected: AtomicU64,
     rc_received: AtomicU64,
     rc_rejected: AtomicU64,
+    esc_received: AtomicU64,
+    esc_rejected: AtomicU64,
     ground_received: AtomicU64,
     ground_rejected: AtomicU64,
     ground_normal_received: AtomicU64,
@@ -275,6 +291,8 @@ impl Counters {
             pilot_rejected: g(&self.pilot_rejected),
             rc_received: g(&self.rc_received),
             rc_rejected: g(&self.rc_rejected),
+            esc_received: g(&self.esc_received),
+            esc_rejected: g(&self.esc_rejected),
             ground_received: g(&self.ground_received),
             ground_rejected: g(&self.ground_rejected),
             ground_normal_received: g(&self.ground_normal_received),
@@ -342,6 +360,7 @@ pub struct Ros2Inputs {
     drive: Receiver<DriveCommand>,
     pilot: Receiver<PilotCommand>,
     rc: Receiver<RcFrame>,
+    esc: Receiver<EscFrame>,
     ground: Receiver<GroundHeight>,
     ground_normal: Receiver<GroundNormal>,
     clock: Arc<RosClock>,
@@ -373,6 +392,12 @@ impl Ros2Inputs {
     /// The newest RC frame accepted since the last call, if any. Never blocks.
     pub fn latest_rc(&mut self) -> Option<RcFrame> {
         self.rc.try_iter().last()
+    }
+
+    /// The newest ESC report accepted since the last call, if any. Never
+    /// blocks.
+    pub fn latest_esc(&mut self) -> Option<EscFrame> {
+        self.esc.try_iter().last()
     }
 
     /// The newest ground height accepted since the last call, if any.

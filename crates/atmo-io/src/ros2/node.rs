@@ -17,15 +17,15 @@ use super::dds::{
     reliable_qos, spawn_node_thread, stream_qos, subscription, take_burst,
 };
 use super::{
-    Counters, DriveCommand, GroundHeight, GroundNormal, Outgoing, PilotCommand, RcFrame,
+    Counters, DriveCommand, EscFrame, GroundHeight, GroundNormal, Outgoing, PilotCommand, RcFrame,
     Ros2Config, Ros2Inputs, Ros2Node, Ros2Publisher, Ros2StartOptions, Ros2Thread, RosClock,
     RosEstimate,
 };
 use crate::error::{IoError, Result};
 use crate::msg::frames::{odometry_to_state, vehicle_odometry_to_state};
 use crate::msg::{
-    ActuatorMotors, Clock, DiagnosticArray, DiagnosticStatus, InputRc, KeyValue, MpcStatus,
-    Odometry, OffboardControlMode, PilotInput, PointStamped, RosMessage, Time, Twist,
+    ActuatorMotors, Clock, DiagnosticArray, DiagnosticStatus, EscStatus, InputRc, KeyValue,
+    MpcStatus, Odometry, OffboardControlMode, PilotInput, PointStamped, RosMessage, Time, Twist,
     Vector3Stamped, VehicleOdometry,
 };
 use crate::stamp_order::StampOrder;
@@ -53,6 +53,7 @@ struct NodeThread {
     drive: Option<Subscription<Twist>>,
     pilot: Option<Subscription<PilotInput>>,
     rc: Option<Subscription<InputRc>>,
+    esc: Option<Subscription<EscStatus>>,
     ground: Option<Subscription<PointStamped>>,
     ground_normal: Option<Subscription<Vector3Stamped>>,
     /// `topics.clock`, with `use_sim_time` only.
@@ -63,6 +64,7 @@ struct NodeThread {
     drive_tx: SyncSender<DriveCommand>,
     pilot_tx: SyncSender<PilotCommand>,
     rc_tx: SyncSender<RcFrame>,
+    esc_tx: SyncSender<EscFrame>,
     ground_tx: SyncSender<GroundHeight>,
     ground_normal_tx: SyncSender<GroundNormal>,
     clock: Arc<RosClock>,
@@ -92,6 +94,7 @@ fn topic_type_hashes(config: &Ros2Config) -> Result<Vec<KeyValue>> {
         &topics.ground,
         &topics.ground_normal,
         &topics.rc,
+        &topics.esc_status,
         &topics.autopilot_estimate,
     ];
     let clock = config.use_sim_time.then_some(&topics.clock);
@@ -125,6 +128,7 @@ impl Ros2Node {
         let (drive_tx, drive_rx) = sync_channel(16);
         let (pilot_tx, pilot_rx) = sync_channel(16);
         let (rc_tx, rc_rx) = sync_channel(16);
+        let (esc_tx, esc_rx) = sync_channel(16);
         let (ground_tx, ground_rx) = sync_channel(16);
         let (ground_normal_tx, ground_normal_rx) = sync_channel(16);
         let clock = Arc::new(RosClock {
@@ -138,6 +142,7 @@ impl Ros2Node {
             drive_tx,
             pilot_tx,
             rc_tx,
+            esc_tx,
             ground_tx,
             ground_normal_tx,
             clock: Arc::clone(&clock),
@@ -161,6 +166,7 @@ impl Ros2Node {
                 drive: drive_rx,
                 pilot: pilot_rx,
                 rc: rc_rx,
+                esc: esc_rx,
                 ground: ground_rx,
                 ground_normal: ground_normal_rx,
                 clock,
@@ -179,6 +185,7 @@ struct NodeChannels {
     drive_tx: SyncSender<DriveCommand>,
     pilot_tx: SyncSender<PilotCommand>,
     rc_tx: SyncSender<RcFrame>,
+    esc_tx: SyncSender<EscFrame>,
     ground_tx: SyncSender<GroundHeight>,
     ground_normal_tx: SyncSender<GroundNormal>,
     clock: Arc<RosClock>,
@@ -208,6 +215,7 @@ impl NodeThread {
         let drive = subscription::<Twist>(node, &t.drive_command)?;
         let pilot = subscription::<PilotInput>(node, &t.pilot)?;
         let rc = subscription::<InputRc>(node, &t.rc)?;
+        let esc = subscription::<EscStatus>(node, &t.esc_status)?;
         let ground = subscription::<PointStamped>(node, &t.ground)?;
         let ground_normal = subscription::<Vector3Stamped>(node, &t.ground_normal)?;
         let clock_sub = if config.use_sim_time {
@@ -223,6 +231,7 @@ impl NodeThread {
             drive_tx,
             pilot_tx,
             rc_tx,
+            esc_tx,
             ground_tx,
             ground_normal_tx,
             clock,
@@ -238,6 +247,7 @@ impl NodeThread {
             drive,
             pilot,
             rc,
+            esc,
             ground,
             ground_normal,
             clock_sub,
@@ -247,6 +257,7 @@ impl NodeThread {
             drive_tx,
             pilot_tx,
             rc_tx,
+            esc_tx,
             ground_tx,
             ground_normal_tx,
             clock,
@@ -269,6 +280,7 @@ impl NodeThread {
             self.take_drive();
             self.take_pilot();
             self.take_rc();
+            self.take_esc();
             self.take_ground();
             self.take_ground_normal();
             self.take_clock();
@@ -287,6 +299,7 @@ impl NodeThread {
             drive,
             pilot,
             rc,
+            esc,
             ground,
             ground_normal,
             clock_sub,
@@ -303,6 +316,7 @@ impl NodeThread {
             drive,
             pilot,
             rc,
+            esc,
             ground,
             ground_normal,
             clock_sub,
@@ -337,11 +351,12 @@ impl NodeThread {
             + c.drive_rejected
             + c.pilot_rejected
             + c.rc_rejected
+            + c.esc_rejected
             + c.ground_rejected
             + c.ground_normal_rejected
             + c.autopilot_rejected
             + c.clock_rejected;
-        let pairs: [(&str, u64); 24] = [
+        let pairs: [(&str, u64); 26] = [
             ("estimates_received", c.estimates_received),
             ("estimates_accepted", c.estimates_accepted),
             ("malformed", c.malformed),
@@ -356,6 +371,8 @@ impl NodeThread {
             ("pilot_rejected", c.pilot_rejected),
             ("rc_received", c.rc_received),
             ("rc_rejected", c.rc_rejected),
+            ("esc_received", c.esc_received),
+            ("esc_rejected", c.esc_rejected),
             ("ground_received", c.ground_received),
             ("ground_rejected", c.ground_rejected),
             ("ground_normal_received", c.ground_normal_received),
@@ -521,6 +538,24 @@ impl NodeThread {
             |input: InputRc| {
                 (input.channel_count <= InputRc::RC_INPUT_MAX_CHANNELS).then(|| RcFrame {
                     input,
+                    received: Instant::now(),
+                })
+            },
+        );
+    }
+
+    /// ESC reports: at most [`EscStatus::CONNECTED_ESC_MAX`] ESCs, else
+    /// rejected; their speeds are the daemon's to read (its `[esc]`).
+    fn take_esc(&self) {
+        let c = &self.counters;
+        self.take_input(
+            self.esc.as_ref(),
+            &c.esc_received,
+            &c.esc_rejected,
+            &self.esc_tx,
+            |status: EscStatus| {
+                (status.esc_count <= EscStatus::CONNECTED_ESC_MAX).then(|| EscFrame {
+                    status,
                     received: Instant::now(),
                 })
             },

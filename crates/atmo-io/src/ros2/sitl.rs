@@ -9,6 +9,7 @@
 //! | `topics.estimate` | publishes the plant's state | [`Ros2Inputs::latest_estimate`](super::Ros2Inputs::latest_estimate) |
 //! | `topics.autopilot_estimate` (when enabled) | publishes the autopilot's own estimate of the same instant (the same state unless given apart) | [`Ros2Inputs::latest_autopilot_estimate`](super::Ros2Inputs::latest_autopilot_estimate) |
 //! | `topics.pilot` | publishes pilot inputs | [`Ros2Inputs::latest_pilot`](super::Ros2Inputs::latest_pilot) |
+//! | `topics.esc_status` (when enabled) | publishes the rotors' RPM as PX4's `EscStatus` (four ESCs online, each its motor's) | [`Ros2Inputs::latest_esc`](super::Ros2Inputs::latest_esc) |
 //! | `topics.status` | [`SitlInputs::latest_status`] | publishes one status per tick |
 //!
 //! Each estimate goes out on the estimate topic and, when enabled, the
@@ -48,7 +49,7 @@ use super::dds::{
 use super::{Ros2Config, Ros2StartOptions, Ros2Thread, TopicConfig};
 use crate::error::Result;
 use crate::msg::frames::{state_to_odometry, state_to_vehicle_odometry};
-use crate::msg::{MpcStatus, Odometry, PilotInput, RosMessage, VehicleOdometry};
+use crate::msg::{EscStatus, MpcStatus, Odometry, PilotInput, RosMessage, VehicleOdometry};
 
 /// What the SITL node has seen and done so far (monotonic counters).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
@@ -99,6 +100,8 @@ enum Outgoing {
         stamp_ns: u64,
     },
     Pilot(PilotInput),
+    /// The four rotors' RPM (the node thread makes the `EscStatus`).
+    RotorRpm([i32; 4]),
 }
 
 /// The plant's sending side (`Clone + Send`; never blocks, never allocates).
@@ -130,6 +133,13 @@ impl SitlPublisher {
             autopilot: *autopilot,
             stamp_ns,
         })
+    }
+
+    /// Queues the four rotors' RPM (the robot file's rotor order) for
+    /// `topics.esc_status` as PX4 publishes it: four ESCs, online and
+    /// armed, ESC k driving motor k + 1; false if dropped (counted).
+    pub fn try_publish_rotor_rpm(&self, rpm: [i32; 4]) -> bool {
+        self.send(Outgoing::RotorRpm(rpm))
     }
 
     /// Queues one pilot input for `topics.pilot`; false if dropped (counted).
@@ -246,6 +256,7 @@ struct SitlThread {
     estimate: Option<EstimatePub>,
     autopilot_estimate: Option<EstimatePub>,
     pilot: Option<Publisher<PilotInput>>,
+    esc: Option<Publisher<EscStatus>>,
     status: Option<Subscription<MpcStatus>>,
     out_rx: Receiver<Outgoing>,
     status_tx: SyncSender<MpcStatus>,
@@ -272,11 +283,13 @@ impl SitlThread {
         let estimate = EstimatePub::new(node, &t.estimate, &qos)?;
         let autopilot_estimate = EstimatePub::new(node, &t.autopilot_estimate, &qos)?;
         let pilot = publisher::<PilotInput>(node, &t.pilot, &qos)?;
+        let esc = publisher::<EscStatus>(node, &t.esc_status, &qos)?;
         let status = subscription::<MpcStatus>(node, &t.status)?;
         Ok(Self {
             estimate,
             autopilot_estimate,
             pilot,
+            esc,
             status,
             out_rx,
             status_tx,
@@ -295,11 +308,12 @@ impl SitlThread {
             estimate,
             autopilot_estimate,
             pilot,
+            esc,
             status,
             _dds: dds,
             ..
         } = self;
-        dds.shut_down((estimate, autopilot_estimate, pilot, status))
+        dds.shut_down((estimate, autopilot_estimate, pilot, esc, status))
     }
 
     fn publish(&self, message: Outgoing) {
@@ -324,6 +338,19 @@ impl SitlThread {
                 }
             }
             Outgoing::Pilot(m) => count(self.pilot.as_ref().map(|p| p.publish(m).is_ok())),
+            Outgoing::RotorRpm(rpm) => {
+                let mut status = EscStatus {
+                    esc_count: 4,
+                    esc_online_flags: 0b1111,
+                    esc_armed_flags: 0b1111,
+                    ..EscStatus::default()
+                };
+                for (k, (report, rpm)) in status.esc.iter_mut().zip(rpm).enumerate() {
+                    report.esc_rpm = rpm;
+                    report.actuator_function = EscStatus::ACTUATOR_FUNCTION_MOTOR1 + k as u8;
+                }
+                count(self.esc.as_ref().map(|p| p.publish(status).is_ok()));
+            }
         }
     }
 

@@ -78,8 +78,10 @@ fn tipped(f: &Flight, from: f64, above: f64) -> f64 {
 }
 
 /// A rotor stopped in flight (1.2 m up, the morph begun): its ESC's speed
-/// names it two reports after the stop (the observer's torque took
-/// 0.20-0.24 s); the failsafe descent on the three rotors left (the
+/// names it two reports after the stop, a few more with the speeds' noise,
+/// within 0.06 s (under the 0.08 s past which the stopped-rotor bound
+/// found no landing; the observer's torque took 0.20-0.24 s); the failsafe
+/// descent on the three rotors left (the
 /// backup controller: that rotor commanded nothing, its diagonal partner
 /// only pushing, the heading let go). Two rotors on a diagonal carry the
 /// robot (2 x 28.15 N against 54 N: no margin to brake), and about that
@@ -94,7 +96,7 @@ fn a_rotor_stopped_in_flight_is_told_by_its_speed_and_hits_slower_than_a_cut() {
             seed,
         );
         let seen = detected(&f, Detected::ROTOR_STOPPED).unwrap_or_else(|| panic!("{seed}"));
-        assert!(seen.time > 1.0 && seen.time < 1.02, "{seed}: {}", seen.time);
+        assert!(seen.time > 1.0 && seen.time < 1.06, "{seed}: {}", seen.time);
         let out = f.first_in(Mode::Failsafe, seen.time).unwrap();
         assert!(out.time - seen.time < 0.02, "{seed}: {}", out.time);
         // Out: the rotor is commanded nothing from then on.

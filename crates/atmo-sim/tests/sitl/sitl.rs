@@ -17,8 +17,9 @@ use std::process::{Child, Command, ExitStatus, Stdio};
 use std::sync::OnceLock;
 use std::time::{Duration, Instant};
 
+use atmo_flight::flight_log::INPUTS_TOPIC;
 use atmo_io::mcap_log::read_topic;
-use atmo_io::msg::{MpcStatus, SolverStatus};
+use atmo_io::msg::{MpcStatus, SolverStatus, TickInputs};
 
 /// Every driver alive in every tick from arming until the server's last
 /// plant step (`server.served_until_ns` of its summary.json), nothing lost
@@ -307,6 +308,18 @@ fn the_daemon_binary_lands_on_the_wheels_against_the_plant_server_and_replays() 
     let dir = run_dir("sitl");
     let tag = format!("atmo_sitl_{}", std::process::id());
     let config = daemon_config(&dir, &tag);
+    // The ESCs' telemetry too: PX4's EscStatus from the server, the
+    // rotors' speeds in the daemon's ticks.
+    let text = std::fs::read_to_string(&config)
+        .unwrap()
+        .replace(
+            "type = \"px4_msgs/msg/EscStatus\", enabled = false",
+            "type = \"px4_msgs/msg/EscStatus\", enabled = true",
+        )
+        .replace("full_speed_rpm = 0.0", "full_speed_rpm = 20000.0");
+    assert!(text.contains("full_speed_rpm = 20000.0"));
+    assert!(text.contains("EscStatus\", enabled = true"));
+    std::fs::write(&config, text).unwrap();
     let log = dir.join("flight.mcap");
     let domain = domain();
 
@@ -377,6 +390,34 @@ fn the_daemon_binary_lands_on_the_wheels_against_the_plant_server_and_replays() 
         at(1.0)
     );
     assert_drivers_alive_while_served(&status, &summary);
+    // Every flying tick had the rotors' speeds, and none read stopped.
+    let inputs: Vec<(u64, TickInputs)> = read_topic(&log, INPUTS_TOPIC).unwrap();
+    let flying_ticks: std::collections::HashSet<u64> = status
+        .iter()
+        .filter(|(_, s)| matches!(s.mode.name(), "flight" | "morphing" | "transition"))
+        .map(|(_, s)| s.tick)
+        .collect();
+    let flying: Vec<&TickInputs> = inputs
+        .iter()
+        .map(|(_, i)| i)
+        .filter(|i| flying_ticks.contains(&i.tick))
+        .collect();
+    assert!(flying.len() > 150, "{} flying ticks", flying.len());
+    let with_speeds = flying.iter().filter(|i| i.has_rotor_speeds).count();
+    assert!(
+        with_speeds * 100 >= flying.len() * 99,
+        "{with_speeds} of {} flying ticks had the rotors' speeds",
+        flying.len()
+    );
+    assert!(
+        flying
+            .iter()
+            .filter(|i| i.has_rotor_speeds)
+            .flat_map(|i| i.rotor_speeds)
+            .all(|v| (0.3..=1.0).contains(&v)),
+        "a rotor's speed out of the flight's range"
+    );
+    assert!(status.iter().all(|(_, s)| s.actuator_faults == 0));
     let last = &status.last().unwrap().1;
     assert_eq!(last.io.log_dropped, 0);
     // The solver's 4 ms time limit is wall-clock: on a shared machine a
