@@ -3,7 +3,8 @@
 //! has switched it off, while the estimate is still good, and for a stale
 //! estimate while the autopilot's own is fresh (flown on its attitude,
 //! rates and vertical speed, the horizontal velocity zeroed: not braked
-//! against). Without either, the failsafe's open-loop trim.
+//! against). Without either, the failsafe's open-loop trim. And for a
+//! rotor its ESC reports stopped, on the three rotors left.
 //!
 //! Without it the failed MPC's last plan was flown on (its first command,
 //! held): a robot whose solves never came back hovered or climbed away on
@@ -19,14 +20,17 @@
 //! [`VERTICAL_SEPARATION`] times slower than the attitude's, the thrust
 //! divided by the tilt of the body so that leaning costs no height. The
 //! wrench is allocated to the four rotors through the model at the tilt
-//! flown, with the observer's learned wrench (`TiltedBody::commands_for`),
-//! and each command clamped to [0, 1]. The arms meanwhile go to the
+//! flown, with the observer's learned wrench (`TiltedBody::commands_for`;
+//! with a rotor stopped `TiltedBody::commands_without`: the lift and what
+//! the three can give of the torque), the lift cut where a rotor would
+//! pass full thrust (`level_before_lift`), and each command clamped to
+//! [0, 1]. The arms meanwhile go to the
 //! failsafe descent's landing tilt (`monitor.rotor_out_landing_tilt_deg`),
 //! so that it comes down on its wheels, not its base.
 //!
-//! Limits: it allocates over the four rotors as the robot file has them
-//! (a rotor fault learned by `rotor_estimate` is not flown around), it
-//! knows no ground effect (the vertical loop's integral takes it up) and
+//! Limits: a weak or stuck rotor learned by `rotor_estimate` is not flown
+//! around (only a stopped one), a stopped rotor's descent in flight still
+//! crashes (docs/faults.md), it knows no ground effect (the vertical loop's integral takes it up) and
 //! it damps the velocity, it does not hold a position: it lands where its
 //! velocity at the failure carries it to.
 //!
