@@ -646,21 +646,29 @@ impl TiltedBody {
         for k in 0..3 {
             a.set_row(k + 1, &self.thrust_torque.row(k));
         }
-        let g_b = Vector3::new(0.0, 0.0, self.gravity);
-        let gravity_torque = self.first_moment.cross(&g_b);
-        let d = &self.disturbance;
-        let rhs = Vector4::new(
-            force_z - d[2],
-            torque.x - gravity_torque.x - d[3],
-            torque.y - gravity_torque.y - d[4],
-            torque.z - gravity_torque.z - d[5],
-        );
+        let rhs = self.thrust_wrench_for(force_z, torque);
         // Singular only when no command moves one of the four rows (no
         // vertical thrust, no yaw authority): no trim exists, and every
         // caller clamps or compares, so +inf reads as "beyond full".
         a.lu()
             .solve(&rhs)
             .unwrap_or_else(|| Input::from_element(f64::INFINITY))
+    }
+
+    /// What the rotors' thrust must give (F_z, tau_x, tau_y, tau_z) for the
+    /// body z force `force_z` and the net torque `torque` about B, with
+    /// gravity's torque at a level attitude and the disturbance wrench
+    /// taken out ([`Self::commands_for`], `commands_without`).
+    pub(crate) fn thrust_wrench_for(&self, force_z: f64, torque: &Vector3<f64>) -> Vector4<f64> {
+        let g_b = Vector3::new(0.0, 0.0, self.gravity);
+        let gravity_torque = self.first_moment.cross(&g_b);
+        let d = &self.disturbance;
+        Vector4::new(
+            force_z - d[2],
+            torque.x - gravity_torque.x - d[3],
+            torque.y - gravity_torque.y - d[4],
+            torque.z - gravity_torque.z - d[5],
+        )
     }
 }
 

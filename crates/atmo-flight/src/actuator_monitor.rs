@@ -499,8 +499,8 @@ mod tests {
         m.update(&i);
         assert_eq!(m.detected(), Detected::default());
     }
-    /// Speeds of a rotor following `command` from `thrust` through the
-    /// 0.03 s lag over `dt`: its thrust after.
+    /// The thrust of a rotor following `command` from `thrust` through
+    /// the 0.03 s lag, `dt` later.
     fn lagged(thrust: f64, command: f64, dt: f64) -> f64 {
         command + (thrust - command) * (-dt / 0.03).exp()
     }

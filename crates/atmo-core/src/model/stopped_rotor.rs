@@ -38,14 +38,8 @@ impl TiltedBody {
                 self.thrust_torque[(1, i)],
             )
         };
-        let g_b = Vector3::new(0.0, 0.0, self.gravity);
-        let gravity_torque = self.first_moment.cross(&g_b);
-        let d = &self.disturbance;
-        let rhs = Vector3::new(
-            force_z - d[2],
-            torque.x - gravity_torque.x - d[3],
-            torque.y - gravity_torque.y - d[4],
-        ) - column(stopped) * delivered;
+        // The yaw row is left out: three rotors cannot hold it too.
+        let rhs = self.thrust_wrench_for(force_z, torque).xyz() - column(stopped) * delivered;
         let others = others_than(stopped);
         let (partner, a, b) = self.diagonals(stopped);
         let mut u = Input::zeros();
