@@ -165,3 +165,4 @@ class MpcStatus(IdlStruct, typename="atmo_msgs::msg::dds_::MpcStatus_"):
     rejected_ground: uint64 = 0
     io: IoHealth = field(default_factory=IoHealth)
     actuator_faults: uint8 = 0
+    rejected_rotor_speeds: uint64 = 0

@@ -493,7 +493,13 @@ fn run(arg: &DaemonConfigArg, log_path: Option<PathBuf>, duration: Option<f64>) 
         }
         if Instant::now() >= next_diagnostics {
             next_diagnostics = Instant::now() + diagnostics_period;
-            let status = atmo_flight::arming::diagnostics(arming, flight_problem);
+            let mut status = atmo_flight::arming::diagnostics(arming, flight_problem);
+            status
+                .values
+                .extend(shared.counts().map(|(key, value)| atmo_io::msg::KeyValue {
+                    key: key.into(),
+                    value: value.to_string(),
+                }));
             ros_out.try_publish_diagnostics(DiagnosticArray {
                 status: vec![status],
                 ..DiagnosticArray::default()
@@ -516,16 +522,21 @@ fn run(arg: &DaemonConfigArg, log_path: Option<PathBuf>, duration: Option<f64>) 
     log.finish();
     let written = log_thread.join();
     ros_thread.stop().context("stopping the ROS 2 node")?;
-    let written = written.with_context(|| format!("writing the log {}", log_path.display()))?;
+    // The counters first: a log that failed is when they matter most.
     tracing::info!(
         ticks,
         log = %log_path.display(),
+        counters = %shared
+            .counts()
+            .map(|(key, value)| format!("{key}={value}"))
+            .join(" "),
+        "atmo-daemon stopped"
+    );
+    let written = written.with_context(|| format!("writing the log {}", log_path.display()))?;
+    tracing::info!(
         records = written.written,
         dropped = written.dropped,
-        pilot_stale_ticks = shared.pilot_stale_ticks.load(Ordering::Relaxed),
-        ground_stale_ticks = shared.ground_stale_ticks.load(Ordering::Relaxed),
-        port_send_errors = shared.port_send_errors.load(Ordering::Relaxed),
-        "atmo-daemon stopped"
+        "log written"
     );
     if panicked || stack.is_err() {
         bail!(

@@ -230,6 +230,25 @@ pub struct OnboardShared {
     pub started: AtomicBool,
 }
 
+impl OnboardShared {
+    /// Every counter, named: what the diagnostics publish and the exit
+    /// report prints (whatever the tick dropped or refused is told here).
+    pub fn counts(&self) -> [(&'static str, u64); 9] {
+        let g = |c: &AtomicU64| c.load(Ordering::Relaxed);
+        [
+            ("driver_deaths", g(&self.driver_deaths)),
+            ("pilot_stale_ticks", g(&self.pilot_stale_ticks)),
+            ("pilot_lost_ticks", g(&self.pilot_lost_ticks)),
+            ("rc_rejected", g(&self.rc_rejected)),
+            ("esc_rejected", g(&self.esc_rejected)),
+            ("estimates_stale_ticks", g(&self.estimates_stale_ticks)),
+            ("ground_stale_ticks", g(&self.ground_stale_ticks)),
+            ("port_send_errors", g(&self.port_send_errors)),
+            ("log_dropped", g(&self.log_dropped)),
+        ]
+    }
+}
+
 /// Settings the tick uses (from [`DaemonConfig`]).
 #[derive(Debug, Clone, Copy)]
 pub struct OnboardSettings {

@@ -41,6 +41,20 @@ fn a_full_log_disk_is_reported_at_once_and_in_the_exit_status() {
             && stderr.contains("/dev/full: No space left on device"),
         "the exit names the file and the OS error: {stderr}"
     );
+    // Every record the control thread could not log is counted and told.
+    let dropped: u64 = stderr
+        .split("log_dropped=")
+        .nth(1)
+        .and_then(|rest| rest.split(|c: char| !c.is_ascii_digit()).next())
+        .and_then(|n| n.parse().ok())
+        .unwrap_or_else(|| panic!("no log_dropped in the exit report: {stderr}"));
+    assert!(
+        dropped > 0,
+        "a second of ticks on /dev/full dropped none: {stderr}"
+    );
+    for counter in ["rc_rejected=", "esc_rejected=", "estimates_stale_ticks="] {
+        assert!(stderr.contains(counter), "{counter} not reported: {stderr}");
+    }
 }
 
 /// `replay --config ... --out DIR` wrote its what-if files into DIR as it

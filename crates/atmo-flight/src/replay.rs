@@ -272,6 +272,7 @@ pub fn compared_fields(s: &MpcStatus) -> Vec<(String, Value)> {
         ("rejected_tilt", s.rejected_tilt),
         ("rejected_pilot", s.rejected_pilot),
         ("rejected_ground", s.rejected_ground),
+        ("rejected_rotor_speeds", s.rejected_rotor_speeds),
         ("ground_contact", u64::from(s.ground_contact)),
         ("actuator_faults", u64::from(s.actuator_faults)),
         (

@@ -94,6 +94,19 @@ pub struct RejectCounters {
     pub rotor_speeds: u64,
 }
 
+impl RejectCounters {
+    /// The counters in the order of the log's `MpcStatus::rejected_inputs`.
+    pub fn counts(&self) -> [u64; 5] {
+        [
+            self.estimate,
+            self.tilt,
+            self.pilot,
+            self.ground,
+            self.rotor_speeds,
+        ]
+    }
+}
+
 /// The status record of one tick (fixed size, copied into logs).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Status {

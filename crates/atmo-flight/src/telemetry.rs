@@ -132,5 +132,6 @@ pub fn status_message(
         // Filled in by the I/O layer that owns the transports (zero in simulation).
         io: IoHealth::default(),
         actuator_faults: s.actuator_faults,
+        rejected_rotor_speeds: s.rejected.rotor_speeds,
     }
 }

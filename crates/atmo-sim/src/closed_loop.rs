@@ -348,12 +348,7 @@ fn fly_until(
                 &tick.outputs.thrust,
                 (s.solver != atmo_flight::SolverStatus::Idle).then_some(s.feedback_time),
                 s.mpc_failures_total,
-                [
-                    s.rejected.estimate,
-                    s.rejected.tilt,
-                    s.rejected.pilot,
-                    s.rejected.ground,
-                ],
+                s.rejected.counts(),
             );
             if let Some((d, p)) = stack
                 .flare_decision()

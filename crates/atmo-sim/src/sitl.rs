@@ -367,12 +367,7 @@ pub fn serve(
                 &s.thrust,
                 (s.solver_iterations > 0).then_some(s.feedback_time),
                 s.mpc_failures_total,
-                [
-                    s.rejected_estimate,
-                    s.rejected_tilt,
-                    s.rejected_pilot,
-                    s.rejected_ground,
-                ],
+                s.rejected_inputs(),
             );
         }
         let t = plant.time();

@@ -411,9 +411,25 @@ pub struct MpcStatus {
     /// 8: contact inferred, 16: a rotor stopped by its ESC's speed; 0:
     /// nothing). Logs written before it decode with 0.
     pub actuator_faults: u8,
+    /// ESC speed reports refused (a speed not finite or outside [0, 2] of
+    /// full). Logs written before it decode with 0.
+    pub rejected_rotor_speeds: u64,
 }
 
 impl MpcStatus {
+    /// The inputs the flight stack refused, in the order of
+    /// `review::Summary::rejected_inputs` (estimate, tilt, pilot, ground,
+    /// rotor speeds).
+    pub fn rejected_inputs(&self) -> [u64; 5] {
+        [
+            self.rejected_estimate,
+            self.rejected_tilt,
+            self.rejected_pilot,
+            self.rejected_ground,
+            self.rejected_rotor_speeds,
+        ]
+    }
+
     /// A 12-state as the message's array (state, reference, predicted_next).
     pub fn array(x: &atmo_core::model::State) -> [f64; 12] {
         let mut out = [0.0; 12];
@@ -466,19 +482,20 @@ struct Wire<S> {
     rejected_pilot: u64,
     rejected_ground: u64,
     io: IoHealth,
-    actuator_faults: Trailing,
+    actuator_faults: Trailing<u8>,
+    rejected_rotor_speeds: Trailing<u64>,
 }
 
-/// The message's last field, which logs written before it lack: read as
-/// 0 when the payload ends before it (the reader fails at the end of the
-/// payload; nothing follows it to misread).
+/// One of the message's last fields, which logs written before them lack:
+/// read as 0 when the payload ends before it (the reader fails at the end
+/// of the payload; nothing follows it to misread).
 #[derive(Serialize)]
 #[serde(transparent)]
-struct Trailing(u8);
+struct Trailing<T>(T);
 
-impl<'de> Deserialize<'de> for Trailing {
+impl<'de, T: Deserialize<'de> + Default> Deserialize<'de> for Trailing<T> {
     fn deserialize<D: Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
-        Ok(Self(u8::deserialize(deserializer).unwrap_or(0)))
+        Ok(Self(T::deserialize(deserializer).unwrap_or_default()))
     }
 }
 
@@ -523,6 +540,7 @@ impl Serialize for MpcStatus {
             rejected_ground: self.rejected_ground,
             io: self.io,
             actuator_faults: Trailing(self.actuator_faults),
+            rejected_rotor_speeds: Trailing(self.rejected_rotor_speeds),
         }
         .serialize(serializer)
     }
@@ -579,6 +597,7 @@ impl<'de> Deserialize<'de> for MpcStatus {
             rejected_ground: w.rejected_ground,
             io: w.io,
             actuator_faults: w.actuator_faults.0,
+            rejected_rotor_speeds: w.rejected_rotor_speeds.0,
         })
     }
 }

@@ -264,6 +264,7 @@ pub(crate) fn sample_status() -> MpcStatus {
             driver_deaths: [0, 1, 0, 2],
         },
         actuator_faults: 6,
+        rejected_rotor_speeds: 14,
         ..MpcStatus::default()
     };
     for i in 0..12 {
@@ -330,17 +331,21 @@ fn mpc_status_layout() {
         body.extend(v.to_le_bytes());
     }
     body.push(6); // actuator_faults
+    body.extend([0; 7]); // pad to 8
+    body.extend(14u64.to_le_bytes()); // rejected_rotor_speeds
     round_trip(&status, &body);
-    // A log written before `actuator_faults` ends at `io`: it decodes, 0.
+    // Logs written before the trailing fields end at them: they decode, 0.
     let bytes = encode_to_vec(&status).unwrap();
-    let old = decode::<MpcStatus>("/atmo/status", &bytes[..bytes.len() - 1]).unwrap();
-    assert_eq!(
-        old,
-        MpcStatus {
-            actuator_faults: 0,
+    for (cut, faults) in [(12, 6), (16, 0)] {
+        let old = decode::<MpcStatus>("/atmo/status", &bytes[..bytes.len() - cut]).unwrap();
+        let (actuator_faults, rejected_rotor_speeds) = (faults, 0);
+        let expected = MpcStatus {
+            actuator_faults,
+            rejected_rotor_speeds,
             ..status
-        }
-    );
+        };
+        assert_eq!(old, expected, "{cut} bytes cut");
+    }
 }
 
 #[test]
@@ -357,8 +362,9 @@ fn big_endian_payloads_decode() {
 #[test]
 fn malformed_payloads_are_errors_naming_the_topic() {
     let good = encode_to_vec(&sample_status()).unwrap();
-    // Every truncation of a valid status fails cleanly.
-    for len in 0..good.len() - 3 {
+    // Every truncation of a valid status fails cleanly, but for the last
+    // fields', which older logs lack (1 + 7 padding + 8 bytes).
+    for len in 0..good.len() - 16 {
         let err = decode::<MpcStatus>("/atmo/status", &good[..len]).unwrap_err();
         let text = err.to_string();
         assert!(

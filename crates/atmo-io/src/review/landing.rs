@@ -38,8 +38,9 @@ pub struct Summary {
     pub mode_sequence: Vec<String>,
     /// Ticks whose MPC command did not come from a fresh solve.
     pub mpc_failures: u64,
-    /// Inputs rejected by the flight stack (estimate, tilt, pilot, ground).
-    pub rejected_inputs: [u64; 4],
+    /// Inputs rejected by the flight stack (estimate, tilt, pilot, ground,
+    /// rotor speeds).
+    pub rejected_inputs: [u64; 5],
     pub sim_time_s: f64,
     /// Wall-clock time of the run, s (null when summarized from a log).
     pub wall_time_s: Option<f64>,
@@ -72,7 +73,7 @@ pub struct LandingTracker {
     has_flown: bool,
     max_mean_thrust: f64,
     mpc_failures: u64,
-    rejected: [u64; 4],
+    rejected: [u64; 5],
     feedback_times: Vec<f64>,
     /// Time, tilt and vertical speed at the first wheel contact after flying.
     touchdown: Option<(f64, f64, f64)>,
@@ -108,7 +109,7 @@ impl LandingTracker {
         thrust: &[f64; 4],
         feedback_time: Option<f64>,
         mpc_failures_total: u64,
-        rejected: [u64; 4],
+        rejected: [u64; 5],
     ) {
         if self.modes.last() != Some(&mode) {
             self.modes.push(mode);

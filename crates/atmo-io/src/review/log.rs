@@ -111,12 +111,7 @@ fn control_tick(tracker: &mut LandingTracker, s: &MpcStatus) {
         &s.thrust,
         (s.solver_status != SolverStatus::Idle).then_some(s.feedback_time),
         s.mpc_failures_total,
-        [
-            s.rejected_estimate,
-            s.rejected_tilt,
-            s.rejected_pilot,
-            s.rejected_ground,
-        ],
+        s.rejected_inputs(),
     );
 }
 
