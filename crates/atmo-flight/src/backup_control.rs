@@ -24,20 +24,24 @@
 //! with a rotor stopped `TiltedBody::commands_without`: the lift and what
 //! the three can give of the torque), the lift cut where a rotor would
 //! pass full thrust (`level_before_lift`), and each command clamped to
-//! [0, 1]. The arms meanwhile go to the
+//! [0, 1]. With a rotor stopped the angle term is the spin's steering
+//! instead ([`spin_steering`]) and no lift is cut for the torque: three
+//! rotors cannot level the body, they can turn its spin to the vertical
+//! (docs/decisions/2026-12-07-spin-steering.md). The arms meanwhile go to the
 //! failsafe descent's landing tilt (`monitor.rotor_out_landing_tilt_deg`),
 //! so that it comes down on its wheels, not its base.
 //!
 //! Limits: a weak or stuck rotor learned by `rotor_estimate` is not flown
-//! around (only a stopped one), a stopped rotor's descent in flight still
-//! crashes (docs/faults.md), it knows no ground effect (the vertical loop's integral takes it up) and
+//! around (only a stopped one), a stopped rotor's descent in flight lands
+//! hard and crashes on about a third of the flights (docs/faults.md), it
+//! knows no ground effect (the vertical loop's integral takes it up) and
 //! it damps the velocity, it does not hold a position: it lands where its
 //! velocity at the failure carries it to.
 //!
 //! Pure, fixed-size, no allocation: it runs on the control path.
 
 use atmo_core::model::{Input, State, TiltedBody, idx, level_cosine};
-use nalgebra::Vector3;
+use nalgebra::{Matrix3, Vector3};
 
 /// How much slower the vertical speed loop is than the attitude loop: a
 /// cascade's outer loop a factor of several below the inner one does not
@@ -85,10 +89,10 @@ impl LevelDescent {
     ///
     /// With a rotor `stopped` (its ESC says so) the three rotors left fly
     /// it (`TiltedBody::commands_without`): the heading let go, the body
-    /// spinning up on the pair's unopposed drag torque, of the levelling
-    /// torque the part the three can give (about the pair's own diagonal,
-    /// only the partner's push and the spin; what that leaves undone:
-    /// docs/faults.md, the stopped rotor in flight).
+    /// spinning up on the pair's unopposed drag torque, its spin steered
+    /// to the vertical ([`spin_steering`]) and its rates damped, of that
+    /// torque the part the three can give, the lift never cut for it (what
+    /// that leaves undone: docs/faults.md, the stopped rotor in flight).
     #[allow(clippy::too_many_arguments)] // the descent's inputs, each a number
     pub fn command(
         &mut self,
@@ -115,9 +119,15 @@ impl LevelDescent {
             0.0,
         );
         let rates = Vector3::new(state[idx::WX], state[idx::WY], state[idx::WZ]);
-        let angular_acceleration =
-            -angle_error * (bandwidth * bandwidth) - rates * (2.0 * bandwidth);
-        let torque = body.inertia * angular_acceleration;
+        // Critically damped on four rotors; on three the angle term is the
+        // spin's steering (they cannot level the body, they can steer its
+        // spin), the rates damped alike (the nutation that would keep the
+        // body coned round its spin).
+        let damping = -rates * (2.0 * bandwidth);
+        let torque = match stopped {
+            Some(_) => spin_steering(&body.inertia, state, bandwidth) + body.inertia * damping,
+            None => body.inertia * (damping - angle_error * (bandwidth * bandwidth)),
+        };
         // NED: z down, the velocity in the world frame.
         let error = descent_speed - state[idx::VZ];
         // Critically damped: s^2 + k s + k^2 / 4. The integral is bounded
@@ -131,11 +141,46 @@ impl LevelDescent {
             Some(s) => body.commands_without(s.rotor, s.delivered, force_z, &torque),
             None => body.commands_for(force_z, &torque),
         };
-        let u = level_before_lift(allocate, force_z);
+        // Levelling is the spin's on three rotors: no lift is cut for it.
+        let u = match stopped {
+            Some(_) => allocate(force_z),
+            None => level_before_lift(allocate, force_z),
+        };
         u.iter()
             .all(|v| v.is_finite())
             .then(|| u.map(|v| v.clamp(0.0, 1.0)))
     }
+}
+
+/// The torque (body frame) that turns the body's angular momentum towards
+/// the world's vertical at `state`: with one rotor stopped, what levels the
+/// robot on average. Three rotors torque the body about one axis and a
+/// half (the pair's differential and the partner's push), not about the
+/// pair's own diagonal, and their unopposed drag spins the body up. A
+/// spinning body answers a torque by moving its angular momentum `H`
+/// along it (dH/dt = torque: gyroscopic precession, not a tip), and a
+/// body that spins about the vertical cones its thrust round it, which is
+/// vertical on average (Mueller and D'Andrea's relaxed hover): so the
+/// torque asked is `bandwidth |H|` times the part of the vertical (signed
+/// as `H`) across `H`, which turns `H` to the vertical at `bandwidth`
+/// rad/s per rad, whatever the spin. Without a spin it asks next to
+/// nothing: a body that does not spin cannot be levelled about the pair's
+/// diagonal by anything left. The allocation takes what the three rotors
+/// can give of it (`TiltedBody::commands_without`), which the spin turns
+/// round the world.
+pub fn spin_steering(inertia: &Matrix3<f64>, state: &State, bandwidth: f64) -> Vector3<f64> {
+    let (sin_roll, cos_roll) = state[idx::ROLL].sin_cos();
+    let (sin_pitch, cos_pitch) = state[idx::PITCH].sin_cos();
+    // The world's down (NED z) in the body frame.
+    let down = Vector3::new(-sin_pitch, sin_roll * cos_pitch, cos_roll * cos_pitch);
+    let momentum = inertia * Vector3::new(state[idx::WX], state[idx::WY], state[idx::WZ]);
+    let size = momentum.norm();
+    if size <= f64::EPSILON {
+        return Vector3::zeros();
+    }
+    let axis = momentum / size;
+    let vertical = down * momentum.dot(&down).signum();
+    (vertical - axis * vertical.dot(&axis)) * (bandwidth * size)
 }
 
 /// Bisection steps of [`level_before_lift`]: the lift found to 2^-12 of
@@ -281,5 +326,48 @@ mod tests {
         assert!((torque - asked).norm() < 1e-3, "{torque} {asked}");
         assert!((u.max() - 1.0).abs() < 1e-3, "{u}");
         assert!(u.sum() > b.hover_trim().sum(), "{u}");
+    }
+
+    #[test]
+    fn spinning_tipped_it_turns_the_spin_to_the_vertical_and_level_it_asks_nothing() {
+        let b = body();
+        let down_of = |x: &State| {
+            let (sr, cr) = x[idx::ROLL].sin_cos();
+            let (sp, cp) = x[idx::PITCH].sin_cos();
+            Vector3::new(-sp, sr * cp, cr * cp)
+        };
+        for (roll, pitch, spin) in [(0.3, 0.0, -12.0), (-0.2, 0.25, 15.0), (0.1, -0.4, -4.0)] {
+            let mut x = State::zeros();
+            x[idx::ROLL] = roll;
+            x[idx::PITCH] = pitch;
+            x[idx::WZ] = spin;
+            let torque = spin_steering(&b.inertia, &x, 10.0);
+            // dH = torque dt: the angle between H and the vertical (signed
+            // as H) shrinks.
+            let h = b.inertia * Vector3::new(0.0, 0.0, spin);
+            let vertical = down_of(&x) * h.dot(&down_of(&x)).signum();
+            let angle = |h: &Vector3<f64>| h.angle(&vertical);
+            let after = h + torque * 1e-3;
+            assert!(angle(&after) < angle(&h), "{roll} {pitch} {spin}: {torque}");
+            // The turn is at the bandwidth: 10 rad/s per rad, near enough
+            // for a small step (the torque is across H).
+            let rate = (angle(&h) - angle(&after)) / 1e-3;
+            assert!(
+                (rate / (10.0 * angle(&h).sin()) - 1.0).abs() < 0.01,
+                "{rate}"
+            );
+        }
+        // Spinning about the vertical, or not turning at all: nothing.
+        let mut x = State::zeros();
+        x[idx::WZ] = 12.0;
+        let level = spin_steering(&b.inertia, &x, 10.0);
+        // The inertia's products tilt H off body z by a few thousandths.
+        assert!(
+            level.norm() < 0.05 * b.inertia[(2, 2)] * 12.0 * 10.0,
+            "{level}"
+        );
+        x[idx::WZ] = 0.0;
+        x[idx::ROLL] = 0.3;
+        assert_eq!(spin_steering(&b.inertia, &x, 10.0), Vector3::zeros());
     }
 }
