@@ -249,6 +249,13 @@ impl OnboardShared {
     }
 }
 
+/// `result`'s value, or none with the refusal counted in `rejected`.
+fn counted<T, E>(result: std::result::Result<T, E>, rejected: &AtomicU64) -> Option<T> {
+    result
+        .map_err(|_| rejected.fetch_add(1, Ordering::Relaxed))
+        .ok()
+}
+
 /// Settings the tick uses (from [`DaemonConfig`]).
 #[derive(Debug, Clone, Copy)]
 pub struct OnboardSettings {
@@ -411,29 +418,18 @@ impl TickIo for OnboardIo {
         }
         if let Some(frame) = self.ros_in.latest_rc()
             && let Some(rc) = &mut self.rc
+            && let Some(reading) = counted(rc.map(&frame.input), &self.shared.rc_rejected)
         {
-            match rc.map(&frame.input) {
-                Ok(reading) => {
-                    let received = stamp_on_tick_clock(deadline_ns, frame.received);
-                    self.latch.radio(reading, received);
-                }
-                Err(_) => {
-                    self.shared.rc_rejected.fetch_add(1, Ordering::Relaxed);
-                }
-            }
+            let received = stamp_on_tick_clock(deadline_ns, frame.received);
+            self.latch.radio(reading, received);
         }
         if let Some(frame) = self.ros_in.latest_esc()
             && let Some(esc) = &self.esc
+            && let Some(speeds) =
+                counted(esc.rotor_speeds(&frame.status), &self.shared.esc_rejected)
         {
-            match esc.rotor_speeds(&frame.status) {
-                Ok(speeds) => {
-                    let received = stamp_on_tick_clock(deadline_ns, frame.received);
-                    self.latch.rotor_speeds(speeds, received);
-                }
-                Err(_) => {
-                    self.shared.esc_rejected.fetch_add(1, Ordering::Relaxed);
-                }
-            }
+            let received = stamp_on_tick_clock(deadline_ns, frame.received);
+            self.latch.rotor_speeds(speeds, received);
         }
         while let Some(d) = self.ros_in.latest_drive() {
             self.latch.drive(DriveCommand {

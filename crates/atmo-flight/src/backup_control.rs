@@ -169,10 +169,7 @@ impl LevelDescent {
 /// can give of it (`TiltedBody::commands_without`), which the spin turns
 /// round the world.
 pub fn spin_steering(inertia: &Matrix3<f64>, state: &State, bandwidth: f64) -> Vector3<f64> {
-    let (sin_roll, cos_roll) = state[idx::ROLL].sin_cos();
-    let (sin_pitch, cos_pitch) = state[idx::PITCH].sin_cos();
-    // The world's down (NED z) in the body frame.
-    let down = Vector3::new(-sin_pitch, sin_roll * cos_pitch, cos_roll * cos_pitch);
+    let down = world_down(state);
     let momentum = inertia * Vector3::new(state[idx::WX], state[idx::WY], state[idx::WZ]);
     let size = momentum.norm();
     if size <= f64::EPSILON {
@@ -181,6 +178,13 @@ pub fn spin_steering(inertia: &Matrix3<f64>, state: &State, bandwidth: f64) -> V
     let axis = momentum / size;
     let vertical = down * momentum.dot(&down).signum();
     (vertical - axis * vertical.dot(&axis)) * (bandwidth * size)
+}
+
+/// The world's down (NED z) in the body frame at `state`'s roll and pitch.
+fn world_down(state: &State) -> Vector3<f64> {
+    let (sin_roll, cos_roll) = state[idx::ROLL].sin_cos();
+    let (sin_pitch, cos_pitch) = state[idx::PITCH].sin_cos();
+    Vector3::new(-sin_pitch, sin_roll * cos_pitch, cos_roll * cos_pitch)
 }
 
 /// Bisection steps of [`level_before_lift`]: the lift found to 2^-12 of
@@ -331,11 +335,6 @@ mod tests {
     #[test]
     fn spinning_tipped_it_turns_the_spin_to_the_vertical_and_level_it_asks_nothing() {
         let b = body();
-        let down_of = |x: &State| {
-            let (sr, cr) = x[idx::ROLL].sin_cos();
-            let (sp, cp) = x[idx::PITCH].sin_cos();
-            Vector3::new(-sp, sr * cp, cr * cp)
-        };
         for (roll, pitch, spin) in [(0.3, 0.0, -12.0), (-0.2, 0.25, 15.0), (0.1, -0.4, -4.0)] {
             let mut x = State::zeros();
             x[idx::ROLL] = roll;
@@ -345,7 +344,7 @@ mod tests {
             // dH = torque dt: the angle between H and the vertical (signed
             // as H) shrinks.
             let h = b.inertia * Vector3::new(0.0, 0.0, spin);
-            let vertical = down_of(&x) * h.dot(&down_of(&x)).signum();
+            let vertical = world_down(&x) * h.dot(&world_down(&x)).signum();
             let angle = |h: &Vector3<f64>| h.angle(&vertical);
             let after = h + torque * 1e-3;
             assert!(angle(&after) < angle(&h), "{roll} {pitch} {spin}: {torque}");

@@ -277,10 +277,8 @@ impl SimIo {
         }
         self.latch
             .ground_contact(self.actuators.contact(self.now_ns, plant.contact_signal()));
-        // The ESCs' speeds: each rotor's thrust after the motor's lag (and
-        // any fault on it) goes with its speed squared.
-        let speeds = plant.thrust().map(|t| t.max(0.0).sqrt());
-        self.rotor_speeds = [speeds[0], speeds[1], speeds[2], speeds[3]];
+        // The ESCs' speeds: after the motor's lag and any fault on it.
+        self.rotor_speeds = plant.rotor_speeds();
     }
 
     /// The command the last tick left for the plant (held until the next).

@@ -185,13 +185,8 @@ impl Links {
             let ok = self.drivers.publish_ground_contact(plant.contact_signal());
             self.count(ok);
             if let Some(full) = self.esc_full_speed_rpm {
-                // Each rotor's speed goes with the square root of its thrust.
-                let rpm = plant
-                    .thrust()
-                    .map(|t| (t.max(0.0).sqrt() * full).round() as i32);
-                let ok = self
-                    .ros_out
-                    .try_publish_rotor_rpm([rpm[0], rpm[1], rpm[2], rpm[3]]);
+                let rpm = plant.rotor_speeds().map(|s| (s * full).round() as i32);
+                let ok = self.ros_out.try_publish_rotor_rpm(rpm);
                 self.count(ok);
             }
         }

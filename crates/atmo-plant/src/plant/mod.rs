@@ -522,6 +522,13 @@ impl Plant {
         })
     }
 
+    /// Each rotor's speed, a fraction of its speed at full: what its ESC
+    /// would report (thrust goes with the speed squared).
+    pub fn rotor_speeds(&self) -> [f64; 4] {
+        let t = self.thrust().map(|t| t.max(0.0).sqrt());
+        [t[0], t[1], t[2], t[3]]
+    }
+
     /// Normalized thrust of each rotor (after the motor lag and curve).
     pub fn thrust(&self) -> Input {
         if self.motor_lag.is_some() {
