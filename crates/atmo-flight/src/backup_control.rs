@@ -27,13 +27,16 @@
 //! [0, 1]. With a rotor stopped the angle term is the spin's steering
 //! instead ([`spin_steering`]) and no lift is cut for the torque: three
 //! rotors cannot level the body, they can turn its spin to the vertical
-//! (docs/decisions/2026-12-07-spin-steering.md). The arms meanwhile go to the
+//! (docs/decisions/2026-12-07-spin-steering.md); the lift the diagonal
+//! pair cannot give the stopped rotor's partner gives, as far as its torque
+//! is asked for (`partner_lifts`). The arms meanwhile go to the
 //! failsafe descent's landing tilt (`monitor.rotor_out_landing_tilt_deg`),
 //! so that it comes down on its wheels, not its base.
 //!
 //! Limits: a weak or stuck rotor learned by `rotor_estimate` is not flown
 //! around (only a stopped one), a stopped rotor's descent in flight lands
-//! hard and crashes on about a third of the flights (docs/faults.md), it
+//! hard (about 1 m/s) and crashes on about one flight in seven
+//! (docs/faults.md), it
 //! knows no ground effect (the vertical loop's integral takes it up) and
 //! it damps the velocity, it does not hold a position: it lands where its
 //! velocity at the failure carries it to.
@@ -141,9 +144,11 @@ impl LevelDescent {
             Some(s) => body.commands_without(s.rotor, s.delivered, force_z, &torque),
             None => body.commands_for(force_z, &torque),
         };
-        // Levelling is the spin's on three rotors: no lift is cut for it.
+        // Levelling is the spin's on three rotors: no lift is cut for it;
+        // the lift the pair cannot give, the partner gives where its torque
+        // is asked for.
         let u = match stopped {
-            Some(_) => allocate(force_z),
+            Some(s) => partner_lifts(body, s.rotor, &torque, allocate(force_z)),
             None => level_before_lift(allocate, force_z),
         };
         u.iter()
@@ -178,6 +183,39 @@ pub fn spin_steering(inertia: &Matrix3<f64>, state: &State, bandwidth: f64) -> V
     let axis = momentum / size;
     let vertical = down * momentum.dot(&down).signum();
     (vertical - axis * vertical.dot(&axis)) * (bandwidth * size)
+}
+
+/// With rotor `stopped` out, the commands `u` of the three left with the
+/// lift the diagonal pair cannot give (its commands past full) taken from
+/// the stopped rotor's diagonal partner, as far as the partner's torque is
+/// asked for: at most the command whose torque is the part of `torque`
+/// (the steering's and the damping's) along the partner's lever. The
+/// allocation leaves the partner off whenever the exact torque would need
+/// it pulling, and the pair at full cannot hold the weight with the arms
+/// at the landing tilt: the robot fell until the ground. The partner
+/// pushes about one axis only, fixed in the body and turning round the
+/// world with the spin; pushing for lift where the steering asks that
+/// torque (about half of each turn) lifts without tipping, pushing past it
+/// tips the body (docs/decisions/2026-12-07-partner-lift.md).
+fn partner_lifts(body: &TiltedBody, stopped: usize, torque: &Vector3<f64>, mut u: Input) -> Input {
+    let (partner, a, b) = body.diagonals(stopped);
+    // NED: a lift is a negative body z force.
+    let missing: f64 = [a, b]
+        .iter()
+        .map(|&r| (u[r] - 1.0).max(0.0) * body.thrust_force[(2, r)])
+        .sum();
+    let per_command = body.thrust_force[(2, partner)];
+    let lever = body
+        .thrust_torque
+        .fixed_view::<2, 1>(0, partner)
+        .into_owned();
+    let asked = lever.dot(&torque.xy()) / lever.norm_squared();
+    if missing >= 0.0 || per_command >= 0.0 || asked.is_nan() || asked <= 0.0 {
+        return u;
+    }
+    let lifting = u[partner].max(0.0) + missing / per_command;
+    u[partner] = u[partner].max(lifting.min(asked));
+    u
 }
 
 /// The world's down (NED z) in the body frame at `state`'s roll and pitch.
@@ -368,5 +406,42 @@ mod tests {
         x[idx::WZ] = 0.0;
         x[idx::ROLL] = 0.3;
         assert_eq!(spin_steering(&b.inertia, &x, 10.0), Vector3::zeros());
+    }
+
+    #[test]
+    fn the_lift_the_pair_cannot_give_the_partner_gives_where_its_torque_is_asked() {
+        let b = Model::new(&RobotConfig::atmo()).at_tilt(40f64.to_radians());
+        let stopped = 1;
+        let (partner, a, c) = b.diagonals(stopped);
+        let lever = b.thrust_torque.fixed_view::<2, 1>(0, partner).into_owned();
+        let along = Vector3::new(lever.x, lever.y, 0.0) / lever.norm();
+        let mut u = Input::zeros();
+        u[a] = 1.3;
+        u[c] = 1.2;
+        let lift = |u: &Input| {
+            (0..4)
+                .map(|r| u[r].min(1.0) * b.thrust_force[(2, r)])
+                .sum::<f64>()
+        };
+        // Its torque asked, plenty of it: the lift past full comes back.
+        let out = partner_lifts(&b, stopped, &(along * 10.0), u);
+        assert!(out[partner] > 0.0, "{out}");
+        let unclamped = u[a] * b.thrust_force[(2, a)] + u[c] * b.thrust_force[(2, c)];
+        assert!((lift(&out) - unclamped).abs() < 1e-9, "{out}");
+        // A little of it asked: that much torque and no more.
+        let out = partner_lifts(&b, stopped, &(along * 0.2), u);
+        assert!((lever.norm() * out[partner] - 0.2).abs() < 1e-9, "{out}");
+        // NED: more lift is a more negative force, short of the whole.
+        assert!(
+            lift(&out) < lift(&u) && lift(&out) - unclamped > 1e-3,
+            "{out}"
+        );
+        // Its torque unwanted, or the pair not at full: nothing changes.
+        assert_eq!(partner_lifts(&b, stopped, &(-along), u), u);
+        let mut under = u;
+        under[a] = 0.9;
+        under[c] = 0.8;
+        assert_eq!(partner_lifts(&b, stopped, &along, under), under);
+        assert_eq!(out[stopped], 0.0);
     }
 }

@@ -83,10 +83,11 @@ fn tipped(f: &Flight, from: f64, above: f64) -> f64 {
 /// found no landing; the observer's torque took 0.20-0.24 s); the failsafe
 /// descent on the three rotors left (the
 /// backup controller: that rotor commanded nothing, its diagonal partner
-/// only pushing, the heading let go, the spin steered to the vertical).
-/// Two rotors on a diagonal carry the robot (2 x 28.15 N against 54 N: no
-/// margin to brake), and about that diagonal nothing but the spin turns
-/// it back: it touches down hard (a third of the census's flights crash),
+/// only pushing and lifting where its torque is asked, the heading let
+/// go, the spin steered to the vertical). Two rotors on a diagonal carry
+/// the robot (2 x 28.15 N against 54 N: no margin to brake), and about
+/// that diagonal nothing but the spin turns it back: it touches down hard
+/// (about one in seven of the census's flights crash),
 /// first at under 2 m/s where the MPC's rotor-out descent hit at about 3
 /// and the thrust cut at 4.6 (docs/faults.md).
 #[test]
