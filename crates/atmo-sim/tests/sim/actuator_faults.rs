@@ -33,7 +33,7 @@ fn a_rotor_at_80_percent_is_taken_up_by_the_observer_and_the_landing_made() {
 }
 
 /// The first tick whose status has `bit` of the actuator monitor set.
-fn detected(f: &Flight, bit: u8) -> Option<&TickRecord> {
+pub(super) fn detected(f: &Flight, bit: u8) -> Option<&TickRecord> {
     f.ticks
         .iter()
         .find(|t| t.outputs.status.actuator_faults & bit != 0)

@@ -10,7 +10,9 @@
 //!
 //! `ROTOR_SEEDS=0,7000001 BOUND_ONSETS=flight,transition cargo test
 //! --release -p atmo-sim --test sim -- --ignored stopped_rotor_bound
-//! --nocapture`
+//! --nocapture`; `BOUND_FROM=detection` starts the search where the
+//! flight stack told the rotor stopped (the flight until then flown by the
+//! stack, closed loop): what is left to find once the stack knows.
 #![allow(clippy::unwrap_used, reason = "test")]
 
 use atmo_core::Input;
@@ -23,8 +25,9 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
 
-use super::actuator_faults::seeded_scenario;
+use super::actuator_faults::{detected, seeded_scenario};
 use super::faults::fly_scenario;
+use atmo_flight::actuator_monitor::Detected;
 
 /// Length of one piece of the open-loop command, s.
 const SEGMENT: f64 = 0.08;
@@ -260,6 +263,7 @@ fn stopped_rotor_bound() {
     // detection's latency; 0: the rotor known stopped at the onset).
     let latency: f64 = std::env::var("BOUND_LATENCY").map_or(0.0, |s| s.parse().unwrap());
     let fixed = (latency / SEGMENT).ceil() as usize;
+    let from_detection = std::env::var("BOUND_FROM").is_ok_and(|v| v == "detection");
     let trace = std::env::var("BOUND_TRACE").is_ok();
     let onsets = std::env::var("BOUND_ONSETS").unwrap_or_else(|_| "flight,transition".into());
     for seed in seeds {
@@ -284,6 +288,13 @@ fn stopped_rotor_bound() {
                         .find(|t| t.outputs.status.mode == Mode::Transition)
                 }
                 .unwrap();
+                let at = if from_detection {
+                    detected(&shipped, Detected::ROTOR_STOPPED)
+                        .filter(|t| t.time >= at.time)
+                        .unwrap_or(at)
+                } else {
+                    at
+                };
                 let tilt_rate_max = scenario.robot.limits.tilt_rate_max;
                 let before = shipped
                     .ticks
