@@ -189,14 +189,14 @@ pub fn spin_steering(inertia: &Matrix3<f64>, state: &State, bandwidth: f64) -> V
 /// lift the diagonal pair cannot give (its commands past full) taken from
 /// the stopped rotor's diagonal partner, as far as the partner's torque is
 /// asked for: at most the command whose torque is the part of `torque`
-/// (the steering's and the damping's) along the partner's lever. The
-/// allocation leaves the partner off whenever the exact torque would need
-/// it pulling, and the pair at full cannot hold the weight with the arms
-/// at the landing tilt: the robot fell until the ground. The partner
-/// pushes about one axis only, fixed in the body and turning round the
-/// world with the spin; pushing for lift where the steering asks that
-/// torque (about half of each turn) lifts without tipping, pushing past it
-/// tips the body (docs/decisions/2026-12-07-partner-lift.md).
+/// (the steering's and the damping's) along the partner's lever. Why:
+/// the allocation leaves the partner off whenever the exact torque would
+/// need it pulling, and the pair at full cannot hold the weight with the
+/// arms at the landing tilt. The partner pushes about one axis only,
+/// fixed in the body and turning round the world with the spin; pushing
+/// for lift where the steering asks that torque lifts without tipping,
+/// pushing past it tips the body
+/// (docs/decisions/2026-12-07-partner-lift.md).
 fn partner_lifts(body: &TiltedBody, stopped: usize, torque: &Vector3<f64>, mut u: Input) -> Input {
     let (partner, a, b) = body.diagonals(stopped);
     // NED: a lift is a negative body z force.
@@ -205,10 +205,7 @@ fn partner_lifts(body: &TiltedBody, stopped: usize, torque: &Vector3<f64>, mut u
         .map(|&r| (u[r] - 1.0).max(0.0) * body.thrust_force[(2, r)])
         .sum();
     let per_command = body.thrust_force[(2, partner)];
-    let lever = body
-        .thrust_torque
-        .fixed_view::<2, 1>(0, partner)
-        .into_owned();
+    let lever = body.roll_pitch_lever(partner);
     let asked = lever.dot(&torque.xy()) / lever.norm_squared();
     if missing >= 0.0 || per_command >= 0.0 || asked.is_nan() || asked <= 0.0 {
         return u;
@@ -413,7 +410,7 @@ mod tests {
         let b = Model::new(&RobotConfig::atmo()).at_tilt(40f64.to_radians());
         let stopped = 1;
         let (partner, a, c) = b.diagonals(stopped);
-        let lever = b.thrust_torque.fixed_view::<2, 1>(0, partner).into_owned();
+        let lever = b.roll_pitch_lever(partner);
         let along = Vector3::new(lever.x, lever.y, 0.0) / lever.norm();
         let mut u = Input::zeros();
         u[a] = 1.3;

@@ -2,7 +2,7 @@
 //! stopped rotor's diagonal partner only pushing (`FailsafeControl::Backup`
 //! in atmo-flight flies it).
 
-use nalgebra::{Matrix3, Vector3};
+use nalgebra::{Matrix3, Vector2, Vector3};
 
 use super::{Input, TiltedBody};
 
@@ -80,17 +80,27 @@ impl TiltedBody {
         u
     }
 
+    /// The roll and pitch torque of rotor `rotor` (0-based) at full
+    /// command, N m: the one axis it turns the body about, and how hard.
+    pub fn roll_pitch_lever(&self, rotor: usize) -> Vector2<f64> {
+        self.thrust_torque.fixed_view::<2, 1>(0, rotor).into_owned()
+    }
+
     /// With rotor `stopped` out: its diagonal partner (the rotor whose roll
     /// and pitch torque points most against its) and the pair on the other
     /// diagonal, in order.
     pub fn diagonals(&self, stopped: usize) -> (usize, usize, usize) {
         let stopped = stopped.min(3);
-        let lever = |i: usize| self.thrust_torque.fixed_view::<2, 1>(0, i).into_owned();
         let others = others_than(stopped);
         let partner = others
             .into_iter()
             .min_by(|&a, &b| {
-                let (la, lb) = (lever(a).dot(&lever(stopped)), lever(b).dot(&lever(stopped)));
+                let (la, lb) = (
+                    self.roll_pitch_lever(a)
+                        .dot(&self.roll_pitch_lever(stopped)),
+                    self.roll_pitch_lever(b)
+                        .dot(&self.roll_pitch_lever(stopped)),
+                );
                 la.total_cmp(&lb)
             })
             .unwrap_or(others[0]);

@@ -291,7 +291,7 @@ fn stopped_rotor_bound() {
                 let at = if from_detection {
                     detected(&shipped, Detected::ROTOR_STOPPED)
                         .filter(|t| t.time >= at.time)
-                        .unwrap_or(at)
+                        .unwrap_or_else(|| panic!("seed {seed} rotor {n}: never told stopped"))
                 } else {
                     at
                 };
