@@ -629,14 +629,30 @@ fn rotor_fault_outcomes() {
                         .rfind(|t| t.outputs.status.mode == Mode::Failsafe)
                         .map(|t| t.outputs.status.tilt_limit.to_degrees().round());
                     let end = f.ticks.last().map(|t| (t.truth_height, t.truth[idx::VZ]));
+                    // MPC ticks without a fresh solve while the MPC flies.
+                    let stale_aloft = f
+                        .ticks
+                        .iter()
+                        .filter(|t| {
+                            matches!(
+                                t.outputs.status.mode,
+                                Mode::Flight | Mode::Morphing | Mode::Transition
+                            ) && matches!(
+                                t.outputs.status.solver,
+                                atmo_flight::step_io::SolverStatus::Fallback
+                                    | atmo_flight::step_io::SolverStatus::Failed
+                            )
+                        })
+                        .count();
                     let s = &f.summary;
                     println!(
-                        "seed {seed} {onset:>22} rotor {n} {what:>12}: seen {seen:?} modes {:?} tilt {:?} impact {:?} crash {:?} tipped {tipped:.0} deg spin {spin:.1} rad/s descent tilt {descent_tilt:?} end (height, vz) {end:.2?} landed {}",
+                        "seed {seed} {onset:>22} rotor {n} {what:>12}: seen {seen:?} modes {:?} tilt {:?} impact {:?} crash {:?} tipped {tipped:.0} deg spin {spin:.1} rad/s descent tilt {descent_tilt:?} end (height, vz) {end:.2?} landed {} mpc failures {} stale aloft {stale_aloft}",
                         f.modes(),
                         s.touchdown_tilt_deg.map(|v| (v * 10.0).round() / 10.0),
                         s.impact_speed_mps.map(|v| (v * 100.0).round() / 100.0),
                         s.crash_reason,
-                        f.landed()
+                        f.landed(),
+                        s.mpc_failures
                     );
                 }
             }
