@@ -1,5 +1,7 @@
 //! How soft a stopped rotor's landing could be at all (a measurement, not
-//! a check): from the plant's state at the fault's onset, with the rotor
+//! a check): from the flight's plant at the fault's onset (the flight's
+//! commands replayed into a plant up to there, bit for bit: its wind and
+//! noise the flight's), with the rotor
 //! known stopped from that instant, a cross-entropy search over open-loop
 //! commands (the three rotors left and the tilt rate, piecewise constant)
 //! looks for the softest touchdown the plant allows, from two starts: the
@@ -19,7 +21,7 @@ use atmo_core::Input;
 use atmo_core::model::{idx, level_cosine};
 use atmo_flight::Mode;
 use atmo_plant::plant::N_CONTACTS;
-use atmo_plant::{Command, CrashKind, InitialState, Plant};
+use atmo_plant::{Command, CrashKind, Plant};
 use atmo_sim::closed_loop::TickRecord;
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -79,6 +81,41 @@ fn command(x: &[f64], failed: usize, time: f64, tilt_rate_max: f64) -> Command {
 /// the body's largest tilt from level while touching (per 30 deg), plus 10
 /// for a crash by the plant's rule and 20 if nothing touched by the end: a
 /// landing without a crash always scores under 10.
+/// The plant of the flight `ticks` flew, stepped through its commands up
+/// to the tick at `at` (the failed rotor's command zeroed from the onset
+/// tick at `onset` on, as the fault did): the wind's gust and turbulence and
+/// every noise drawn at the same times as in the flight.
+fn flown_plant(
+    scenario: &atmo_sim::Scenario,
+    ticks: &[TickRecord],
+    onset: f64,
+    failed: usize,
+    at: f64,
+) -> Plant {
+    let mut plant = scenario.build_plant().unwrap();
+    let mut command = Command::idle();
+    for t in ticks {
+        while plant.time() < t.time - 1e-9 {
+            let (force, torque) = scenario.disturbance_at(plant.time());
+            plant.set_external_wrench(force, torque).unwrap();
+            plant.step(&command).unwrap();
+        }
+        if t.time >= at - 1e-9 {
+            break;
+        }
+        let mut rotors = Input::from(t.outputs.thrust);
+        if t.time >= onset - 1e-9 {
+            rotors[failed] = 0.0;
+        }
+        command = Command {
+            rotors,
+            tilt_rate: t.outputs.tilt_velocity,
+            wheel_rates: t.outputs.wheel_rates,
+        };
+    }
+    plant
+}
+
 fn rollout(start: &Plant, x: &[f64], failed: usize, tilt_rate_max: f64) -> Outcome {
     let mut p = start.clone();
     let t0 = p.time();
@@ -288,6 +325,7 @@ fn stopped_rotor_bound() {
                         .find(|t| t.outputs.status.mode == Mode::Transition)
                 }
                 .unwrap();
+                let onset_time = at.time;
                 let at = if from_detection {
                     detected(&shipped, Detected::ROTOR_STOPPED)
                         .filter(|t| t.time >= at.time)
@@ -296,25 +334,16 @@ fn stopped_rotor_bound() {
                     at
                 };
                 let tilt_rate_max = scenario.robot.limits.tilt_rate_max;
-                let before = shipped
-                    .ticks
-                    .iter()
-                    .rfind(|t| t.time < at.time)
-                    .unwrap_or(at);
-                let initial = InitialState {
-                    state: at.truth,
-                    tilt: at.truth_tilt,
-                    thrust: Input::from(before.outputs.thrust),
-                };
-                let plant = Plant::new(
-                    &scenario.robot,
-                    &scenario.plant,
-                    &scenario.file.terrain,
-                    &initial,
-                    scenario.file.seed,
-                )
-                .unwrap();
                 let failed = n - 1;
+                // The flight's own world: its wind, gust and noise at the
+                // same times (a plant started afresh at the truth draws
+                // them anew from its own clock).
+                let plant = flown_plant(&scenario, &shipped.ticks, onset_time, failed, at.time);
+                assert!(
+                    (plant.state() - at.truth).amax() == 0.0 && plant.time() == at.time,
+                    "seed {seed} rotor {n}: the replayed flight is not the flown one at {:.3} s",
+                    at.time
+                );
                 let x0 = shipped_commands(&shipped.ticks, at.time, failed, tilt_rate_max);
                 let replayed = rollout(&plant, &x0, failed, tilt_rate_max);
                 let pair = diagonal_left(&x0, fixed, failed, &scenario.robot.rotor.yaw_sign);
