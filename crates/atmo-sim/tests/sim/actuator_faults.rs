@@ -603,7 +603,9 @@ fn a_bad_actuator_fault_is_refused_naming_the_key() {
 /// Prints what each rotor fault does (a measurement, not a check):
 /// `cargo test -p atmo-sim --test sim -- --ignored rotor_fault_outcomes --nocapture`;
 /// `ROTOR_SEEDS=7100002,7100003` flies other seeds than the tests',
-/// `ROTOR_KINDS=stuck` only the faults whose line contains a word.
+/// `ROTOR_KINDS=stuck` only the faults whose line contains a word. Each
+/// line ends with the flight's MPC failures and `stale aloft`: the ticks
+/// flown on the MPC's fallback (or failed) while it flies the robot.
 #[test]
 #[ignore = "a measurement"]
 fn rotor_fault_outcomes() {
