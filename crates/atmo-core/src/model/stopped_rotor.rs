@@ -92,17 +92,13 @@ impl TiltedBody {
     pub fn diagonals(&self, stopped: usize) -> (usize, usize, usize) {
         let stopped = stopped.min(3);
         let others = others_than(stopped);
+        let against = |i: usize| {
+            self.roll_pitch_lever(i)
+                .dot(&self.roll_pitch_lever(stopped))
+        };
         let partner = others
             .into_iter()
-            .min_by(|&a, &b| {
-                let (la, lb) = (
-                    self.roll_pitch_lever(a)
-                        .dot(&self.roll_pitch_lever(stopped)),
-                    self.roll_pitch_lever(b)
-                        .dot(&self.roll_pitch_lever(stopped)),
-                );
-                la.total_cmp(&lb)
-            })
+            .min_by(|&a, &b| against(a).total_cmp(&against(b)))
             .unwrap_or(others[0]);
         let mut pair = others.into_iter().filter(|&r| r != partner);
         let a = pair.next().unwrap_or(others[0]);

@@ -76,11 +76,6 @@ fn command(x: &[f64], failed: usize, time: f64, tilt_rate_max: f64) -> Command {
     c
 }
 
-/// Flies `x` open loop from `start`. The score is the fastest approach
-/// speed of any contact as it touches (wheels and base corners, m/s) and
-/// the body's largest tilt from level while touching (per 30 deg), plus 10
-/// for a crash by the plant's rule and 20 if nothing touched by the end: a
-/// landing without a crash always scores under 10.
 /// The plant of the flight `ticks` flew, stepped through its commands up
 /// to the tick at `at` (the failed rotor's command zeroed from the onset
 /// tick at `onset` on, as the fault did): the wind's gust and turbulence and
@@ -116,6 +111,11 @@ fn flown_plant(
     plant
 }
 
+/// Flies `x` open loop from `start`. The score is the fastest approach
+/// speed of any contact as it touches (wheels and base corners, m/s) and
+/// the body's largest tilt from level while touching (per 30 deg), plus 10
+/// for a crash by the plant's rule and 20 if nothing touched by the end: a
+/// landing without a crash always scores under 10.
 fn rollout(start: &Plant, x: &[f64], failed: usize, tilt_rate_max: f64) -> Outcome {
     let mut p = start.clone();
     let t0 = p.time();
